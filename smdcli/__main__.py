@@ -1,0 +1,5 @@
+"""Allow ``python -m smdcli``."""
+
+from smdcli.cli import main
+
+main()

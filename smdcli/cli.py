@@ -1,0 +1,102 @@
+"""The `smd` command: parse, call the library, print, choose the exit code."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from smdcli import __version__
+
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    help="Simulate spring-mass-damper systems from TOML scenarios: exact where linear, measured where not.",
+    pretty_exceptions_enable=False,
+)
+
+
+def _fail(message: str) -> None:
+    """One line on stderr."""
+    typer.echo(f"smd: {message}", err=True)
+
+
+def _version(value: bool):
+    if value:
+        typer.echo(f"smd {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                       help="Print the version and exit.")):
+    """smd: spring-mass-damper simulation."""
+
+
+@app.command()
+def simulate(
+    scenarios: List[Path] = typer.Argument(..., help="Scenario TOML files."),
+    out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
+    method: Optional[str] = typer.Option(None, "--method", help="Solver, overriding [solver].method."),
+    rtol: Optional[float] = typer.Option(None, "--rtol", min=0.0, help="Relative tolerance override."),
+    atol: Optional[float] = typer.Option(None, "--atol", min=0.0, help="Absolute tolerance override."),
+    no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
+    as_json: bool = typer.Option(False, "--json", help="Print the summaries as JSON."),
+    fail_fast: bool = typer.Option(False, "--fail-fast", help="Stop at the first scenario that fails."),
+):
+    """Solve each scenario; write OUT/<stem>.h5 and OUT/<stem>_response.png, _phase.png."""
+    from smdcli.errors import SmdError
+    from smdcli.simulate import Options, format_summary, simulate as run_one, summary
+
+    options = Options(method=method, rtol=rtol or None, atol=atol or None, plots=not no_plots)
+    worst = 0
+    summaries = []
+    for path in scenarios:
+        try:
+            run = run_one(path, out, options)
+        except SmdError as exc:
+            _fail(str(exc))
+            worst = max(worst, exc.exit_code)
+            if fail_fast:
+                break
+            continue
+        except KeyboardInterrupt:
+            _fail("interrupted; no partial file was left under a final name")
+            raise typer.Exit(130)
+        data = summary(run)
+        summaries.append(data)
+        if not quiet and not as_json:
+            typer.echo(format_summary(data))
+    if as_json:
+        typer.echo(json.dumps(summaries, indent=2))
+    raise typer.Exit(worst)
+
+
+@app.command()
+def info(
+    scenario: Path = typer.Argument(..., help="Scenario TOML file."),
+    as_json: bool = typer.Option(False, "--json", help="Print as JSON."),
+):
+    """DOFs, M C K, natural frequencies, damping ratios and regimes, stiffness, what auto would pick."""
+    from smdcli.errors import SmdError
+    from smdcli.simulate import format_info, info as describe
+
+    try:
+        data = describe(scenario)
+    except SmdError as exc:
+        _fail(str(exc))
+        raise typer.Exit(exc.exit_code)
+    typer.echo(json.dumps(data, indent=2) if as_json else format_info(data))
+
+
+def main() -> None:
+    """Console-script entry point."""
+    try:
+        app()
+    except KeyboardInterrupt:
+        typer.echo("smd: interrupted", err=True)
+        sys.exit(130)

@@ -1,0 +1,344 @@
+"""The assembled system M x'' + C x' + K x + f_nl(x, x') = B u(t).
+
+Springs and dampers are two-terminal elements: each stamps a 2x2 block
+[[a, -a], [-a, a]] into K or C (one diagonal entry for an element to
+ground). Nonlinear parts (cubic springs, quadratic dampers) act through an
+incidence matrix D, one row per element: relative motion d = D x, and the
+element forces return to the DOFs as D^T g(d).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+
+from smdcli.errors import ScenarioError
+from smdcli.forcing import Signal, build_signal
+from smdcli.scenario import GROUND, Scenario, TimeSpec
+
+# Relative width around zeta = 1 inside which a mode is called critically damped.
+CRITICAL_BAND = 1e-8
+# A linear model whose decaying eigenvalues spread wider than this is stiff.
+STIFF_RATIO = 1e3
+
+
+def time_grid(spec: TimeSpec) -> np.ndarray:
+    """Output times: start + k*step up to end (as MATLAB's start:step:end), or `points` evenly."""
+    if spec.points is not None:
+        h = (spec.end - spec.start) / (spec.points - 1)
+        grid = spec.start + h * np.arange(spec.points)
+        grid[-1] = spec.end
+        return grid
+    n = int(math.floor((spec.end - spec.start) / spec.step * (1 + 1e-12))) + 1
+    return spec.start + spec.step * np.arange(n)
+
+
+@dataclass(frozen=True)
+class Incidence:
+    """Nonlinear elements of one law: rows of D (+1 on the first node, -1 on the second) and coefficients."""
+
+    D: np.ndarray  # (n_elements, n)
+    coef: np.ndarray  # (n_elements,)
+    paths: tuple[str, ...]
+
+    def __len__(self) -> int:
+        return len(self.coef)
+
+
+@dataclass(frozen=True)
+class Modes:
+    """Modes of the linear part, from the eigenvalues of the state matrix."""
+
+    eigenvalues: np.ndarray  # (2n,) complex
+    natural_frequencies: np.ndarray  # (n,) rad/s
+    damping_ratios: np.ndarray  # (n,)
+    regimes: tuple[str, ...]
+    shapes: np.ndarray  # (n, n) undamped mass-normalized mode shapes, columns
+
+
+def regime(zeta: float) -> str:
+    """The damping regime's name for a damping ratio."""
+    if zeta == 0.0:
+        return "undamped"
+    if abs(zeta - 1.0) <= CRITICAL_BAND:
+        return "critically damped"
+    return "underdamped" if zeta < 1.0 else "overdamped"
+
+
+@dataclass(frozen=True)
+class Model:
+    """Matrices, DOF names, nonlinear elements and force signals of one scenario."""
+
+    dofs: tuple[str, ...]
+    M: np.ndarray
+    C: np.ndarray
+    K: np.ndarray
+    x0: np.ndarray
+    v0: np.ndarray
+    signals: tuple[Signal, ...] = ()
+    force_dofs: tuple[int, ...] = ()  # DOF index each signal acts on
+    force_paths: tuple[str, ...] = ()
+    cubic: Incidence | None = None  # force k3 d^3
+    quadratic: Incidence | None = None  # force c |d'| d'
+    source: str = "<model>"
+    element_form: bool = True
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+
+    # ------------------------------------------------------------ structure
+    @property
+    def n(self) -> int:
+        """Number of degrees of freedom."""
+        return len(self.dofs)
+
+    @property
+    def is_linear(self) -> bool:
+        """True when there is no cubic spring and no quadratic damper."""
+        return self.cubic is None and self.quadratic is None
+
+    @property
+    def is_forced(self) -> bool:
+        """True when any force acts."""
+        return bool(self.signals)
+
+    @property
+    def nonlinear_paths(self) -> tuple[str, ...]:
+        """Field paths of the nonlinear elements."""
+        return sum((inc.paths for inc in (self.cubic, self.quadratic) if inc is not None), ())
+
+    @cached_property
+    def Minv(self) -> np.ndarray:
+        """Inverse mass matrix, by a solve rather than inv()."""
+        return np.linalg.solve(self.M, np.eye(self.n))
+
+    @cached_property
+    def B(self) -> np.ndarray:
+        """Input matrix: column j puts force j on its DOF."""
+        B = np.zeros((self.n, len(self.signals)))
+        for j, dof in enumerate(self.force_dofs):
+            B[dof, j] = 1.0
+        return B
+
+    @cached_property
+    def state_matrix(self) -> np.ndarray:
+        """A = [[0, I], [-M^-1 K, -M^-1 C]] of the linear part."""
+        n = self.n
+        A = np.zeros((2 * n, 2 * n))
+        A[:n, n:] = np.eye(n)
+        A[n:, :n] = -self.Minv @ self.K
+        A[n:, n:] = -self.Minv @ self.C
+        return A
+
+    @cached_property
+    def input_matrix(self) -> np.ndarray:
+        """[0; M^-1 B]: how the force signals enter the state equation."""
+        return np.vstack([np.zeros((self.n, len(self.signals))), self.Minv @ self.B])
+
+    # --------------------------------------------------------------- forces
+    def forces(self, t) -> np.ndarray:
+        """Signal values at t: (len(t), n_signals) for an array, (n_signals,) for a scalar."""
+        t_arr = np.asarray(t, dtype=float)
+        out = np.zeros(t_arr.shape + (len(self.signals),))
+        for j, s in enumerate(self.signals):
+            out[..., j] = s.value(t_arr)
+        return out
+
+    def applied_force(self, t: np.ndarray) -> np.ndarray:
+        """External force per DOF on the grid: (N, n)."""
+        return self.forces(t) @ self.B.T
+
+    def breakpoints(self, t0: float, t1: float) -> np.ndarray:
+        """Sorted distinct times in (t0, t1) where some force jumps or kinks."""
+        parts = [s.breakpoints(t0, t1) for s in self.signals]
+        if not parts:
+            return np.empty(0)
+        times = np.unique(np.concatenate(parts))
+        # Merge breakpoints closer than rounding: they are one edge.
+        if len(times) > 1:
+            keep = np.concatenate([[True], np.diff(times) > 1e-12 * max(1.0, abs(t1))])
+            times = times[keep]
+        return times
+
+    # ------------------------------------------------------------ nonlinear
+    def nonlinear_force(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """f_nl(x, v) on the DOFs; x and v may carry a leading time axis."""
+        f = np.zeros(np.shape(x))
+        if self.cubic is not None:
+            d = x @ self.cubic.D.T
+            f = f + (self.cubic.coef * d**3) @ self.cubic.D
+        if self.quadratic is not None:
+            dv = v @ self.quadratic.D.T
+            f = f + (self.quadratic.coef * np.abs(dv) * dv) @ self.quadratic.D
+        return f
+
+    def tangent(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Tangent stiffness and damping K + df_nl/dx, C + df_nl/dv at (x, v)."""
+        Kt, Ct = self.K, self.C
+        if self.cubic is not None:
+            d = self.cubic.D @ x
+            Kt = Kt + self.cubic.D.T @ ((3 * self.cubic.coef * d**2)[:, None] * self.cubic.D)
+        if self.quadratic is not None:
+            dv = self.quadratic.D @ v
+            Ct = Ct + self.quadratic.D.T @ ((2 * self.quadratic.coef * np.abs(dv))[:, None] * self.quadratic.D)
+        return Kt, Ct
+
+    def rhs(self, t: float, y: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """State derivative [v; a] for state y = [x; v] and force values u."""
+        n = self.n
+        dy = self.state_matrix @ y
+        if len(u):
+            dy[n:] += self.Minv @ (self.B @ u)
+        if not self.is_linear:
+            dy[n:] -= self.Minv @ self.nonlinear_force(y[:n], y[n:])
+        return dy
+
+    def jacobian(self, t: float, y: np.ndarray) -> np.ndarray:
+        """Analytic Jacobian of rhs with respect to the state, nonlinear terms included."""
+        if self.is_linear:
+            return self.state_matrix
+        n = self.n
+        Kt, Ct = self.tangent(y[:n], y[n:])
+        J = np.zeros((2 * n, 2 * n))
+        J[:n, n:] = np.eye(n)
+        J[n:, :n] = -self.Minv @ Kt
+        J[n:, n:] = -self.Minv @ Ct
+        return J
+
+    def acceleration(self, x: np.ndarray, v: np.ndarray, force: np.ndarray) -> np.ndarray:
+        """a = M^-1 (F - C v - K x - f_nl) on a grid of states, (N, n) each."""
+        rest = force - v @ self.C.T - x @ self.K.T
+        if not self.is_linear:
+            rest = rest - self.nonlinear_force(x, v)
+        return rest @ self.Minv.T
+
+    # ----------------------------------------------------------------- modes
+    @cached_property
+    def modes(self) -> Modes:
+        """Natural frequencies, damping ratios and regimes of the linear part."""
+        n = self.n
+        if n == 1:
+            m, c, k = self.M[0, 0], self.C[0, 0], self.K[0, 0]
+            wn = math.sqrt(k / m)
+            zeta = c / (2 * math.sqrt(k * m)) if k > 0 else math.inf
+            eig = np.roots([m, c, k]).astype(complex)
+            return Modes(eig, np.array([wn]), np.array([zeta]), (regime(zeta),), np.array([[1 / math.sqrt(m)]]))
+        eig = np.linalg.eigvals(self.state_matrix)
+        wn, zeta = _pair_modes(eig)
+        order = np.argsort(wn)
+        wn, zeta = wn[order], zeta[order]
+        from scipy.linalg import eigh
+
+        _, shapes = eigh(self.K, self.M)
+        return Modes(eig, wn, zeta, tuple(regime(z) for z in zeta), shapes)
+
+    @cached_property
+    def stiffness_ratio(self) -> float:
+        """max |Re lambda| / min |Re lambda| over the decaying eigenvalues of the linear part (1 if none decay)."""
+        re = np.abs(self.modes.eigenvalues.real)
+        scale = np.abs(self.modes.eigenvalues).max(initial=0.0)
+        re = re[re > 1e-12 * max(scale, 1.0)]
+        return float(re.max() / re.min()) if len(re) else 1.0
+
+    @property
+    def is_stiff(self) -> bool:
+        """Stiff in the classical sense: decay rates spread over more than STIFF_RATIO."""
+        return self.stiffness_ratio > STIFF_RATIO
+
+    @cached_property
+    def omega_max(self) -> float:
+        """Largest eigenvalue magnitude of the linear part [rad/s]."""
+        return float(np.abs(self.modes.eigenvalues).max(initial=0.0))
+
+
+def _pair_modes(eig: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Group state eigenvalues into n modes; from each pair, wn = sqrt(l1 l2) and zeta = -(l1 + l2) / (2 wn)."""
+    scale = max(np.abs(eig).max(initial=0.0), 1.0)
+    is_complex = np.abs(eig.imag) > 1e-9 * scale
+    upper = eig[is_complex & (eig.imag > 0)]
+    pairs = [(lam, np.conj(lam)) for lam in upper]
+    real = np.sort(eig[~is_complex].real)  # most negative first
+    # Real eigenvalues come from overdamped (or critically damped) modes; pair them outside in.
+    while len(real) >= 2:
+        pairs.append((real[0], real[-1]))
+        real = real[1:-1]
+    if len(real):  # a lone real root: a rigid-body mode with a damper
+        pairs.append((real[0], 0.0))
+    wn = np.array([math.sqrt(max((a * b).real, 0.0)) for a, b in pairs])
+    zeta = np.array([(-(a + b).real / (2 * w)) if w > 0 else math.inf for (a, b), w in zip(pairs, wn)])
+    zeta = np.where(np.abs(zeta) < 1e-12, 0.0, zeta)
+    return wn, zeta
+
+
+def build(scenario: Scenario) -> Model:
+    """Assemble the Model of a validated scenario."""
+    dofs = scenario.dof_names
+    index = {name: i for i, name in enumerate(dofs)}
+    n = len(dofs)
+    cubic = quadratic = None
+    if scenario.system is not None:
+        sys = scenario.system
+        M, C, K = (np.array(a, dtype=float) for a in (sys.M, sys.C, sys.K))
+        x0, v0 = np.array(sys.x0, dtype=float), np.array(sys.v0, dtype=float)
+    else:
+        M = np.diag([m.m for m in scenario.masses]).astype(float)
+        C = np.zeros((n, n))
+        K = np.zeros((n, n))
+        x0 = np.array([m.x0 for m in scenario.masses], dtype=float)
+        v0 = np.array([m.v0 for m in scenario.masses], dtype=float)
+        cubic_rows, quad_rows = [], []
+        for element in scenario.springs + scenario.dampers:
+            row = _incidence_row(element.connects, index, n)
+            target = K if element.kind == "spring" else C
+            if element.kind == "damper" and element.law == "quadratic":
+                quad_rows.append((row, element.coef, element.path))
+                continue
+            target += element.coef * np.outer(row, row)
+            if element.law == "cubic":
+                cubic_rows.append((row, element.k3, element.path))
+        cubic = _incidence(cubic_rows)
+        quadratic = _incidence(quad_rows)
+    signals = tuple(build_signal(f) for f in scenario.forces)
+    model = Model(
+        dofs=dofs, M=M, C=C, K=K, x0=x0, v0=v0, signals=signals,
+        force_dofs=tuple(index[f.on] for f in scenario.forces),
+        force_paths=tuple(f.path for f in scenario.forces),
+        cubic=cubic, quadratic=quadratic, source=scenario.path,
+        element_form=scenario.system is None,
+    )
+    _check_forces_finite(model, scenario)
+    return model
+
+
+def _incidence_row(connects: tuple[str, str], index: dict[str, int], n: int) -> np.ndarray:
+    row = np.zeros(n)
+    a, b = connects
+    if a != GROUND:
+        row[index[a]] += 1.0
+    if b != GROUND:
+        row[index[b]] -= 1.0
+    return row
+
+
+def _incidence(rows) -> Incidence | None:
+    if not rows:
+        return None
+    return Incidence(
+        D=np.array([r for r, _, _ in rows]),
+        coef=np.array([c for _, c, _ in rows], dtype=float),
+        paths=tuple(p for _, _, p in rows),
+    )
+
+
+def _check_forces_finite(model: Model, scenario: Scenario) -> None:
+    """Refuse forces that are not finite on the output grid (e.g. exp(9**9), 1/(t-1))."""
+    if not model.signals:
+        return
+    grid = time_grid(scenario.time)
+    for j, signal in enumerate(model.signals):
+        values = signal.value(grid)
+        bad = ~np.isfinite(values)
+        if bad.any():
+            t_bad = grid[np.argmax(bad)]
+            raise ScenarioError(scenario.path, model.force_paths[j], f"force is not finite at t = {t_bad:g} s (value {values[bad][0]})")

@@ -1,0 +1,61 @@
+"""Result of one solve: time-major arrays, labels, statistics. Writers only read it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class SolverStats:
+    """What a solve cost and how it went; -1 where a method does not report a count."""
+
+    method: str
+    requested_method: str
+    reason: str
+    rtol: float | None = None
+    atol: float | None = None
+    dt: float | None = None
+    nfev: int = 0
+    njev: int = 0
+    nlu: int = 0
+    steps_accepted: int = 0
+    steps_rejected: int = 0
+    wall_time_s: float = 0.0
+    success: bool = True
+    message: str = "ok"
+
+    def as_attrs(self) -> dict:
+        """Flat attributes for HDF5 and JSON; None becomes NaN (tolerances) or -1."""
+        out = {}
+        for key, value in self.__dict__.items():
+            if value is None:
+                value = float("nan")
+            out[key] = value
+        return out
+
+
+@dataclass(frozen=True)
+class Result:
+    """Trajectories on the output grid, (N, n) each, SI units, with the cost of getting them."""
+
+    time: np.ndarray
+    dofs: tuple[str, ...]
+    displacement: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    force: np.ndarray
+    stats: SolverStats
+    t_failed: float | None = None  # where a failed run stopped
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def success(self) -> bool:
+        """Whether the solver reached the end time."""
+        return self.stats.success
+
+    def peak_displacement(self) -> np.ndarray:
+        """Largest |x| per DOF over the finite part of the run."""
+        x = np.where(np.isfinite(self.displacement), np.abs(self.displacement), 0.0)
+        return x.max(axis=0) if len(x) else np.zeros(len(self.dofs))

@@ -1,0 +1,206 @@
+"""Library entry points behind `smd simulate` and `smd info`: scenario -> model -> solver -> writers."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from smdcli import scenario as scenario_mod
+from smdcli.errors import SolverFailed, UsageError
+from smdcli.model import Model, build, time_grid
+from smdcli.result import Result
+from smdcli.scenario import Scenario
+from smdcli.solvers.base import Tolerances
+
+
+@dataclass(frozen=True)
+class Options:
+    """Command-line overrides of the scenario's [solver] table, and what to write."""
+
+    method: str | None = None
+    rtol: float | None = None
+    atol: float | None = None
+    plots: bool = True
+
+
+@dataclass
+class Run:
+    """One scenario's trip through smd, with the files it produced."""
+
+    scenario: Scenario
+    model: Model
+    result: Result
+    outputs: list[Path] = field(default_factory=list)
+
+
+def prepare(path: str | Path) -> tuple[Scenario, Model, np.ndarray]:
+    """Load, validate and assemble: every input error surfaces here, before any work."""
+    sc = scenario_mod.load(path)
+    return sc, build(sc), time_grid(sc.time)
+
+
+def solve_scenario(sc: Scenario, model: Model, grid: np.ndarray, options: Options = Options()) -> Result:
+    """Solve with the scenario's solver settings, overridden by the options."""
+    from smdcli.solvers.registry import solve
+
+    method = options.method or sc.solver.method
+    tol = Tolerances(rtol=options.rtol or sc.solver.rtol, atol=options.atol or sc.solver.atol, dt=sc.solver.dt)
+    field_name = "--method" if options.method else "solver.method"
+    return solve(model, grid, method, tol, field=field_name)
+
+
+def output_folder(out: str | Path) -> Path:
+    """Create the output folder if needed; refuse one that cannot be written."""
+    out = Path(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"{out}: cannot create output folder: {exc.strerror}") from None
+    if not out.is_dir():
+        raise UsageError(f"{out}: is not a folder")
+    import os
+
+    if not os.access(out, os.W_OK | os.X_OK):
+        raise UsageError(f"{out}: output folder is not writable")
+    return out
+
+
+def simulate(path: str | Path, out: str | Path, options: Options = Options()) -> Run:
+    """Validate, solve and write one scenario; a solver failure raises SolverFailed and writes nothing."""
+    sc, model, grid = prepare(path)
+    out_dir = output_folder(out)
+    result = solve_scenario(sc, model, grid, options)
+    run = Run(sc, model, result)
+    if not result.success:
+        raise SolverFailed(f"{sc.path}: {result.stats.method} {result.stats.message}; {failure_hint(model, result)}",
+                           result=result)
+    from smdcli.io_hdf5 import write_simulation
+
+    h5 = out_dir / f"{sc.stem}.h5"
+    write_simulation(h5, sc, model, result)
+    run.outputs.append(h5)
+    if options.plots:
+        from smdcli import plots
+
+        title = sc.title or sc.stem
+        for name, figure in (("response", plots.response_figure), ("phase", plots.phase_figure)):
+            png = out_dir / f"{sc.stem}_{name}.png"
+            plots.save_figure(figure(result, title), png)
+            run.outputs.append(png)
+    return run
+
+
+def failure_hint(model: Model, result: Result) -> str:
+    """What to try after a failed run."""
+    from smdcli.solvers.registry import get_solver
+
+    solver = get_solver(result.stats.method)
+    if not solver.implicit and (model.is_stiff or "steps" in result.stats.message):
+        return "the scene may be stiff: try an implicit method ('Radau', 'BDF', 'ode15s') or 'auto'"
+    if result.stats.dt:
+        return f"fixed step: the stable step is below 2/omega_max = {2 / model.omega_max:.3g} s"
+    return "try tighter tolerances (--rtol, --atol) or another method"
+
+
+def summary(run: Run) -> dict:
+    """The facts a user wants after a run, as plain data (printed, or as JSON)."""
+    s = run.result.stats
+    return {
+        "scenario": run.scenario.path,
+        "title": run.scenario.title,
+        "method": s.method,
+        "requested_method": s.requested_method,
+        "reason": s.reason,
+        "rtol": s.rtol, "atol": s.atol,
+        "steps_accepted": s.steps_accepted, "steps_rejected": s.steps_rejected,
+        "nfev": s.nfev, "njev": s.njev, "nlu": s.nlu,
+        "wall_time_s": s.wall_time_s,
+        "success": s.success, "message": s.message,
+        "peak_displacement_m": dict(zip(run.result.dofs, map(float, run.result.peak_displacement()))),
+        "notes": list(run.result.notes),
+        "outputs": [str(p) for p in run.outputs],
+    }
+
+
+def format_summary(data: dict) -> str:
+    """Terminal text for a run summary."""
+    lines = [f"{data['scenario']}: {data['title']}" if data["title"] else data["scenario"],
+             f"  method   {data['method']} ({data['reason']})"]
+    if data["rtol"] is not None:
+        lines.append(f"  tolerance rtol={data['rtol']:g} atol={data['atol']:g}")
+    rejected = "not reported" if data["steps_rejected"] < 0 else data["steps_rejected"]
+    lines.append(f"  cost     {data['steps_accepted']} steps ({rejected} rejected), {data['nfev']} f evals, "
+                 f"{data['njev']} Jacobians, {data['nlu']} LU; {data['wall_time_s'] * 1e3:.1f} ms")
+    peaks = ", ".join(f"{k} {v:.6g}" for k, v in data["peak_displacement_m"].items())
+    lines.append(f"  peak |x| {peaks} m")
+    lines += [f"  {note}" for note in data["notes"]]
+    if data["outputs"]:
+        lines.append(f"  wrote    {', '.join(data['outputs'])}")
+    return "\n".join(lines)
+
+
+def info(path: str | Path) -> dict:
+    """DOFs, matrices, modes, regimes, stiffness and auto's choice, as plain data."""
+    sc, model, grid = prepare(path)
+    m = model.modes
+    from smdcli.solvers.auto import Auto
+
+    solver, reason = Auto().choose(model)
+    data = {
+        "scenario": sc.path, "title": sc.title, "dofs": list(model.dofs),
+        "form": "element" if model.element_form else "matrix",
+        "M": model.M.tolist(), "C": model.C.tolist(), "K": model.K.tolist(),
+        "linear": model.is_linear, "nonlinear_elements": list(model.nonlinear_paths),
+        "forces": [f"{p} on {model.dofs[d]}: {type(s).__name__.lower()}"
+                   for p, s, d in zip(model.force_paths, model.signals, model.force_dofs)],
+        "modes": [
+            {"natural_frequency_rad_s": float(w), "natural_frequency_hz": float(w / (2 * math.pi)),
+             "damping_ratio": float(z), "regime": r}
+            for w, z, r in zip(m.natural_frequencies, m.damping_ratios, m.regimes)
+        ],
+        "eigenvalues": [[float(e.real), float(e.imag)] for e in m.eigenvalues],
+        "stiffness_ratio": model.stiffness_ratio,
+        "stiff": model.is_stiff,
+        "time": {"start": float(grid[0]), "end": float(grid[-1]), "points": len(grid)},
+    }
+    if solver is not None:
+        data["auto"] = {"method": solver.name, "reason": reason}
+    else:
+        y0 = np.concatenate([model.x0, model.v0])
+        lam = np.linalg.eigvals(model.jacobian(0.0, y0))
+        re = np.abs(lam.real[lam.real < 0])
+        ratio0 = float(re.max() / re.min()) if len(re) else 1.0
+        data["linearized_at_start"] = {"eigenvalues": [[float(e.real), float(e.imag)] for e in lam],
+                                       "stiffness_ratio": ratio0}
+        data["auto"] = {"method": "DOP853 or Radau",
+                        "reason": (f"nonlinear ({', '.join(model.nonlinear_paths)}): the linearization at the start "
+                                   f"has stiffness ratio {ratio0:.3g}, but stiffness is decided along the trajectory: "
+                                   "DOP853 runs while h*|lambda|max stays below its stability limit, else Radau")}
+    return data
+
+
+def format_info(d: dict) -> str:
+    """Terminal text for `smd info`."""
+    def matrix(name, rows):
+        body = "\n".join("      [" + ", ".join(f"{v:10.4g}" for v in row) + "]" for row in rows)
+        return f"  {name} =\n{body}"
+
+    lines = [f"{d['scenario']}: {d['title']}" if d["title"] else d["scenario"],
+             f"  DOFs     {', '.join(d['dofs'])} ({d['form']} form, "
+             f"{'linear' if d['linear'] else 'nonlinear: ' + ', '.join(d['nonlinear_elements'])})",
+             f"  time     {d['time']['start']:g} .. {d['time']['end']:g} s, {d['time']['points']} points"]
+    lines += [f"  force    {f}" for f in d["forces"]] or ["  force    none (free response)"]
+    lines += [matrix("M", d["M"]), matrix("C", d["C"]), matrix("K", d["K"])]
+    lines.append("  modes    omega_n [rad/s]   f_n [Hz]   zeta        regime")
+    for i, mode in enumerate(d["modes"], 1):
+        lines.append(f"    {i:<5}  {mode['natural_frequency_rad_s']:14.6g} {mode['natural_frequency_hz']:10.4g}"
+                     f"   {mode['damping_ratio']:<10.5g}  {mode['regime']}")
+    lines.append(f"  stiffness ratio {d['stiffness_ratio']:.4g} ({'stiff' if d['stiff'] else 'not stiff'}"
+                 f"{' in its linear part' if not d['linear'] else ''})")
+    if "linearized_at_start" in d:
+        lines.append(f"  linearized at t0: stiffness ratio {d['linearized_at_start']['stiffness_ratio']:.4g}")
+    lines.append(f"  auto     {d['auto']['method']}: {d['auto']['reason']}")
+    return "\n".join(lines)

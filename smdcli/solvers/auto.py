@@ -1,0 +1,66 @@
+"""auto: the cheapest method that is exact or accurate enough, and why it was chosen."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from smdcli.model import Model
+from smdcli.result import Result
+from smdcli.solvers.base import Solver, Tolerances
+from smdcli.solvers.closed_form import ClosedForm
+from smdcli.solvers.exact import Exact
+from smdcli.solvers.ivp import DOP853, Radau, StiffnessDetected, StiffnessMonitor
+
+
+def _force_kinds(model: Model) -> str:
+    kinds = sorted({type(s).__name__.lower() for s in model.signals})
+    return ", ".join(kinds)
+
+
+class Auto(Solver):
+    """Closed form or exact for linear scenes; for the rest, explicit unless the trajectory proves stiff."""
+
+    name = "auto"
+    family = "choice"
+    description = "picks the cheapest method that is exact or accurate enough, and says why"
+
+    def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
+        start = time.perf_counter()
+        solver, reason = self.choose(model)
+        if solver is None:  # nonlinear: try explicit with a stiffness watch
+            monitor = StiffnessMonitor(model, DOP853.stability_boundary)
+            try:
+                result = DOP853(monitor=monitor).solve(model, grid, tol)
+                reason = (f"nonlinear ({', '.join(model.nonlinear_paths)}); explicit DOP853 was held by stability "
+                          f"on {monitor.fraction:.0%} of {monitor.steps} steps (max h*|lambda| = {monitor.max_rho:.2f}, "
+                          f"limit {DOP853.stability_boundary}): not stiff along this trajectory")
+            except StiffnessDetected as stiff:
+                result = Radau().solve(model, grid, tol)
+                reason = (f"nonlinear ({', '.join(model.nonlinear_paths)}) and stiff: explicit DOP853 was "
+                          f"stability-limited on {stiff.fraction:.0%} of its steps by t = {stiff.t:.3g} s "
+                          f"(h*|lambda| = {stiff.rho:.2f}); implicit Radau with the analytic Jacobian")
+        else:
+            result = solver.solve(model, grid, tol)
+        stats = dataclasses.replace(result.stats, requested_method=self.name, reason=reason,
+                                    wall_time_s=time.perf_counter() - start)
+        return dataclasses.replace(result, stats=stats)
+
+    def choose(self, model: Model) -> tuple[Solver | None, str]:
+        """The solver for a model and the reason, or (None, '') where the trajectory must decide."""
+        if model.is_linear:
+            if model.n == 1 and not model.is_forced:
+                regime = model.modes.regimes[0]
+                return ClosedForm(), f"linear 1-DOF free response ({regime}): closed form, exact to rounding"
+            if Exact().refuse(model) is None:
+                forced = f"with {_force_kinds(model)} forces integrated exactly between their discontinuities" \
+                    if model.is_forced else "free response"
+                return Exact(), f"linear time-invariant, {forced}: matrix exponential, exact to rounding"
+            if model.is_stiff:
+                return Radau(), (f"linear but the {_force_kinds(model)} force has no exact integral, and stiff "
+                                 f"(stiffness ratio {model.stiffness_ratio:.3g}): implicit Radau at the scenario's tolerances")
+            return DOP853(), (f"linear but the {_force_kinds(model)} force has no exact integral; not stiff "
+                              f"(stiffness ratio {model.stiffness_ratio:.3g}): DOP853 at the scenario's tolerances")
+        return None, ""

@@ -1,0 +1,61 @@
+"""What a solver is: a name, what it can handle, its order, and solve(model, grid)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from smdcli.model import Model
+from smdcli.result import Result, SolverStats
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """The accuracy a run asks for: relative and absolute error, and a fixed step where one is used."""
+
+    rtol: float = 1e-6
+    atol: float = 1e-9
+    dt: float | None = None
+
+
+class Solver:
+    """A method: refuse() says why it cannot take a model; solve() returns a Result."""
+
+    name: ClassVar[str]
+    family: ClassVar[str]
+    description: ClassVar[str] = ""
+    linear_only: ClassVar[bool] = False
+    adaptive: ClassVar[bool] = True
+    implicit: ClassVar[bool] = False
+    order: ClassVar[int | None] = None
+
+    def refuse(self, model: Model) -> str | None:
+        """Why this solver cannot take the model, with what to use instead; None if it can."""
+        if self.linear_only and not model.is_linear:
+            first = model.nonlinear_paths[0]
+            return (f"{self.name!r} needs a linear model; {first} is nonlinear; "
+                    "try 'DOP853', 'Radau' or 'auto'")
+        return None
+
+    def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
+        """Integrate the model over the grid."""
+        raise NotImplementedError
+
+
+def make_result(model: Model, grid: np.ndarray, x: np.ndarray, v: np.ndarray, stats: SolverStats,
+                t_failed: float | None = None, notes: tuple[str, ...] = ()) -> Result:
+    """A Result from displacement and velocity on the grid; force and acceleration derived."""
+    force = model.applied_force(grid) if model.is_forced else np.zeros_like(x)
+    with np.errstate(all="ignore"):
+        acceleration = model.acceleration(x, v, force)
+    return Result(time=grid, dofs=model.dofs, displacement=x, velocity=v, acceleration=acceleration,
+                  force=force, stats=stats, t_failed=t_failed, notes=notes)
+
+
+def segments(model: Model, grid: np.ndarray) -> list[tuple[float, float]]:
+    """The intervals between force discontinuities that cover the grid."""
+    t0, t1 = float(grid[0]), float(grid[-1])
+    cuts = [t0, *model.breakpoints(t0, t1), t1]
+    return list(zip(cuts[:-1], cuts[1:]))

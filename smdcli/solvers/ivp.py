@@ -1,0 +1,298 @@
+"""scipy integrators, driven step by step between force discontinuities.
+
+Driving scipy's OdeSolver classes directly (rather than through solve_ivp)
+lets smd restart at every force breakpoint, count accepted and rejected
+steps, stop at divergence with the time reached, and watch h * |lambda|max
+along the trajectory to tell whether an explicit method is held back by
+stability (stiffness) rather than accuracy.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from typing import Callable, ClassVar
+
+import numpy as np
+
+from smdcli.model import Model
+from smdcli.result import Result, SolverStats
+from smdcli.solvers.base import Solver, Tolerances, make_result, segments
+
+# A state larger than this (relative to the initial and forced scale) has diverged.
+GROWTH_BOUND = 1e8
+MAX_STEPS = 2_000_000
+
+
+class StiffnessDetected(Exception):
+    """Raised by the monitor when an explicit method is stability-limited."""
+
+    def __init__(self, t: float, fraction: float, rho: float):
+        self.t, self.fraction, self.rho = t, fraction, rho
+        super().__init__(f"stability-limited on {fraction:.0%} of recent steps at t = {t:.4g} s")
+
+
+class StiffnessMonitor:
+    """Counts accepted explicit steps whose h * spectral radius of the Jacobian nears the stability boundary."""
+
+    def __init__(self, model: Model, boundary: float, window: int = 200, limit: float = 0.8, abort: bool = True):
+        self.model, self.boundary = model, boundary
+        self.window, self.limit, self.abort = window, limit, abort
+        self.recent: list[bool] = []
+        self.limited = 0
+        self.steps = 0
+        self.max_rho = 0.0
+
+    def __call__(self, t: float, h: float, y: np.ndarray) -> None:
+        rho = h * float(np.abs(np.linalg.eigvals(self.model.jacobian(t, y))).max())
+        self.max_rho = max(self.max_rho, rho)
+        is_limited = rho > 0.5 * self.boundary
+        self.steps += 1
+        self.limited += is_limited
+        self.recent.append(is_limited)
+        if len(self.recent) > self.window:
+            self.recent.pop(0)
+        if self.abort and len(self.recent) == self.window:
+            fraction = sum(self.recent) / self.window
+            if fraction >= self.limit:
+                raise StiffnessDetected(t, fraction, rho)
+
+    @property
+    def fraction(self) -> float:
+        """Share of all monitored steps that were stability-limited."""
+        return self.limited / self.steps if self.steps else 0.0
+
+
+@contextlib.contextmanager
+def _count_attempts(module, name: str, key: Callable):
+    """Count the step attempts of an implicit scipy method by wrapping its per-attempt solve."""
+    original = getattr(module, name)
+    keys: list = []
+
+    def wrapped(*args, **kwargs):
+        k = key(*args)
+        if not keys or keys[-1] != k:  # a Jacobian refresh retries the same attempt
+            keys.append(k)
+        return original(*args, **kwargs)
+
+    setattr(module, name, wrapped)
+    try:
+        yield keys
+    finally:
+        setattr(module, name, original)
+
+
+def _force_function(model: Model, ta: float, tb: float) -> Callable[[float], np.ndarray]:
+    """Force values on [ta, tb], taking left limits in the segment's second half so no jump leaks in."""
+    mid = 0.5 * (ta + tb)
+    signals = model.signals
+
+    def u(t: float) -> np.ndarray:
+        if t < mid:
+            return np.array([float(s.value(t)) for s in signals])
+        return np.array([float(s.value_left(t)) for s in signals])
+
+    return u
+
+
+def _rhs(model: Model, ta: float, tb: float):
+    A = model.state_matrix
+    G = model.input_matrix
+    n = model.n
+    Minv = model.Minv
+    linear = model.is_linear
+    u = _force_function(model, ta, tb) if model.is_forced else None
+
+    def fun(t, y):
+        dy = A @ y
+        if u is not None:
+            dy += G @ u(t)
+        if not linear:
+            dy[n:] -= Minv @ model.nonlinear_force(y[:n], y[n:])
+        return dy
+
+    return fun
+
+
+def _scale(model: Model, grid: np.ndarray) -> float:
+    """A size that a bounded response stays within by far: initial state and static deflection."""
+    scale = max(np.abs(model.x0).max(initial=0.0), np.abs(model.v0).max(initial=0.0), 1.0)
+    if model.is_forced:
+        peak_force = np.abs(model.applied_force(grid)).max(initial=0.0)
+        stiffness = np.abs(np.diag(model.K)).min(initial=0.0)
+        scale = max(scale, peak_force / stiffness if stiffness > 0 else peak_force * (grid[-1] - grid[0]) ** 2)
+    return scale
+
+
+def _diverged(y: np.ndarray, bound: float) -> str | None:
+    if not np.all(np.isfinite(y)):
+        return "the state became NaN or infinite"
+    if np.abs(y).max() > bound:
+        return f"the state grew past {bound:.3g}"
+    return None
+
+
+class ScipyMethod(Solver):
+    """One of scipy.integrate's OdeSolver classes, restarted at every force discontinuity."""
+
+    scipy_name: ClassVar[str]
+    stability_boundary: ClassVar[float] = 0.0  # on the negative real axis, explicit methods
+    monitor: StiffnessMonitor | None = None
+
+    def __init__(self, monitor: StiffnessMonitor | None = None, breakpoints: bool = True):
+        self.monitor = monitor
+        self.breakpoints = breakpoints
+
+    def _solver_class(self):
+        import scipy.integrate as si
+
+        return getattr(si, self.scipy_name)
+
+    def _attempt_counter(self):
+        """A context that counts attempts, for methods whose nfev per attempt varies."""
+        import scipy.integrate._ivp.bdf as bdf
+        import scipy.integrate._ivp.radau as radau
+
+        if self.scipy_name == "Radau":
+            return _count_attempts(radau, "solve_collocation_system", lambda fun, t, y, h, *a: (t, h))
+        if self.scipy_name == "BDF":
+            return _count_attempts(bdf, "solve_bdf_system", lambda fun, t_new, y, c, *a: (t_new, c))
+        return contextlib.nullcontext(None)
+
+    def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
+        start = time.perf_counter()
+        cls = self._solver_class()
+        n, N = model.n, len(grid)
+        out = np.full((N, 2 * n), np.nan)
+        y = np.concatenate([model.x0, model.v0])
+        out[0] = y
+        k = 1
+        nfev = njev = nlu = accepted = attempts_rk = 0
+        bound = GROWTH_BOUND * _scale(model, grid)
+        failure, t_reached = None, float(grid[0])
+        kwargs = {"rtol": tol.rtol, "atol": tol.atol}
+        if self.implicit:
+            kwargs["jac"] = model.jacobian
+        n_stages = getattr(cls, "n_stages", None)
+        segs = segments(model, grid) if self.breakpoints else [(float(grid[0]), float(grid[-1]))]
+        with self._attempt_counter() as attempts_implicit:
+            for ta, tb in segs:
+                solver = cls(_rhs(model, ta, tb), ta, y, tb, **kwargs)
+                while solver.status == "running":
+                    before = solver.nfev
+                    message = solver.step()
+                    if n_stages:
+                        attempts_rk += (solver.nfev - before) // n_stages
+                    if solver.status == "failed":
+                        failure = message or "step failed"
+                        break
+                    accepted += 1
+                    if accepted > MAX_STEPS:
+                        failure = f"more than {MAX_STEPS} steps"
+                        break
+                    t_old, t_new = solver.t_old, solver.t
+                    j = int(np.searchsorted(grid, t_new, side="right"))
+                    if j > k:
+                        out[k:j] = solver.dense_output()(grid[k:j]).T
+                        k = j
+                    failure = _diverged(solver.y, bound)
+                    t_reached = t_new
+                    if failure:
+                        break
+                    if self.monitor is not None:
+                        self.monitor(t_new, t_new - t_old, solver.y)
+                nfev += solver.nfev
+                njev += solver.njev
+                nlu += solver.nlu
+                if failure:
+                    break
+                y = solver.y
+            if attempts_implicit is not None:
+                rejected = len(attempts_implicit) - accepted
+            elif n_stages:
+                rejected = attempts_rk - accepted
+            else:
+                rejected = -1  # LSODA does not report rejections
+        if failure:
+            out[k:] = np.nan
+        stats = SolverStats(
+            method=self.name, requested_method=self.name, reason="", rtol=tol.rtol, atol=tol.atol,
+            nfev=nfev, njev=njev, nlu=nlu, steps_accepted=accepted, steps_rejected=rejected,
+            wall_time_s=time.perf_counter() - start, success=failure is None,
+            message="ok" if failure is None else f"failed at t = {t_reached:.6g} s: {failure}",
+        )
+        return make_result(model, grid, out[:, :n], out[:, n:], stats, t_failed=None if failure is None else t_reached)
+
+
+def _scipy(name: str, scipy_name: str, implicit: bool, order: int, boundary: float, text: str):
+    return type(name, (ScipyMethod,), {
+        "name": name, "scipy_name": scipy_name, "family": "scipy.integrate.solve_ivp",
+        "implicit": implicit, "order": order, "stability_boundary": boundary, "description": text,
+    })
+
+
+RK45 = _scipy("RK45", "RK45", False, 5, 3.3, "explicit Dormand-Prince 5(4)")
+RK23 = _scipy("RK23", "RK23", False, 3, 2.5, "explicit Bogacki-Shampine 3(2)")
+DOP853 = _scipy("DOP853", "DOP853", False, 8, 6.0, "explicit Dormand-Prince 8(5,3)")
+Radau = _scipy("Radau", "Radau", True, 5, 0.0, "implicit Radau IIA, order 5")
+BDF = _scipy("BDF", "BDF", True, 5, 0.0, "implicit variable-order BDF/NDF, orders 1-5")
+LSODA = _scipy("LSODA", "LSODA", True, 12, 0.0, "ODEPACK LSODA: Adams, switching to BDF when stiff")
+ode45 = _scipy("ode45", "RK45", False, 5, 3.3, "MATLAB ode45's formula: Dormand-Prince 5(4) (scipy RK45)")
+ode23 = _scipy("ode23", "RK23", False, 3, 2.5, "MATLAB ode23's formula: Bogacki-Shampine 3(2) (scipy RK23)")
+ode15s = _scipy("ode15s", "BDF", True, 5, 0.0,
+                "MATLAB ode15s's family: variable-order NDF (scipy BDF implements the NDF formulas)")
+
+
+class Ode113(Solver):
+    """MATLAB ode113's family: variable-order Adams-Bashforth-Moulton (VODE, method='adams', never switches to BDF)."""
+
+    name = "ode113"
+    family = "MATLAB name"
+    description = "variable-order Adams-Bashforth-Moulton PECE, orders 1-12 (VODE adams)"
+    order = 12
+
+    def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
+        from scipy.integrate import ode
+
+        start = time.perf_counter()
+        n, N = model.n, len(grid)
+        out = np.full((N, 2 * n), np.nan)
+        y = np.concatenate([model.x0, model.v0])
+        out[0] = y
+        k = 1
+        counts = np.zeros(5, dtype=np.int64)  # nst, nfe, nje, nlu, rejections
+        bound = GROWTH_BOUND * _scale(model, grid)
+        failure, t_reached = None, float(grid[0])
+        for ta, tb in segments(model, grid):
+            r = ode(_rhs(model, ta, tb)).set_integrator(
+                "vode", method="adams", rtol=tol.rtol, atol=tol.atol, nsteps=MAX_STEPS)
+            r.set_initial_value(y, ta)
+            integ = r._integrator
+            integ.rwork[0] = tb  # tcrit: VODE must not step past the force discontinuity
+            integ.call_args[2] = 4
+            stop = int(np.searchsorted(grid, tb, side="right"))
+            targets = list(grid[k:stop]) + ([tb] if stop == 0 or grid[stop - 1] != tb else [])
+            for target in targets:
+                r.integrate(target)
+                if not r.successful():
+                    failure = f"VODE returned {integ.istate}"
+                    break
+                if k < stop and target == grid[k]:
+                    out[k] = r.y
+                    k += 1
+                failure = _diverged(r.y, bound)
+                t_reached = r.t
+                if failure:
+                    break
+            iw = integ.iwork
+            counts += [iw[10], iw[11], iw[12], iw[18], iw[20] + iw[21]]
+            if failure:
+                break
+            y = r.y.copy()
+        stats = SolverStats(
+            method=self.name, requested_method=self.name, reason="", rtol=tol.rtol, atol=tol.atol,
+            nfev=int(counts[1]), njev=int(counts[2]), nlu=int(counts[3]), steps_accepted=int(counts[0]),
+            steps_rejected=int(counts[4]), wall_time_s=time.perf_counter() - start, success=failure is None,
+            message="ok" if failure is None else f"failed at t = {t_reached:.6g} s: {failure}",
+        )
+        return make_result(model, grid, out[:, :n], out[:, n:], stats, t_failed=None if failure is None else t_reached)

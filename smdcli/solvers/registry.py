@@ -1,0 +1,81 @@
+"""The one place where a method name becomes a solver."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from smdcli.errors import ScenarioError
+from smdcli.model import Model
+from smdcli.result import Result
+from smdcli.solvers.base import Solver, Tolerances
+
+# Methods of DESIGN.md that come with the solver-comparison work (issue 3).
+PLANNED = ("ode23s", "ode23t", "ode23tb", "newmark", "hht", "generalized_alpha",
+           "central_difference", "euler", "rk4")
+
+
+def _solvers() -> dict[str, type[Solver]]:
+    from smdcli.solvers.auto import Auto
+    from smdcli.solvers.closed_form import ClosedForm
+    from smdcli.solvers.exact import Exact
+    from smdcli.solvers.ivp import BDF, DOP853, LSODA, RK23, RK45, Ode113, Radau, ode15s, ode23, ode45
+
+    classes = (Auto, ClosedForm, Exact, RK45, RK23, DOP853, Radau, BDF, LSODA, ode45, ode23, Ode113, ode15s)
+    return {cls.name: cls for cls in classes}
+
+
+def available_methods() -> tuple[str, ...]:
+    """Names a scenario or --method may use now."""
+    return tuple(_solvers())
+
+
+def check_method_name(name: str) -> str | None:
+    """Why a method name cannot be used, or None."""
+    solvers = _solvers()
+    if name in solvers:
+        return None
+    if name in PLANNED:
+        return f"method {name!r} is not yet available in smd {_version()}; available: {', '.join(solvers)}"
+    import difflib
+
+    hint = difflib.get_close_matches(name, list(solvers) + list(PLANNED), n=1)
+    extra = f" (did you mean {hint[0]!r}?)" if hint else ""
+    return f"unknown method {name!r}{extra}; available: {', '.join(solvers)}"
+
+
+def _version() -> str:
+    from smdcli import __version__
+
+    return __version__
+
+
+def get_solver(name: str) -> Solver:
+    """A solver instance by name; raises ValueError listing the valid names."""
+    problem = check_method_name(name)
+    if problem:
+        raise ValueError(problem)
+    return _solvers()[name]()
+
+
+def solve(model: Model, grid: np.ndarray, method: str, tol: Tolerances, field: str = "solver.method") -> Result:
+    """Check that the method can take the model, then solve; refusals are input errors."""
+    problem = check_method_name(method)
+    if problem:
+        raise ScenarioError(model.source, field, problem)
+    solver = _solvers()[method]()
+    problem = solver.refuse(model)
+    if problem:
+        raise ScenarioError(model.source, field, problem)
+    result = solver.solve(model, grid, tol)
+    notes = result.notes
+    explicit = method not in ("auto", "closed_form", "exact") and not solver.implicit
+    if explicit and model.is_linear and model.is_stiff:
+        notes += (f"warning: this scene is stiff (stiffness ratio {model.stiffness_ratio:.3g}); "
+                  f"the explicit {method} is held to tiny steps by stability: try 'exact', 'Radau' or 'auto'",)
+    stats = result.stats
+    if method != "auto":
+        stats = dataclasses.replace(stats, requested_method=method,
+                                    reason=stats.reason or f"requested: {solver.description}")
+    return dataclasses.replace(result, stats=stats, notes=notes)
