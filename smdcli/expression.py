@@ -89,8 +89,10 @@ def _check(node: ast.AST) -> None:
             raise ExpressionError(f"operator {type(node.op).__name__} is not allowed")
         _check(node.operand)
     elif isinstance(node, ast.Call):
-        if not isinstance(node.func, ast.Name) or node.func.id not in FUNCTIONS:
-            what = node.func.id if isinstance(node.func, ast.Name) else _describe(node.func)
+        if not isinstance(node.func, ast.Name):
+            raise ExpressionError(f"{_describe(node.func)} is not allowed")
+        if node.func.id not in FUNCTIONS:
+            what = node.func.id
             raise ExpressionError(
                 f"call of {what!r} is not allowed; allowed functions: " + ", ".join(FUNCTIONS)
             )

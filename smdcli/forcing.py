@@ -113,7 +113,7 @@ class Pulse(Signal):
         return Exo(np.zeros((1, 1)), np.array([self.amplitude]))
 
     def exo_state(self, t):
-        return np.array([float(self.value(t))])
+        return np.array([1.0 if self.t0 <= t < self.t_end else 0.0])
 
 
 class Harmonic(Signal):

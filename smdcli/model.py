@@ -173,6 +173,26 @@ class Model:
             f = f + (self.quadratic.coef * np.abs(dv) * dv) @ self.quadratic.D
         return f
 
+    @cached_property
+    def _nonlinear_maps(self) -> tuple:
+        """(D, M^-1 D^T diag(coef)) per nonlinear law, for a fast right-hand side."""
+        maps = []
+        for inc, law in ((self.cubic, "cubic"), (self.quadratic, "quadratic")):
+            if inc is not None:
+                maps.append((law, inc.D, self.Minv @ (inc.D.T * inc.coef)))
+        return tuple(maps)
+
+    def nonlinear_acceleration(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """M^-1 f_nl(x, v) for one state: the same forces as nonlinear_force, with M^-1 folded in."""
+        out = 0.0
+        for law, D, W in self._nonlinear_maps:
+            if law == "cubic":
+                out = out + W @ (D @ x) ** 3
+            else:
+                dv = D @ v
+                out = out + W @ (np.abs(dv) * dv)
+        return out
+
     def tangent(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Tangent stiffness and damping K + df_nl/dx, C + df_nl/dv at (x, v)."""
         Kt, Ct = self.K, self.C
@@ -191,7 +211,7 @@ class Model:
         if len(u):
             dy[n:] += self.Minv @ (self.B @ u)
         if not self.is_linear:
-            dy[n:] -= self.Minv @ self.nonlinear_force(y[:n], y[n:])
+            dy[n:] -= self.nonlinear_acceleration(y[:n], y[n:])
         return dy
 
     def jacobian(self, t: float, y: np.ndarray) -> np.ndarray:

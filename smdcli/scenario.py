@@ -177,6 +177,13 @@ class _Table:
         where = self.path if key is None else (f"{self.path}.{key}" if self.path else key)
         return ScenarioError(self.file, where, message)
 
+    def missing(self, key: str, expected: str) -> ScenarioError:
+        """A required key is absent: point at a misspelling of it if the table has one."""
+        typo = difflib.get_close_matches(key, [k for k in self.data if k not in self.used], n=1, cutoff=0.6)
+        if typo:
+            return self.fail(typo[0], f"unknown key (did you mean {key!r}?)")
+        return self.fail(key, f"required field is missing (expected {expected})")
+
     def has(self, key: str) -> bool:
         """Whether the key is present."""
         return key in self.data
@@ -191,7 +198,7 @@ class _Table:
         """A finite real number; `minimum` inclusive, `positive` strict."""
         if key not in self.data:
             if default is ...:
-                raise self.fail(key, "required field is missing (expected a number)")
+                raise self.missing(key, "a number")
             return default
         value = self.raw(key)
         return self._check_number(key, value, minimum, positive)
@@ -212,7 +219,7 @@ class _Table:
         """A whole number >= minimum."""
         if key not in self.data:
             if default is ...:
-                raise self.fail(key, "required field is missing (expected a whole number)")
+                raise self.missing(key, "a whole number")
             return default
         value = self.raw(key)
         if isinstance(value, bool) or not isinstance(value, int):
@@ -225,7 +232,7 @@ class _Table:
         """A string, optionally one of `choices`."""
         if key not in self.data:
             if default is ...:
-                raise self.fail(key, "required field is missing (expected a string)")
+                raise self.missing(key, "a string")
             return default
         value = self.raw(key)
         if not isinstance(value, str):
@@ -241,7 +248,7 @@ class _Table:
         """An array of finite numbers, optionally of a given length."""
         if key not in self.data:
             if default is ...:
-                raise self.fail(key, "required field is missing (expected an array of numbers)")
+                raise self.missing(key, "an array of numbers")
             return default
         value = self.raw(key)
         if not isinstance(value, list):

@@ -99,8 +99,8 @@ def _rhs(model: Model, ta: float, tb: float):
     A = model.state_matrix
     G = model.input_matrix
     n = model.n
-    Minv = model.Minv
     linear = model.is_linear
+    nonlinear = model.nonlinear_acceleration
     u = _force_function(model, ta, tb) if model.is_forced else None
 
     def fun(t, y):
@@ -108,7 +108,7 @@ def _rhs(model: Model, ta: float, tb: float):
         if u is not None:
             dy += G @ u(t)
         if not linear:
-            dy[n:] -= Minv @ model.nonlinear_force(y[:n], y[n:])
+            dy[n:] -= nonlinear(y[:n], y[n:])
         return dy
 
     return fun

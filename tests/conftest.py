@@ -1,0 +1,56 @@
+"""Shared helpers: scenarios from text, and the CLI run in-process."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from smdcli import scenario
+from smdcli.model import build, time_grid
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIOS = ROOT / "scenarios"
+
+
+def model_of(text: str, name: str = "test.toml"):
+    """(scenario, model, grid) of scenario text."""
+    sc = scenario.parse(text, name)
+    return sc, build(sc), time_grid(sc.time)
+
+
+def one_dof(c: float, k: float = 25.0, m: float = 1.0, x0: float = 0.1, v0: float = 0.0,
+            end: float = 5.0, step: float = 0.05, law: str = "linear", extra: str = "") -> str:
+    """Text of a 1-DOF scenario."""
+    return f"""
+[time]
+end = {end!r}
+step = {step!r}
+[[mass]]
+name = "m"
+m = {m!r}
+x0 = {x0!r}
+v0 = {v0!r}
+[[spring]]
+connects = ["ground", "m"]
+k = {k!r}
+[[damper]]
+connects = ["ground", "m"]
+c = {c!r}
+law = "{law}"
+{extra}
+"""
+
+
+@pytest.fixture
+def cli():
+    """Run `smd ...` in-process; returns the click Result (stdout and stderr apart)."""
+    from smdcli.cli import app
+
+    runner = CliRunner()
+
+    def run(*args):
+        return runner.invoke(app, [str(a) for a in args])
+
+    return run

@@ -1,0 +1,109 @@
+"""The commands as a user runs them: outputs, HDF5 layout, exit codes, startup cost."""
+
+import json
+import subprocess
+import sys
+
+import h5py
+import numpy as np
+import pytest
+from conftest import SCENARIOS
+
+ALL = sorted(SCENARIOS.glob("*.toml"))
+BOOK = ["one_dof_nonlinear_stiff", "one_dof_undamped", "one_dof_underdamped", "one_dof_overdamped",
+        "one_dof_critical", "one_dof_square_fourier", "one_dof_square_wave", "one_dof_harmonic",
+        "two_dof_forced", "three_dof_forced", "three_dof_free", "three_dof_matrix_forced", "three_dof_matrix_free"]
+
+
+def test_every_book_scenario_is_bundled():
+    assert sorted(p.stem for p in ALL) == sorted(BOOK)
+
+
+def test_every_scenario_runs_in_one_batch(tmp_path, cli):
+    result = cli("simulate", *ALL, "-o", tmp_path, "--no-plots", "--json")
+    assert result.exit_code == 0, result.output
+    summaries = json.loads(result.stdout)
+    assert [s["scenario"] for s in summaries] == [str(p) for p in ALL]
+    for s, path in zip(summaries, ALL):
+        assert s["success"]
+        assert (tmp_path / f"{path.stem}.h5").exists()
+        assert not list(tmp_path.glob("*.part"))
+
+
+def test_simulate_writes_the_documented_layout_and_plots(tmp_path, cli):
+    result = cli("simulate", SCENARIOS / "two_dof_forced.toml", "-o", tmp_path)
+    assert result.exit_code == 0, result.output
+    assert "method   exact" in result.stdout and "peak |x|" in result.stdout
+    for name in ("two_dof_forced_response.png", "two_dof_forced_phase.png"):
+        assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with h5py.File(tmp_path / "two_dof_forced.h5") as f:
+        assert f.attrs["kind"] == "simulate" and f.attrs["schema_version"] == 1
+        assert "[[mass]]" in f.attrs["scenario"]
+        N = len(f["time"])
+        assert N == 1001 and f["time"].attrs["units"] == "s"
+        assert [d.decode() for d in f["dof"][()]] == ["m1", "m2"]
+        for name, units in (("displacement", "m"), ("velocity", "m/s"), ("acceleration", "m/s^2"), ("force", "N")):
+            ds = f[name]
+            assert ds.shape == (N, 2) and ds.attrs["units"] == units
+            assert ds.dims[0][0].name == "/time" and ds.dims[1][0].name == "/dof"
+        solver = f["solver"].attrs
+        assert solver["method"] == "exact" and solver["requested_method"] == "auto" and solver["success"]
+        for key in ("reason", "rtol", "atol", "dt", "nfev", "njev", "nlu", "steps_accepted", "steps_rejected",
+                    "wall_time_s", "message"):
+            assert key in solver
+        np.testing.assert_array_equal(f["model/K"][()], [[90, -90], [-90, 175]])
+        assert f["model/modes"].attrs["natural_frequencies_rad_s"].shape == (2,)
+        np.testing.assert_allclose(f["displacement"][0], [1.0, -1.0])
+        np.testing.assert_allclose(f["force"][:, 0], 3.3 * np.sin(10 * f["time"][()]), atol=1e-12)
+        # The acceleration satisfies the equation of motion on the grid.
+        x, v, a = f["displacement"][()], f["velocity"][()], f["acceleration"][()]
+        M, C, K = (f[f"model/{m}"][()] for m in "MCK")
+        np.testing.assert_allclose(a @ M.T + v @ C.T + x @ K.T, f["force"][()], atol=1e-10)
+
+
+def test_method_override_and_worst_exit_code(tmp_path, cli):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[time]\nend = -1\n")
+    result = cli("simulate", SCENARIOS / "one_dof_critical.toml", bad, SCENARIOS / "one_dof_undamped.toml",
+                 "-o", tmp_path, "--method", "RK45", "--rtol", "1e-8", "--no-plots")
+    assert result.exit_code == 2
+    assert (tmp_path / "one_dof_critical.h5").exists() and (tmp_path / "one_dof_undamped.h5").exists()
+    with h5py.File(tmp_path / "one_dof_undamped.h5") as f:
+        assert f["solver"].attrs["method"] == "RK45" and f["solver"].attrs["rtol"] == 1e-8
+    result = cli("simulate", bad, SCENARIOS / "one_dof_undamped.toml", "-o", tmp_path / "ff", "--fail-fast")
+    assert result.exit_code == 2 and not (tmp_path / "ff" / "one_dof_undamped.h5").exists()
+
+
+def test_solver_failure_exits_1_with_where_and_why(tmp_path, cli):
+    scenario = tmp_path / "escape.toml"
+    scenario.write_text('[time]\nend = 10.0\n[[mass]]\nname = "m"\nm = 1.0\nx0 = 2.0\n'
+                        '[[spring]]\nconnects = ["ground", "m"]\nk = 1.0\nlaw = "cubic"\nk3 = -1.0\n')
+    result = cli("simulate", scenario, "-o", tmp_path)
+    assert result.exit_code == 1
+    assert "failed at t =" in result.stderr and "try" in result.stderr
+    assert not (tmp_path / "escape.h5").exists()
+
+
+def test_info_reports_modes_regimes_and_auto(cli):
+    result = cli("info", SCENARIOS / "one_dof_critical.toml", "--json")
+    data = json.loads(result.stdout)
+    assert data["modes"][0]["regime"] == "critically damped"
+    assert data["modes"][0]["natural_frequency_rad_s"] == pytest.approx(5.0, rel=1e-15)
+    assert data["auto"]["method"] == "closed_form"
+    data = json.loads(cli("info", SCENARIOS / "three_dof_matrix_forced.toml", "--json").stdout)
+    w = np.sqrt(np.sort(np.linalg.eigvals(np.linalg.solve(np.diag([2.5, 2, 3]), data["K"])).real))
+    np.testing.assert_allclose([m["natural_frequency_rad_s"] for m in data["modes"]], w, rtol=0.05)
+    data = json.loads(cli("info", SCENARIOS / "one_dof_nonlinear_stiff.toml", "--json").stdout)
+    assert data["nonlinear_elements"] == ["damper[0]"]
+    assert data["linearized_at_start"]["stiffness_ratio"] > 1000
+    text = cli("info", SCENARIOS / "three_dof_forced.toml").stdout
+    assert "stiffness ratio" in text and "auto     exact" in text
+
+
+def test_help_does_not_import_heavy_modules():
+    code = ("import sys, runpy; sys.argv = ['smd', '--help']\n"
+            "try:\n    runpy.run_module('smdcli', run_name='__main__')\nexcept SystemExit:\n    pass\n"
+            "heavy = [m for m in ('scipy', 'matplotlib', 'h5py') if m in sys.modules]\n"
+            "print('HEAVY', heavy)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert "HEAVY []" in out

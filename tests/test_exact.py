@@ -1,0 +1,187 @@
+"""The exact solver against closed forms, the book's formulas and independent tight integrations."""
+
+import math
+
+import numpy as np
+from conftest import SCENARIOS, model_of
+from scipy.integrate import solve_ivp
+
+from smdcli import scenario
+from smdcli.model import build, time_grid
+from smdcli.solvers import solve
+from smdcli.solvers.base import Tolerances
+
+
+def load(name):
+    sc = scenario.load(SCENARIOS / f"{name}.toml")
+    return sc, build(sc), time_grid(sc.time)
+
+
+def test_element_form_assembles_the_books_matrices():
+    """C and K printed in the book's matrix approach (MASS3.m)."""
+    _, model, _ = load("three_dof_forced")
+    np.testing.assert_array_equal(model.M, np.diag([2.5, 2.0, 3.0]))
+    np.testing.assert_array_equal(model.C, [[3, -0.5, 0], [-0.5, 4, -3.5], [0, -3.5, 3.5]])
+    np.testing.assert_array_equal(model.K, [[30, -5, 0], [-5, 35, -30], [0, -30, 90]])
+
+
+def test_element_and_matrix_forms_give_the_same_trajectories():
+    _, element, grid = load("three_dof_free")
+    _, matrix, grid2 = load("three_dof_matrix_free")
+    a = solve(element, grid, "auto", Tolerances())
+    b = solve(matrix, grid2, "auto", Tolerances())
+    np.testing.assert_array_equal(grid, grid2)
+    np.testing.assert_allclose(a.displacement, b.displacement, rtol=0, atol=1e-14)
+
+
+def _book_three_dof(t, y):
+    """three_MASS.m's third_DOF, transcribed: an independent right-hand side."""
+    k1, k2, k3, k4, c1, c2, c3, m1, m2, m3 = 25, 5, 30, 30, 2.5, 0.5, 3.5, 2.5, 2, 3
+    F1, F2, F3 = 20 * math.sin(120 * t), 0.0, 20.0
+    return [y[1], (F1 - (k1 + k2) * y[0] + k2 * y[2] - (c1 + c2) * y[1] + c2 * y[3]) / m1,
+            y[3], (F2 + k2 * y[0] - (k2 + k3) * y[2] + k3 * y[4] - (c2 + c3) * y[3] + c2 * y[1] + c3 * y[5]) / m2,
+            y[5], (F3 + k3 * y[2] - (k3 + 2 * k4) * y[4] + c3 * y[3] - c3 * y[5]) / m3]
+
+
+def test_three_dof_forced_matches_tight_integration_of_the_books_equations():
+    sc, model, grid = load("three_dof_forced")
+    grid = grid[grid <= 10.0]
+    exact = solve(model, grid, "exact", Tolerances())
+    ref = solve_ivp(_book_three_dof, (0, grid[-1]), np.zeros(6), method="DOP853", t_eval=grid, rtol=1e-12, atol=1e-14)
+    peak = np.abs(ref.y[0::2]).max()
+    assert np.abs(exact.displacement - ref.y[0::2].T).max() / peak < 1e-10
+
+
+def test_harmonic_steady_state_matches_equations_9_32_and_9_33():
+    _, model, grid = load("one_dof_harmonic")
+    r = solve(model, grid, "auto", Tolerances())
+    assert r.stats.method == "exact"
+    m, k, c, F0, w = 2.5, 25.0, 2.5, 10.0, 5.0
+    wn = math.sqrt(k / m)
+    zeta = c / (2 * math.sqrt(k * m))
+    X = (F0 / m) / math.sqrt((wn**2 - w**2) ** 2 + (2 * zeta * wn * w) ** 2)  # (9-32)
+    theta = math.atan2(2 * zeta * wn * w, wn**2 - w**2)  # (9-33), in [0, pi]
+    tail = grid >= 30.0  # transient exp(-0.5 t) < 3e-7 of its start
+    t = grid[tail]
+    design = np.column_stack([np.cos(w * t), np.sin(w * t)])
+    (a, b), *_ = np.linalg.lstsq(design, r.displacement[tail, 0], rcond=None)
+    assert abs(math.hypot(a, b) - X) / X < 1e-5
+    assert abs(math.atan2(b, a) - theta) < 1e-5
+    assert abs(X - 0.25298) < 1e-5 and abs(theta - 2.8198) < 1e-4
+
+
+def _tight_with_stops(model, grid, edges, forcing):
+    """DOP853 at rtol 1e-12, restarted at every edge: an independent reference."""
+    m, c, k = model.M[0, 0], model.C[0, 0], model.K[0, 0]
+    y = [model.x0[0], model.v0[0]]
+    out = np.empty(len(grid))
+    cuts = [grid[0], *[e for e in edges if grid[0] < e < grid[-1]], grid[-1]]
+    for ta, tb in zip(cuts[:-1], cuts[1:]):
+        level = forcing(0.5 * (ta + tb))
+        sel = (grid >= ta) & (grid <= tb)
+        sol = solve_ivp(lambda t, s: [s[1], (level - c * s[1] - k * s[0]) / m], (ta, tb), y, method="DOP853",
+                        rtol=1e-12, atol=1e-14, dense_output=True)
+        out[sel] = sol.sol(grid[sel])[0]
+        y = sol.y[:, -1]
+    return out
+
+
+def test_square_wave_matches_tight_run_stopping_at_every_edge():
+    _, model, grid = load("one_dof_square_wave")
+    r = solve(model, grid, "auto", Tolerances())
+    assert r.stats.method == "exact"
+    edges = np.arange(1, 14) * 1.0
+    ref = _tight_with_stops(model, grid, edges, lambda t: 100.0 if math.floor(t) % 2 == 0 else -100.0)
+    assert np.abs(r.displacement[:, 0] - ref).max() / np.abs(ref).max() < 1e-9
+
+
+def test_edges_between_output_points_are_honoured():
+    """A pulse from 0.0123 s to 0.0456 s on a 0.01 s grid: exact agrees with the tight stopped run."""
+    text = """
+[time]
+end = 2.0
+step = 0.01
+[[mass]]
+name = "m"
+m = 1.0
+[[spring]]
+connects = ["ground", "m"]
+k = 400.0
+[[damper]]
+connects = ["ground", "m"]
+c = 1.0
+[[force]]
+on = "m"
+type = "pulse"
+amplitude = 50.0
+t0 = 0.0123
+duration = 0.0333
+"""
+    _, model, grid = model_of(text)
+    r = solve(model, grid, "exact", Tolerances())
+    ref = _tight_with_stops(model, grid, [0.0123, 0.0456], lambda t: 50.0 if 0.0123 <= t < 0.0456 else 0.0)
+    assert np.abs(r.displacement[:, 0] - ref).max() / np.abs(ref).max() < 1e-9
+
+
+def test_fourier_square_matches_the_books_func_pulse_integrated_tightly():
+    _, model, grid = load("one_dof_square_fourier")
+    grid = grid[grid <= 4.0]
+    r = solve(model, grid, "exact", Tolerances())
+    n = np.arange(1, 114)
+    coef = 200 / (n * np.pi) * (1 - np.cos(n * np.pi))
+
+    def func_pulse(t):
+        return coef @ np.sin(n * np.pi * t)
+
+    np.testing.assert_allclose(r.force[:, 0], [func_pulse(t) for t in grid], rtol=0, atol=1e-9)
+    ref = solve_ivp(lambda t, y: [y[1], (func_pulse(t) - 0.5 * y[1] - 1000 * y[0]) / 10], (0, grid[-1]), [0, 0],
+                    method="DOP853", t_eval=grid, rtol=1e-12, atol=1e-14)
+    assert np.abs(r.displacement[:, 0] - ref.y[0]).max() / np.abs(ref.y[0]).max() < 1e-8
+
+
+def test_table_force_is_exact_for_piecewise_linear_input():
+    """A ramp F = 10 t on a table: the response to a ramp has a closed form."""
+    text = """
+[time]
+end = 3.0
+step = 0.01
+[[mass]]
+name = "m"
+m = 1.0
+[[spring]]
+connects = ["ground", "m"]
+k = 4.0
+[[force]]
+on = "m"
+type = "table"
+t = [0.0, 5.0]
+values = [0.0, 50.0]
+"""
+    _, model, grid = model_of(text)
+    r = solve(model, grid, "auto", Tolerances())
+    assert r.stats.method == "exact"
+    # x'' + 4x = 10 t from rest: x = (10/4)(t - sin(2t)/2)
+    np.testing.assert_allclose(r.displacement[:, 0], 2.5 * (grid - np.sin(2 * grid) / 2), rtol=0, atol=1e-13)
+
+
+def test_undamped_resonance_is_exact():
+    """x'' + x = cos t from rest: x = t sin(t) / 2 (the secular term)."""
+    text = """
+[time]
+end = 50.0
+step = 0.05
+[[mass]]
+name = "m"
+m = 1.0
+[[spring]]
+connects = ["ground", "m"]
+k = 1.0
+[[force]]
+on = "m"
+type = "cosine"
+amplitude = 1.0
+omega = 1.0
+"""
+    _, model, grid = model_of(text)
+    r = solve(model, grid, "exact", Tolerances())
+    np.testing.assert_allclose(r.displacement[:, 0], grid * np.sin(grid) / 2, rtol=0, atol=1e-12)
