@@ -62,7 +62,7 @@ class Exact(Solver):
         return None
 
     def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
-        from scipy.linalg import expm
+        from scipy.linalg import expm  # imported before the clock: wall time is the solve's own
 
         start = time.perf_counter()
         Aaug, blocks = _augmented(model)
