@@ -1,6 +1,5 @@
 """Every category of bad input: exit 2, one line naming file and field, no traceback, nothing written."""
 
-from pathlib import Path
 
 import pytest
 

@@ -132,6 +132,26 @@ def _diverged(y: np.ndarray, bound: float) -> str | None:
     return None
 
 
+def _initial(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Output rows (NaN until reached) with the initial state in row 0, that state, and the divergence bound."""
+    y = np.concatenate([model.x0, model.v0])
+    out = np.full((len(grid), 2 * model.n), np.nan)
+    out[0] = y
+    return out, y, GROWTH_BOUND * _scale(model, grid)
+
+
+def _finish(solver: Solver, model: Model, grid: np.ndarray, out: np.ndarray, tol: Tolerances, start: float,
+            counts: dict, failure: str | None, t_reached: float) -> Result:
+    """The Result of an integration that stopped at t_reached, failed if `failure` says why."""
+    stats = SolverStats(
+        method=solver.name, requested_method=solver.name, reason="", rtol=tol.rtol, atol=tol.atol,
+        wall_time_s=time.perf_counter() - start, success=failure is None,
+        message="ok" if failure is None else f"failed at t = {t_reached:.6g} s: {failure}", **counts,
+    )
+    n = model.n
+    return make_result(model, grid, out[:, :n], out[:, n:], stats, t_failed=None if failure is None else t_reached)
+
+
 class ScipyMethod(Solver):
     """One of scipy.integrate's OdeSolver classes, restarted at every force discontinuity."""
 
@@ -162,13 +182,9 @@ class ScipyMethod(Solver):
     def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
         cls = self._solver_class()  # imported before the clock: wall time is the solve's own
         start = time.perf_counter()
-        n, N = model.n, len(grid)
-        out = np.full((N, 2 * n), np.nan)
-        y = np.concatenate([model.x0, model.v0])
-        out[0] = y
+        out, y, bound = _initial(model, grid)
         k = 1
         nfev = njev = nlu = accepted = attempts_rk = 0
-        bound = GROWTH_BOUND * _scale(model, grid)
         failure, t_reached = None, float(grid[0])
         kwargs = {"rtol": tol.rtol, "atol": tol.atol}
         if self.implicit:
@@ -215,13 +231,8 @@ class ScipyMethod(Solver):
                 rejected = -1  # LSODA does not report rejections
         if failure:
             out[k:] = np.nan
-        stats = SolverStats(
-            method=self.name, requested_method=self.name, reason="", rtol=tol.rtol, atol=tol.atol,
-            nfev=nfev, njev=njev, nlu=nlu, steps_accepted=accepted, steps_rejected=rejected,
-            wall_time_s=time.perf_counter() - start, success=failure is None,
-            message="ok" if failure is None else f"failed at t = {t_reached:.6g} s: {failure}",
-        )
-        return make_result(model, grid, out[:, :n], out[:, n:], stats, t_failed=None if failure is None else t_reached)
+        counts = {"nfev": nfev, "njev": njev, "nlu": nlu, "steps_accepted": accepted, "steps_rejected": rejected}
+        return _finish(self, model, grid, out, tol, start, counts, failure, t_reached)
 
 
 def _scipy(name: str, scipy_name: str, implicit: bool, order: int, boundary: float, text: str):
@@ -255,13 +266,9 @@ class Ode113(Solver):
         from scipy.integrate import ode  # imported before the clock
 
         start = time.perf_counter()
-        n, N = model.n, len(grid)
-        out = np.full((N, 2 * n), np.nan)
-        y = np.concatenate([model.x0, model.v0])
-        out[0] = y
+        out, y, bound = _initial(model, grid)
         k = 1
         counts = np.zeros(5, dtype=np.int64)  # nst, nfe, nje, nlu, rejections
-        bound = GROWTH_BOUND * _scale(model, grid)
         failure, t_reached = None, float(grid[0])
         for ta, tb in segments(model, grid):
             r = ode(_rhs(model, ta, tb)).set_integrator(
@@ -289,10 +296,6 @@ class Ode113(Solver):
             if failure:
                 break
             y = r.y.copy()
-        stats = SolverStats(
-            method=self.name, requested_method=self.name, reason="", rtol=tol.rtol, atol=tol.atol,
-            nfev=int(counts[1]), njev=int(counts[2]), nlu=int(counts[3]), steps_accepted=int(counts[0]),
-            steps_rejected=int(counts[4]), wall_time_s=time.perf_counter() - start, success=failure is None,
-            message="ok" if failure is None else f"failed at t = {t_reached:.6g} s: {failure}",
-        )
-        return make_result(model, grid, out[:, :n], out[:, n:], stats, t_failed=None if failure is None else t_reached)
+        nst, nfe, nje, nlu, rejected = (int(c) for c in counts)
+        stats = {"nfev": nfe, "njev": nje, "nlu": nlu, "steps_accepted": nst, "steps_rejected": rejected}
+        return _finish(self, model, grid, out, tol, start, stats, failure, t_reached)
