@@ -54,7 +54,7 @@ class Auto(Solver):
             if model.n == 1 and not model.is_forced:
                 regime = model.modes.regimes[0]
                 return ClosedForm(), f"linear 1-DOF free response ({regime}): closed form, exact to rounding"
-            if Exact().refuse(model) is None:
+            if all(s.exo() is not None for s in model.signals):
                 forced = f"with {_force_kinds(model)} forces integrated exactly between their discontinuities" \
                     if model.is_forced else "free response"
                 return Exact(), f"linear time-invariant, {forced}: matrix exponential, exact to rounding"

@@ -1,5 +1,10 @@
 """Exact solution of linear time-invariant scenes by the matrix exponential.
 
+Chirp and expression forces have no exact form: they are replaced by their
+first-order hold on the output grid (a piecewise-linear table), which is then
+integrated exactly; the error is that of the hold, O(step^2), and `auto` does
+not choose this path (it integrates such forces to the scenario's tolerance).
+
 The structure's state y = [x; v] is augmented with the exosystem state w of
 every force (see forcing.py): z' = [[A, G], [0, S]] z. Between force
 breakpoints z(t + h) = expm(Aaug h) z(t) is exact; at each breakpoint w is
@@ -12,10 +17,12 @@ start of every block as well.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
 
+from smdcli.forcing import Table
 from smdcli.model import Model
 from smdcli.result import Result, SolverStats
 from smdcli.solvers.base import Solver, Tolerances, make_result, segments
@@ -42,6 +49,15 @@ def _augmented(model: Model) -> tuple[np.ndarray, list[tuple[int, int, object]]]
     return Aaug, blocks
 
 
+def first_order_hold(model: Model, grid: np.ndarray) -> tuple[Model, tuple[str, ...]]:
+    """Replace forces without an exact form (chirp, expression) by their piecewise-linear interpolant on the grid."""
+    held = tuple(path for path, s in zip(model.force_paths, model.signals) if s.exo() is None)
+    if not held:
+        return model, held
+    signals = tuple(s if s.exo() is not None else Table(grid, s.value(grid), "linear") for s in model.signals)
+    return dataclasses.replace(model, signals=signals, _cache={}), held
+
+
 class Exact(Solver):
     """State transition by matrix exponential; forces integrated exactly between their breakpoints."""
 
@@ -51,20 +67,11 @@ class Exact(Solver):
     linear_only = True
     adaptive = False
 
-    def refuse(self, model: Model) -> str | None:
-        problem = super().refuse(model)
-        if problem:
-            return problem
-        for path, signal in zip(model.force_paths, model.signals):
-            if signal.exo() is None:
-                return (f"'exact' integrates constant, step, sine, cosine, square, fourier_square, "
-                        f"pulse and table forces; {path} is a {type(signal).__name__.lower()}; try 'DOP853' or 'auto'")
-        return None
-
     def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
         from scipy.linalg import expm  # imported before the clock: wall time is the solve's own
 
         start = time.perf_counter()
+        model, held = first_order_hold(model, grid)
         Aaug, blocks = _augmented(model)
         size = Aaug.shape[0]
         n, N = model.n, len(grid)
@@ -72,6 +79,8 @@ class Exact(Solver):
         cache: dict[float, np.ndarray] = {}
 
         def phi(dt: float) -> np.ndarray:
+            if N > 1 and abs(dt - h) <= 1e-9 * h:
+                dt = h  # a grid difference that is h up to the rounding of the grid times
             if dt not in cache:
                 cache[dt] = expm(Aaug * dt)
             return cache[dt]
@@ -118,6 +127,7 @@ class Exact(Solver):
         stats = SolverStats(
             method=self.name, requested_method=self.name, reason="",
             nlu=0, steps_accepted=max(N - 1, 0), wall_time_s=time.perf_counter() - start,
-            message=f"ok: {len(segs)} force segments, {len(cache)} matrix exponentials of size {size}",
+            message=(f"ok: {len(segs)} force segments, {len(cache)} matrix exponentials of size {size}"
+                     + (f"; first-order hold on the output grid for {', '.join(held)} (error O(step^2))" if held else "")),
         )
         return make_result(model, grid, x.copy(), v.copy(), stats)
