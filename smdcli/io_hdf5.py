@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 import tempfile
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -28,17 +28,9 @@ def atomic_path(final: Path):
         yield Path(tmp)
         os.replace(tmp, final)
     except BaseException:
-        with _suppress():
+        with suppress(OSError):
             os.unlink(tmp)
         raise
-
-
-@contextmanager
-def _suppress():
-    try:
-        yield
-    except OSError:
-        pass
 
 
 def write_simulation(path: Path, scenario: Scenario, model: Model, result: Result) -> None:
@@ -92,14 +84,3 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
         if model.nonlinear_paths:
             group.attrs["nonlinear_elements"] = list(model.nonlinear_paths)
 
-
-def read_result(path: Path) -> dict:
-    """The data sets and solver attributes of a simulate file, as plain arrays (for tests and tools)."""
-    import h5py
-
-    with h5py.File(path, "r") as f:
-        out = {name: f[name][()] for name in ("time", "displacement", "velocity", "acceleration", "force")}
-        out["dof"] = [d.decode() if isinstance(d, bytes) else d for d in f["dof"][()]]
-        out["solver"] = dict(f["solver"].attrs)
-        out["attrs"] = dict(f.attrs)
-    return out

@@ -10,7 +10,7 @@ element forces return to the DOFs as D^T g(d).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
@@ -85,7 +85,6 @@ class Model:
     quadratic: Incidence | None = None  # force c |d'| d'
     source: str = "<model>"
     element_form: bool = True
-    _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     # ------------------------------------------------------------ structure
     @property
@@ -173,26 +172,6 @@ class Model:
             f = f + (self.quadratic.coef * np.abs(dv) * dv) @ self.quadratic.D
         return f
 
-    @cached_property
-    def _nonlinear_maps(self) -> tuple:
-        """(D, M^-1 D^T diag(coef)) per nonlinear law, for a fast right-hand side."""
-        maps = []
-        for inc, law in ((self.cubic, "cubic"), (self.quadratic, "quadratic")):
-            if inc is not None:
-                maps.append((law, inc.D, self.Minv @ (inc.D.T * inc.coef)))
-        return tuple(maps)
-
-    def nonlinear_acceleration(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """M^-1 f_nl(x, v) for one state: the same forces as nonlinear_force, with M^-1 folded in."""
-        out = 0.0
-        for law, D, W in self._nonlinear_maps:
-            if law == "cubic":
-                out = out + W @ (D @ x) ** 3
-            else:
-                dv = D @ v
-                out = out + W @ (np.abs(dv) * dv)
-        return out
-
     def tangent(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Tangent stiffness and damping K + df_nl/dx, C + df_nl/dv at (x, v)."""
         Kt, Ct = self.K, self.C
@@ -209,9 +188,9 @@ class Model:
         n = self.n
         dy = self.state_matrix @ y
         if len(u):
-            dy[n:] += self.Minv @ (self.B @ u)
+            dy += self.input_matrix @ u
         if not self.is_linear:
-            dy[n:] -= self.nonlinear_acceleration(y[:n], y[n:])
+            dy[n:] -= self.Minv @ self.nonlinear_force(y[:n], y[n:])
         return dy
 
     def jacobian(self, t: float, y: np.ndarray) -> np.ndarray:
@@ -265,11 +244,6 @@ class Model:
     def is_stiff(self) -> bool:
         """Stiff in the classical sense: decay rates spread over more than STIFF_RATIO."""
         return self.stiffness_ratio > STIFF_RATIO
-
-    @cached_property
-    def omega_max(self) -> float:
-        """Largest eigenvalue magnitude of the linear part [rad/s]."""
-        return float(np.abs(self.modes.eigenvalues).max(initial=0.0))
 
 
 def _pair_modes(eig: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

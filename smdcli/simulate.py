@@ -100,8 +100,6 @@ def failure_hint(model: Model, result: Result) -> str:
     solver = get_solver(result.stats.method)
     if not solver.implicit and (model.is_stiff or "steps" in result.stats.message):
         return "the scene may be stiff: try an implicit method ('Radau', 'BDF', 'ode15s') or 'auto'"
-    if result.stats.dt:
-        return f"fixed step: the stable step is below 2/omega_max = {2 / model.omega_max:.3g} s"
     return "try tighter tolerances (--rtol, --atol) or another method"
 
 

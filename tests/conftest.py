@@ -43,6 +43,14 @@ law = "{law}"
 """
 
 
+def force_block(kind: str, on: str = "m", **fields) -> str:
+    """A [[force]] table in TOML text; lists and numbers written as TOML reads them."""
+    lines = ["[[force]]", f'on = "{on}"', f'type = "{kind}"']
+    for key, value in fields.items():
+        lines.append(f"{key} = {value!r}" if not isinstance(value, str) else f'{key} = "{value}"')
+    return "\n".join(lines) + "\n"
+
+
 @pytest.fixture
 def cli():
     """Run `smd ...` in-process; returns the click Result (stdout and stderr apart)."""

@@ -44,6 +44,11 @@ def edit(text, old, new):
     return text.replace(old, new, 1)
 
 
+def with_force(kind, fields):
+    """VALID with its sine force replaced by one of another type."""
+    return edit(edit(VALID, 'type = "sine"', f'type = "{kind}"'), "amplitude = 1.0\nomega = 2.0", fields)
+
+
 CASES = {
     "syntax": (edit(VALID, "end = 1.0", "end = = 1.0"), "line 3"),
     "unknown_key": (edit(VALID, "m = 1.0", "m = 1.0\ncolour = 'red'"), "mass[0].colour: unknown key"),
@@ -72,18 +77,12 @@ CASES = {
     "unknown_method": (VALID + '[solver]\nmethod = "ode99"\n', "solver.method: unknown method"),
     "planned_method": (VALID + '[solver]\nmethod = "ode23s"\n', "not yet available"),
     "negative_rtol": (VALID + "[solver]\nrtol = -1e-6\n", "solver.rtol: expected a number > 0"),
-    "expression_import": (edit(edit(VALID, 'type = "sine"', 'type = "expression"'), "amplitude = 1.0\nomega = 2.0",
-                               "expr = \"__import__('os')\""), "force[0].expr: call of '__import__'"),
-    "expression_attribute": (edit(edit(VALID, 'type = "sine"', 'type = "expression"'), "amplitude = 1.0\nomega = 2.0",
-                                  'expr = "t.real"'), "force[0].expr: attribute access"),
-    "expression_overflow": (edit(edit(VALID, 'type = "sine"', 'type = "expression"'), "amplitude = 1.0\nomega = 2.0",
-                                 'expr = "9**9**9"'), "force[0]: force is not finite"),
-    "table_missing_file": (edit(edit(VALID, 'type = "sine"', 'type = "table"'), "amplitude = 1.0\nomega = 2.0",
-                                'file = "nope.csv"'), "force[0].file: "),
-    "table_not_increasing": (edit(edit(VALID, 'type = "sine"', 'type = "table"'), "amplitude = 1.0\nomega = 2.0",
-                                  "t = [0.0, 1.0, 0.5]\nvalues = [1.0, 2.0, 3.0]"), "force[0].t[2]: expected strictly increasing"),
-    "table_length_mismatch": (edit(edit(VALID, 'type = "sine"', 'type = "table"'), "amplitude = 1.0\nomega = 2.0",
-                                   "t = [0.0, 1.0]\nvalues = [1.0]"), "force[0].values: expected 2 numbers"),
+    "expression_import": (with_force("expression", "expr = \"__import__('os')\""), "force[0].expr: call of '__import__'"),
+    "expression_attribute": (with_force("expression", 'expr = "t.real"'), "force[0].expr: attribute access"),
+    "expression_overflow": (with_force("expression", 'expr = "9**9**9"'), "force[0]: force is not finite"),
+    "table_missing_file": (with_force("table", 'file = "nope.csv"'), "force[0].file: "),
+    "table_not_increasing": (with_force("table", "t = [0.0, 1.0, 0.5]\nvalues = [1.0, 2.0, 3.0]"), "force[0].t[2]: expected strictly increasing"),
+    "table_length_mismatch": (with_force("table", "t = [0.0, 1.0]\nvalues = [1.0]"), "force[0].values: expected 2 numbers"),
     "cubic_without_k3": (edit(VALID, "k = 5.0", 'k = 5.0\nlaw = "cubic"'), "spring[1].k3: required field is missing"),
     "mixed_forms": (MATRIX + '[[mass]]\nname = "z"\nm = 1.0\n', "mass: cannot be combined with [system]"),
     "matrix_not_square": (edit(MATRIX, "[0.0, 1.0]]\nK", "[0.0, 1.0, 3.0]]\nK"), "system.M[1]: expected 2 numbers"),

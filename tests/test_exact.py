@@ -3,7 +3,7 @@
 import math
 
 import numpy as np
-from conftest import SCENARIOS, model_of, one_dof
+from conftest import SCENARIOS, force_block, model_of, one_dof
 from scipy.integrate import solve_ivp
 
 from smdcli import scenario
@@ -97,14 +97,7 @@ def test_square_wave_matches_tight_run_stopping_at_every_edge():
 
 def test_edges_between_output_points_are_honoured():
     """A pulse from 0.0123 s to 0.0456 s on a 0.01 s grid: exact agrees with the tight stopped run."""
-    text = one_dof(1.0, k=400.0, x0=0.0, end=2.0, step=0.01, extra="""
-[[force]]
-on = "m"
-type = "pulse"
-amplitude = 50.0
-t0 = 0.0123
-duration = 0.0333
-""")
+    text = one_dof(1.0, k=400.0, x0=0.0, end=2.0, step=0.01, extra=force_block("pulse", amplitude=50.0, t0=0.0123, duration=0.0333))
     _, model, grid = model_of(text)
     r = solve(model, grid, "exact", Tolerances())
     ref = _tight_with_stops(model, grid, [0.0123, 0.0456], lambda t: 50.0 if 0.0123 <= t < 0.0456 else 0.0)
@@ -129,13 +122,7 @@ def test_fourier_square_matches_the_books_func_pulse_integrated_tightly():
 
 def test_table_force_is_exact_for_piecewise_linear_input():
     """A ramp F = 10 t on a table: the response to a ramp has a closed form."""
-    text = one_dof(0.0, k=4.0, x0=0.0, end=3.0, step=0.01, extra="""
-[[force]]
-on = "m"
-type = "table"
-t = [0.0, 5.0]
-values = [0.0, 50.0]
-""")
+    text = one_dof(0.0, k=4.0, x0=0.0, end=3.0, step=0.01, extra=force_block("table", t=[0.0, 5.0], values=[0.0, 50.0]))
     _, model, grid = model_of(text)
     r = solve(model, grid, "auto", Tolerances())
     assert r.stats.method == "exact"
@@ -145,13 +132,7 @@ values = [0.0, 50.0]
 
 def test_undamped_resonance_is_exact():
     """x'' + x = cos t from rest: x = t sin(t) / 2 (the secular term)."""
-    text = one_dof(0.0, k=1.0, x0=0.0, end=50.0, step=0.05, extra="""
-[[force]]
-on = "m"
-type = "cosine"
-amplitude = 1.0
-omega = 1.0
-""")
+    text = one_dof(0.0, k=1.0, x0=0.0, end=50.0, step=0.05, extra=force_block("cosine", amplitude=1.0, omega=1.0))
     _, model, grid = model_of(text)
     r = solve(model, grid, "exact", Tolerances())
     np.testing.assert_allclose(r.displacement[:, 0], grid * np.sin(grid) / 2, rtol=0, atol=1e-12)
@@ -160,12 +141,7 @@ omega = 1.0
 def test_expression_force_first_order_hold_converges_at_second_order():
     """exact on an expression force holds it linearly on the grid: error falls 4x when the step halves."""
     def text(step):
-        return one_dof(0.6, k=9.0, x0=0.0, end=10.0, step=step, extra="""
-[[force]]
-on = "m"
-type = "expression"
-expr = "2*sin(1.3*t) + exp(-t)"
-""")
+        return one_dof(0.6, k=9.0, x0=0.0, end=10.0, step=step, extra=force_block("expression", expr="2*sin(1.3*t) + exp(-t)"))
     errors = []
     for step in (0.04, 0.02):
         _, model, grid = model_of(text(step))

@@ -55,7 +55,7 @@ def first_order_hold(model: Model, grid: np.ndarray) -> tuple[Model, tuple[str, 
     if not held:
         return model, held
     signals = tuple(s if s.exo() is not None else Table(grid, s.value(grid), "linear") for s in model.signals)
-    return dataclasses.replace(model, signals=signals, _cache={}), held
+    return dataclasses.replace(model, signals=signals), held
 
 
 class Exact(Solver):

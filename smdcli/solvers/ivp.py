@@ -35,9 +35,9 @@ class StiffnessDetected(Exception):
 class StiffnessMonitor:
     """Counts accepted explicit steps whose h * spectral radius of the Jacobian nears the stability boundary."""
 
-    def __init__(self, model: Model, boundary: float, window: int = 200, limit: float = 0.8, abort: bool = True):
+    def __init__(self, model: Model, boundary: float, window: int = 200, limit: float = 0.8):
         self.model, self.boundary = model, boundary
-        self.window, self.limit, self.abort = window, limit, abort
+        self.window, self.limit = window, limit
         self.recent: list[bool] = []
         self.limited = 0
         self.steps = 0
@@ -52,7 +52,7 @@ class StiffnessMonitor:
         self.recent.append(is_limited)
         if len(self.recent) > self.window:
             self.recent.pop(0)
-        if self.abort and len(self.recent) == self.window:
+        if len(self.recent) == self.window:
             fraction = sum(self.recent) / self.window
             if fraction >= self.limit:
                 raise StiffnessDetected(t, fraction, rho)
@@ -96,20 +96,11 @@ def _force_function(model: Model, ta: float, tb: float) -> Callable[[float], np.
 
 
 def _rhs(model: Model, ta: float, tb: float):
-    A = model.state_matrix
-    G = model.input_matrix
-    n = model.n
-    linear = model.is_linear
-    nonlinear = model.nonlinear_acceleration
-    u = _force_function(model, ta, tb) if model.is_forced else None
+    """Model.rhs on the segment [ta, tb], with force values that never take the next segment's jump."""
+    u = _force_function(model, ta, tb) if model.is_forced else (lambda t: np.empty(0))
 
     def fun(t, y):
-        dy = A @ y
-        if u is not None:
-            dy += G @ u(t)
-        if not linear:
-            dy[n:] -= nonlinear(y[:n], y[n:])
-        return dy
+        return model.rhs(t, y, u(t))
 
     return fun
 

@@ -26,11 +26,6 @@ def _solvers() -> dict[str, type[Solver]]:
     return {cls.name: cls for cls in classes}
 
 
-def available_methods() -> tuple[str, ...]:
-    """Names a scenario or --method may use now."""
-    return tuple(_solvers())
-
-
 def check_method_name(name: str) -> str | None:
     """Why a method name cannot be used, or None."""
     solvers = _solvers()
