@@ -113,6 +113,7 @@ class SolverSpec:
     rtol: float = 1e-6
     atol: float = 1e-9
     dt: float | None = None
+    options: tuple[tuple[str, float | str], ...] = ()  # beta, gamma, scheme (newmark), alpha (hht), rho_inf
 
 
 @dataclass(frozen=True)
@@ -623,8 +624,13 @@ def _read_csv(t: _Table, name: str) -> tuple[tuple[float, ...], tuple[float, ...
     return tuple(times), tuple(values)
 
 
+# Where each method parameter is meaningful: Newmark's beta and gamma, Hilber's alpha, Chung-Hulbert's rho_inf.
+OPTION_RANGES = {"beta": (0.0, 0.5), "gamma": (0.5, 1.0), "alpha": (-1 / 3, 0.0), "rho_inf": (0.0, 1.0)}
+
+
 def _read_solver(t: _Table) -> SolverSpec:
-    from smdcli.solvers.registry import check_method_name
+    from smdcli.solvers.fixed_step import Newmark
+    from smdcli.solvers.registry import METHOD_OPTIONS, check_method_name
 
     method = t.string("method", "auto")
     problem = check_method_name(method)
@@ -633,8 +639,24 @@ def _read_solver(t: _Table) -> SolverSpec:
     rtol = t.number("rtol", 1e-6, positive=True)
     atol = t.number("atol", 1e-9, positive=True)
     dt = t.number("dt", None, positive=True)
-    t.finish(("method", "rtol", "atol", "dt"))
-    return SolverSpec(method=method, rtol=rtol, atol=atol, dt=dt)
+    options = []
+    for key, owner in METHOD_OPTIONS.items():
+        if not t.has(key):
+            continue
+        if method != owner:
+            raise t.fail(key, f"applies to method {owner!r} only, found method {method!r}")
+        if key == "scheme":
+            value = t.string(key)
+            if value not in Newmark.SCHEMES:
+                raise t.fail(key, f"expected one of {', '.join(map(repr, Newmark.SCHEMES))}, found {value!r}")
+        else:
+            low, high = OPTION_RANGES[key]
+            value = t.number(key)
+            if not low <= value <= high:
+                raise t.fail(key, f"expected a number in [{low:.4g}, {high:.4g}], found {value!r}")
+        options.append((key, value))
+    t.finish(("method", "rtol", "atol", "dt", *METHOD_OPTIONS))
+    return SolverSpec(method=method, rtol=rtol, atol=atol, dt=dt, options=tuple(options))
 
 
 def _read_sweep(t: _Table) -> tuple[tuple[str, Any], ...]:

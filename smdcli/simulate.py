@@ -47,7 +47,8 @@ def solve_scenario(sc: Scenario, model: Model, grid: np.ndarray, options: Option
     from smdcli.solvers.registry import solve
 
     method = options.method or sc.solver.method
-    tol = Tolerances(rtol=options.rtol or sc.solver.rtol, atol=options.atol or sc.solver.atol, dt=sc.solver.dt)
+    tol = Tolerances(rtol=options.rtol or sc.solver.rtol, atol=options.atol or sc.solver.atol, dt=sc.solver.dt,
+                     options=sc.solver.options)
     field_name = "--method" if options.method else "solver.method"
     return solve(model, grid, method, tol, field=field_name)
 
@@ -98,6 +99,15 @@ def failure_hint(model: Model, result: Result) -> str:
     from smdcli.solvers.registry import get_solver
 
     solver = get_solver(result.stats.method)
+    if not solver.adaptive:
+        limit = solver.omega_limit()
+        w_max = float(model.modes.natural_frequencies.max())
+        if w_max > 0 and limit < math.inf:
+            stable = f"below {limit / w_max:.4g} s ({limit:.3g} / omega_max, omega_max = {w_max:.4g} rad/s)" \
+                if limit > 0 else "nowhere on an undamped scene"
+            return (f"fixed step {result.stats.dt:.4g} s: {solver.name}'s stable step is {stable}; "
+                    "set a smaller solver.dt or use an implicit method")
+        return "set a smaller solver.dt or use another method"
     if not solver.implicit and (model.is_stiff or "steps" in result.stats.message):
         return "the scene may be stiff: try an implicit method ('Radau', 'BDF', 'ode15s') or 'auto'"
     return "try tighter tolerances (--rtol, --atol) or another method"

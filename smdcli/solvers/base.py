@@ -13,11 +13,12 @@ from smdcli.result import Result, SolverStats
 
 @dataclass(frozen=True)
 class Tolerances:
-    """The accuracy a run asks for: relative and absolute error, and a fixed step where one is used."""
+    """The accuracy a run asks for: relative and absolute error, a fixed step and method parameters where used."""
 
     rtol: float = 1e-6
     atol: float = 1e-9
     dt: float | None = None
+    options: tuple[tuple[str, float | str], ...] = ()  # method parameters: beta, gamma, scheme, alpha, rho_inf
 
 
 class Solver:

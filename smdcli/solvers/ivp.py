@@ -155,6 +155,10 @@ class ScipyMethod(Solver):
         self.breakpoints = breakpoints
 
     def _solver_class(self):
+        if self.scipy_name in ("Rosenbrock23", "Trapezoid", "TRBDF2"):
+            from smdcli.solvers import stiff23
+
+            return getattr(stiff23, self.scipy_name)
         import scipy.integrate as si
 
         return getattr(si, self.scipy_name)
@@ -180,6 +184,10 @@ class ScipyMethod(Solver):
         kwargs = {"rtol": tol.rtol, "atol": tol.atol}
         if self.implicit:
             kwargs["jac"] = model.jacobian
+        own = self.scipy_name in ("Rosenbrock23", "Trapezoid", "TRBDF2")
+        if own:
+            kwargs.update(time_dependent=model.is_forced, constant_jacobian=model.is_linear)
+        own_rejected = 0
         n_stages = getattr(cls, "n_stages", None)
         segs = segments(model, grid) if self.breakpoints else [(float(grid[0]), float(grid[-1]))]
         with self._attempt_counter() as attempts_implicit:
@@ -211,10 +219,13 @@ class ScipyMethod(Solver):
                 nfev += solver.nfev
                 njev += solver.njev
                 nlu += solver.nlu
+                own_rejected += getattr(solver, "n_rejected", 0)
                 if failure:
                     break
                 y = solver.y
-            if attempts_implicit is not None:
+            if own:
+                rejected = own_rejected
+            elif attempts_implicit is not None:
                 rejected = len(attempts_implicit) - accepted
             elif n_stages:
                 rejected = attempts_rk - accepted
@@ -243,6 +254,12 @@ ode45 = _scipy("ode45", "RK45", False, 5, 3.3, "MATLAB ode45's formula: Dormand-
 ode23 = _scipy("ode23", "RK23", False, 3, 2.5, "MATLAB ode23's formula: Bogacki-Shampine 3(2) (scipy RK23)")
 ode15s = _scipy("ode15s", "BDF", True, 5, 0.0,
                 "MATLAB ode15s's family: variable-order NDF (scipy BDF implements the NDF formulas)")
+ode23s = _scipy("ode23s", "Rosenbrock23", True, 2, 0.0,
+                "MATLAB ode23s's formula: Rosenbrock 2(3) of Shampine and Reichelt (smd's own)")
+ode23t = _scipy("ode23t", "Trapezoid", True, 2, 0.0,
+                "MATLAB ode23t's formula: trapezoidal rule, no numerical damping (smd's own)")
+ode23tb = _scipy("ode23tb", "TRBDF2", True, 2, 0.0,
+                 "MATLAB ode23tb's formula: TR-BDF2 of Hosea and Shampine (smd's own)")
 
 
 class Ode113(Solver):

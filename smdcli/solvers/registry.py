@@ -11,18 +11,21 @@ from smdcli.model import Model
 from smdcli.result import Result
 from smdcli.solvers.base import Solver, Tolerances
 
-# Methods of DESIGN.md that come with the solver-comparison work (issue 3).
-PLANNED = ("ode23s", "ode23t", "ode23tb", "newmark", "hht", "generalized_alpha",
-           "central_difference", "euler", "rk4")
+# Parameters of the [solver] table that belong to one method each.
+METHOD_OPTIONS = {"beta": "newmark", "gamma": "newmark", "scheme": "newmark", "alpha": "hht",
+                  "rho_inf": "generalized_alpha"}
 
 
 def _solvers() -> dict[str, type[Solver]]:
     from smdcli.solvers.auto import Auto
     from smdcli.solvers.closed_form import ClosedForm
     from smdcli.solvers.exact import Exact
-    from smdcli.solvers.ivp import BDF, DOP853, LSODA, RK23, RK45, Ode113, Radau, ode15s, ode23, ode45
+    from smdcli.solvers.fixed_step import HHT, RK4, CentralDifference, Euler, GeneralizedAlpha, Newmark
+    from smdcli.solvers.ivp import (BDF, DOP853, LSODA, RK23, RK45, Ode113, Radau, ode15s, ode23, ode23s,
+                                    ode23t, ode23tb, ode45)
 
-    classes = (Auto, ClosedForm, Exact, RK45, RK23, DOP853, Radau, BDF, LSODA, ode45, ode23, Ode113, ode15s)
+    classes = (Auto, ClosedForm, Exact, RK45, RK23, DOP853, Radau, BDF, LSODA, ode45, ode23, Ode113, ode15s,
+               ode23s, ode23t, ode23tb, Newmark, HHT, GeneralizedAlpha, CentralDifference, Euler, RK4)
     return {cls.name: cls for cls in classes}
 
 
@@ -31,19 +34,11 @@ def check_method_name(name: str) -> str | None:
     solvers = _solvers()
     if name in solvers:
         return None
-    if name in PLANNED:
-        return f"method {name!r} is not yet available in smd {_version()}; available: {', '.join(solvers)}"
     import difflib
 
-    hint = difflib.get_close_matches(name, list(solvers) + list(PLANNED), n=1)
+    hint = difflib.get_close_matches(name, list(solvers), n=1)
     extra = f" (did you mean {hint[0]!r}?)" if hint else ""
     return f"unknown method {name!r}{extra}; available: {', '.join(solvers)}"
-
-
-def _version() -> str:
-    from smdcli import __version__
-
-    return __version__
 
 
 def get_solver(name: str) -> Solver:
