@@ -93,6 +93,70 @@ def info(
     typer.echo(json.dumps(data, indent=2) if as_json else format_info(data))
 
 
+@app.command("compare-solvers")
+def compare_solvers(
+    scenario: Path = typer.Argument(..., help="Scenario TOML file."),
+    methods: Optional[str] = typer.Option(None, "--methods", help="Comma list; default: every adaptive and fixed-step method."),
+    tolerances: Optional[str] = typer.Option(None, "--tolerances",
+                                             help="Comma list of rtol or rtol/atol; default 1e-3..1e-10, atol = rtol/1000."),
+    steps: Optional[str] = typer.Option(None, "--steps", help="Comma list of fixed steps in s; default h*omega_max 3..0.02."),
+    repeats: int = typer.Option(3, "--repeats", help="Timings per run; the median is kept (runs over 2 s: once)."),
+    out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
+    no_breakpoints: bool = typer.Option(False, "--no-breakpoints",
+                                        help="Do not restart adaptive methods at force discontinuities (for study)."),
+    no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
+    as_json: bool = typer.Option(False, "--json", help="Print the runs as JSON."),
+):
+    """Run methods over ladders of tolerances and steps against a reference; chart error against cost."""
+    from smdcli.compare import as_dict, format_table, run_and_write
+    from smdcli.errors import SmdError
+
+    def progress(total):
+        if quiet or as_json or not sys.stderr.isatty():
+            return None
+        return _ProgressBar(total)
+
+    try:
+        comparison, written = run_and_write(scenario, out, methods, tolerances, steps, repeats,
+                                            breakpoints=not no_breakpoints, plots=not no_plots,
+                                            progress=progress if progress(1) else None)
+    except SmdError as exc:
+        _fail(str(exc))
+        raise typer.Exit(exc.exit_code)
+    except KeyboardInterrupt:
+        _fail("interrupted; no partial file was left under a final name")
+        raise typer.Exit(130)
+    if as_json:
+        typer.echo(json.dumps(as_dict(comparison), indent=2))
+    elif not quiet:
+        typer.echo(format_table(comparison))
+        typer.echo("wrote " + ", ".join(str(p) for p in written))
+
+
+class _ProgressBar:
+    """click's progress bar on stderr, advanced once per run, labelled with the run in progress."""
+
+    def __init__(self, total: int):
+        self.bar = typer.progressbar(length=total, label="comparing", file=sys.stderr, show_pos=True,
+                                     item_show_func=lambda label: label)
+
+    def __enter__(self):
+        self.bar.__enter__()
+        first = [True]
+
+        def tick(label: str):
+            if not first[0]:
+                self.bar.update(1)
+            first[0] = False
+            self.bar.update(0, label)
+
+        return tick
+
+    def __exit__(self, *exc):
+        return self.bar.__exit__(*exc)
+
+
 def main() -> None:
     """Console-script entry point."""
     try:

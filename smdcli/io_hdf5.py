@@ -33,18 +33,23 @@ def atomic_path(final: Path):
         raise
 
 
+def write_header(f, scenario: Scenario, kind: str) -> None:
+    """The root attributes every smd file carries."""
+    f.attrs["smd_version"] = __version__
+    f.attrs["schema_version"] = SCHEMA_VERSION
+    f.attrs["kind"] = kind
+    f.attrs["created"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    f.attrs["title"] = scenario.title
+    f.attrs["scenario"] = scenario.text
+    f.attrs["scenario_path"] = str(scenario.path)
+
+
 def write_simulation(path: Path, scenario: Scenario, model: Model, result: Result) -> None:
     """Write one simulate run in the layout of DESIGN.md."""
     import h5py
 
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
-        f.attrs["smd_version"] = __version__
-        f.attrs["schema_version"] = SCHEMA_VERSION
-        f.attrs["kind"] = "simulate"
-        f.attrs["created"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
-        f.attrs["title"] = scenario.title
-        f.attrs["scenario"] = scenario.text
-        f.attrs["scenario_path"] = str(scenario.path)
+        write_header(f, scenario, "simulate")
 
         time = f.create_dataset("time", data=result.time)
         time.attrs["units"] = "s"

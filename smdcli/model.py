@@ -242,8 +242,8 @@ class Model:
 
     @property
     def is_stiff(self) -> bool:
-        """Stiff in the classical sense: decay rates spread over more than STIFF_RATIO."""
-        return self.stiffness_ratio > STIFF_RATIO
+        """Stiff in the classical sense: decay rates spread over STIFF_RATIO (1000) or more."""
+        return self.stiffness_ratio >= STIFF_RATIO * (1 - 1e-9)
 
 
 def _pair_modes(eig: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

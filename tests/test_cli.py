@@ -7,7 +7,7 @@ import sys
 import h5py
 import numpy as np
 import pytest
-from conftest import SCENARIOS
+from conftest import SCENARIOS, model_of, one_dof
 
 ALL = sorted(SCENARIOS.glob("*.toml"))
 BOOK = ["one_dof_nonlinear_stiff", "one_dof_undamped", "one_dof_underdamped", "one_dof_overdamped",
@@ -107,3 +107,44 @@ def test_help_does_not_import_heavy_modules():
             "print('HEAVY', heavy)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert "HEAVY []" in out
+
+
+def test_compare_solvers_writes_table_json_hdf5_and_charts(cli, tmp_path):
+    import h5py
+
+    from smdcli.solvers import solve
+    from smdcli.solvers.base import Tolerances
+
+    scene = tmp_path / "scene.toml"
+    scene.write_text(one_dof(0.4, end=10.0, step=0.01))
+    out = tmp_path / "out"
+    r = cli("compare-solvers", scene, "--methods", "ode45,ode23s,central_difference",
+            "--tolerances", "1e-3/1e-6,1e-5", "--steps", "0.5,0.01", "--repeats", "2", "-o", out, "--json")
+    assert r.exit_code == 0, r.output
+    data = json.loads(r.stdout)
+    runs = {(run["method"], run["rtol"] if run["adaptive"] else run["dt"]): run for run in data["runs"]}
+    assert len(runs) == 6 and data["reference"].startswith("exact")
+    assert runs[("central_difference", 0.5)]["success"] is False  # h * omega = 2.5 > 2
+    assert runs[("central_difference", 0.5)]["error"] is None
+    _, model, grid = model_of(one_dof(0.4, end=10.0, step=0.01))
+    exact = solve(model, grid, "exact", Tolerances()).displacement
+    ode23s = solve(model, grid, "ode23s", Tolerances(1e-3, 1e-6)).displacement
+    assert runs[("ode23s", 1e-3)]["error"] == pytest.approx(np.abs(ode23s - exact).max() / np.abs(exact).max())
+    assert runs[("ode45", 1e-5)]["atol"] == pytest.approx(1e-8)
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["scene_compare.h5", "scene_stability.png", "scene_work_precision.png"]
+    with h5py.File(out / "scene_compare.h5") as f:
+        assert f.attrs["kind"] == "compare"
+        assert list(f["runs/method"].asstr()[:]) == [run["method"] for run in data["runs"]]
+        assert f["runs/error"].attrs["units"] == "1" and f["reference/displacement"].shape == (1001, 1)
+
+
+def test_compare_solvers_bad_method_is_exit_2_and_writes_nothing(cli, tmp_path):
+    scene = tmp_path / "scene.toml"
+    scene.write_text(one_dof(0.4))
+    r = cli("compare-solvers", scene, "--methods", "ode45,rk54", "-o", tmp_path / "out")
+    assert r.exit_code == 2
+    assert "--methods: unknown method 'rk54'" in r.stderr and "Traceback" not in r.output
+    assert not (tmp_path / "out").exists()
+    r = cli("compare-solvers", scene, "--tolerances", "1e-3/x", "-o", tmp_path / "out")
+    assert r.exit_code == 2 and "--tolerances" in r.stderr

@@ -19,6 +19,8 @@ class Tolerances:
     atol: float = 1e-9
     dt: float | None = None
     options: tuple[tuple[str, float | str], ...] = ()  # method parameters: beta, gamma, scheme, alpha, rho_inf
+    max_steps: int | None = None  # step budget; None: the solver's own limit
+    breakpoints: bool = True  # restart adaptive methods at force discontinuities (False only for study)
 
 
 class Solver:

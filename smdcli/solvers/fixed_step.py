@@ -57,6 +57,7 @@ class FixedStep(Solver):
         start = time.perf_counter()
         self.params = dict(tol.options)
         dt = self.step_size(grid, tol)
+        max_steps = tol.max_steps or MAX_STEPS
         bound = GROWTH_BOUND * _scale(model, grid)
         n = model.n
         self.counts = {"nfev": 0, "njev": 0, "nlu": 0}
@@ -73,12 +74,12 @@ class FixedStep(Solver):
             force = _force_function(model, ta, tb)
             state = self.start(model, ta, y[:n], y[n:], force)
             times.append(ta), states.append(y), slopes.append(self.slope(state))
-            budget = MAX_STEPS - total
+            budget = max_steps - total
             march = self._march_linear if model.is_linear else self._march
             new_states, new_slopes, failure = march(model, state, ta, h, min(steps, budget), force, bound)
             done = len(new_states)
             if failure is None and done < steps:
-                failure = f"more than {MAX_STEPS} steps"
+                failure = f"more than {max_steps} steps"
             total += done
             t_new = ta + h * np.arange(1, done + 1)
             if done == steps:
@@ -154,7 +155,11 @@ class FixedStep(Solver):
             return np.zeros(len(model.signals))
 
         before = dict(self.counts)
-        self.step(model, np.split(np.zeros(size), sizes), 0.0, h, recording)
+        self.step(model, np.split(np.zeros(size), sizes), 0.0, h, recording)  # factors what the step needs
+        factorizations = self.counts["nlu"] - before["nlu"]
+        self.counts.update(before)
+        requested.clear()
+        self.step(model, np.split(np.zeros(size), sizes), 0.0, h, recording)  # what each further step costs
         per_step = {key: self.counts[key] - before[key] for key in before}
         offsets = sorted({round(t / h, 12) for t in requested})
         A = np.column_stack([np.concatenate(self.step(model, np.split(e, sizes), 0.0, h, recording))
@@ -166,6 +171,7 @@ class FixedStep(Solver):
                     return np.eye(len(model.signals))[m] * (abs(t - c * h) <= 1e-9 * h)
                 loads[j, :, m] = np.concatenate(self.step(model, np.split(np.zeros(size), sizes), 0.0, h, unit))
         self.counts.update(before)
+        self.counts["nlu"] += factorizations
         self._affine_cache = (h, (A, loads, offsets, per_step))
         return self._affine_cache[1]
 

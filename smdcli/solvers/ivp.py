@@ -189,7 +189,9 @@ class ScipyMethod(Solver):
             kwargs.update(time_dependent=model.is_forced, constant_jacobian=model.is_linear)
         own_rejected = 0
         n_stages = getattr(cls, "n_stages", None)
-        segs = segments(model, grid) if self.breakpoints else [(float(grid[0]), float(grid[-1]))]
+        breakpoints = self.breakpoints and tol.breakpoints
+        segs = segments(model, grid) if breakpoints else [(float(grid[0]), float(grid[-1]))]
+        max_steps = tol.max_steps or MAX_STEPS
         with self._attempt_counter() as attempts_implicit:
             for ta, tb in segs:
                 solver = cls(_rhs(model, ta, tb), ta, y, tb, **kwargs)
@@ -202,8 +204,8 @@ class ScipyMethod(Solver):
                         failure = message or "step failed"
                         break
                     accepted += 1
-                    if accepted > MAX_STEPS:
-                        failure = f"more than {MAX_STEPS} steps"
+                    if accepted > max_steps:
+                        failure = f"more than {max_steps} steps"
                         break
                     t_old, t_new = solver.t_old, solver.t
                     j = int(np.searchsorted(grid, t_new, side="right"))
@@ -280,7 +282,7 @@ class Ode113(Solver):
         failure, t_reached = None, float(grid[0])
         for ta, tb in segments(model, grid):
             r = ode(_rhs(model, ta, tb)).set_integrator(
-                "vode", method="adams", rtol=tol.rtol, atol=tol.atol, nsteps=MAX_STEPS)
+                "vode", method="adams", rtol=tol.rtol, atol=tol.atol, nsteps=tol.max_steps or MAX_STEPS)
             r.set_initial_value(y, ta)
             integ = r._integrator
             integ.rwork[0] = tb  # tcrit: VODE must not step past the force discontinuity

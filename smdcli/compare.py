@@ -1,0 +1,326 @@
+"""`smd compare-solvers`: many methods over ladders of tolerances and steps, against a reference.
+
+Error is the largest displacement difference from the reference over the output grid and all
+DOFs, divided by the reference's peak displacement. The reference is the exact solution for a
+linear scene; for a nonlinear one, Radau and DOP853 at rtol 1e-12, whose difference is reported
+as the reference's own error.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from smdcli.errors import UsageError
+from smdcli.model import Model
+from smdcli.result import Result
+from smdcli.scenario import Scenario
+from smdcli.solvers.base import Tolerances
+
+DEFAULT_ADAPTIVE = ("ode45", "ode23", "ode113", "ode15s", "ode23s", "ode23t", "ode23tb", "DOP853", "Radau", "LSODA")
+DEFAULT_FIXED = ("newmark", "hht", "generalized_alpha", "central_difference", "euler", "rk4")
+DEFAULT_RTOLS = tuple(10.0 ** -k for k in range(3, 11))
+# Steps as h * omega_max: either side of RK4's limit (2.83) and central difference's (2), then finer.
+DEFAULT_H_OMEGA = (3.0, 2.6, 2.1, 1.9, 1.0, 0.5, 0.2, 0.1, 0.05, 0.02)
+ATOL_PER_RTOL = 1e-3
+STEP_BUDGET = 200_000
+TIME_ONCE_S = 2.0  # runs longer than this are timed once, not repeated
+
+
+@dataclass
+class Run:
+    """One method at one setting: its error and its cost."""
+
+    method: str
+    adaptive: bool
+    rtol: float
+    atol: float
+    dt: float
+    h_omega: float  # dt * omega_max (fixed step), NaN otherwise
+    error: float  # max |x - x_ref| / peak |x_ref|; NaN when the run failed
+    growth: float  # peak |x| / peak |x_ref| over what was computed
+    wall_time_s: float
+    nfev: int
+    njev: int
+    nlu: int
+    steps_accepted: int
+    steps_rejected: int
+    success: bool
+    message: str
+
+
+@dataclass
+class Comparison:
+    """Every run, the reference and what it cost, for one scenario."""
+
+    scenario: Scenario
+    model: Model
+    grid: np.ndarray
+    reference: Result
+    reference_method: str
+    reference_error: float
+    omega_max: float
+    breakpoints: bool
+    runs: list[Run] = field(default_factory=list)
+
+
+def parse_methods(text: str | None, linear: bool) -> list[str]:
+    """A comma list of method names, checked against the registry."""
+    from smdcli.solvers.registry import check_method_name
+
+    if not text:
+        return list(DEFAULT_ADAPTIVE + DEFAULT_FIXED)
+    methods = [m.strip() for m in text.split(",") if m.strip()]
+    for m in methods:
+        problem = check_method_name(m)
+        if problem:
+            raise UsageError(f"--methods: {problem}")
+        if m in ("auto", "exact", "closed_form"):
+            raise UsageError(f"--methods: {m!r} is not compared: the reference is the exact solution or a tight run")
+    if not methods:
+        raise UsageError("--methods: expected a comma-separated list of methods, found nothing")
+    return methods
+
+
+def parse_tolerances(text: str | None) -> list[tuple[float, float]]:
+    """'rtol[/atol],...' pairs; atol defaults to rtol * 1e-3."""
+    if not text:
+        return [(r, r * ATOL_PER_RTOL) for r in DEFAULT_RTOLS]
+    pairs = []
+    for item in text.split(","):
+        parts = item.strip().split("/")
+        try:
+            values = [float(p) for p in parts]
+        except ValueError:
+            raise UsageError(f"--tolerances: expected rtol or rtol/atol numbers, found {item.strip()!r}") from None
+        if len(values) > 2 or not all(math.isfinite(v) and v > 0 for v in values):
+            raise UsageError(f"--tolerances: expected positive rtol or rtol/atol, found {item.strip()!r}")
+        pairs.append((values[0], values[1] if len(values) == 2 else values[0] * ATOL_PER_RTOL))
+    return pairs
+
+
+def parse_steps(text: str | None, omega_max: float, span: float) -> list[float]:
+    """Fixed steps in seconds; by default a ladder of h * omega_max (or of the span, for a scene without stiffness)."""
+    if not text:
+        if omega_max > 0:
+            return [c / omega_max for c in DEFAULT_H_OMEGA]
+        return [span / n for n in (50, 100, 200, 500, 1000, 2000)]
+    steps = []
+    for item in text.split(","):
+        try:
+            value = float(item)
+        except ValueError:
+            raise UsageError(f"--steps: expected step sizes in seconds, found {item.strip()!r}") from None
+        if not (math.isfinite(value) and value > 0):
+            raise UsageError(f"--steps: expected positive step sizes, found {item.strip()!r}")
+        steps.append(value)
+    return steps
+
+
+def reference_solution(model: Model, grid: np.ndarray) -> tuple[Result, str, float]:
+    """(reference, its name, its estimated error relative to its peak)."""
+    from smdcli.solvers.registry import solve
+
+    if model.is_linear:
+        exact = solve(model, grid, "exact", Tolerances())
+        return exact, "exact (matrix exponential)", 0.0
+    tight = Tolerances(rtol=1e-12, atol=1e-14)
+    radau = solve(model, grid, "Radau", tight)
+    dop = solve(model, grid, "DOP853", tight)
+    if not (radau.success and dop.success):
+        failed = radau if not radau.success else dop
+        raise UsageError(f"the reference run ({failed.stats.method}) failed: {failed.stats.message}")
+    peak = float(np.abs(radau.displacement).max()) or 1.0
+    return radau, "Radau rtol 1e-12 (checked against DOP853 rtol 1e-12)", \
+        float(np.abs(radau.displacement - dop.displacement).max() / peak)
+
+
+def plan(methods: list[str], tolerances, steps) -> list[tuple[str, Tolerances]]:
+    """Every (method, settings) pair to run, loosest first within each method."""
+    from smdcli.solvers.registry import get_solver
+
+    jobs = []
+    for m in methods:
+        if get_solver(m).adaptive:
+            jobs += [(m, Tolerances(rtol=r, atol=a)) for r, a in sorted(tolerances, reverse=True)]
+        else:
+            jobs += [(m, Tolerances(dt=h)) for h in sorted(steps, reverse=True)]
+    return jobs
+
+
+def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], tolerances, steps,
+            repeats: int = 3, breakpoints: bool = True, budget: int = STEP_BUDGET,
+            progress: Callable[[str], None] = lambda label: None) -> Comparison:
+    """Run the plan; failures are recorded, never raised. A method that ran out of budget skips its tighter rungs."""
+    from smdcli.solvers.registry import get_solver, solve
+
+    reference, ref_name, ref_error = reference_solution(model, grid)
+    omega_max = float(model.modes.natural_frequencies.max()) if model.n else 0.0
+    out = Comparison(sc, model, grid, reference, ref_name, ref_error, omega_max, breakpoints)
+    peak = float(np.abs(reference.displacement).max()) or 1.0
+    exhausted: set[str] = set()
+    span = float(grid[-1] - grid[0])
+    for method, tol in plan(methods, tolerances, steps):
+        progress(f"{method} {'dt ' + format(tol.dt, '.3g') if tol.dt else 'rtol ' + format(tol.rtol, '.0e')}")
+        adaptive = get_solver(method).adaptive
+        tol = Tolerances(rtol=tol.rtol, atol=tol.atol, dt=tol.dt, max_steps=budget, breakpoints=breakpoints)
+        if method in exhausted or (tol.dt and span / tol.dt > budget):
+            needed = f"{math.ceil(span / tol.dt)} steps" if tol.dt else "more steps than a looser tolerance"
+            out.runs.append(_skipped(method, adaptive, tol, omega_max, f"skipped: needs {needed}, budget {budget}"))
+            continue
+        times, result = [], None
+        for _ in range(max(1, repeats)):
+            result = solve(model, grid, method, tol)
+            times.append(result.stats.wall_time_s)
+            if result.stats.wall_time_s > TIME_ONCE_S or not result.success:
+                break
+        s = result.stats
+        if not s.success and "steps" in s.message:
+            exhausted.add(method)
+        with np.errstate(invalid="ignore"):
+            computed = np.abs(result.displacement[np.isfinite(result.displacement).all(axis=1)])
+        growth = float(computed.max() / peak) if computed.size else math.nan
+        error = float(np.abs(result.displacement - reference.displacement).max() / peak) if s.success else math.nan
+        out.runs.append(Run(
+            method=method, adaptive=adaptive, rtol=tol.rtol, atol=tol.atol, dt=tol.dt or math.nan,
+            h_omega=(tol.dt * omega_max) if tol.dt else math.nan, error=error, growth=growth,
+            wall_time_s=statistics.median(times), nfev=s.nfev, njev=s.njev, nlu=s.nlu,
+            steps_accepted=s.steps_accepted, steps_rejected=s.steps_rejected, success=s.success,
+            message=s.message))
+    return out
+
+
+def _skipped(method, adaptive, tol, omega_max, message) -> Run:
+    return Run(method=method, adaptive=adaptive, rtol=tol.rtol, atol=tol.atol, dt=tol.dt or math.nan,
+               h_omega=(tol.dt * omega_max) if tol.dt else math.nan, error=math.nan, growth=math.nan,
+               wall_time_s=math.nan, nfev=0, njev=0, nlu=0, steps_accepted=0, steps_rejected=0, success=False,
+               message=message)
+
+
+# ----------------------------------------------------------------- reports
+def as_dict(c: Comparison) -> dict:
+    """Plain data for --json."""
+    return {
+        "scenario": c.scenario.path, "reference": c.reference_method, "reference_error": c.reference_error,
+        "omega_max_rad_s": c.omega_max, "breakpoints": c.breakpoints,
+        "runs": [{k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in asdict(r).items()}
+                 for r in c.runs],
+    }
+
+
+def format_table(c: Comparison) -> str:
+    """The terminal table: one line per run."""
+    lines = [f"{c.scenario.path}: reference {c.reference_method}"
+             + (f", its own error {c.reference_error:.1e}" if c.reference_error else "")
+             + f"; omega_max {c.omega_max:.4g} rad/s; error = max |x - x_ref| / peak |x_ref|"
+             + ("" if c.breakpoints else "; NOT restarted at force discontinuities (--no-breakpoints)"),
+             f"{'method':<19}{'setting':>17}{'error':>10}{'time [ms]':>11}{'nfev':>9}{'njev':>7}{'nlu':>8}"
+             f"{'steps':>9}{'rejected':>9}  status"]
+    for r in c.runs:
+        setting = f"rtol {r.rtol:.0e}/{r.atol:.0e}" if r.adaptive else f"h*w {r.h_omega:.3g}" if c.omega_max \
+            else f"dt {r.dt:.3g}"
+        error = f"{r.error:.2e}" if r.success else "-"
+        ms = f"{1e3 * r.wall_time_s:.1f}" if math.isfinite(r.wall_time_s) else "-"
+        status = "ok" if r.success else f"FAILED: {r.message}"
+        lines.append(f"{r.method:<19}{setting:>17}{error:>10}{ms:>11}{r.nfev:>9}{r.njev:>7}{r.nlu:>8}"
+                     f"{r.steps_accepted:>9}{r.steps_rejected:>9}  {status}")
+    return "\n".join(lines)
+
+
+def write_hdf5(path: Path, c: Comparison) -> None:
+    """One file with every run's figures and the reference (kind = "compare")."""
+    import h5py
+
+    from smdcli.io_hdf5 import atomic_path, write_header
+
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        write_header(f, c.scenario, "compare")
+        f.attrs["reference"] = c.reference_method
+        f.attrs["reference_error"] = c.reference_error
+        f.attrs["omega_max_rad_s"] = c.omega_max
+        f.attrs["breakpoints"] = c.breakpoints
+        runs = f.create_group("runs")
+        n = len(c.runs)
+        index = runs.create_dataset("run", data=np.arange(n))
+        index.make_scale("run")
+        string = h5py.string_dtype("utf-8")
+        for name in ("method", "message"):
+            runs.create_dataset(name, data=np.array([getattr(r, name) for r in c.runs], dtype=object), dtype=string)
+        units = {"rtol": "1", "atol": "m", "dt": "s", "h_omega": "1", "error": "1", "growth": "1",
+                 "wall_time_s": "s"}
+        for name in ("rtol", "atol", "dt", "h_omega", "error", "growth", "wall_time_s"):
+            ds = runs.create_dataset(name, data=np.array([getattr(r, name) for r in c.runs], dtype=float))
+            ds.attrs["units"] = units[name]
+        for name in ("nfev", "njev", "nlu", "steps_accepted", "steps_rejected"):
+            runs.create_dataset(name, data=np.array([getattr(r, name) for r in c.runs], dtype=np.int64))
+        for name in ("adaptive", "success"):
+            runs.create_dataset(name, data=np.array([getattr(r, name) for r in c.runs], dtype=bool))
+        for ds in runs.values():
+            if ds.name != index.name:
+                ds.dims[0].attach_scale(index)
+        ref = f.create_group("reference")
+        ref.attrs["method"] = c.reference_method
+        t = ref.create_dataset("time", data=c.grid)
+        t.attrs["units"] = "s"
+        x = ref.create_dataset("displacement", data=c.reference.displacement)
+        x.attrs["units"] = "m"
+
+
+def stability_limits(methods: list[str]) -> dict[str, float]:
+    """Each fixed-step method's largest stable h * omega on an undamped scene."""
+    from smdcli.solvers.registry import get_solver
+
+    limits = {}
+    for m in methods:
+        solver = get_solver(m)
+        if not solver.adaptive:
+            solver.params = {}
+            limits[m] = solver.omega_limit()
+    return limits
+
+
+def run_and_write(path: str | Path, out: str | Path, methods: str | None = None, tolerances: str | None = None,
+                  steps: str | None = None, repeats: int = 3, breakpoints: bool = True, plots: bool = True,
+                  progress=None) -> tuple[Comparison, list[Path]]:
+    """The whole command: validate everything first, run, then write HDF5 and charts atomically."""
+    from smdcli.simulate import output_folder, prepare
+
+    sc, model, grid = prepare(path)
+    method_list = parse_methods(methods, model.is_linear)
+    tolerance_list = parse_tolerances(tolerances)
+    omega_max = float(model.modes.natural_frequencies.max())
+    step_list = parse_steps(steps, omega_max, float(grid[-1] - grid[0]))
+    if repeats < 1:
+        raise UsageError(f"--repeats: expected an integer >= 1, found {repeats}")
+    out_dir = output_folder(out)
+    jobs = len(plan(method_list, tolerance_list, step_list))
+    with (progress(jobs) if progress else _silent()) as tick:
+        comparison = compare(sc, model, grid, method_list, tolerance_list, step_list, repeats=repeats,
+                             breakpoints=breakpoints, progress=tick)
+    stem = sc.stem
+    written = [out_dir / f"{stem}_compare.h5"]
+    write_hdf5(written[0], comparison)
+    if plots:
+        from smdcli.plots import save_figure, stability_figure, work_precision_figure
+
+        title = sc.title or stem
+        save_figure(work_precision_figure(comparison, title), out_dir / f"{stem}_work_precision.png")
+        written.append(out_dir / f"{stem}_work_precision.png")
+        limits = stability_limits(method_list)
+        if limits:
+            save_figure(stability_figure(comparison, title, limits), out_dir / f"{stem}_stability.png")
+            written.append(out_dir / f"{stem}_stability.png")
+    return comparison, written
+
+
+class _silent:
+    def __enter__(self):
+        return lambda label: None
+
+    def __exit__(self, *exc):
+        return False
