@@ -162,6 +162,7 @@ def test_on_stiff_scenes_rk45_needs_ten_times_the_steps_of_implicit_methods(name
         assert rk45 > 10 * steps_to_reach(model, grid, method, target, exact), method
     forced = solve(model, grid, "RK45", Tolerances())
     assert any("stiff" in note for note in forced.notes)  # the user who forces an explicit method is told
+    assert "stiff (stiffness ratio" in solve(model, grid, "auto", Tolerances()).stats.reason
 
 
 def test_linear_stiff_scene_matches_its_closed_form():

@@ -53,13 +53,16 @@ class Auto(Solver):
     def choose(self, model: Model) -> tuple[Solver | None, str]:
         """The solver for a model and the reason, or (None, '') where the trajectory must decide."""
         if model.is_linear:
+            # Stiffness does not matter to exact methods, but the user should know an integrator would feel it.
+            stiff = (f"; stiff (stiffness ratio {model.stiffness_ratio:.3g}), which an exact method does not feel"
+                     if model.is_stiff else "")
             if model.n == 1 and not model.is_forced:
                 regime = model.modes.regimes[0]
-                return ClosedForm(), f"linear 1-DOF free response ({regime}): closed form, exact to rounding"
+                return ClosedForm(), f"linear 1-DOF free response ({regime}): closed form, exact to rounding{stiff}"
             if all(s.exo() is not None for s in model.signals):
                 forced = f"with {_force_kinds(model)} forces integrated exactly between their discontinuities" \
                     if model.is_forced else "free response"
-                return Exact(), f"linear time-invariant, {forced}: matrix exponential, exact to rounding"
+                return Exact(), f"linear time-invariant, {forced}: matrix exponential, exact to rounding{stiff}"
             if model.is_stiff:
                 return Radau(), (f"linear but the {_force_kinds(model)} force has no exact integral, and stiff "
                                  f"(stiffness ratio {model.stiffness_ratio:.3g}): implicit Radau at the scenario's tolerances")
