@@ -112,15 +112,11 @@ def compare_solvers(
     from smdcli.compare import as_dict, format_table, run_and_write
     from smdcli.errors import SmdError
 
-    def progress(total):
-        if quiet or as_json or not sys.stderr.isatty():
-            return None
-        return _ProgressBar(total)
-
+    show_progress = not (quiet or as_json) and sys.stderr.isatty()
     try:
         comparison, written = run_and_write(scenario, out, methods, tolerances, steps, repeats,
                                             breakpoints=not no_breakpoints, plots=not no_plots,
-                                            progress=progress if progress(1) else None)
+                                            progress=_ProgressBar if show_progress else None)
     except SmdError as exc:
         _fail(str(exc))
         raise typer.Exit(exc.exit_code)

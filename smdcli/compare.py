@@ -8,6 +8,7 @@ as the reference's own error.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import statistics
 from dataclasses import asdict, dataclass, field
@@ -69,7 +70,7 @@ class Comparison:
     runs: list[Run] = field(default_factory=list)
 
 
-def parse_methods(text: str | None, linear: bool) -> list[str]:
+def parse_methods(text: str | None) -> list[str]:
     """A comma list of method names, checked against the registry."""
     from smdcli.solvers.registry import check_method_name
 
@@ -160,7 +161,7 @@ def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], to
     from smdcli.solvers.registry import get_solver, solve
 
     reference, ref_name, ref_error = reference_solution(model, grid)
-    omega_max = float(model.modes.natural_frequencies.max()) if model.n else 0.0
+    omega_max = model.omega_max
     out = Comparison(sc, model, grid, reference, ref_name, ref_error, omega_max, breakpoints)
     peak = float(np.abs(reference.displacement).max()) or 1.0
     exhausted: set[str] = set()
@@ -279,8 +280,7 @@ def stability_limits(methods: list[str]) -> dict[str, float]:
     for m in methods:
         solver = get_solver(m)
         if not solver.adaptive:
-            solver.params = {}
-            limits[m] = solver.omega_limit()
+            limits[m] = solver.omega_limit()  # with the method's default parameters
     return limits
 
 
@@ -291,15 +291,14 @@ def run_and_write(path: str | Path, out: str | Path, methods: str | None = None,
     from smdcli.simulate import output_folder, prepare
 
     sc, model, grid = prepare(path)
-    method_list = parse_methods(methods, model.is_linear)
+    method_list = parse_methods(methods)
     tolerance_list = parse_tolerances(tolerances)
-    omega_max = float(model.modes.natural_frequencies.max())
-    step_list = parse_steps(steps, omega_max, float(grid[-1] - grid[0]))
+    step_list = parse_steps(steps, model.omega_max, float(grid[-1] - grid[0]))
     if repeats < 1:
         raise UsageError(f"--repeats: expected an integer >= 1, found {repeats}")
     out_dir = output_folder(out)
     jobs = len(plan(method_list, tolerance_list, step_list))
-    with (progress(jobs) if progress else _silent()) as tick:
+    with progress(jobs) if progress else contextlib.nullcontext(lambda label: None) as tick:
         comparison = compare(sc, model, grid, method_list, tolerance_list, step_list, repeats=repeats,
                              breakpoints=breakpoints, progress=tick)
     stem = sc.stem
@@ -316,11 +315,3 @@ def run_and_write(path: str | Path, out: str | Path, methods: str | None = None,
             save_figure(stability_figure(comparison, title, limits), out_dir / f"{stem}_stability.png")
             written.append(out_dir / f"{stem}_stability.png")
     return comparison, written
-
-
-class _silent:
-    def __enter__(self):
-        return lambda label: None
-
-    def __exit__(self, *exc):
-        return False

@@ -241,6 +241,11 @@ class Model:
         return float(re.max() / re.min()) if len(re) else 1.0
 
     @property
+    def omega_max(self) -> float:
+        """Highest undamped natural frequency, rad/s: what bounds an explicit step."""
+        return float(self.modes.natural_frequencies.max())
+
+    @property
     def is_stiff(self) -> bool:
         """Stiff in the classical sense: decay rates spread over STIFF_RATIO (1000) or more."""
         return self.stiffness_ratio >= STIFF_RATIO * (1 - 1e-9)

@@ -624,13 +624,9 @@ def _read_csv(t: _Table, name: str) -> tuple[tuple[float, ...], tuple[float, ...
     return tuple(times), tuple(values)
 
 
-# Where each method parameter is meaningful: Newmark's beta and gamma, Hilber's alpha, Chung-Hulbert's rho_inf.
-OPTION_RANGES = {"beta": (0.0, 0.5), "gamma": (0.5, 1.0), "alpha": (-1 / 3, 0.0), "rho_inf": (0.0, 1.0)}
-
-
 def _read_solver(t: _Table) -> SolverSpec:
     from smdcli.solvers.fixed_step import Newmark
-    from smdcli.solvers.registry import METHOD_OPTIONS, check_method_name
+    from smdcli.solvers.registry import METHOD_OPTIONS, OPTION_RANGES, check_method_name
 
     method = t.string("method", "auto")
     problem = check_method_name(method)

@@ -101,7 +101,7 @@ def failure_hint(model: Model, result: Result) -> str:
     solver = get_solver(result.stats.method)
     if not solver.adaptive:
         limit = solver.omega_limit()
-        w_max = float(model.modes.natural_frequencies.max())
+        w_max = model.omega_max
         if w_max > 0 and limit < math.inf:
             stable = f"below {limit / w_max:.4g} s ({limit:.3g} / omega_max, omega_max = {w_max:.4g} rad/s)" \
                 if limit > 0 else "nowhere on an undamped scene"

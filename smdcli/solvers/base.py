@@ -3,12 +3,17 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Callable, ClassVar
 
 import numpy as np
 
 from smdcli.model import Model
 from smdcli.result import Result, SolverStats
+
+
+# A state larger than this (relative to the initial and forced scale) has diverged.
+GROWTH_BOUND = 1e8
+MAX_STEPS = 2_000_000
 
 
 @dataclass(frozen=True)
@@ -62,3 +67,35 @@ def segments(model: Model, grid: np.ndarray) -> list[tuple[float, float]]:
     t0, t1 = float(grid[0]), float(grid[-1])
     cuts = [t0, *model.breakpoints(t0, t1), t1]
     return list(zip(cuts[:-1], cuts[1:]))
+
+
+def force_function(model: Model, ta: float, tb: float) -> Callable[[float], np.ndarray]:
+    """Force values on [ta, tb], taking left limits in the segment's second half so no jump leaks in."""
+    mid = 0.5 * (ta + tb)
+    signals = model.signals
+
+    def u(t: float) -> np.ndarray:
+        if t < mid:
+            return np.array([float(s.value(t)) for s in signals])
+        return np.array([float(s.value_left(t)) for s in signals])
+
+    return u
+
+
+def divergence_bound(model: Model, grid: np.ndarray) -> float:
+    """GROWTH_BOUND times a size a bounded response stays within: initial state and static deflection."""
+    scale = max(np.abs(model.x0).max(initial=0.0), np.abs(model.v0).max(initial=0.0), 1.0)
+    if model.is_forced:
+        peak_force = np.abs(model.applied_force(grid)).max(initial=0.0)
+        stiffness = np.abs(np.diag(model.K)).min(initial=0.0)
+        scale = max(scale, peak_force / stiffness if stiffness > 0 else peak_force * (grid[-1] - grid[0]) ** 2)
+    return GROWTH_BOUND * scale
+
+
+def diverged(y: np.ndarray, bound: float) -> str | None:
+    """Why a state counts as diverged (NaN, inf, past the bound), or None."""
+    if not np.all(np.isfinite(y)):
+        return "the state became NaN or infinite"
+    if np.abs(y).max() > bound:
+        return f"the state grew past {bound:.3g}"
+    return None

@@ -19,8 +19,8 @@ import numpy as np
 
 from smdcli.model import Model
 from smdcli.result import Result, SolverStats
-from smdcli.solvers.base import Solver, Tolerances, make_result, segments
-from smdcli.solvers.ivp import GROWTH_BOUND, MAX_STEPS, _diverged, _force_function, _scale
+from smdcli.solvers.base import (MAX_STEPS, Solver, Tolerances, divergence_bound, diverged, force_function,
+                                 make_result, segments)
 
 NEWTON_MAXITER = 25
 NEWTON_TOL = 1e-10
@@ -58,7 +58,7 @@ class FixedStep(Solver):
         self.params = dict(tol.options)
         dt = self.step_size(grid, tol)
         max_steps = tol.max_steps or MAX_STEPS
-        bound = GROWTH_BOUND * _scale(model, grid)
+        bound = divergence_bound(model, grid)
         n = model.n
         self.counts = {"nfev": 0, "njev": 0, "nlu": 0}
         # Nodes for the output interpolant; a restart at a force jump repeats the node with the new slope.
@@ -71,9 +71,11 @@ class FixedStep(Solver):
             steps = step_count(tb - ta, dt)
             h = (tb - ta) / steps
             h_max = max(h_max, h)
-            force = _force_function(model, ta, tb)
+            force = force_function(model, ta, tb)
             state = self.start(model, ta, y[:n], y[n:], force)
-            times.append(ta), states.append(y), slopes.append(self.slope(state))
+            times.append(ta)
+            states.append(y)
+            slopes.append(self.slope(state))
             budget = max_steps - total
             march = self._march_linear if model.is_linear else self._march
             new_states, new_slopes, failure = march(model, state, ta, h, min(steps, budget), force, bound)
@@ -84,7 +86,9 @@ class FixedStep(Solver):
             t_new = ta + h * np.arange(1, done + 1)
             if done == steps:
                 t_new[-1] = tb
-            times.extend(t_new), states.extend(new_states), slopes.extend(new_slopes)
+            times.extend(t_new)
+            states.extend(new_states)
+            slopes.extend(new_slopes)
             if done:
                 t_reached = float(t_new[-1])
                 y = new_states[-1]
@@ -110,10 +114,11 @@ class FixedStep(Solver):
             except StepFailed as exc:
                 return states, slopes, str(exc)
             y = self.state_vector(state)
-            failure = _diverged(y, bound)
+            failure = diverged(y, bound)
             if failure:
                 return states, slopes, failure
-            states.append(y), slopes.append(self.slope(state))
+            states.append(y)
+            slopes.append(self.slope(state))
         return states, slopes, None
 
     def _march_linear(self, model, state, ta, h, steps, force, bound):
@@ -128,14 +133,14 @@ class FixedStep(Solver):
             for i in range(steps):
                 z = A @ z + drive[i]
                 zs[i] = z
-                if i % 256 == 255 and _diverged(z, bound):
+                if i % 256 == 255 and diverged(z, bound):
                     zs = zs[:i + 1]
                     break
             n2 = 2 * model.n
             states = zs[:, :n2]
             bad = ~np.isfinite(states).all(axis=1) | (np.abs(states).max(axis=1, initial=0.0) > bound)
         done = int(np.argmax(bad)) if bad.any() else len(states)
-        failure = _diverged(states[done], bound) if done < len(states) else None
+        failure = diverged(states[done], bound) if done < len(states) else None
         for key, value in per_step.items():
             self.counts[key] += value * done
         first = self.slope_offset * model.n
@@ -224,7 +229,7 @@ def _sampled_forces(model: Model, force, times: np.ndarray) -> np.ndarray:
 def _hermite(times, states, slopes, grid, t_reached) -> np.ndarray:
     """States on the grid by cubic Hermite interpolation between steps; NaN past t_reached."""
     out = np.full((len(grid), states.shape[1]), np.nan)
-    reach = grid <= t_reached * (1 + 1e-12) + 1e-300
+    reach = grid <= t_reached + 1e-12 * max(1.0, abs(t_reached))
     g = grid[reach]
     if len(times) == 1:
         out[reach] = states[0]

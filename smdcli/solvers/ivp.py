@@ -17,11 +17,12 @@ import numpy as np
 
 from smdcli.model import Model
 from smdcli.result import Result, SolverStats
-from smdcli.solvers.base import Solver, Tolerances, make_result, segments
+from smdcli.solvers.base import (MAX_STEPS, Solver, Tolerances, divergence_bound, diverged, force_function,
+                                 make_result, segments)
 
-# A state larger than this (relative to the initial and forced scale) has diverged.
-GROWTH_BOUND = 1e8
-MAX_STEPS = 2_000_000
+
+# OdeSolver subclasses that smd writes itself (smdcli.solvers.stiff23), for MATLAB's ode23s/t/tb.
+OWN_SOLVERS = ("Rosenbrock23", "Trapezoid", "TRBDF2")
 
 
 class StiffnessDetected(Exception):
@@ -82,22 +83,9 @@ def _count_attempts(module, name: str, key: Callable):
         setattr(module, name, original)
 
 
-def _force_function(model: Model, ta: float, tb: float) -> Callable[[float], np.ndarray]:
-    """Force values on [ta, tb], taking left limits in the segment's second half so no jump leaks in."""
-    mid = 0.5 * (ta + tb)
-    signals = model.signals
-
-    def u(t: float) -> np.ndarray:
-        if t < mid:
-            return np.array([float(s.value(t)) for s in signals])
-        return np.array([float(s.value_left(t)) for s in signals])
-
-    return u
-
-
 def _rhs(model: Model, ta: float, tb: float):
     """Model.rhs on the segment [ta, tb], with force values that never take the next segment's jump."""
-    u = _force_function(model, ta, tb) if model.is_forced else (lambda t: np.empty(0))
+    u = force_function(model, ta, tb) if model.is_forced else (lambda t: np.empty(0))
 
     def fun(t, y):
         return model.rhs(t, y, u(t))
@@ -105,30 +93,12 @@ def _rhs(model: Model, ta: float, tb: float):
     return fun
 
 
-def _scale(model: Model, grid: np.ndarray) -> float:
-    """A size that a bounded response stays within by far: initial state and static deflection."""
-    scale = max(np.abs(model.x0).max(initial=0.0), np.abs(model.v0).max(initial=0.0), 1.0)
-    if model.is_forced:
-        peak_force = np.abs(model.applied_force(grid)).max(initial=0.0)
-        stiffness = np.abs(np.diag(model.K)).min(initial=0.0)
-        scale = max(scale, peak_force / stiffness if stiffness > 0 else peak_force * (grid[-1] - grid[0]) ** 2)
-    return scale
-
-
-def _diverged(y: np.ndarray, bound: float) -> str | None:
-    if not np.all(np.isfinite(y)):
-        return "the state became NaN or infinite"
-    if np.abs(y).max() > bound:
-        return f"the state grew past {bound:.3g}"
-    return None
-
-
 def _initial(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """Output rows (NaN until reached) with the initial state in row 0, that state, and the divergence bound."""
     y = np.concatenate([model.x0, model.v0])
     out = np.full((len(grid), 2 * model.n), np.nan)
     out[0] = y
-    return out, y, GROWTH_BOUND * _scale(model, grid)
+    return out, y, divergence_bound(model, grid)
 
 
 def _finish(solver: Solver, model: Model, grid: np.ndarray, out: np.ndarray, tol: Tolerances, start: float,
@@ -155,7 +125,7 @@ class ScipyMethod(Solver):
         self.breakpoints = breakpoints
 
     def _solver_class(self):
-        if self.scipy_name in ("Rosenbrock23", "Trapezoid", "TRBDF2"):
+        if self.scipy_name in OWN_SOLVERS:
             from smdcli.solvers import stiff23
 
             return getattr(stiff23, self.scipy_name)
@@ -184,7 +154,7 @@ class ScipyMethod(Solver):
         kwargs = {"rtol": tol.rtol, "atol": tol.atol}
         if self.implicit:
             kwargs["jac"] = model.jacobian
-        own = self.scipy_name in ("Rosenbrock23", "Trapezoid", "TRBDF2")
+        own = self.scipy_name in OWN_SOLVERS
         if own:
             kwargs.update(time_dependent=model.is_forced, constant_jacobian=model.is_linear)
         own_rejected = 0
@@ -212,7 +182,7 @@ class ScipyMethod(Solver):
                     if j > k:
                         out[k:j] = solver.dense_output()(grid[k:j]).T
                         k = j
-                    failure = _diverged(solver.y, bound)
+                    failure = diverged(solver.y, bound)
                     t_reached = t_new
                     if failure:
                         break
@@ -297,7 +267,7 @@ class Ode113(Solver):
                 if k < stop and target == grid[k]:
                     out[k] = r.y
                     k += 1
-                failure = _diverged(r.y, bound)
+                failure = diverged(r.y, bound)
                 t_reached = r.t
                 if failure:
                     break

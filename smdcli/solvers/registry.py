@@ -14,6 +14,8 @@ from smdcli.solvers.base import Solver, Tolerances
 # Parameters of the [solver] table that belong to one method each.
 METHOD_OPTIONS = {"beta": "newmark", "gamma": "newmark", "scheme": "newmark", "alpha": "hht",
                   "rho_inf": "generalized_alpha"}
+# Where each numeric parameter is meaningful: Newmark's beta and gamma, Hilber's alpha, Chung-Hulbert's rho_inf.
+OPTION_RANGES = {"beta": (0.0, 0.5), "gamma": (0.5, 1.0), "alpha": (-1 / 3, 0.0), "rho_inf": (0.0, 1.0)}
 
 
 def _solvers() -> dict[str, type[Solver]]:

@@ -79,7 +79,7 @@ class _OneStep(OdeSolver):
     error_order = 3  # the estimate is O(h^3)
 
     def __init__(self, fun, t0, y0, t_bound, jac, rtol=1e-3, atol=1e-6, first_step=None, max_step=np.inf,
-                 time_dependent=True, constant_jacobian=False, vectorized=False, **extraneous):
+                 time_dependent=True, constant_jacobian=False, vectorized=False):
         super().__init__(fun, t0, y0, t_bound, vectorized)
         self.rtol = max(float(rtol), 100 * EPS)
         self.atol = np.asarray(atol, dtype=float)
@@ -247,6 +247,8 @@ class RosenbrockDense(DenseOutput):
 class Trapezoid(_OneStep):
     """ode23t: the trapezoidal rule, A-stable and without numerical damping, solved by simplified Newton."""
 
+    second: tuple[float, np.ndarray] | None = None  # (t, y'') at the current step's start
+
     def _second_derivative(self, t, y, f):
         return self._jacobian(t, y) @ f + self._time_derivative(t, y, f)
 
@@ -262,14 +264,14 @@ class Trapezoid(_OneStep):
         if not converged:
             return None
         f1 = self.fun(t + h, z)
-        if not hasattr(self, "_y2") or self._y2[0] != t:
-            self._y2 = (t, self._second_derivative(t, y, f0))
+        if self.second is None or self.second[0] != t:
+            self.second = (t, self._second_derivative(t, y, f0))
         y2_new = self._second_derivative(t + h, z, f1)
-        estimate = -(h * h / 12) * (y2_new - self._y2[1])
+        estimate = -(h * h / 12) * (y2_new - self.second[1])
         error = lu.solve(estimate)
         error_norm = _rms(error / self._scale(y, z))
         if error_norm <= 1:
-            self._y2 = (t + h, y2_new)
+            self.second = (t + h, y2_new)  # the next step starts here
         return z, f1, error_norm, HermiteDense(t, t + h, y, f0, z, f1)
 
 
