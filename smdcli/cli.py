@@ -130,6 +130,82 @@ def compare_solvers(
         typer.echo("wrote " + ", ".join(str(p) for p in written))
 
 
+@app.command()
+def sweep(
+    scenario: Path = typer.Argument(..., help="Scenario TOML file (its [sweep] table is the default family)."),
+    param: Optional[List[str]] = typer.Option(None, "--param", help="Field path to sweep (damper[0].c, mass.m1.m, "
+                                              "force[0].omega, time.end, zeta); twice for a grid."),
+    values: Optional[List[str]] = typer.Option(None, "--values", help="Values per --param: a,b,c | start:stop:step | "
+                                               "linspace(a,b,n) | logspace(a,b,n)."),
+    labels: Optional[str] = typer.Option(None, "--labels", help="Comma list of legend labels, one per member."),
+    ic: Optional[List[str]] = typer.Option(None, "--ic", help="An initial condition: x0=0.1,v0=1 (or m1.x0=..); repeat."),
+    frequency: Optional[str] = typer.Option(None, "--frequency", help="Frequency response over SPEC rad/s "
+                                            "(append Hz for hertz), e.g. 0:10:0.2 or 'linspace(0.1,2,200) Hz'."),
+    normalized: bool = typer.Option(False, "--normalized", help="1-DOF: X K / F0 and theta against omega / omega_n."),
+    input_dof: Optional[str] = typer.Option(None, "--input", help="DOF the unit force acts on (default: first force's)."),
+    direction: Optional[str] = typer.Option(None, "--direction", help="Measured response: up, down or both."),
+    measure: bool = typer.Option(False, "--measure", help="Linear scene: also simulate to steady state and compare."),
+    quantity: Optional[str] = typer.Option(None, "--quantity", help="Overlay plot of displacement, velocity, "
+                                           "acceleration or force."),
+    metric: Optional[str] = typer.Option(None, "--metric", help="peak_displacement, rms_displacement, settling_time "
+                                         "or peak_ground_force."),
+    method: Optional[str] = typer.Option(None, "--method", help="Solver for every member (default: the scenario's)."),
+    workers: Optional[int] = typer.Option(None, "--workers", min=1, help="Processes for nonlinear members "
+                                          "(default: the number of cores)."),
+    out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
+    no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
+    as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+):
+    """Run a family: parameters over grids, initial conditions, or a frequency response; one HDF5 and plots."""
+    from smdcli.errors import SmdError
+    from smdcli.sweep import format_summary, run_and_write, summary
+
+    if method is not None:
+        from smdcli.solvers.registry import check_method_name
+
+        problem = check_method_name(method)
+        if problem:
+            _fail(f"--method: {problem}")
+            raise typer.Exit(2)
+    options = {"parameter": tuple(param or ()), "values": tuple(values or ()),
+               "labels": tuple(x.strip() for x in labels.split(",")) if labels else (),
+               "ic": tuple(ic or ()), "frequency": frequency, "normalized": normalized or None,
+               "input": input_dof, "direction": direction, "measure": measure or None, "quantity": quantity,
+               "metric": metric, "method": method}
+    show_progress = not (quiet or as_json) and sys.stderr.isatty()
+    try:
+        run = run_and_write(scenario, out, options, workers, plots=not no_plots,
+                            progress=_CountBar if show_progress else None)
+    except SmdError as exc:
+        _fail(str(exc))
+        raise typer.Exit(exc.exit_code)
+    except KeyboardInterrupt:
+        _fail("interrupted; no partial file was left under a final name")
+        raise typer.Exit(130)
+    data = summary(run)
+    if as_json:
+        typer.echo(json.dumps(data, indent=2, default=float))
+    elif not quiet:
+        typer.echo(format_summary(data))
+    failed = run.result is not None and not run.result.success.all()
+    raise typer.Exit(1 if failed else 0)
+
+
+class _CountBar:
+    """click's progress bar on stderr, advanced by a count of finished members."""
+
+    def __init__(self, total: int):
+        self.bar = typer.progressbar(length=total, label="sweeping", file=sys.stderr, show_pos=True)
+
+    def __enter__(self):
+        self.bar.__enter__()
+        return self.bar.update
+
+    def __exit__(self, *exc):
+        return self.bar.__exit__(*exc)
+
+
 class _ProgressBar:
     """click's progress bar on stderr, advanced once per run, labelled with the run in progress."""
 

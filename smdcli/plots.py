@@ -194,6 +194,215 @@ def stability_figure(comparison, title: str, limits: dict[str, float]):
     return fig
 
 
+# ------------------------------------------------------------------ sweeps
+
+MAX_LEGEND = 12  # beyond this many members, a colour bar replaces the legend
+QUANTITY_LABELS = {"displacement": "Displacement x [m]", "velocity": "Velocity v [m/s]",
+                   "acceleration": "Acceleration a [m/s²]", "force": "Applied force F [N]"}
+METRIC_LABELS = {"peak_displacement": "peak |x| [m]", "rms_displacement": "RMS x [m]",
+                 "settling_time": "settling time to 2 % [s]", "peak_ground_force": "peak force to ground [N]"}
+_STYLES = ("-", "-.", ":", "--")
+
+
+def _member_colors(count: int):
+    """A colour per member: the cycle for a legend's worth, a colour map beyond."""
+    if count <= MAX_LEGEND:
+        return [f"C{i % 10}" for i in range(count)], None
+    from matplotlib import colormaps
+
+    cmap = colormaps["viridis"]
+    return [cmap(i / max(count - 1, 1)) for i in range(count)], cmap
+
+
+def overlay_figure(family, result, quantity: str, title: str):
+    """One panel per DOF, one line per member of the family, with a legend (or a colour bar for many)."""
+    data = getattr(result, quantity)
+    S, N, n = data.shape
+    colors, cmap = _member_colors(S)
+    fig = _figure(figsize=(9, 2.2 + 2.6 * n))
+    axes = np.atleast_1d(fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0])
+    height = 2.2 + 2.6 * n
+    fig.subplots_adjust(left=0.1, right=0.8 if cmap is None else 0.86, top=1 - 0.75 / height, bottom=0.55 / height,
+                        hspace=0.12)
+    for j, ax in enumerate(axes):
+        for s in range(S):
+            t = result.time if result.time.ndim == 1 else result.time[s]
+            ok = np.isfinite(t)
+            style = _STYLES[s % len(_STYLES)] if cmap is None else "-"
+            ax.plot(*envelope(t[ok], data[s, ok, j]), style, lw=1.4 if cmap is None else 0.8, color=colors[s],
+                    label=family.labels[s])
+            if not result.success[s]:
+                ax.plot(t[ok][-1], data[s, ok, j][-1], "x", color=colors[s], ms=8)
+        ax.set_ylabel(f"{result.dofs[j]}: {QUANTITY_LABELS[quantity]}", fontsize=9)
+        ax.grid(True, alpha=0.4)
+    axes[-1].set_xlabel("Time t [s]")
+    if cmap is None:
+        axes[0].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    else:
+        _colorbar(fig, axes, cmap, family)
+    fig.suptitle(f"{title}\n{S} runs: {result.how}", fontsize=10)
+    return fig
+
+
+def _colorbar(fig, axes, cmap, family):
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    values = family.values[:, 0] if family.values.shape[1] else np.arange(len(family))
+    mappable = ScalarMappable(norm=Normalize(values.min(), values.max()), cmap=cmap)
+    bar = fig.colorbar(mappable, ax=list(axes), fraction=0.04, pad=0.02)
+    bar.set_label(family.spec.parameters[0] if family.spec.parameters else "member")
+
+
+def metric_figure(family, values: np.ndarray, metric: str, dofs, title: str):
+    """A metric per DOF: against the parameter (one parameter) or as a heat map over the grid (two)."""
+    n = values.shape[1]
+    params = family.spec.parameters
+    if len(params) == 2:
+        fig = _figure(figsize=(5.2 * min(n, 3), 4.6 * math.ceil(n / 3)))
+        axes = np.atleast_1d(fig.subplots(math.ceil(n / 3), min(n, 3), squeeze=False).ravel())
+        fig.subplots_adjust(left=0.1, right=0.95, top=0.8, bottom=0.12, wspace=0.35, hspace=0.35)
+        a, b = family.spec.values
+        for j in range(n):
+            ax = axes[j]
+            grid = values[:, j].reshape(len(a), len(b)).T
+            mesh = ax.pcolormesh(a, b, grid, shading="nearest", cmap="viridis")
+            fig.colorbar(mesh, ax=ax).set_label(METRIC_LABELS[metric])
+            ax.set_xlabel(params[0])
+            ax.set_ylabel(params[1])
+            ax.set_title(str(dofs[j]), fontsize=9)
+        for ax in axes[n:]:
+            ax.set_visible(False)
+    else:
+        fig = _figure(figsize=(8, 5))
+        ax = fig.subplots()
+        fig.subplots_adjust(left=0.12, right=0.95, top=0.86, bottom=0.12)
+        x = family.values[:, 0] if params else np.arange(len(family))
+        for j in range(n):
+            ax.plot(x, values[:, j], "o-", ms=4, lw=1.2, label=str(dofs[j]))
+        ax.set_xlabel(params[0] if params else "member")
+        ax.set_ylabel(METRIC_LABELS[metric])
+        ax.grid(True, alpha=0.4)
+        ax.legend(fontsize=8)
+    fig.suptitle(f"{title}\n{METRIC_LABELS[metric]} of every run", fontsize=10)
+    return fig
+
+
+def frequency_figure(family, response, title: str, unit: str = "rad/s", normalized: bool = False):
+    """Amplitude (log) and phase lag against frequency: one line per member and DOF, resonance peaks marked.
+
+    Normalized (1-DOF): X K / F0 and theta against r = omega / omega_n, as the book's Figures 9-9 and 9-10.
+    Measured responses (nonlinear, or on request) are drawn as markers, up sweeps and down sweeps apart.
+    """
+    S, F, n = response.amplitude.shape
+    colors, cmap = _member_colors(S * n if S == 1 else S)
+    fig = _figure(figsize=(9.5, 8))
+    ax_a, ax_p = fig.subplots(2, 1, sharex=True)
+    fig.subplots_adjust(left=0.1, right=0.78, top=0.88, bottom=0.08, hspace=0.08)
+    k = family.K[:, 0, 0] if normalized else np.ones(S)
+    wn = np.sqrt(family.K[:, 0, 0] / family.M[:, 0, 0]) if normalized else np.ones(S)
+    scale_x = (lambda s: response.omega / wn[s]) if normalized else \
+        (lambda s: response.omega / (2 * math.pi) if unit == "Hz" else response.omega)
+    markers = {"up": "^", "down": "v"}
+    for s in range(S):
+        for j in range(n):
+            color = colors[s] if S > 1 else colors[j]
+            label = family.labels[s] if n == 1 else (f"{response.dofs[j]}" if S == 1 else f"{family.labels[s]}: {response.dofs[j]}")
+            style = _STYLES[(s if S > 1 else j) % len(_STYLES)] if cmap is None else "-"
+            x = scale_x(s)
+            if response.exact:
+                with np.errstate(all="ignore"):
+                    ax_a.plot(x, response.amplitude[s, :, j] * k[s], style, color=color, lw=1.4, label=label)
+                    ax_p.plot(x, response.phase[s, :, j], style, color=color, lw=1.4)
+            for direction, (amp, lag) in response.measured.items():
+                if response.exact:  # markers over the exact lines, labelled once
+                    tag = f"simulated, sweep {direction}" if s == 0 and j == 0 else None
+                else:
+                    tag = f"sweep {direction}" + (f": {label}" if S > 1 or n > 1 else "")
+                ax_a.plot(x, amp[s, :, j] * k[s], markers[direction], color=color, ms=4, mfc="none",
+                          ls="-" if not response.exact else "none", lw=0.8, label=tag)
+                ax_p.plot(x, lag[s, :, j], markers[direction], color=color, ms=4, mfc="none",
+                          ls="-" if not response.exact else "none", lw=0.8)
+    for peak in response.peaks:
+        if "direction" in peak:
+            continue
+        s = peak["member"]
+        w = peak["omega"] / (wn[s] if normalized else (2 * math.pi if unit == "Hz" else 1.0))
+        if math.isfinite(peak["amplitude"]):
+            ax_a.plot(w, peak["amplitude"] * k[s], "o", color="k", ms=5, mfc="none")
+        else:
+            ax_a.axvline(w, color="0.5", ls=":", lw=1)
+    if any(math.isfinite(p["amplitude"]) for p in response.peaks):
+        ax_a.plot([], [], "o", color="k", mfc="none", label="resonance peak")
+    if any(not math.isfinite(p["amplitude"]) for p in response.peaks):
+        ax_a.plot([], [], ":", color="0.5", label="undamped resonance (unbounded)")
+    ax_a.set_yscale("log")
+    if normalized:
+        ax_a.set_ylabel("Normalized amplitude X K / F0")
+        ax_p.set_xlabel("Frequency ratio r = omega / omega_n")
+    else:
+        ax_a.set_ylabel(f"Amplitude per unit force on {response.input_dof} [m/N]")
+        ax_p.set_xlabel(f"Forcing frequency [{unit}]")
+    finite = response.amplitude[np.isfinite(response.amplitude) & (response.amplitude > 0)]
+    measured = [a[np.isfinite(a) & (a > 0)] for a, _ in response.measured.values()]
+    pool = np.concatenate([finite * (k.max() if normalized else 1)] + [m * (k.max() if normalized else 1) for m in measured])
+    if pool.size:
+        ax_a.set_ylim(max(pool.min() / 2, pool.max() * 1e-6), pool.max() * 2)
+    ax_p.set_ylabel("Phase lag theta [rad]")
+    ax_p.set_yticks([0, math.pi / 2, math.pi] + ([3 * math.pi / 2, 2 * math.pi] if np.nanmax(response.phase, initial=0) > 3.3 else []))
+    ax_p.set_yticklabels(["0", "π/2", "π"] + (["3π/2", "2π"] if len(ax_p.get_yticks()) > 3 else []))
+    for ax in (ax_a, ax_p):
+        ax.grid(True, which="both", alpha=0.35)
+    if cmap is None:
+        ax_a.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    else:
+        _colorbar(fig, [ax_a, ax_p], cmap, family)
+    kind = "exact receptance (K - w²M + iwC)⁻¹" if response.exact else "measured by simulation to steady state"
+    extra = f"; measured vs exact: {response.difference:.1e} of the peak" if response.difference is not None else ""
+    fig.suptitle(f"{title}\nfrequency response, {kind}{extra}", fontsize=10)
+    return fig
+
+
+def portrait_figure(curves, title: str, poincare=None):
+    """Phase portraits: velocity against displacement per curve (label, x, v), start marked, direction arrowed;
+    Poincare points (label, x, v) drawn as dots."""
+    fig = _figure(figsize=(7.5, 6.5))
+    ax = fig.subplots()
+    fig.subplots_adjust(left=0.13, right=0.72, top=0.88, bottom=0.1)
+    for i, (label, x, v) in enumerate(curves):
+        color = f"C{i % 10}"
+        faint = poincare is not None
+        ax.plot(x, v, _STYLES[i % len(_STYLES)] if len(curves) <= 4 else "-", lw=0.6 if faint else 1.3, color=color,
+                alpha=0.35 if faint else 1.0, label=label)
+        ax.plot(x[0], v[0], "o", color=color, ms=7, mfc="white", mew=1.5)
+        _direction_arrows(ax, x, v, color)
+    if poincare is not None:
+        for i, (label, x, v) in enumerate(poincare):
+            ax.plot(x, v, ".", color=f"C{i % 10}", ms=5, label=f"{label}: once per period")
+    ax.plot([], [], "o", color="k", mfc="white", label="start")
+    ax.set_xlabel("Displacement x [m]")
+    ax.set_ylabel("Velocity v [m/s]")
+    ax.grid(True, alpha=0.4)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    ax.set_title(title, fontsize=10)
+    return fig
+
+
+def _direction_arrows(ax, x: np.ndarray, v: np.ndarray, color, count: int = 4) -> None:
+    """Arrowheads along a trajectory, spaced by arc length in the plot's own scale, showing the direction of motion."""
+    if len(x) < 3:
+        return
+    sx, sv = np.ptp(x) or 1.0, np.ptp(v) or 1.0
+    arc = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x) / sx, np.diff(v) / sv))])
+    if arc[-1] == 0:
+        return
+    # Early along the path, where the motion is largest and the arrows are clear of the end point.
+    for target in arc[-1] * np.array([0.04, 0.12, 0.25, 0.45][:count]):
+        i = min(int(np.searchsorted(arc, target)), len(x) - 2)
+        ax.annotate("", xy=(x[i + 1], v[i + 1]), xytext=(x[i], v[i]),
+                    arrowprops={"arrowstyle": "-|>", "color": color, "lw": 1.2, "mutation_scale": 14})
+
+
 def save_figure(fig, path: Path) -> None:
     """Save a figure atomically as PNG and release it."""
     from smdcli.io_hdf5 import atomic_path

@@ -315,7 +315,11 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
         line = int(match.group(1)) if match else None
         message = re.sub(r"\s*\(at line \d+, column \d+\)", "", message)
         raise ScenarioError(file, None, f"invalid TOML: {message}", line=line) from None
+    return parse_document(doc, text, file)
 
+
+def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
+    """Validate an already-decoded TOML document (a sweep member is one, edited)."""
     top = _Table(file, "", doc)
     title = top.string("title", "")
     description = top.string("description", "")
@@ -655,18 +659,49 @@ def _read_solver(t: _Table) -> SolverSpec:
     return SolverSpec(method=method, rtol=rtol, atol=atol, dt=dt, options=tuple(options))
 
 
+SWEEP_KEYS = ("parameter", "values", "labels", "ic", "frequency", "normalized", "input", "direction",
+              "measure", "quantity", "metric", "method")
+
+
 def _read_sweep(t: _Table) -> tuple[tuple[str, Any], ...]:
-    # The sweep command reads these; here only their types are checked.
+    # Types only: the sweep command reads the contents and names this file in its errors.
     items = []
-    if t.has("parameter"):
-        items.append(("parameter", t.string("parameter")))
-    for key in ("values", "frequency"):
-        if t.has(key):
-            value = t.raw(key)
+    for key in SWEEP_KEYS:
+        if not t.has(key):
+            continue
+        value = t.raw(key)
+        if key in ("normalized", "measure"):
+            if not isinstance(value, bool):
+                raise t.fail(key, f"expected true or false, found {_kind(value)}")
+        elif key in ("parameter", "labels", "ic"):
+            if isinstance(value, str) and key == "parameter":
+                value = [value]
+            if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+                raise t.fail(key, f"expected a string or an array of strings, found {_kind(value)}")
+            value = tuple(value)
+        elif key == "values":
+            value = _sweep_values(t, value)
+        elif key == "frequency":
             if isinstance(value, list):
                 value = t.numbers(key)
             elif not isinstance(value, str):
                 raise t.fail(key, f"expected an array of numbers or a range string, found {_kind(value)}")
-            items.append((key, tuple(value) if isinstance(value, list) else value))
-    t.finish(("parameter", "values", "frequency"))
+        elif not isinstance(value, str):
+            raise t.fail(key, f"expected a string, found {_kind(value)}")
+        items.append((key, value))
+    t.finish(SWEEP_KEYS)
     return tuple(items)
+
+
+def _sweep_values(t: _Table, value: Any) -> tuple:
+    """One value spec (a range string or an array of numbers), or an array of such specs (one per parameter)."""
+    def one(v, where):
+        if isinstance(v, str):
+            return v
+        if isinstance(v, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+            return tuple(t._check_number(f"{where}[{i}]", x, None, False) for i, x in enumerate(v))
+        raise t.fail(where, f"expected an array of numbers or a range string, found {_kind(v)}")
+
+    if isinstance(value, list) and value and all(isinstance(v, (list, str)) for v in value):
+        return tuple(one(v, f"values[{i}]") for i, v in enumerate(value))
+    return (one(value, "values"),)

@@ -14,10 +14,12 @@ BOOK = ["one_dof_nonlinear_stiff", "one_dof_undamped", "one_dof_underdamped", "o
         "one_dof_critical", "one_dof_square_fourier", "one_dof_square_wave", "one_dof_harmonic",
         "two_dof_forced", "three_dof_forced", "three_dof_free", "three_dof_matrix_forced", "three_dof_matrix_free"]
 STUDIES = ["one_dof_linear_stiff", "two_mass_stiff_chain"]  # stiff scenes for compare-solvers
+SWEEPS = ["one_dof_regimes_sweep", "ic_underdamped", "ic_critical", "ic_overdamped", "frequency_response_zeta",
+          "two_dof_frequency_response", "duffing_frequency_response"]  # scenes with a [sweep] table
 
 
 def test_every_book_scenario_is_bundled():
-    assert sorted(p.stem for p in ALL) == sorted(BOOK + STUDIES)
+    assert sorted(p.stem for p in ALL) == sorted(BOOK + STUDIES + SWEEPS)
 
 
 def test_every_scenario_runs_in_one_batch(tmp_path, cli):
