@@ -192,6 +192,87 @@ def sweep(
     raise typer.Exit(1 if failed else 0)
 
 
+@app.command()
+def phase(
+    scenarios: List[Path] = typer.Argument(..., help="Scenario TOML files, overlaid."),
+    dof: Optional[str] = typer.Option(None, "--dof", help="Comma list of DOFs (default: all)."),
+    ic: Optional[List[str]] = typer.Option(None, "--ic", help="An initial condition x0=..,v0=.. (repeat): a family."),
+    poincare: bool = typer.Option(False, "--poincare", help="Also sample once per forcing period (Poincare section)."),
+    periods: Optional[int] = typer.Option(None, "--periods", help="Run this many forcing periods instead of the "
+                                          "scenario's time span."),
+    skip_periods: int = typer.Option(0, "--skip-periods", help="Poincare: leave out the first periods (transient)."),
+    method: Optional[str] = typer.Option(None, "--method", help="Solver, overriding [solver].method."),
+    out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
+):
+    """Phase portraits (x against v) of DOFs, scenarios or a family, start and direction marked; --poincare."""
+    from smdcli.errors import SmdError
+    from smdcli.phase import portraits
+
+    try:
+        run = portraits(scenarios, out, dof, tuple(ic or ()), poincare, periods, skip_periods, method)
+    except SmdError as exc:
+        _fail(str(exc))
+        raise typer.Exit(exc.exit_code)
+    except KeyboardInterrupt:
+        _fail("interrupted; no partial file was left under a final name")
+        raise typer.Exit(130)
+    if not quiet:
+        typer.echo(f"{len(run.curves)} trajectories" + (f", {sum(len(c.x) for c in run.poincare)} Poincare points "
+                                                         f"(T = {run.period:.4g} s)" if run.poincare else ""))
+        typer.echo("wrote " + ", ".join(str(p) for p in run.outputs))
+
+
+@app.command()
+def draw(
+    scenario: Path = typer.Argument(..., help="Scenario TOML file."),
+    out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
+):
+    """A schematic of the system from its elements: masses, springs, dampers (nonlinear in red), walls, forces."""
+    from smdcli.errors import SmdError
+    from smdcli.schematic import write_schematic
+
+    try:
+        png = write_schematic(scenario, out)
+    except SmdError as exc:
+        _fail(str(exc))
+        raise typer.Exit(exc.exit_code)
+    if not quiet:
+        typer.echo(f"wrote {png}")
+
+
+@app.command()
+def animate(
+    scenario: Path = typer.Argument(..., help="Scenario TOML file."),
+    fps: int = typer.Option(20, "--fps", help="Frames per second of the GIF."),
+    seconds: Optional[float] = typer.Option(None, "--seconds", help="Length of the GIF (default: the run, at most 20 s)."),
+    scale: Optional[float] = typer.Option(None, "--scale", help="Displacement magnification (default: the largest "
+                                          "motion drawn as 0.3 of the mass spacing)."),
+    start: Optional[float] = typer.Option(None, "--start", help="First simulated time shown."),
+    end: Optional[float] = typer.Option(None, "--end", help="Last simulated time shown."),
+    method: Optional[str] = typer.Option(None, "--method", help="Solver, overriding [solver].method."),
+    out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
+):
+    """A GIF of the masses moving, springs and dampers drawn, with a time stamp on each frame."""
+    from smdcli.errors import SmdError
+    from smdcli.schematic import animate as make_gif
+
+    try:
+        gif, facts = make_gif(scenario, out, fps, seconds, scale, start, end, method)
+    except SmdError as exc:
+        _fail(str(exc))
+        raise typer.Exit(exc.exit_code)
+    except KeyboardInterrupt:
+        _fail("interrupted; no partial file was left under a final name")
+        raise typer.Exit(130)
+    if not quiet:
+        typer.echo(f"{facts['frames']} frames at {facts['fps']} fps, t = {facts['start']:g} .. {facts['end']:g} s, "
+                   f"displacements x {facts['scale']:.3g}, {facts['bytes'] / 2**20:.2f} MB")
+        typer.echo(f"wrote {gif}")
+
+
 class _CountBar:
     """click's progress bar on stderr, advanced by a count of finished members."""
 

@@ -363,6 +363,13 @@ def frequency_figure(family, response, title: str, unit: str = "rad/s", normaliz
     return fig
 
 
+def _wrap(text: str, width: int) -> str:
+    """Break a long label or title line at spaces, keeping existing line breaks."""
+    import textwrap
+
+    return "\n".join(textwrap.fill(line, width) for line in text.split("\n"))
+
+
 def portrait_figure(curves, title: str, poincare=None):
     """Phase portraits: velocity against displacement per curve (label, x, v), start marked, direction arrowed;
     Poincare points (label, x, v) drawn as dots."""
@@ -373,18 +380,19 @@ def portrait_figure(curves, title: str, poincare=None):
         color = f"C{i % 10}"
         faint = poincare is not None
         ax.plot(x, v, _STYLES[i % len(_STYLES)] if len(curves) <= 4 else "-", lw=0.6 if faint else 1.3, color=color,
-                alpha=0.35 if faint else 1.0, label=label)
+                alpha=0.35 if faint else 1.0, label=_wrap(label, 32))
         ax.plot(x[0], v[0], "o", color=color, ms=7, mfc="white", mew=1.5)
         _direction_arrows(ax, x, v, color)
     if poincare is not None:
         for i, (label, x, v) in enumerate(poincare):
-            ax.plot(x, v, ".", color=f"C{i % 10}", ms=5, label=f"{label}: once per period")
+            ax.plot(x, v, "o", color=f"C{i % 10}", ms=6, mec="k", mew=0.6, zorder=5,
+                    label=_wrap(f"{label}: once per period", 32))
     ax.plot([], [], "o", color="k", mfc="white", label="start")
     ax.set_xlabel("Displacement x [m]")
     ax.set_ylabel("Velocity v [m/s]")
     ax.grid(True, alpha=0.4)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
-    ax.set_title(title, fontsize=10)
+    ax.set_title(_wrap(title, 80), fontsize=10)
     return fig
 
 

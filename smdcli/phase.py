@@ -1,0 +1,169 @@
+"""smd phase: phase portraits (displacement against velocity) of runs, families and Poincare sections."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from smdcli import scenario as scenario_mod
+from smdcli.errors import SolverFailed, UsageError
+from smdcli.model import time_grid
+from smdcli.scenario import Scenario, TimeSpec
+
+POINTS_PER_PERIOD = 64  # portrait resolution when --periods sets the run's length
+
+
+@dataclass
+class Curve:
+    """One trajectory of one DOF: its label, time, displacement and velocity."""
+
+    label: str
+    time: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+
+
+@dataclass
+class PhaseRun:
+    """What one `smd phase` drew and wrote."""
+
+    curves: list[Curve]
+    poincare: list[Curve] | None = None
+    period: float | None = None
+    outputs: list[Path] = field(default_factory=list)
+
+
+def forcing_period(sc: Scenario) -> float:
+    """The period of the scene's first periodic force (sine, cosine, square, Fourier square)."""
+    for force in sc.forces:
+        if force.omega and force.type in ("sine", "cosine", "square", "fourier_square"):
+            return 2 * math.pi / force.omega
+    raise UsageError(f"{sc.path}: --poincare samples once per forcing period, and this scene has no periodic force")
+
+
+def _runs(sc: Scenario, ics: tuple[str, ...]) -> list[tuple[str, Scenario]]:
+    """(label, scenario) of each trajectory a scenario stands for: itself, or its time-domain family."""
+    from smdcli.sweep import read_spec
+
+    table = dict(sc.sweep)
+    if not ics and "frequency" in table or not (ics or "ic" in table or "parameter" in table):
+        return [(sc.title or sc.stem, sc)]
+    cli = {"ic": ics} if ics else {}
+    spec = read_spec(sc, cli)
+    if spec.frequency is not None:
+        return [(sc.title or sc.stem, sc)]
+    from smdcli.sweep import build_family
+
+    family = build_family(sc, dataclasses.replace(spec, frequency=None))
+    return [(family.labels[s], family.member_scenario(s)) for s in range(len(family))]
+
+
+def _solve(sc: Scenario, method: str | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    from smdcli.model import build
+    from smdcli.simulate import Options, failure_hint, solve_scenario
+
+    model, grid = build(sc), time_grid(sc.time)
+    result = solve_scenario(sc, model, grid, Options(method=method))
+    if not result.success:
+        raise SolverFailed(f"{sc.path}: {result.stats.method} {result.stats.message}; {failure_hint(model, result)}")
+    return result.time, result.displacement, result.velocity
+
+
+def portraits(paths: list[Path], out: Path, dofs: str | None = None, ics: tuple[str, ...] = (),
+              poincare: bool = False, periods: int | None = None, skip_periods: int = 0,
+              method: str | None = None, plots: bool = True) -> PhaseRun:
+    """Load every scenario first (input errors before any work), solve, draw and write `<stem>_phase.*`."""
+    from smdcli.simulate import output_folder
+
+    scenarios = [scenario_mod.load(p) for p in paths]
+    if ics and len(scenarios) > 1:
+        raise UsageError("--ic: give one scenario with an initial-condition family")
+    names = scenarios[0].dof_names
+    chosen = list(names) if not dofs else [d.strip() for d in dofs.split(",") if d.strip()]
+    for sc in scenarios:
+        missing = [d for d in chosen if d not in sc.dof_names]
+        if missing:
+            raise UsageError(f"--dof: {sc.path} has no DOF {missing[0]!r}; its DOFs are {', '.join(sc.dof_names)}")
+    runs = [(label if len(scenarios) == 1 else f"{sc.stem}: {label}", member, sc)
+            for sc in scenarios for label, member in _runs(sc, ics)]
+    if periods is not None and periods < 1 or skip_periods < 0:
+        raise UsageError("--periods must be at least 1 and --skip-periods at least 0")
+    period = None
+    if poincare:
+        period = forcing_period(scenarios[0])
+        for _, member, _ in runs:
+            if abs(forcing_period(member) - period) > 1e-12 * period:
+                raise UsageError(f"--poincare: {member.path} has another forcing period; overlay scenes of one period")
+    out_dir = output_folder(out)
+    curves, sections = [], [] if poincare else None
+    for label, member, sc in runs:
+        if periods is not None:
+            span = (period or forcing_period(member)) if period or member.forces else None
+            if span is None:
+                raise UsageError(f"--periods: {member.path} has no periodic force to count periods of")
+            spacing = np.diff(time_grid(member.time)[:2])[0]
+            member = dataclasses.replace(member, time=TimeSpec(member.time.start, member.time.start + periods * span,
+                                                               step=min(spacing, span / POINTS_PER_PERIOD)))
+        t, x, v = _solve(member, method)
+        alone = len(runs) == 1
+        for dof in chosen:
+            j = member.dof_names.index(dof)
+            name = dof if alone else (label if len(chosen) == 1 else f"{label}: {dof}")
+            curves.append(Curve(name, t, x[:, j], v[:, j]))
+        if poincare:
+            count = int(math.floor((member.time.end - member.time.start) / period * (1 + 1e-12)))
+            if count < 1:
+                raise UsageError(f"{member.path}: the run is shorter than one forcing period ({period:.4g} s); "
+                                 "use --periods")
+            sampled = dataclasses.replace(member, time=TimeSpec(member.time.start,
+                                                                member.time.start + count * period, step=period))
+            ts, xs, vs = _solve(sampled, method)
+            keep = slice(min(skip_periods, len(ts) - 1), None)
+            for dof in chosen:
+                j = member.dof_names.index(dof)
+                sections.append(Curve(dof if alone else (label if len(chosen) == 1 else f"{label}: {dof}"),
+                                      ts[keep], xs[keep, j], vs[keep, j]))
+    run = PhaseRun(curves, sections, period)
+    stem = scenarios[0].stem if len(scenarios) == 1 else f"{scenarios[0].stem}_and_{len(scenarios) - 1}_more"
+    h5 = out_dir / f"{stem}_phase.h5"
+    _write(h5, scenarios[0], run)
+    run.outputs.append(h5)
+    if plots:
+        from smdcli import plots as plotting
+
+        title = scenarios[0].title or scenarios[0].stem if len(scenarios) == 1 else \
+            " vs ".join(sc.stem for sc in scenarios)
+        title += "\nphase plot: displacement vs velocity" + (
+            f"; Poincare section: dots once per forcing period T = {period:.4g} s"
+            + (f" after {skip_periods} periods" if skip_periods else "") if poincare else "")
+        figure = plotting.portrait_figure([(c.label, c.x, c.v) for c in curves], title,
+                                          [(c.label, c.x, c.v) for c in sections] if poincare else None)
+        png = out_dir / f"{stem}_phase.png"
+        plotting.save_figure(figure, png)
+        run.outputs.append(png)
+    return run
+
+
+def _write(path: Path, sc: Scenario, run: PhaseRun) -> None:
+    """One group per curve (time, displacement, velocity), Poincare points apart."""
+    import h5py
+
+    from smdcli.io_hdf5 import atomic_path, write_header
+
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        write_header(f, sc, "phase")
+        for group_name, curves in (("curves", run.curves), ("poincare", run.poincare or [])):
+            if not curves:
+                continue
+            group = f.create_group(group_name)
+            if run.period and group_name == "poincare":
+                group.attrs["period_s"] = run.period
+            for i, c in enumerate(curves):
+                g = group.create_group(f"{i:03d}")
+                g.attrs["label"] = c.label
+                for name, data, units in (("time", c.time, "s"), ("displacement", c.x, "m"), ("velocity", c.v, "m/s")):
+                    g.create_dataset(name, data=data).attrs["units"] = units

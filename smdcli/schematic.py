@@ -1,0 +1,278 @@
+"""smd draw and smd animate: the system drawn from its elements, still or moving.
+
+Masses stand in a row in DOF order; a ground element is tied to the left wall when its
+mass is in the left half of the row, else to the right wall. Elements between the same
+two nodes share the gap in lanes above and below the centre line; elements that skip a
+mass arc over the row. A matrix-form scene has no element list: its elements are read
+back from M, C, K (off-diagonal -K_ij between i and j, row sums to the ground).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from smdcli.errors import UsageError
+from smdcli.scenario import GROUND, Scenario
+
+SPACING = 1.0  # between mass centres at rest
+BLOCK = 0.34  # block width and height
+WALL_GAP = 0.9  # wall to the nearest mass centre
+MAX_GIF_BYTES = 5 * 2**20
+
+
+@dataclass(frozen=True)
+class Element:
+    """A spring or damper between two nodes (a DOF index or "left"/"right" wall), labelled."""
+
+    kind: str  # "spring" | "damper"
+    a: int | str
+    b: int | str
+    label: str
+    nonlinear: bool = False
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where everything is drawn at rest."""
+
+    names: tuple[str, ...]
+    masses: tuple[float, ...]
+    elements: tuple[Element, ...]
+    forces: tuple[tuple[int, str], ...]  # (DOF, label)
+    left_wall: bool
+    right_wall: bool
+
+
+def _wall(i: int, n: int) -> str:
+    return "left" if i <= (n - 1) / 2 else "right"
+
+
+def layout(sc: Scenario) -> Layout:
+    """The drawing's elements, from the scenario's element list or read back from its matrices."""
+    names = sc.dof_names
+    n = len(names)
+    index = {name: i for i, name in enumerate(names)}
+    elements = []
+    if sc.system is None:
+        masses = tuple(m.m for m in sc.masses)
+        for e in sc.springs + sc.dampers:
+            ends = [index[node] if node != GROUND else None for node in e.connects]
+            if None in ends:
+                i = ends[0] if ends[0] is not None else ends[1]
+                a, b = (_wall(i, n), i) if _wall(i, n) == "left" else (i, _wall(i, n))
+            else:
+                a, b = sorted(ends)
+            symbol = "k" if e.kind == "spring" else "c"
+            label = f"{symbol}{e.index + 1} = {e.coef:g}"
+            if e.law == "cubic":
+                label += f", k3 = {e.k3:g} (cubic)"
+            elif e.law == "quadratic":
+                label += " (quadratic)"
+            elements.append(Element(e.kind, a, b, label, e.law != "linear"))
+    else:
+        M, C, K = (np.array(a) for a in (sc.system.M, sc.system.C, sc.system.K))
+        masses = tuple(np.diag(M))
+        for kind, matrix, symbol in (("spring", K, "k"), ("damper", C, "c")):
+            for i in range(n):
+                for j in range(i + 1, n):
+                    if matrix[i, j] != 0:
+                        elements.append(Element(kind, i, j, f"{symbol} = {-matrix[i, j]:g}"))
+                to_ground = matrix[i].sum()
+                if abs(to_ground) > 1e-12 * max(np.abs(matrix).max(), 1.0):
+                    wall = _wall(i, n)
+                    a, b = (wall, i) if wall == "left" else (i, wall)
+                    elements.append(Element(kind, a, b, f"{symbol} = {to_ground:g}"))
+    forces = tuple((index[f.on], _force_label(f)) for f in sc.forces)
+    walls = {e.a for e in elements} | {e.b for e in elements}
+    return Layout(names, masses, tuple(elements), forces, "left" in walls, "right" in walls)
+
+
+def _force_label(f) -> str:
+    amplitude = f"{f.amplitude:g} N" if f.type not in ("table", "expression") else ""
+    if f.type in ("sine", "cosine"):
+        return f"F = {f.amplitude:g} {'sin' if f.type == 'sine' else 'cos'}({f.omega:g} t)"
+    if f.type == "expression":
+        return f"F = {f.expr}" if len(f.expr or "") < 28 else "F(t) expression"
+    return f"F: {f.type.replace('_', ' ')} {amplitude}".strip()
+
+
+def _node_x(node: int | str, positions: np.ndarray) -> float:
+    if node == "left":
+        return -WALL_GAP
+    if node == "right":
+        return (len(positions) - 1) * SPACING + WALL_GAP
+    return positions[node]
+
+
+def _zigzag(x0: float, x1: float, y: float, turns: int = 6, height: float = 0.045):
+    """A spring's line: straight ends and a zigzag between."""
+    length = x1 - x0
+    lead = 0.15 * length
+    xs = np.linspace(x0 + lead, x1 - lead, 2 * turns + 1)
+    ys = np.full_like(xs, y)
+    ys[1:-1:2] += height
+    ys[2:-1:2] -= height
+    return np.concatenate([[x0], xs, [x1]]), np.concatenate([[y], ys, [y]])
+
+
+def _dashpot(ax, x0: float, x1: float, y: float, color) -> None:
+    """A damper: rod, open cylinder and piston."""
+    mid = 0.5 * (x0 + x1)
+    width = min(0.18, 0.45 * (x1 - x0))
+    h = 0.04
+    ax.plot([x0, mid - width / 2], [y, y], color=color, lw=1.4)
+    ax.plot([mid - width / 2, mid + width / 2, mid + width / 2, mid - width / 2],
+            [y + h, y + h, y - h, y - h], color=color, lw=1.4)
+    piston = mid
+    ax.plot([piston, piston], [y - 0.8 * h, y + 0.8 * h], color=color, lw=2.2)
+    ax.plot([piston, x1], [y, y], color=color, lw=1.4)
+
+
+def draw(ax, plan: Layout, displacement: np.ndarray | None = None, scale: float = 1.0, labels: bool = True) -> None:
+    """Draw the system on an axes, masses moved by scale * displacement."""
+    from matplotlib.patches import Rectangle
+
+    n = len(plan.names)
+    rest = np.arange(n) * SPACING
+    positions = rest + (scale * np.asarray(displacement) if displacement is not None else 0.0)
+    half = BLOCK / 2
+    ax.set_xlim(-WALL_GAP - 0.35, (n - 1) * SPACING + WALL_GAP + 0.35)
+    ax.set_ylim(-0.75, 0.75)
+    ax.set_aspect("equal")
+    ax.axis("off")
+    for wall, x in (("left", -WALL_GAP), ("right", (n - 1) * SPACING + WALL_GAP)):
+        if getattr(plan, f"{wall}_wall"):
+            ax.plot([x, x], [-0.42, 0.42], color="k", lw=2.5)
+            sign = -1 if wall == "left" else 1
+            for y in np.linspace(-0.4, 0.4, 9):
+                ax.plot([x, x + sign * 0.07], [y, y + 0.05], color="k", lw=0.8)
+    ax.plot([-WALL_GAP, (n - 1) * SPACING + WALL_GAP], [-half - 0.02] * 2, color="0.75", lw=0.8, zorder=0)
+    # Lanes: elements sharing a gap are spread above and below the centre line.
+    lanes: dict[tuple, int] = {}
+    offsets = (0.09, -0.09, 0.0, 0.15, -0.15)
+    for e in plan.elements:
+        key = (e.a, e.b)
+        lane = lanes.get(key, 0)
+        lanes[key] = lane + 1
+        skips = isinstance(e.a, int) and isinstance(e.b, int) and abs(e.b - e.a) > 1
+        x0 = _node_x(e.a, positions) + (half if isinstance(e.a, int) else 0.0)
+        x1 = _node_x(e.b, positions) - (half if isinstance(e.b, int) else 0.0)
+        color = "tab:red" if e.nonlinear else "k"
+        y = 0.3 + 0.1 * lane if skips else offsets[lane % len(offsets)]
+        if skips:  # over the masses in between: rise from the blocks' tops
+            x0, x1 = _node_x(e.a, positions), _node_x(e.b, positions)
+            ax.plot([x0, x0], [half, y], color=color, lw=1.0)
+            ax.plot([x1, x1], [half, y], color=color, lw=1.0)
+        if e.kind == "spring":
+            xs, ys = _zigzag(x0, x1, y)
+            ax.plot(xs, ys, color=color, lw=1.4)
+        else:
+            _dashpot(ax, x0, x1, y, color)
+        if labels:
+            ax.text(0.5 * (x0 + x1), y + (0.06 if y >= 0 else -0.06), e.label, ha="center",
+                    va="bottom" if y >= 0 else "top", fontsize=7, color=color)
+    for i, x in enumerate(positions):
+        ax.add_patch(Rectangle((x - half, -half), BLOCK, BLOCK, facecolor="#9ecae1", edgecolor="k", lw=1.3, zorder=3))
+        text = plan.names[i] + (f"\n{plan.masses[i]:g} kg" if labels else "")
+        ax.text(x, 0, text, ha="center", va="center", fontsize=8, zorder=4)
+    for dof, label in plan.forces:
+        x = positions[dof]
+        ax.annotate("", xy=(x + 0.28, half + 0.2), xytext=(x - 0.05, half + 0.2),
+                    arrowprops={"arrowstyle": "-|>", "color": "tab:green", "lw": 1.8})
+        if labels:
+            ax.text(x + 0.12, half + 0.26, label, ha="center", va="bottom", fontsize=7, color="tab:green")
+
+
+def schematic_figure(sc: Scenario):
+    """The schematic of a scenario, labelled, as a Figure."""
+    from smdcli.plots import _figure, _wrap
+
+    plan = layout(sc)
+    n = len(plan.names)
+    fig = _figure(figsize=(2.2 + 2.6 * n, 3.6))
+    ax = fig.add_axes((0.01, 0.02, 0.98, 0.8))
+    draw(ax, plan)
+    legend = "red: nonlinear element" if any(e.nonlinear for e in plan.elements) else ""
+    form = "element form" if sc.system is None else "matrix form (elements read back from K and C)"
+    fig.suptitle(_wrap(f"{sc.title or sc.stem}\n{form}" + (f"; {legend}" if legend else ""), 70), fontsize=9)
+    return fig
+
+
+def write_schematic(path: str | Path, out: str | Path) -> Path:
+    """`smd draw`: OUT/<stem>_schematic.png."""
+    from smdcli import scenario as scenario_mod
+    from smdcli.model import build
+    from smdcli.plots import save_figure
+    from smdcli.simulate import output_folder
+
+    sc = scenario_mod.load(path)
+    build(sc)
+    out_dir = output_folder(out)
+    png = out_dir / f"{sc.stem}_schematic.png"
+    save_figure(schematic_figure(sc), png)
+    return png
+
+
+def animate(path: str | Path, out: str | Path, fps: int = 20, seconds: float | None = None,
+            scale: float | None = None, start: float | None = None, end: float | None = None,
+            method: str | None = None) -> tuple[Path, dict]:
+    """`smd animate`: OUT/<stem>.gif of the masses moving, displacements scaled to be seen, time stamped."""
+    import dataclasses
+
+    from smdcli import scenario as scenario_mod
+    from smdcli.io_hdf5 import atomic_path
+    from smdcli.phase import _solve
+    from smdcli.plots import _figure
+    from smdcli.scenario import TimeSpec
+    from smdcli.simulate import output_folder
+
+    if not 1 <= fps <= 50:
+        raise UsageError(f"--fps: expected 1 to 50 frames per second, found {fps}")
+    sc = scenario_mod.load(path)
+    t0 = sc.time.start if start is None else start
+    t1 = sc.time.end if end is None else end
+    if not sc.time.start <= t0 < t1 <= sc.time.end:
+        raise UsageError(f"--start/--end: expected {sc.time.start:g} <= start < end <= {sc.time.end:g}, "
+                         f"found {t0:g} and {t1:g}")
+    length = min(t1 - t0, 20.0) if seconds is None else seconds
+    if not 0 < length <= 60:
+        raise UsageError(f"--seconds: expected a GIF length in (0, 60] s, found {length:g}")
+    frames = max(2, int(round(length * fps)))
+    # The whole run from the scenario's start (the state at t0 depends on it), sampled at the frames.
+    lead = t0 - sc.time.start
+    step = (t1 - t0) / (frames - 1)
+    skip = int(round(lead / step)) if lead > 0 else 0
+    grid = TimeSpec(sc.time.start, sc.time.start + (skip + frames - 1) * step, points=skip + frames)
+    out_dir = output_folder(out)
+    t, x, _ = _solve(dataclasses.replace(sc, time=grid), method)
+    t, x = t[skip:], x[skip:]
+    peak = np.abs(x).max()
+    if scale is None:
+        scale = 0.3 * SPACING / peak if peak > 0 else 1.0
+    plan = layout(sc)
+    n = len(plan.names)
+    fig = _figure(figsize=(1.6 + 1.9 * n, 2.2), dpi=80)
+    ax = fig.add_axes((0.0, 0.0, 1.0, 0.86))
+    images = []
+    from PIL import Image
+
+    for k in range(len(t)):
+        ax.clear()
+        draw(ax, plan, x[k], scale, labels=False)
+        fig.texts.clear()
+        fig.text(0.02, 0.93, f"t = {t[k]:7.2f} s", fontsize=9, family="monospace")
+        fig.text(0.98, 0.93, f"displacements x {scale:.3g}", fontsize=8, ha="right", color="0.35")
+        fig.canvas.draw()
+        rgba = np.asarray(fig.canvas.buffer_rgba())
+        images.append(Image.fromarray(rgba[..., :3]).quantize(colors=32, method=Image.Quantize.MEDIANCUT, dither=0))
+    gif = out_dir / f"{sc.stem}.gif"
+    with atomic_path(gif) as tmp:
+        images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:], duration=int(1000 / fps),
+                       loop=0, optimize=True, disposal=1)
+    size = gif.stat().st_size
+    return gif, {"frames": len(images), "fps": fps, "scale": scale, "bytes": size, "start": float(t[0]),
+                 "end": float(t[-1])}
