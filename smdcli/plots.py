@@ -278,8 +278,16 @@ def metric_figure(family, values: np.ndarray, metric: str, dofs, title: str):
         ax = fig.subplots()
         fig.subplots_adjust(left=0.12, right=0.95, top=0.86, bottom=0.12)
         x = family.values[:, 0] if params else np.arange(len(family))
+        order = np.argsort(x, kind="stable")
+        finite = values[np.isfinite(values)]
+        top = finite.max() * 1.05 if finite.size else 1.0
         for j in range(n):
-            ax.plot(x, values[:, j], "o-", ms=4, lw=1.2, label=str(dofs[j]))
+            ax.plot(x[order], values[order, j], "o-", ms=4, lw=1.2, label=str(dofs[j]), color=f"C{j}")
+            missing = ~np.isfinite(values[:, j])
+            if missing.any():
+                ax.plot(x[missing], np.full(missing.sum(), top), "x", ms=8, mew=2, color=f"C{j}",
+                        label=f"{dofs[j]}: no value (not settled by the end)" if metric == "settling_time" else
+                        f"{dofs[j]}: no value")
         ax.set_xlabel(params[0] if params else "member")
         ax.set_ylabel(METRIC_LABELS[metric])
         ax.grid(True, alpha=0.4)

@@ -15,6 +15,7 @@ import re
 import time
 import tomllib
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import Any, Callable
 
 import numpy as np
@@ -311,7 +312,7 @@ class Family:
 
     scenario: Scenario
     spec: SweepSpec
-    labels: list[str]
+    given_labels: tuple[str, ...]  # legend entries given (labels, or the --ic texts); else made from values
     values: np.ndarray  # (S, number of parameters)
     shape: tuple[int, ...]  # members as a grid: one axis per parameter (or per initial condition)
     base: Model
@@ -323,7 +324,16 @@ class Family:
     scenarios: list[Scenario] | None = None  # per member, where members differ in more than matrices
 
     def __len__(self) -> int:
-        return len(self.labels)
+        return len(self.x0)
+
+    @cached_property
+    def labels(self) -> list[str]:
+        """A legend entry per member: as given, else "path = value" (made on first use: a big family rarely needs them)."""
+        if self.given_labels:
+            return list(self.given_labels)
+        if not self.spec.parameters:
+            return [self.scenario.title or self.scenario.stem]
+        return [", ".join(f"{p} = {v:.4g}" for p, v in zip(self.spec.parameters, combo)) for combo in self.values]
 
     def model(self, s: int) -> Model:
         """Member s as a Model."""
@@ -387,7 +397,7 @@ def build_family(sc: Scenario, spec: SweepSpec) -> Family:
                 states.append(parse_ic(text, sc.dof_names))
             except ValueError as exc:
                 raise UsageError(f"{sc.path}: ic {text!r}: {exc}") from None
-        labels = list(spec.labels) if spec.labels else list(spec.ics)
+        labels = tuple(spec.labels) if spec.labels else tuple(spec.ics)
         x0 = np.array([a for a, _ in states])
         v0 = np.array([b for _, b in states])
         S = len(states)
@@ -403,16 +413,13 @@ def build_family(sc: Scenario, spec: SweepSpec) -> Family:
                       x0, v0, scenarios)
     if not spec.parameters:
         stacks = _stack([base])
-        return Family(sc, spec, [sc.title or sc.stem], np.empty((1, 0)), (1,), base, **stacks)
+        return Family(sc, spec, (), np.empty((1, 0)), (1,), base, **stacks)
     if "zeta" in spec.parameters and len(spec.parameters) > 1:
         raise UsageError("--param zeta: cannot be combined with a second parameter (zeta is set from k and m)")
     grids = np.meshgrid(*spec.values, indexing="ij")
     combos = np.stack([g.ravel() for g in grids], axis=1)
     shape = tuple(len(v) for v in spec.values)
-    if spec.labels:
-        labels = list(spec.labels)
-    else:
-        labels = [", ".join(f"{p} = {v:.4g}" for p, v in zip(spec.parameters, combo)) for combo in combos]
+    labels = tuple(spec.labels)
     doc0 = tomllib.loads(sc.text)
 
     def member(combo) -> Scenario:
@@ -1211,7 +1218,8 @@ def format_summary(data: dict) -> str:
         for p in data["peaks"][:24]:
             amp = f"{p['amplitude']:.5g} m/N" if math.isfinite(p["amplitude"]) else "unbounded (undamped)"
             how = f" (largest measured, sweep {p['direction']}, on the grid)" if "direction" in p else ""
-            lines.append(f"    {p['label']}: {p['dof']} at {p['omega']:.6g} rad/s ({p['omega'] / (2 * math.pi):.5g} Hz), "
+            who = f"{p['label']}: " if data["members"] > 1 else ""
+            lines.append(f"    {who}{p['dof']} at {p['omega']:.6g} rad/s ({p['omega'] / (2 * math.pi):.5g} Hz), "
                          f"{amp}{how}")
         if len(data["peaks"]) > 24:
             lines.append(f"    ... {len(data['peaks']) - 24} more in the HDF5 file")
