@@ -197,6 +197,7 @@ def stability_figure(comparison, title: str, limits: dict[str, float]):
 # ------------------------------------------------------------------ sweeps
 
 MAX_LEGEND = 12  # beyond this many members, a colour bar replaces the legend
+MAX_LINES = 300  # members drawn in an overlay; more would be slow and look the same
 QUANTITY_LABELS = {"displacement": "Displacement x [m]", "velocity": "Velocity v [m/s]",
                    "acceleration": "Acceleration a [m/s²]", "force": "Applied force F [N]"}
 METRIC_LABELS = {"peak_displacement": "peak |x| [m]", "rms_displacement": "RMS x [m]",
@@ -224,8 +225,9 @@ def overlay_figure(family, result, quantity: str, title: str):
     height = 2.2 + 2.6 * n
     fig.subplots_adjust(left=0.1, right=0.8 if cmap is None else 0.86, top=1 - 0.75 / height, bottom=0.55 / height,
                         hspace=0.12)
+    drawn = np.unique(np.linspace(0, S - 1, min(S, MAX_LINES)).round().astype(int))
     for j, ax in enumerate(axes):
-        for s in range(S):
+        for s in drawn:
             t = result.time if result.time.ndim == 1 else result.time[s]
             ok = np.isfinite(t)
             style = _STYLES[s % len(_STYLES)] if cmap is None else "-"
@@ -240,7 +242,8 @@ def overlay_figure(family, result, quantity: str, title: str):
         axes[0].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     else:
         _colorbar(fig, axes, cmap, family)
-    fig.suptitle(f"{title}\n{S} runs: {result.how}", fontsize=10)
+    shown = f" ({len(drawn)} of them drawn, evenly spaced)" if len(drawn) < S else ""
+    fig.suptitle(_wrap(f"{title}\n{S} runs{shown}: {result.how}", 100), fontsize=10)
     return fig
 
 
