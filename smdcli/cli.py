@@ -24,6 +24,33 @@ def _fail(message: str) -> None:
     typer.echo(f"smd: {message}", err=True)
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is, so that files being written are removed on the way out."""
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated()
+
+
+def _interrupted(exc: KeyboardInterrupt) -> typer.Exit:
+    """Say what stopped the run; the exit code a shell expects (130 for SIGINT, 143 for SIGTERM)."""
+    terminated = isinstance(exc, Terminated)
+    _fail(f"{'terminated' if terminated else 'interrupted'}; no partial file was left under a final name")
+    return typer.Exit(143 if terminated else 130)
+
+
+def _report(exc: Exception) -> int:
+    """One line for an error smd reports (its exit code) or a file that could not be written (2)."""
+    from smdcli.errors import SmdError
+
+    if isinstance(exc, SmdError):
+        _fail(str(exc))
+        return exc.exit_code
+    where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+    _fail(f"{where}cannot write: {exc.strerror or exc}")
+    return 2
+
+
 def _version(value: bool):
     if value:
         typer.echo(f"smd {__version__}")
@@ -47,26 +74,27 @@ def simulate(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
     as_json: bool = typer.Option(False, "--json", help="Print the summaries as JSON."),
     fail_fast: bool = typer.Option(False, "--fail-fast", help="Stop at the first scenario that fails."),
+    save_partial: bool = typer.Option(False, "--save-partial", help="When a solver fails, write what it computed "
+                                      "to OUT/<stem>_partial.h5, marked failed."),
 ):
     """Solve each scenario; write OUT/<stem>.h5 and OUT/<stem>_response.png, _phase.png."""
     from smdcli.errors import SmdError
     from smdcli.simulate import Options, format_summary, simulate as run_one, summary
 
-    options = Options(method=method, rtol=rtol or None, atol=atol or None, plots=not no_plots)
+    options = Options(method=method, rtol=rtol or None, atol=atol or None, plots=not no_plots,
+                      save_partial=save_partial)
     worst = 0
     summaries = []
     for path in scenarios:
         try:
             run = run_one(path, out, options)
-        except SmdError as exc:
-            _fail(str(exc))
-            worst = max(worst, exc.exit_code)
+        except (SmdError, OSError) as exc:
+            worst = max(worst, _report(exc))
             if fail_fast:
                 break
             continue
-        except KeyboardInterrupt:
-            _fail("interrupted; no partial file was left under a final name")
-            raise typer.Exit(130)
+        except KeyboardInterrupt as exc:
+            raise _interrupted(exc)
         data = summary(run)
         summaries.append(data)
         if not quiet and not as_json:
@@ -87,9 +115,8 @@ def info(
 
     try:
         data = describe(scenario)
-    except SmdError as exc:
-        _fail(str(exc))
-        raise typer.Exit(exc.exit_code)
+    except (SmdError, OSError) as exc:
+        raise typer.Exit(_report(exc))
     typer.echo(json.dumps(data, indent=2) if as_json else format_info(data))
 
 
@@ -117,12 +144,10 @@ def compare_solvers(
         comparison, written = run_and_write(scenario, out, methods, tolerances, steps, repeats,
                                             breakpoints=not no_breakpoints, plots=not no_plots,
                                             progress=_ProgressBar if show_progress else None)
-    except SmdError as exc:
-        _fail(str(exc))
-        raise typer.Exit(exc.exit_code)
-    except KeyboardInterrupt:
-        _fail("interrupted; no partial file was left under a final name")
-        raise typer.Exit(130)
+    except (SmdError, OSError) as exc:
+        raise typer.Exit(_report(exc))
+    except KeyboardInterrupt as exc:
+        raise _interrupted(exc)
     if as_json:
         typer.echo(json.dumps(as_dict(comparison), indent=2))
     elif not quiet:
@@ -177,12 +202,10 @@ def sweep(
     try:
         run = run_and_write(scenario, out, options, workers, plots=not no_plots,
                             progress=_CountBar if show_progress else None)
-    except SmdError as exc:
-        _fail(str(exc))
-        raise typer.Exit(exc.exit_code)
-    except KeyboardInterrupt:
-        _fail("interrupted; no partial file was left under a final name")
-        raise typer.Exit(130)
+    except (SmdError, OSError) as exc:
+        raise typer.Exit(_report(exc))
+    except KeyboardInterrupt as exc:
+        raise _interrupted(exc)
     data = summary(run)
     if as_json:
         typer.echo(json.dumps(data, indent=2, default=float))
@@ -211,12 +234,10 @@ def phase(
 
     try:
         run = portraits(scenarios, out, dof, tuple(ic or ()), poincare, periods, skip_periods, method)
-    except SmdError as exc:
-        _fail(str(exc))
-        raise typer.Exit(exc.exit_code)
-    except KeyboardInterrupt:
-        _fail("interrupted; no partial file was left under a final name")
-        raise typer.Exit(130)
+    except (SmdError, OSError) as exc:
+        raise typer.Exit(_report(exc))
+    except KeyboardInterrupt as exc:
+        raise _interrupted(exc)
     if not quiet:
         typer.echo(f"{len(run.curves)} trajectories" + (f", {sum(len(c.x) for c in run.poincare)} Poincare points "
                                                          f"(T = {run.period:.4g} s)" if run.poincare else ""))
@@ -235,9 +256,8 @@ def draw(
 
     try:
         png = write_schematic(scenario, out)
-    except SmdError as exc:
-        _fail(str(exc))
-        raise typer.Exit(exc.exit_code)
+    except (SmdError, OSError) as exc:
+        raise typer.Exit(_report(exc))
     if not quiet:
         typer.echo(f"wrote {png}")
 
@@ -261,16 +281,41 @@ def animate(
 
     try:
         gif, facts = make_gif(scenario, out, fps, seconds, scale, start, end, method)
-    except SmdError as exc:
-        _fail(str(exc))
-        raise typer.Exit(exc.exit_code)
-    except KeyboardInterrupt:
-        _fail("interrupted; no partial file was left under a final name")
-        raise typer.Exit(130)
+    except (SmdError, OSError) as exc:
+        raise typer.Exit(_report(exc))
+    except KeyboardInterrupt as exc:
+        raise _interrupted(exc)
     if not quiet:
         typer.echo(f"{facts['frames']} frames at {facts['fps']} fps, t = {facts['start']:g} .. {facts['end']:g} s, "
                    f"displacements x {facts['scale']:.3g}, {facts['bytes'] / 2**20:.2f} MB")
         typer.echo(f"wrote {gif}")
+
+
+@app.command("diff")
+def diff_files(
+    a: Path = typer.Argument(..., help="First smd .h5 file."),
+    b: Path = typer.Argument(..., help="Second smd .h5 file."),
+    rtol: float = typer.Option(1e-9, "--rtol", help="Relative tolerance per sample."),
+    atol: float = typer.Option(0.0, "--atol", help="Absolute tolerance per sample."),
+    datasets: Optional[str] = typer.Option(None, "--datasets", help="Comma list of data sets to compare (default: all)."),
+    allow_failed: bool = typer.Option(False, "--allow-failed", help="Compare files whose run failed."),
+    as_json: bool = typer.Option(False, "--json", help="Print the report as JSON."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing; the exit code says it."),
+):
+    """Compare two result files: exit 0 when every data set agrees within tolerance, 1 when not, 2 if unreadable."""
+    from smdcli.diff import as_dict, diff, format_report
+    from smdcli.errors import SmdError
+
+    try:
+        report = diff(a, b, rtol, atol, datasets.split(",") if datasets else None, allow_failed)
+    except SmdError as exc:
+        _fail(str(exc))
+        raise typer.Exit(2)
+    if as_json:
+        typer.echo(json.dumps(as_dict(report), indent=2, default=str))
+    elif not quiet:
+        typer.echo(format_report(report))
+    raise typer.Exit(1 if report.differs else 0)
 
 
 class _CountBar:
@@ -312,6 +357,9 @@ class _ProgressBar:
 
 def main() -> None:
     """Console-script entry point."""
+    import signal
+
+    signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         app()
     except KeyboardInterrupt:

@@ -24,6 +24,7 @@ class Options:
     rtol: float | None = None
     atol: float | None = None
     plots: bool = True
+    save_partial: bool = False  # on a solver failure, write what was computed to <stem>_partial.h5
 
 
 @dataclass
@@ -75,10 +76,15 @@ def simulate(path: str | Path, out: str | Path, options: Options = Options()) ->
     out_dir = output_folder(out)
     result = solve_scenario(sc, model, grid, options)
     run = Run(sc, model, result)
-    if not result.success:
-        raise SolverFailed(f"{sc.path}: {result.stats.method} {result.stats.message}; {failure_hint(model, result)}",
-                           result=result)
     from smdcli.io_hdf5 import write_simulation
+
+    if not result.success:
+        message = f"{sc.path}: {result.stats.method} {result.stats.message}; {failure_hint(model, result)}"
+        if options.save_partial:
+            partial = out_dir / f"{sc.stem}_partial.h5"
+            write_simulation(partial, sc, model, result)
+            message += f"; what was computed (to t = {result.t_failed:g} s, NaN after) is in {partial}, marked failed"
+        raise SolverFailed(message, result=result)
 
     h5 = out_dir / f"{sc.stem}.h5"
     write_simulation(h5, sc, model, result)

@@ -1,0 +1,237 @@
+"""smd diff: compare two smd result files data set by data set, within tolerances.
+
+Every data set of either file is compared (or those named): numbers within
+atol + rtol * max(|a|, |b|) (NaN equal to NaN), strings and integers exactly. A
+difference is reported with its largest size, where it is (the coordinates of the
+data set's dimension scales: time, DOF, member, frequency) and how many samples
+differ. Run metadata (the creation time, wall times, the smd version, the /run
+group) never makes files differ. A different scenario (by the SHA-256 of its text)
+or solver is named, but only data decide the exit code: 0 same, 1 different,
+2 a file unreadable, not an smd file, or (without --allow-failed) from a failed run.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from smdcli.errors import UsageError
+
+DEFAULT_RTOL = 1e-9
+DEFAULT_ATOL = 0.0
+RUN_METADATA_ATTRS = frozenset({"created", "wall_time_s", "smd_version"})
+RUN_METADATA_GROUPS = ("run",)
+
+
+@dataclass
+class DatasetDiff:
+    """How one data set differs (or that it does not)."""
+
+    name: str
+    status: str  # "same", "different", "only in A", "only in B", "shape", "type"
+    shape: tuple = ()
+    other_shape: tuple = ()
+    count: int = 0
+    total: int = 0
+    largest: float = 0.0
+    relative: float = 0.0
+    where: dict = field(default_factory=dict)
+    values: tuple = ()
+
+
+@dataclass
+class Report:
+    """All that differs between two files."""
+
+    a: str
+    b: str
+    rtol: float
+    atol: float
+    datasets: list[DatasetDiff]
+    notes: list[str]
+
+    @property
+    def differs(self) -> bool:
+        """True when any compared data set differs."""
+        return any(d.status != "same" for d in self.datasets)
+
+
+def _open(path: Path):
+    import h5py
+
+    path = Path(path)
+    if not path.exists():
+        raise UsageError(f"{path}: no such file")
+    if path.is_dir():
+        raise UsageError(f"{path}: is a directory, expected an smd .h5 file")
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise UsageError(f"{path}: not a readable HDF5 file ({str(exc).split('(')[0].strip() or 'unreadable'})") from None
+    if "smd_version" not in f.attrs or "kind" not in f.attrs:
+        f.close()
+        raise UsageError(f"{path}: an HDF5 file, but not one smd wrote (no smd_version and kind attributes)")
+    return f
+
+
+def _datasets(f) -> dict:
+    import h5py
+
+    found = {}
+
+    def visit(name, obj):
+        parts = name.split("/")
+        if isinstance(obj, h5py.Dataset) and parts[0] not in RUN_METADATA_GROUPS and parts[-1] not in RUN_METADATA_ATTRS:
+            found[name] = obj
+
+    f.visititems(visit)
+    return found
+
+
+def _failed(f) -> str | None:
+    """Why the run of a file counts as failed, or None."""
+    if "solver" in f and not bool(f["solver"].attrs.get("success", True)):
+        return f"its run failed ({f['solver'].attrs.get('message', '')})"
+    if "success" in f and f.attrs.get("kind") == "sweep" and not np.all(f["success"][()]):
+        return f"{int((~f['success'][()].astype(bool)).sum())} of its members failed"
+    if "runs/success" in f and f.attrs.get("kind") == "compare":
+        return None  # a comparison records failures as results
+    return None
+
+
+def _text(value) -> str:
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def _where(ds, index: tuple) -> dict:
+    """Coordinates of an index from the data set's dimension scales (or the bare index)."""
+    where = {}
+    for axis, i in enumerate(index):
+        scales = ds.dims[axis] if axis < len(ds.dims) else []
+        if len(scales):
+            scale = scales[0]
+            key = scale.name.rsplit("/", 1)[-1]
+            value = scale[i] if scale.ndim == 1 and i < scale.shape[0] else i
+            where[key] = _text(value) if isinstance(value, bytes) else (value.item() if hasattr(value, "item") else value)
+        else:
+            where[f"axis{axis}"] = int(i)
+    return where
+
+
+def _compare(name: str, da, db, rtol: float, atol: float) -> DatasetDiff:
+    a, b = da[()], db[()]
+    shape_a, shape_b = np.shape(a), np.shape(b)
+    if shape_a != shape_b:
+        return DatasetDiff(name, "shape", shape_a, shape_b)
+    numeric = all(np.issubdtype(np.asarray(x).dtype, np.number) or np.asarray(x).dtype == bool for x in (a, b))
+    if not numeric:
+        same = np.array_equal(np.asarray(a, dtype=object), np.asarray(b, dtype=object))
+        return DatasetDiff(name, "same" if same else "different", shape_a, shape_b,
+                           0 if same else int(np.sum(np.asarray(a, dtype=object) != np.asarray(b, dtype=object))),
+                           int(np.size(a)))
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    with np.errstate(invalid="ignore", over="ignore"):
+        gap = np.abs(a - b)
+        both_nan = np.isnan(a) & np.isnan(b)
+        same_inf = np.isinf(a) & (a == b)
+        gap = np.where(both_nan | same_inf, 0.0, gap)
+        gap = np.where(np.isnan(gap), np.inf, gap)  # NaN on one side only
+        bound = atol + rtol * np.maximum(np.abs(a), np.abs(b))
+        bad = gap > np.where(np.isfinite(bound), bound, 0.0)
+    count = int(bad.sum())
+    if not count:
+        return DatasetDiff(name, "same", shape_a, shape_b, 0, int(a.size))
+    flat = int(np.argmax(np.where(bad, gap, -1.0)))
+    index = np.unravel_index(flat, a.shape) if a.ndim else ()
+    scale = max(abs(a[index]), abs(b[index]))
+    return DatasetDiff(name, "different", shape_a, shape_b, count, int(a.size), float(gap[index]),
+                       float(gap[index] / scale) if scale > 0 else float("inf"), _where(da, index),
+                       (float(a[index]), float(b[index])))
+
+
+def _scenario_hash(f) -> str:
+    return hashlib.sha256(_text(f.attrs.get("scenario", "")).encode()).hexdigest()
+
+
+def diff(path_a: Path, path_b: Path, rtol: float = DEFAULT_RTOL, atol: float = DEFAULT_ATOL,
+         names: list[str] | None = None, allow_failed: bool = False) -> Report:
+    """Compare two smd files; UsageError (exit 2) for a file that cannot be compared."""
+    if rtol < 0 or atol < 0:
+        raise UsageError("--rtol and --atol must be >= 0")
+    with _open(path_a) as fa, _open(path_b) as fb:
+        notes = []
+        for path, f in ((path_a, fa), (path_b, fb)):
+            why = _failed(f)
+            if why and not allow_failed:
+                raise UsageError(f"{path}: {why}; compare it anyway with --allow-failed")
+            if why:
+                notes.append(f"{path}: {why}")
+        kinds = (_text(fa.attrs["kind"]), _text(fb.attrs["kind"]))
+        if kinds[0] != kinds[1]:
+            notes.append(f"different kinds of file: {kinds[0]} vs {kinds[1]}")
+        ha, hb = _scenario_hash(fa), _scenario_hash(fb)
+        if ha != hb:
+            notes.append(f"different scenario (sha256 {ha[:12]} vs {hb[:12]})")
+        for key in ("method", "rtol", "atol", "dt"):
+            va = fa["solver"].attrs.get(key) if "solver" in fa else None
+            vb = fb["solver"].attrs.get(key) if "solver" in fb else None
+            if va is not None and vb is not None and _text(va) != _text(vb) and \
+                    not (isinstance(va, float) and np.isnan(va) and np.isnan(vb)):
+                notes.append(f"different solver {key}: {_text(va)} vs {_text(vb)}")
+        sets_a, sets_b = _datasets(fa), _datasets(fb)
+        if names:
+            wanted = [n.strip().lstrip("/") for n in names if n.strip()]
+            unknown = [n for n in wanted if n not in sets_a and n not in sets_b]
+            if unknown:
+                raise UsageError(f"--datasets: {unknown[0]!r} is in neither file; they hold "
+                                 f"{', '.join(sorted(set(sets_a) | set(sets_b))[:12])}")
+        else:
+            wanted = sorted(set(sets_a) | set(sets_b))
+        results = []
+        for name in wanted:
+            if name not in sets_b:
+                results.append(DatasetDiff(name, "only in A", np.shape(sets_a[name])))
+            elif name not in sets_a:
+                results.append(DatasetDiff(name, "only in B", (), np.shape(sets_b[name])))
+            else:
+                results.append(_compare(name, sets_a[name], sets_b[name], rtol, atol))
+        return Report(str(path_a), str(path_b), rtol, atol, results, notes)
+
+
+def format_report(report: Report) -> str:
+    """Lines for the terminal: a verdict, then one line per differing data set and per note."""
+    bad = [d for d in report.datasets if d.status != "same"]
+    head = (f"{report.a} vs {report.b}: " + (f"{len(bad)} of {len(report.datasets)} data sets differ"
+                                              if bad else f"all {len(report.datasets)} data sets agree")
+            + f" (rtol {report.rtol:g}, atol {report.atol:g})")
+    lines = [head]
+    for d in bad:
+        label = "different time grids: " if d.name == "time" else ""
+        if d.status == "only in A":
+            lines.append(f"  /{d.name}: only in {report.a}")
+        elif d.status == "only in B":
+            lines.append(f"  /{d.name}: only in {report.b}")
+        elif d.status == "shape":
+            lines.append(f"  /{d.name}: {label}different shapes {d.shape} vs {d.other_shape}")
+        elif d.largest:
+            where = ", ".join(f"{k} = {v:.6g}" if isinstance(v, float) else f"{k} = {v}" for k, v in d.where.items())
+            lines.append(f"  /{d.name} {d.shape}: {label}{d.count} of {d.total} samples differ; largest |a - b| = "
+                         f"{d.largest:.3g} (relative {d.relative:.2g}: {d.values[0]:.10g} vs {d.values[1]:.10g})"
+                         + (f" at {where}" if where else ""))
+        else:
+            lines.append(f"  /{d.name} {d.shape}: {d.count} of {d.total} entries differ")
+    lines += [f"  note: {n}" for n in report.notes]
+    return "\n".join(lines)
+
+
+def as_dict(report: Report) -> dict:
+    """The report as plain data (for --json)."""
+    return {"a": report.a, "b": report.b, "rtol": report.rtol, "atol": report.atol, "differ": report.differs,
+            "notes": report.notes,
+            "datasets": [{"name": d.name, "status": d.status, "shape": list(d.shape), "other_shape": list(d.other_shape),
+                          "count": d.count, "total": d.total, "largest": d.largest, "relative": d.relative,
+                          "where": d.where, "values": list(d.values)} for d in report.datasets]}
