@@ -307,7 +307,23 @@ def build(scenario: Scenario) -> Model:
         element_form=scenario.system is None,
     )
     _check_forces_finite(model, scenario)
+    _check_matrices_finite(model, scenario)
     return model
+
+
+def _check_matrices_finite(model: Model, scenario: Scenario) -> None:
+    """Refuse a scene whose accelerations overflow (a mass of 1e-320 kg, say): no method could solve it."""
+    with np.errstate(all="ignore"):
+        try:
+            rows = model.state_matrix[model.n:]
+        except np.linalg.LinAlgError:
+            rows = np.full((model.n, 2 * model.n), np.nan)
+    bad = ~np.isfinite(rows).all(axis=1)
+    if bad.any():
+        i = int(np.argmax(bad))
+        where = f"mass[{i}].m" if scenario.system is None else "system.M"
+        raise ScenarioError(scenario.path, where, f"M^-1 K or M^-1 C is not finite for DOF {model.dofs[i]!r}: "
+                                                  "a mass too small for the stiffness or damping it carries")
 
 
 def _incidence_row(connects: tuple[str, str], index: dict[str, int], n: int) -> np.ndarray:
@@ -330,10 +346,19 @@ def _incidence(rows) -> Incidence | None:
     )
 
 
+MAX_EDGES = 1_000_000  # force discontinuities in one run: each is a restart of the integration
+
+
 def _check_forces_finite(model: Model, scenario: Scenario) -> None:
     """Refuse forces that are not finite on the output grid (e.g. exp(9**9), 1/(t-1))."""
     if not model.signals:
         return
+    for j, signal in enumerate(model.signals):
+        edges = signal.edge_count(scenario.time.start, scenario.time.end)
+        if not edges <= MAX_EDGES:
+            raise ScenarioError(scenario.path, model.force_paths[j],
+                                f"{edges:.3g} discontinuities in the run (limit {MAX_EDGES:.0e}); "
+                                "the period is too short for the time span")
     grid = time_grid(scenario.time)
     for j, signal in enumerate(model.signals):
         values = signal.value(grid)

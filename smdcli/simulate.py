@@ -57,6 +57,8 @@ def solve_scenario(sc: Scenario, model: Model, grid: np.ndarray, options: Option
 def output_folder(out: str | Path) -> Path:
     """Create the output folder if needed; refuse one that cannot be written."""
     out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"{out}: is not a folder (a file of that name exists); give an output folder with -o")
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -105,6 +107,10 @@ def failure_hint(model: Model, result: Result) -> str:
     from smdcli.solvers.registry import get_solver
 
     solver = get_solver(result.stats.method)
+    if not solver.adaptive and "steps" in result.stats.message:
+        span = result.time[-1] - result.time[0]
+        return (f"fixed step {result.stats.dt:.4g} s needs {span / result.stats.dt:.3g} steps for this run; "
+                "set a larger solver.dt (or use an adaptive method)")
     if not solver.adaptive:
         limit = solver.omega_limit()
         w_max = model.omega_max

@@ -1,0 +1,82 @@
+"""Faults: interrupted writes, unwritable places, failing solvers, batches with broken files."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+from conftest import ROOT, SCENARIOS
+
+# Runs the real `smd` entry point with one fault injected: the HDF5 writer pauses inside its
+# temporary file, so the signal lands while a file is being written, every time.
+SLOW_WRITER = """
+import sys, time
+import smdcli.io_hdf5 as io
+original = io.write_header
+def slow(f, scenario, kind):
+    original(f, scenario, kind)
+    f.flush()
+    time.sleep(30)
+io.write_header = slow
+from smdcli.cli import main
+sys.argv = ["smd"] + sys.argv[1:]
+main()
+"""
+
+
+@pytest.mark.parametrize("signum, code, word", [(signal.SIGINT, 130, "interrupted"), (signal.SIGTERM, 143, "terminated")])
+@pytest.mark.parametrize("command", ["simulate", "sweep"])
+def test_a_signal_while_writing_leaves_no_partial_file(tmp_path, signum, code, word, command):
+    out = tmp_path / "out"
+    out.mkdir()
+    earlier = out / "one_dof_regimes_sweep.h5"
+    earlier.write_bytes(b"an earlier result")
+    target = "one_dof_regimes_sweep"
+    args = [command, str(SCENARIOS / f"{target}.toml"), "-o", str(out), "--no-plots"]
+    process = subprocess.Popen([sys.executable, "-c", SLOW_WRITER, *args], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    deadline = time.monotonic() + 60
+    while not list(out.glob(".*.part")):
+        assert process.poll() is None, process.communicate()
+        assert time.monotonic() < deadline, "no temporary file appeared"
+        time.sleep(0.01)
+    process.send_signal(signum)
+    stdout, stderr = process.communicate(timeout=60)
+    assert process.returncode == code, stderr
+    assert f"smd: {word}; no partial file was left under a final name" in stderr
+    assert "Traceback" not in stderr
+    assert sorted(p.name for p in out.iterdir()) == [earlier.name]  # no .part, no new file
+    assert earlier.read_bytes() == b"an earlier result"
+
+
+def test_an_output_that_cannot_be_written_is_one_line_exit_2(cli, tmp_path):
+    out = tmp_path / "out"
+    (out / "one_dof_undamped.h5").mkdir(parents=True)  # the final name is taken by a folder
+    result = cli("simulate", SCENARIOS / "one_dof_undamped.toml", "-o", out, "--no-plots")
+    assert result.exit_code == 2, result.output
+    assert "cannot write" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+    assert not list(out.glob(".*.part"))
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    for command in (["simulate"], ["sweep"], ["phase"], ["draw"], ["animate"], ["compare-solvers"]):
+        result = cli(*command, SCENARIOS / "one_dof_regimes_sweep.toml", "-o", blocker)
+        assert result.exit_code == 2 and "is not a folder" in result.stderr, (command, result.output)
+
+
+def test_a_batch_processes_every_file_and_returns_the_worst_code(cli, tmp_path):
+    broken = tmp_path / "broken.toml"
+    broken.write_text("[time]\nend = 1.0\n")
+    unstable = tmp_path / "unstable.toml"
+    unstable.write_text((SCENARIOS / "one_dof_undamped.toml").read_text().replace("end = 5.0", "end = 200.0")
+                        + '\n[solver]\nmethod = "central_difference"\ndt = 0.5\n')
+    good = SCENARIOS / "one_dof_underdamped.toml"
+    result = cli("simulate", good, unstable, broken, good, "-o", tmp_path / "out", "--no-plots")
+    assert result.exit_code == 2
+    errors = result.stderr.strip().splitlines()
+    assert len(errors) == 2 and "unstable.toml" in errors[0] and "broken.toml" in errors[1]
+    assert "failed at t =" in errors[0] and "stable step is below" in errors[0]
+    assert (tmp_path / "out" / "one_dof_underdamped.h5").exists()
+    result = cli("simulate", unstable, good, "-o", tmp_path / "ff", "--no-plots", "--fail-fast")
+    assert result.exit_code == 1 and not (tmp_path / "ff" / "one_dof_underdamped.h5").exists()

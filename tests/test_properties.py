@@ -1,0 +1,139 @@
+"""Property-based tests of the loader: random TOML documents, and random values put into valid ones,
+give either a model or a ScenarioError, never another exception."""
+
+import tomllib
+
+import tomli_w
+from conftest import SCENARIOS
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from smdcli import scenario
+from smdcli.errors import ScenarioError
+from smdcli.model import build, time_grid
+
+KEYS = ["title", "time", "end", "start", "step", "points", "mass", "name", "m", "x0", "v0", "spring", "damper",
+        "connects", "k", "c", "law", "k3", "force", "on", "type", "amplitude", "omega", "frequency", "period",
+        "phase", "t0", "duration", "duty", "terms", "f0", "f1", "t1", "t", "values", "file", "interpolation",
+        "expr", "solver", "method", "rtol", "atol", "dt", "system", "dofs", "M", "C", "K", "sweep", "parameter",
+        "ground", "m1", "m2", "sine", "cubic", "quadratic", "auto", "RK45", "newmark", "beta", "alpha"]
+NUMBERS = st.one_of(st.integers(-10**6, 10**6), st.floats(allow_nan=True, allow_infinity=True),
+                    st.sampled_from([0, 1, -1, 1e-300, 1e300, 0.5, 25.0, 2.5]))
+SCALARS = st.one_of(NUMBERS, st.booleans(), st.sampled_from(KEYS), st.text(max_size=12))
+VALUES = st.recursive(SCALARS, lambda inner: st.one_of(st.lists(inner, max_size=4),
+                                                        st.dictionaries(st.sampled_from(KEYS), inner, max_size=5)),
+                      max_leaves=25)
+DOCUMENTS = st.dictionaries(st.sampled_from(KEYS), VALUES, max_size=8)
+SETTINGS = settings(max_examples=int(__import__("os").environ.get("SMD_HYPOTHESIS_EXAMPLES", 300)), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+
+def load_fully(text: str) -> None:
+    """What simulate does before solving: parse, assemble, make the grid."""
+    try:
+        sc = scenario.parse(text, "random.toml")
+        model = build(sc)
+        grid = time_grid(sc.time)
+    except ScenarioError:
+        return
+    assert len(grid) >= 2 and model.n >= 1
+
+
+def dumps(doc) -> str | None:
+    try:
+        return tomli_w.dumps(doc)
+    except (TypeError, ValueError):  # e.g. arrays mixing tables and values, not TOML
+        return None
+
+
+@SETTINGS
+@given(DOCUMENTS)
+def test_random_documents_load_or_raise_scenario_error(doc):
+    text = dumps(doc)
+    if text is not None:
+        load_fully(text)
+
+
+@SETTINGS
+@given(st.text(max_size=300))
+def test_random_text_loads_or_raises_scenario_error(text):
+    load_fully(text)
+
+
+BUNDLED = {p.stem: tomllib.loads(p.read_text()) for p in sorted(SCENARIOS.glob("*.toml"))}
+
+
+def leaves(node, path=()):
+    """Paths to every value in a document (tables and arrays included)."""
+    yield path
+    if isinstance(node, dict):
+        for key, value in node.items():
+            yield from leaves(value, path + (key,))
+    elif isinstance(node, list):
+        for i, value in enumerate(node):
+            yield from leaves(value, path + (i,))
+
+
+def replaced(doc, path, value):
+    import copy
+
+    doc = copy.deepcopy(doc)
+    node = doc
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = value
+    return doc
+
+
+@SETTINGS
+@given(st.sampled_from(sorted(BUNDLED)), st.data(), VALUES)
+def test_random_values_in_valid_documents_load_or_raise_scenario_error(stem, data, value):
+    doc = BUNDLED[stem]
+    paths = [p for p in leaves(doc) if p]
+    path = data.draw(st.sampled_from(paths))
+    text = dumps(replaced(doc, path, value))
+    if text is not None:
+        load_fully(text)
+
+
+@SETTINGS
+@given(st.sampled_from(sorted(BUNDLED)), st.data(), st.floats(allow_nan=True, allow_infinity=True))
+def test_random_numbers_in_valid_documents_load_or_raise_scenario_error(stem, data, number):
+    doc = BUNDLED[stem]
+    paths = [p for p in leaves(doc) if p and isinstance(_get(doc, p), (int, float)) and not isinstance(_get(doc, p), bool)]
+    path = data.draw(st.sampled_from(paths))
+    text = dumps(replaced(doc, path, number))
+    if text is not None:
+        load_fully(text)
+
+
+def _get(doc, path):
+    for key in path:
+        doc = doc[key]
+    return doc
+
+
+FAST = [s for s in sorted(BUNDLED) if s.startswith(("one_dof", "ic_", "two_dof_forced", "three_dof_matrix_free"))
+        and s != "one_dof_nonlinear_stiff"]
+
+
+@settings(max_examples=int(__import__("os").environ.get("SMD_HYPOTHESIS_EXAMPLES", 300)) // 3, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(st.sampled_from(FAST), st.data(), st.one_of(st.floats(allow_nan=False, allow_infinity=False),
+                                                  st.sampled_from([1e-300, 1e-30, 1e30, 1e300, 5e-324])))
+def test_any_number_a_valid_scene_accepts_solves_or_fails_cleanly(tmp_path, stem, data, number):
+    """Past the loader: a scene that validates is solved, or its solver fails (exit 1); nothing else."""
+    from smdcli.errors import SmdError
+    from smdcli.simulate import Options, simulate
+
+    doc = BUNDLED[stem]
+    paths = [p for p in leaves(doc) if p and isinstance(_get(doc, p), (int, float)) and not isinstance(_get(doc, p), bool)]
+    path = data.draw(st.sampled_from(paths))
+    text = dumps(replaced(doc, path, number))
+    if text is None:
+        return
+    source = tmp_path / f"{stem}.toml"
+    source.write_text(text)
+    try:
+        simulate(source, tmp_path / "out", Options(plots=False))
+    except SmdError as exc:
+        assert exc.exit_code in (1, 2)
