@@ -127,3 +127,23 @@ def test_a_failed_run_is_refused_unless_allowed(cli, tmp_path):
     with h5py.File(good, "r+") as f:
         f["displacement"][0, 0] += 1.0
     assert cli("diff", good, failed, "--allow-failed").exit_code == 1
+
+
+@pytest.mark.parametrize("command", [
+    ["compare-solvers", SCENARIOS / "one_dof_underdamped.toml", "--methods", "ode45,rk4", "--tolerances", "1e-4,1e-6",
+     "--steps", "0.05,0.01", "--repeats", "1"],
+    ["sweep", SCENARIOS / "one_dof_nonlinear_stiff.toml", "--param", "damper[0].c", "--values", "500,1001",
+     "--workers", "2"],
+    ["phase", SCENARIOS / "one_dof_square_wave.toml", "--poincare"],
+])
+def test_every_kind_of_file_is_deterministic_and_diffable(cli, tmp_path, command):
+    for out in ("a", "b"):
+        result = cli(*command, "-o", tmp_path / out, "--no-plots" if command[0] != "phase" else "--quiet")
+        assert result.exit_code == 0, result.output
+    (name,) = [p.name for p in (tmp_path / "a").glob("*.h5")]
+    result = cli("diff", tmp_path / "a" / name, tmp_path / "b" / name, "--rtol", "0")
+    assert result.exit_code == 0, result.output
+    with h5py.File(tmp_path / "b" / name, "r+") as f:
+        target = next(n for n in float_datasets(tmp_path / "b" / name) if "wall_time" not in n)
+        f[target][...] = f[target][()] * 1.001
+    assert cli("diff", tmp_path / "a" / name, tmp_path / "b" / name).exit_code == 1
