@@ -136,7 +136,7 @@ def write_sweep(path: Path, family, result=None, metrics=None, response=None, ru
         if result is not None:
             _write_time_family(f, result, metrics, member, dof)
         if response is not None:
-            _write_response(f, response, member, dof)
+            _write_response(f, response, member, dof, family, spec.normalized)
 
 
 def _write_time_family(f, result, metrics, member, dof) -> None:
@@ -162,7 +162,7 @@ def _write_time_family(f, result, metrics, member, dof) -> None:
         ds.dims[1].attach_scale(dof)
 
 
-def _write_response(f, response, member, dof) -> None:
+def _write_response(f, response, member, dof, family, normalized: bool) -> None:
     freq = f.create_dataset("frequency", data=response.omega)
     freq.attrs["units"] = "rad/s"
     freq.make_scale("frequency")
@@ -180,6 +180,13 @@ def _write_response(f, response, member, dof) -> None:
     if response.exact:
         stacked(f, "amplitude", response.amplitude, "m/N")
         stacked(f, "phase", response.phase, "rad")
+    if normalized:  # the book's Equation (9-34) axes, 1 DOF: X K / F0 against r = omega / omega_n
+        k = family.K[:, 0, 0]
+        ratio = f.create_dataset("frequency_ratio", data=response.omega[None, :] / np.sqrt(k / family.M[:, 0, 0])[:, None])
+        ratio.dims[0].attach_scale(member)
+        ratio.dims[1].attach_scale(freq)
+        if response.exact:
+            stacked(f, "normalized_amplitude", response.amplitude * k[:, None, None], "1")
     for direction, (amp, lag) in response.measured.items():
         group = f.create_group(f"measured/{direction}")
         stacked(group, "amplitude", amp, "m/N")

@@ -247,6 +247,19 @@ def test_normalized_response_matches_the_books_formulas():
     assert len(undamped) == 1 and undamped[0]["omega"] == pytest.approx(math.sqrt(10), rel=1e-12)
 
 
+def test_normalized_file_holds_the_books_axes(cli, tmp_path):
+    result = cli("sweep", SCENARIOS / "one_dof_harmonic.toml", "--frequency", "0:10:0.2", "--normalized",
+                 "--param", "zeta", "--values", "0:1.2:0.2", "-o", tmp_path)
+    assert result.exit_code == 0, result.output
+    with h5py.File(tmp_path / "one_dof_harmonic_sweep.h5") as f:
+        r, amplitude, phase = f["frequency_ratio"][()], f["normalized_amplitude"][()][..., 0], f["phase"][()][..., 0]
+        zeta = f["parameters/zeta"][()]
+    np.testing.assert_allclose(zeta, [0, 0.2, 0.4, 0.6, 0.8, 1.0, 1.2], atol=1e-15)
+    expected = 1 / np.sqrt((1 - r**2) ** 2 + (2 * zeta[:, None] * r) ** 2)
+    assert np.abs(amplitude / expected - 1).max() < 1e-10
+    assert np.abs(phase - np.arctan2(2 * zeta[:, None] * r, 1 - r**2)).max() < 1e-10
+
+
 def test_two_dof_receptance_matches_a_long_exact_simulation():
     """Amplitude and phase of both masses at three frequencies against the steady state of a time simulation."""
     sc = scenario.load(SCENARIOS / "two_dof_frequency_response.toml")
