@@ -107,6 +107,10 @@ def failure_hint(model: Model, result: Result) -> str:
     from smdcli.solvers.registry import get_solver
 
     solver = get_solver(result.stats.method)
+    if "not finite" in result.stats.message and not hasattr(solver, "omega_limit"):
+        return "check the units of the masses, springs, dampers and forces"
+    if not hasattr(solver, "omega_limit"):
+        return "try another method"
     if not solver.adaptive and "steps" in result.stats.message:
         span = result.time[-1] - result.time[0]
         return (f"fixed step {result.stats.dt:.4g} s needs {span / result.stats.dt:.3g} steps for this run; "

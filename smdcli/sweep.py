@@ -753,7 +753,10 @@ def solve_family(family: Family, method: str | None = None, workers: int | None 
         force = batched
         if progress:
             progress(S)
-        return FamilyResult(grid, family.base.dofs, x, v, acc, force, np.ones(S, bool), ["ok"] * S,
+        finite = np.isfinite(x).all(axis=(1, 2)) & np.isfinite(v).all(axis=(1, 2))
+        messages = ["ok" if ok else "the solution is not finite (NaN or inf): the member's numbers overflow "
+                    "double precision" for ok in finite]
+        return FamilyResult(grid, family.base.dofs, x, v, acc, force, finite, messages,
                             ["exact"] * S, how, time.perf_counter() - start)
     workers = workers or default_workers()
     tasks = [(family.member_scenario(s), method) for s in range(S)]

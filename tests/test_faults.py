@@ -80,3 +80,14 @@ def test_a_batch_processes_every_file_and_returns_the_worst_code(cli, tmp_path):
     assert (tmp_path / "out" / "one_dof_underdamped.h5").exists()
     result = cli("simulate", unstable, good, "-o", tmp_path / "ff", "--no-plots", "--fail-fast")
     assert result.exit_code == 1 and not (tmp_path / "ff" / "one_dof_underdamped.h5").exists()
+
+
+def test_a_result_that_overflows_is_a_solver_failure_not_a_success(cli, tmp_path):
+    """c = 1e300 passes validation, but the closed form's roots overflow: exit 1 naming the cause, no file."""
+    scene = tmp_path / "overflow.toml"
+    scene.write_text((SCENARIOS / "one_dof_underdamped.toml").read_text().replace("c = 2.0", "c = 1e300"))
+    result = cli("simulate", scene, "-o", tmp_path / "out", "--no-plots")
+    assert result.exit_code == 1, result.output
+    assert "not finite" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+    assert "Warning" not in result.output
+    assert not (tmp_path / "out" / "overflow.h5").exists()

@@ -60,7 +60,9 @@ def solve(model: Model, grid: np.ndarray, method: str, tol: Tolerances, field: s
     problem = solver.refuse(model)
     if problem:
         raise ScenarioError(model.source, field, problem)
-    result = solver.solve(model, grid, tol)
+    with np.errstate(all="ignore"):  # overflow is judged below, on the result, not warned about midway
+        result = solver.solve(model, grid, tol)
+    result = _refuse_non_finite(result)
     notes = result.notes
     explicit = method not in ("auto", "closed_form", "exact") and not solver.implicit
     if explicit and model.is_linear and model.is_stiff:
@@ -71,3 +73,18 @@ def solve(model: Model, grid: np.ndarray, method: str, tol: Tolerances, field: s
         stats = dataclasses.replace(stats, requested_method=method,
                                     reason=stats.reason or f"requested: {solver.description}")
     return dataclasses.replace(result, stats=stats, notes=notes)
+
+
+def _refuse_non_finite(result):
+    """A run that reports success but holds NaN or inf (numbers beyond double precision) is a failure."""
+    if not result.success:
+        return result
+    state = np.concatenate([result.displacement, result.velocity], axis=1)
+    bad = ~np.isfinite(state).all(axis=1)
+    if not bad.any():
+        return result
+    t_bad = float(result.time[np.argmax(bad)])
+    stats = dataclasses.replace(result.stats, success=False,
+                                message=f"failed at t = {t_bad:.6g} s: the solution is not finite (NaN or inf): "
+                                        "the scene's numbers overflow double precision")
+    return dataclasses.replace(result, stats=stats, t_failed=t_bad)
