@@ -67,7 +67,7 @@ def _root(version: bool = typer.Option(False, "--version", callback=_version, is
 def simulate(
     scenarios: List[Path] = typer.Argument(..., help="Scenario TOML files."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
-    method: Optional[str] = typer.Option(None, "--method", help="Solver, overriding [solver].method."),
+    method: Optional[str] = typer.Option(None, "--method", help="Solver, overriding the scenario's solver.method."),
     rtol: Optional[float] = typer.Option(None, "--rtol", min=0.0, help="Relative tolerance override."),
     atol: Optional[float] = typer.Option(None, "--atol", min=0.0, help="Absolute tolerance override."),
     no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
@@ -157,7 +157,7 @@ def compare_solvers(
 
 @app.command()
 def sweep(
-    scenario: Path = typer.Argument(..., help="Scenario TOML file (its [sweep] table is the default family)."),
+    scenario: Path = typer.Argument(..., help="Scenario TOML file (its sweep table is the default family)."),
     param: Optional[List[str]] = typer.Option(None, "--param", help="Field path to sweep (damper[0].c, mass.m1.m, "
                                               "force[0].omega, time.end, zeta); twice for a grid."),
     values: Optional[List[str]] = typer.Option(None, "--values", help="Values per --param: a,b,c | start:stop:step | "
@@ -224,7 +224,7 @@ def phase(
     periods: Optional[int] = typer.Option(None, "--periods", help="Run this many forcing periods instead of the "
                                           "scenario's time span."),
     skip_periods: int = typer.Option(0, "--skip-periods", help="Poincare: leave out the first periods (transient)."),
-    method: Optional[str] = typer.Option(None, "--method", help="Solver, overriding [solver].method."),
+    method: Optional[str] = typer.Option(None, "--method", help="Solver, overriding the scenario's solver.method."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
 ):
@@ -271,7 +271,7 @@ def animate(
                                           "motion drawn as 0.3 of the mass spacing)."),
     start: Optional[float] = typer.Option(None, "--start", help="First simulated time shown."),
     end: Optional[float] = typer.Option(None, "--end", help="Last simulated time shown."),
-    method: Optional[str] = typer.Option(None, "--method", help="Solver, overriding [solver].method."),
+    method: Optional[str] = typer.Option(None, "--method", help="Solver, overriding the scenario's solver.method."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
 ):
