@@ -684,23 +684,67 @@ def _solve_member(args: tuple[Scenario, str | None]) -> tuple:
             result.success, message, result.stats.method)
 
 
-def run_pool(function: Callable, tasks: list, workers: int, progress: Callable[[int], None] | None = None) -> list:
-    """Results of function over tasks, in order: inline for one worker, else in a process pool."""
+_TICKS = None  # in a worker: where it reports finished steps of a long task (see run_pool's steps mode)
+
+
+def _set_ticks(queue) -> None:
+    global _TICKS
+    _TICKS = queue
+
+
+def _tick() -> None:
+    """A worker reports one finished step of its task (a frequency of a measured response)."""
+    if _TICKS is not None:
+        _TICKS.put(1)
+
+
+class _Inline:
+    """The queue's put, for tasks run in this process: straight to the progress bar."""
+
+    def __init__(self, progress):
+        self.put = progress
+
+
+def run_pool(function: Callable, tasks: list, workers: int, progress: Callable[[int], None] | None = None,
+             steps: bool = False) -> list:
+    """Results of function over tasks, in order: inline for one worker, else in a process pool.
+
+    Progress advances by one per task; with steps=True the tasks report finer steps themselves
+    (through _tick), passed back over a queue.
+    """
+    global _TICKS
     results: list = [None] * len(tasks)
     if workers <= 1 or len(tasks) <= 1:
-        for i, task in enumerate(tasks):
-            results[i] = function(task)
-            if progress:
-                progress(1)
-        return results
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
-    with ProcessPoolExecutor(max_workers=min(workers, len(tasks))) as pool:
-        futures = {pool.submit(function, task): i for i, task in enumerate(tasks)}
+        _TICKS = _Inline(progress) if (steps and progress) else None
         try:
-            for future in as_completed(futures):
-                results[futures[future]] = future.result()
-                if progress:
+            for i, task in enumerate(tasks):
+                results[i] = function(task)
+                if progress and not steps:
+                    progress(1)
+        finally:
+            _TICKS = None
+        return results
+    import multiprocessing
+    import queue as queue_mod
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    ticks = multiprocessing.get_context().Queue() if (steps and progress) else None
+    with ProcessPoolExecutor(max_workers=min(workers, len(tasks)), initializer=_set_ticks,
+                             initargs=(ticks,)) as pool:
+        futures = {pool.submit(function, task): i for i, task in enumerate(tasks)}
+        pending = set(futures)
+        try:
+            while pending:
+                done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
+                for future in done:
+                    results[futures[future]] = future.result()
+                    if progress and not steps:
+                        progress(1)
+                while ticks is not None:
+                    try:
+                        ticks.get_nowait()
+                    except queue_mod.Empty:
+                        break
                     progress(1)
         except BaseException:
             for future in futures:
@@ -1020,6 +1064,7 @@ def _measure_direction(args: tuple[Scenario, np.ndarray, int]) -> tuple[np.ndarr
     y = None
     for f, w in enumerate(omega):
         if w <= 0:
+            _tick()
             continue
         doc = copy.deepcopy(doc0)
         set_parameter(doc, f"force[{force_index}].omega", w)
@@ -1037,6 +1082,7 @@ def _measure_direction(args: tuple[Scenario, np.ndarray, int]) -> tuple[np.ndarr
         x1 = xs.T @ rotation
         u1 = model.signals[force_index].value(ts) @ rotation
         lag[f] = np.mod(np.angle(u1) - np.angle(x1) + np.pi / 2, 2 * np.pi) - np.pi / 2
+        _tick()
     return amplitude, lag, steady
 
 
@@ -1082,7 +1128,7 @@ def frequency_response(family: Family, workers: int | None = None,
         index = _driving_force(member)
         for d in directions:
             tasks.append((member, omega if d == "up" else omega[::-1], index))
-    outcomes = run_pool(_measure_direction, tasks, workers or default_workers(), progress)
+    outcomes = run_pool(_measure_direction, tasks, workers or default_workers(), progress, steps=True)
     for i, d in enumerate(directions):
         amp = np.stack([outcomes[s * len(directions) + i][0] for s in range(S)])
         lag = np.stack([outcomes[s * len(directions) + i][1] for s in range(S)])
@@ -1140,8 +1186,8 @@ def run_and_write(path, out, cli: dict[str, Any], workers: int | None = None, pl
                 _driving_force(family.member_scenario(s))
     out_dir = output_folder(out)
     run = SweepRun(family)
-    total = len(family) * (1 if spec.frequency is None or (family.base.is_linear and not spec.measure)
-                           else (2 if spec.direction == "both" else 1))
+    measured = spec.frequency is not None and (not family.base.is_linear or spec.measure)
+    total = len(family) * ((2 if spec.direction == "both" else 1) * len(spec.frequency) if measured else 1)
     with (progress(total) if progress else nullcontext(None)) as tick:
         if spec.frequency is not None:
             run.response = frequency_response(family, workers, tick)
