@@ -210,6 +210,9 @@ def read_spec(sc: Scenario, cli: dict[str, Any]) -> SweepSpec:
             raise fail("labels", f"expected {count} labels (one per member), found {len(labels)}")
     if normalized and frequency is None:
         raise fail("normalized", "applies to a frequency response (--frequency) only")
+    if frequency is not None and pick("method") is not None:
+        raise fail("method", "does not apply to a frequency response: it is exact for a linear scene, "
+                   "and measured with DOP853 at rtol 1e-10 otherwise")
     return SweepSpec(parameters=parameters, values=tuple(values), labels=labels, ics=ics, frequency=frequency,
                      frequency_unit=unit, normalized=normalized, input=pick("input"), direction=direction,
                      measure=bool(pick("measure", False)), quantity=quantity, metric=metric,
