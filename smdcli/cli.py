@@ -39,15 +39,15 @@ def _interrupted(exc: KeyboardInterrupt) -> typer.Exit:
     return typer.Exit(143 if terminated else 130)
 
 
-def _report(exc: Exception) -> int:
-    """One line for an error smd reports (its exit code) or a file that could not be written (2)."""
+def _report(exc: Exception, doing: str = "write") -> int:
+    """One line for an error smd reports (its exit code) or a file that could not be written or read (2)."""
     from smdcli.errors import SmdError
 
     if isinstance(exc, SmdError):
         _fail(str(exc))
         return exc.exit_code
     where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
-    _fail(f"{where}cannot write: {exc.strerror or exc}")
+    _fail(f"{where}cannot {doing}: {exc.strerror or exc}")
     return 2
 
 
@@ -295,8 +295,8 @@ def animate(
 def diff_files(
     a: Path = typer.Argument(..., help="First smd .h5 file."),
     b: Path = typer.Argument(..., help="Second smd .h5 file."),
-    rtol: float = typer.Option(1e-9, "--rtol", help="Relative tolerance per sample."),
-    atol: float = typer.Option(0.0, "--atol", help="Absolute tolerance per sample."),
+    rtol: Optional[float] = typer.Option(None, "--rtol", help="Relative tolerance per sample (default 1e-9)."),
+    atol: Optional[float] = typer.Option(None, "--atol", help="Absolute tolerance per sample (default 0)."),
     datasets: Optional[str] = typer.Option(None, "--datasets", help="Comma list of data sets to compare (default: all)."),
     allow_failed: bool = typer.Option(False, "--allow-failed", help="Compare files whose run failed."),
     as_json: bool = typer.Option(False, "--json", help="Print the report as JSON."),
@@ -306,11 +306,11 @@ def diff_files(
     from smdcli.diff import as_dict, diff, format_report
     from smdcli.errors import SmdError
 
+    given = {name: value for name, value in (("rtol", rtol), ("atol", atol)) if value is not None}
     try:
-        report = diff(a, b, rtol, atol, datasets.split(",") if datasets else None, allow_failed)
-    except SmdError as exc:
-        _fail(str(exc))
-        raise typer.Exit(2)
+        report = diff(a, b, names=datasets.split(",") if datasets else None, allow_failed=allow_failed, **given)
+    except (SmdError, OSError) as exc:
+        raise typer.Exit(_report(exc, doing="read"))
     if as_json:
         typer.echo(json.dumps(as_dict(report), indent=2, default=str))
     elif not quiet:
@@ -318,25 +318,13 @@ def diff_files(
     raise typer.Exit(1 if report.differs else 0)
 
 
-class _CountBar:
-    """click's progress bar on stderr, advanced by a count of finished members."""
-
-    def __init__(self, total: int):
-        self.bar = typer.progressbar(length=total, label="sweeping", file=sys.stderr, show_pos=True)
-
-    def __enter__(self):
-        self.bar.__enter__()
-        return self.bar.update
-
-    def __exit__(self, *exc):
-        return self.bar.__exit__(*exc)
-
-
 class _ProgressBar:
     """click's progress bar on stderr, advanced once per run, labelled with the run in progress."""
 
+    label = "comparing"
+
     def __init__(self, total: int):
-        self.bar = typer.progressbar(length=total, label="comparing", file=sys.stderr, show_pos=True,
+        self.bar = typer.progressbar(length=total, label=self.label, file=sys.stderr, show_pos=True,
                                      item_show_func=lambda label: label)
 
     def __enter__(self):
@@ -353,6 +341,16 @@ class _ProgressBar:
 
     def __exit__(self, *exc):
         return self.bar.__exit__(*exc)
+
+
+class _CountBar(_ProgressBar):
+    """The same bar, advanced by a count of finished members (or frequencies)."""
+
+    label = "sweeping"
+
+    def __enter__(self):
+        self.bar.__enter__()
+        return self.bar.update
 
 
 def main() -> None:

@@ -22,7 +22,7 @@ from smdcli.errors import UsageError
 
 DEFAULT_RTOL = 1e-9
 DEFAULT_ATOL = 0.0
-RUN_METADATA_ATTRS = frozenset({"created", "wall_time_s", "smd_version"})
+RUN_METADATA = frozenset({"created", "wall_time_s", "smd_version"})  # attribute or data set names
 RUN_METADATA_GROUPS = ("run",)
 
 
@@ -84,7 +84,7 @@ def _datasets(f) -> dict:
 
     def visit(name, obj):
         parts = name.split("/")
-        if isinstance(obj, h5py.Dataset) and parts[0] not in RUN_METADATA_GROUPS and parts[-1] not in RUN_METADATA_ATTRS:
+        if isinstance(obj, h5py.Dataset) and parts[0] not in RUN_METADATA_GROUPS and parts[-1] not in RUN_METADATA:
             found[name] = obj
 
     f.visititems(visit)
@@ -97,9 +97,7 @@ def _failed(f) -> str | None:
         return f"its run failed ({f['solver'].attrs.get('message', '')})"
     if "success" in f and f.attrs.get("kind") == "sweep" and not np.all(f["success"][()]):
         return f"{int((~f['success'][()].astype(bool)).sum())} of its members failed"
-    if "runs/success" in f and f.attrs.get("kind") == "compare":
-        return None  # a comparison records failures as results
-    return None
+    return None  # a comparison records its failed runs as results
 
 
 def _text(value) -> str:
@@ -128,10 +126,8 @@ def _compare(name: str, da, db, rtol: float, atol: float) -> DatasetDiff:
         return DatasetDiff(name, "shape", shape_a, shape_b)
     numeric = all(np.issubdtype(np.asarray(x).dtype, np.number) or np.asarray(x).dtype == bool for x in (a, b))
     if not numeric:
-        same = np.array_equal(np.asarray(a, dtype=object), np.asarray(b, dtype=object))
-        return DatasetDiff(name, "same" if same else "different", shape_a, shape_b,
-                           0 if same else int(np.sum(np.asarray(a, dtype=object) != np.asarray(b, dtype=object))),
-                           int(np.size(a)))
+        count = int(np.sum(np.asarray(a, dtype=object) != np.asarray(b, dtype=object)))
+        return DatasetDiff(name, "different" if count else "same", shape_a, shape_b, count, int(np.size(a)))
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
     with np.errstate(invalid="ignore", over="ignore"):

@@ -58,7 +58,7 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
         time = f.create_dataset("time", data=result.time)
         time.attrs["units"] = "s"
         time.make_scale("time")
-        dof = f.create_dataset("dof", data=np.array(result.dofs, dtype=object), dtype=h5py.string_dtype("utf-8"))
+        dof = _strings(f, "dof", result.dofs)
         dof.make_scale("dof")
         for name, data, units in (
             ("displacement", result.displacement, "m"),
@@ -94,8 +94,8 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
             group.attrs["nonlinear_elements"] = list(model.nonlinear_paths)
 
 
-
-def _strings(f, name: str, values) -> object:
+def _strings(f, name: str, values):
+    """A data set of UTF-8 strings."""
     import h5py
 
     return f.create_dataset(name, data=np.array(list(values), dtype=object), dtype=h5py.string_dtype("utf-8"))
@@ -154,8 +154,10 @@ def _write_time_family(f, result, metrics, member, dof) -> None:
     f.create_dataset("success", data=result.success).dims[0].attach_scale(member)
     _strings(f, "message", result.messages).dims[0].attach_scale(member)
     _strings(f, "method", result.methods).dims[0].attach_scale(member)
+    from smdcli.sweep import SETTLING_BAND
+
     group = f.create_group("metrics")
-    group.attrs["settling_band"] = 0.02
+    group.attrs["settling_band"] = SETTLING_BAND
     for name, values in metrics.items():
         ds = group.create_dataset(name, data=values)
         ds.dims[0].attach_scale(member)

@@ -306,7 +306,7 @@ def build(scenario: Scenario) -> Model:
         cubic=cubic, quadratic=quadratic, source=scenario.path,
         element_form=scenario.system is None,
     )
-    _check_forces_finite(model, scenario)
+    _check_forces(model, scenario)
     _check_matrices_finite(model, scenario)
     return model
 
@@ -349,8 +349,9 @@ def _incidence(rows) -> Incidence | None:
 MAX_EDGES = 1_000_000  # force discontinuities in one run: each is a restart of the integration
 
 
-def _check_forces_finite(model: Model, scenario: Scenario) -> None:
-    """Refuse forces that are not finite on the output grid (e.g. exp(9**9), 1/(t-1))."""
+def _check_forces(model: Model, scenario: Scenario) -> None:
+    """Refuse forces with more discontinuities than a run can restart at, or not finite on the output grid
+    (e.g. exp(9**9), 1/(t-1))."""
     if not model.signals:
         return
     for j, signal in enumerate(model.signals):

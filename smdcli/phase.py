@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from smdcli import scenario as scenario_mod
-from smdcli.errors import SolverFailed, UsageError
+from smdcli.errors import UsageError
 from smdcli.model import time_grid
 from smdcli.scenario import Scenario, TimeSpec
 
@@ -47,29 +47,20 @@ def forcing_period(sc: Scenario) -> float:
 
 def _runs(sc: Scenario, ics: tuple[str, ...]) -> list[tuple[str, Scenario]]:
     """(label, scenario) of each trajectory a scenario stands for: itself, or its time-domain family."""
-    from smdcli.sweep import read_spec
-
     table = dict(sc.sweep)
-    if not ics and "frequency" in table or not (ics or "ic" in table or "parameter" in table):
+    time_family = ics or ("frequency" not in table and ("ic" in table or "parameter" in table))
+    if not time_family:
         return [(sc.title or sc.stem, sc)]
-    cli = {"ic": ics} if ics else {}
-    spec = read_spec(sc, cli)
-    if spec.frequency is not None:
-        return [(sc.title or sc.stem, sc)]
-    from smdcli.sweep import build_family
+    from smdcli.sweep import build_family, read_spec
 
-    family = build_family(sc, dataclasses.replace(spec, frequency=None))
+    family = build_family(sc, read_spec(sc, {"ic": ics} if ics else {}))
     return [(family.labels[s], family.member_scenario(s)) for s in range(len(family))]
 
 
 def _solve(sc: Scenario, method: str | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    from smdcli.model import build
-    from smdcli.simulate import Options, failure_hint, solve_scenario
+    from smdcli.simulate import solve_checked
 
-    model, grid = build(sc), time_grid(sc.time)
-    result = solve_scenario(sc, model, grid, Options(method=method))
-    if not result.success:
-        raise SolverFailed(f"{sc.path}: {result.stats.method} {result.stats.message}; {failure_hint(model, result)}")
+    result = solve_checked(sc, method)
     return result.time, result.displacement, result.velocity
 
 

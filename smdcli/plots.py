@@ -80,21 +80,9 @@ def response_figure(result: Result, title: str):
 
 
 def phase_figure(result: Result, title: str):
-    """Phase portrait: velocity against displacement per DOF, start marked."""
-    fig = _figure(figsize=(6.5, 6))
-    ax = fig.subplots()
-    fig.subplots_adjust(left=0.14, right=0.96, top=0.88, bottom=0.1)
-    for j, dof in enumerate(result.dofs):
-        x, v = result.displacement[:, j], result.velocity[:, j]
-        ax.plot(x, v, lw=0.9, color=f"C{j}", label=dof)
-        ax.plot(x[0], v[0], "o", color=f"C{j}", ms=6, mfc="white")
-    ax.plot([], [], "o", color="k", mfc="white", label="start")
-    ax.set_xlabel("Displacement x [m]")
-    ax.set_ylabel("Velocity v [m/s]")
-    ax.grid(True, alpha=0.4)
-    ax.legend(fontsize=8)
-    ax.set_title(f"{title}\nphase portrait", fontsize=10)
-    return fig
+    """Phase portrait of a run: velocity against displacement per DOF, start and direction marked."""
+    curves = [(dof, result.displacement[:, j], result.velocity[:, j]) for j, dof in enumerate(result.dofs)]
+    return portrait_figure(curves, f"{title}\nphase portrait")
 
 
 FAILED_LEVEL = 3.0  # failed runs are drawn as crosses on a band above error = 1
@@ -220,9 +208,9 @@ def overlay_figure(family, result, quantity: str, title: str):
     data = getattr(result, quantity)
     S, N, n = data.shape
     colors, cmap = _member_colors(S)
-    fig = _figure(figsize=(9, 2.2 + 2.6 * n))
-    axes = np.atleast_1d(fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0])
     height = 2.2 + 2.6 * n
+    fig = _figure(figsize=(9, height))
+    axes = np.atleast_1d(fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0])
     fig.subplots_adjust(left=0.1, right=0.8 if cmap is None else 0.86, top=1 - 0.75 / height, bottom=0.55 / height,
                         hspace=0.12)
     drawn = np.unique(np.linspace(0, S - 1, min(S, MAX_LINES)).round().astype(int))
@@ -310,17 +298,17 @@ def frequency_figure(family, response, title: str, unit: str = "rad/s", normaliz
     fig = _figure(figsize=(9.5, 8))
     ax_a, ax_p = fig.subplots(2, 1, sharex=True)
     fig.subplots_adjust(left=0.1, right=0.78, top=0.88, bottom=0.08, hspace=0.08)
-    k = family.K[:, 0, 0] if normalized else np.ones(S)
-    wn = np.sqrt(family.K[:, 0, 0] / family.M[:, 0, 0]) if normalized else np.ones(S)
-    scale_x = (lambda s: response.omega / wn[s]) if normalized else \
-        (lambda s: response.omega / (2 * math.pi) if unit == "Hz" else response.omega)
+    k = family.K[:, 0, 0] if normalized else np.ones(S)  # amplitude scale: X K / F0, or m/N
+    # the x axis per member: r = omega / omega_n, or the frequency in the unit it was given in
+    per = np.sqrt(family.K[:, 0, 0] / family.M[:, 0, 0]) if normalized else \
+        np.full(S, 2 * math.pi if unit == "Hz" else 1.0)
     markers = {"up": "^", "down": "v"}
     for s in range(S):
         for j in range(n):
             color = colors[s] if S > 1 else colors[j]
             label = family.labels[s] if n == 1 else (f"{response.dofs[j]}" if S == 1 else f"{family.labels[s]}: {response.dofs[j]}")
             style = _STYLES[(s if S > 1 else j) % len(_STYLES)] if cmap is None else "-"
-            x = scale_x(s)
+            x = response.omega / per[s]
             if response.exact:
                 with np.errstate(all="ignore"):
                     ax_a.plot(x, response.amplitude[s, :, j] * k[s], style, color=color, lw=1.4, label=label)
@@ -338,7 +326,7 @@ def frequency_figure(family, response, title: str, unit: str = "rad/s", normaliz
         if "direction" in peak:
             continue
         s = peak["member"]
-        w = peak["omega"] / (wn[s] if normalized else (2 * math.pi if unit == "Hz" else 1.0))
+        w = peak["omega"] / per[s]
         if math.isfinite(peak["amplitude"]):
             ax_a.plot(w, peak["amplitude"] * k[s], "o", color="k", ms=5, mfc="none")
         else:
@@ -356,12 +344,13 @@ def frequency_figure(family, response, title: str, unit: str = "rad/s", normaliz
         ax_p.set_xlabel(f"Forcing frequency [{unit}]")
     finite = response.amplitude[np.isfinite(response.amplitude) & (response.amplitude > 0)]
     measured = [a[np.isfinite(a) & (a > 0)] for a, _ in response.measured.values()]
-    pool = np.concatenate([finite * (k.max() if normalized else 1)] + [m * (k.max() if normalized else 1) for m in measured])
+    pool = np.concatenate([finite] + measured) * k.max()
     if pool.size:
         ax_a.set_ylim(max(pool.min() / 2, pool.max() * 1e-6), pool.max() * 2)
     ax_p.set_ylabel("Phase lag theta [rad]")
-    ax_p.set_yticks([0, math.pi / 2, math.pi] + ([3 * math.pi / 2, 2 * math.pi] if np.nanmax(response.phase, initial=0) > 3.3 else []))
-    ax_p.set_yticklabels(["0", "π/2", "π"] + (["3π/2", "2π"] if len(ax_p.get_yticks()) > 3 else []))
+    ticks = 5 if np.nanmax(response.phase, initial=0) > 3.3 else 3  # to 2 pi where a lag passes pi
+    ax_p.set_yticks([i * math.pi / 2 for i in range(ticks)])
+    ax_p.set_yticklabels(["0", "π/2", "π", "3π/2", "2π"][:ticks])
     for ax in (ax_a, ax_p):
         ax.grid(True, which="both", alpha=0.35)
     if cmap is None:

@@ -346,10 +346,10 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
     sweep = _read_sweep(_Table(file, "sweep", top.raw("sweep"))) if top.has("sweep") else ()
     top.finish(_TOP_KEYS)
 
-    # In floating point first: a huge span over a small step is refused before it becomes an integer.
-    n_points = time.points if time.points is not None else (time.end - time.start) / time.step * (1 + 1e-12) + 1
     if not math.isfinite(time.end - time.start):
         raise ScenarioError(file, "time.end", f"expected a time span that is a finite number, found {time.end:g} - {time.start:g}")
+    # In floating point: a huge span over a small step is refused before it becomes an integer.
+    n_points = time.points if time.points is not None else (time.end - time.start) / time.step * (1 + 1e-12) + 1
     if not n_points * max(len(dofs), 1) <= MAX_SAMPLES:
         key = "time.points" if time.points is not None else "time.step"
         raise ScenarioError(

@@ -225,10 +225,9 @@ def animate(path: str | Path, out: str | Path, fps: int = 20, seconds: float | N
 
     from smdcli import scenario as scenario_mod
     from smdcli.io_hdf5 import atomic_path
-    from smdcli.phase import _solve
     from smdcli.plots import _figure
     from smdcli.scenario import TimeSpec
-    from smdcli.simulate import output_folder
+    from smdcli.simulate import output_folder, solve_checked
 
     if not 1 <= fps <= 50:
         raise UsageError(f"--fps: expected 1 to 50 frames per second, found {fps}")
@@ -248,8 +247,8 @@ def animate(path: str | Path, out: str | Path, fps: int = 20, seconds: float | N
     skip = int(round(lead / step)) if lead > 0 else 0
     grid = TimeSpec(sc.time.start, sc.time.start + (skip + frames - 1) * step, points=skip + frames)
     out_dir = output_folder(out)
-    t, x, _ = _solve(dataclasses.replace(sc, time=grid), method)
-    t, x = t[skip:], x[skip:]
+    result = solve_checked(dataclasses.replace(sc, time=grid), method)
+    t, x = result.time[skip:], result.displacement[skip:]
     peak = np.abs(x).max()
     if scale is None:
         scale = 0.3 * SPACING / peak if peak > 0 else 1.0

@@ -81,7 +81,7 @@ def simulate(path: str | Path, out: str | Path, options: Options = Options()) ->
     from smdcli.io_hdf5 import write_simulation
 
     if not result.success:
-        message = f"{sc.path}: {result.stats.method} {result.stats.message}; {failure_hint(model, result)}"
+        message = failure_message(sc, model, result)
         if options.save_partial:
             partial = out_dir / f"{sc.stem}_partial.h5"
             write_simulation(partial, sc, model, result)
@@ -102,20 +102,37 @@ def simulate(path: str | Path, out: str | Path, options: Options = Options()) ->
     return run
 
 
+def solve_checked(sc: Scenario, method: str | None = None) -> Result:
+    """Solve a validated scenario on its own grid; a solver failure raises SolverFailed (exit 1)."""
+    model, grid = build(sc), time_grid(sc.time)
+    result = solve_scenario(sc, model, grid, Options(method=method))
+    if not result.success:
+        raise SolverFailed(failure_message(sc, model, result), result=result)
+    return result
+
+
+def failure_message(sc: Scenario, model: Model, result: Result) -> str:
+    """Which scenario failed, with what method, where and why, and what to try."""
+    return f"{sc.path}: {result.stats.method} {result.stats.message}; {failure_hint(model, result)}"
+
+
 def failure_hint(model: Model, result: Result) -> str:
     """What to try after a failed run."""
     from smdcli.solvers.registry import get_solver
 
+    from smdcli.solvers.fixed_step import FixedStep
+
     solver = get_solver(result.stats.method)
-    if "not finite" in result.stats.message and not hasattr(solver, "omega_limit"):
+    if "not finite" in result.stats.message:  # a solution that overflowed, not a step that went unstable
         return "check the units of the masses, springs, dampers and forces"
-    if not hasattr(solver, "omega_limit"):
-        return "try another method"
-    if not solver.adaptive and "steps" in result.stats.message:
+    fixed_step = isinstance(solver, FixedStep)
+    if fixed_step and "steps" in result.stats.message:
         span = result.time[-1] - result.time[0]
         return (f"fixed step {result.stats.dt:.4g} s needs {span / result.stats.dt:.3g} steps for this run; "
                 "set a larger solver.dt (or use an adaptive method)")
-    if not solver.adaptive:
+    if not solver.adaptive and not fixed_step:  # closed_form, exact
+        return "try another method"
+    if fixed_step:
         limit = solver.omega_limit()
         w_max = model.omega_max
         if w_max > 0 and limit < math.inf:

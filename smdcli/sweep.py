@@ -3,7 +3,7 @@
 A member is the scenario with one edit of its TOML document per swept parameter, validated
 again like any scenario, so a value that makes a bad scene is an input error naming the field.
 Linear families are solved together: one state-transition recurrence over all members at once
-(see batched_exact). Nonlinear families run in a process pool, one member per task.
+(see shared_signal_recurrence). Nonlinear families run in a process pool, one member per task.
 """
 
 from __future__ import annotations
@@ -496,11 +496,11 @@ def shared_signal_recurrence(family: Family, grid: np.ndarray) -> tuple[np.ndarr
     function that derives the acceleration when it is wanted (it costs as much as the recurrence).
     """
     from smdcli.solvers.base import segments
-    from smdcli.solvers.exact import _augmented
+    from smdcli.solvers.exact import augmented
 
     base = family.base
     n, N, S = base.n, len(grid), len(family)
-    Aaug0, blocks = _augmented(base)
+    Aaug0, blocks = augmented(base)
     size = Aaug0.shape[0]
     E = size - 2 * n
     exo_block = Aaug0[2 * n:, 2 * n:]
@@ -543,7 +543,7 @@ def shared_signal_recurrence(family: Family, grid: np.ndarray) -> tuple[np.ndarr
                 cache[dt] = expm_batched(A * dt)
             return cache[dt]
 
-        if uniform and N > 1:
+        if uniform:
             step = phi(h)
             # The force's share Phi_yw w(t_k) of each step: one matrix product per block of steps, for every member.
             coupling = np.ascontiguousarray(step[:, :2 * n, 2 * n:].transpose(2, 1, 0)).reshape(E, 2 * n * c)
@@ -601,22 +601,22 @@ def batched_exact(models: list[Model], grid: np.ndarray) -> tuple[np.ndarray, np
     frequency, say) but the same breakpoints: each member's augmented system, one recurrence for all.
     None when the members' force structures or breakpoints differ."""
     from smdcli.solvers.base import segments
-    from smdcli.solvers.exact import _augmented
+    from smdcli.solvers.exact import augmented
 
     if not all(m.is_linear and all(s.exo() is not None for s in m.signals) for m in models):
         return None
-    augmented = [_augmented(m) for m in models]
-    shapes = {(a.shape, tuple((lo, hi) for lo, hi, _ in blocks)) for a, blocks in augmented}
+    systems = [augmented(m) for m in models]
+    shapes = {(a.shape, tuple((lo, hi) for lo, hi, _ in blocks)) for a, blocks in systems}
     cuts = [segments(m, grid) for m in models]
     if len(shapes) != 1 or any(len(c) != len(cuts[0]) or not np.allclose(c, cuts[0], rtol=0, atol=1e-12)
                                for c in cuts):
         return None
-    A = np.stack([a for a, _ in augmented])
+    A = np.stack([a for a, _ in systems])
     S, size = A.shape[0], A.shape[1]
     n, N = models[0].n, len(grid)
 
     def reseed(z: np.ndarray, t: float) -> None:
-        for s, (_, blocks) in enumerate(augmented):
+        for s, (_, blocks) in enumerate(systems):
             for lo, hi, signal in blocks:
                 z[s, lo:hi] = signal.exo_state(t)
 
@@ -674,14 +674,10 @@ class FamilyResult:
 
 def _solve_member(args: tuple[Scenario, str | None]) -> tuple:
     """Worker: solve one member with its own solver settings (or the override)."""
-    from smdcli.solvers.base import Tolerances
-    from smdcli.solvers.registry import solve
+    from smdcli.simulate import Options, solve_scenario
 
     sc, method = args
-    model, grid = build(sc), time_grid(sc.time)
-    tol = Tolerances(rtol=sc.solver.rtol, atol=sc.solver.atol, dt=sc.solver.dt, options=sc.solver.options)
-    result = solve(model, grid, method or sc.solver.method, tol,
-                   field="--method" if method else "solver.method")
+    result = solve_scenario(sc, build(sc), time_grid(sc.time), Options(method=method))
     message = "ok" if result.success else f"{result.stats.message} (t = {result.t_failed:g} s)"
     return (result.time, result.displacement, result.velocity, result.acceleration, result.force,
             result.success, message, result.stats.method)
@@ -788,10 +784,10 @@ def solve_family(family: Family, method: str | None = None, workers: int | None 
         batched = np.broadcast_to(force, (S,) + force.shape)
         how = f"one batched exact recurrence over {S} members"
     elif exact_ok:
-        batched = batched_exact([family.model(s) for s in range(S)], grid)
+        models = [family.model(s) for s in range(S)]
+        batched = batched_exact(models, grid)
         how = f"one batched exact recurrence over {S} members (each with its own forces)"
         if batched is not None:
-            models = [family.model(s) for s in range(S)]
             x, v = batched
             batched = np.stack([m.applied_force(grid) if m.is_forced else np.zeros((len(grid), n)) for m in models])
             with np.errstate(all="ignore"):
@@ -938,15 +934,13 @@ def resonance_peaks(family: Family, omega: np.ndarray, amplitude: np.ndarray, do
     """Local maxima of every member's amplitude per DOF, refined on the exact receptance between grid neighbours."""
     from scipy.optimize import minimize_scalar
 
-    from scipy.linalg import eigh
-
     peaks = []
     labels = family.labels
     for s in range(len(family)):
         if not np.any(family.C[s]):
             # Undamped: the peaks are poles at the natural frequencies, of unbounded amplitude.
-            lam, shapes = eigh(family.K[s], family.M[s])
-            for w, shape in zip(np.sqrt(np.maximum(lam, 0.0)), shapes.T):
+            modes = family.model(s).modes
+            for w, shape in zip(modes.natural_frequencies, modes.shapes.T):
                 if omega[0] <= w <= omega[-1] and abs(shape[dof]) > 1e-12 * np.abs(shape).max():
                     for j, name in enumerate(family.base.dofs):
                         if abs(shape[j]) > 1e-12 * np.abs(shape).max():
@@ -1059,8 +1053,10 @@ def _measure_direction(args: tuple[Scenario, np.ndarray, int]) -> tuple[np.ndarr
     At each frequency the steady state is found (see _steady_state); amplitude is (max - min) / 2
     of x over that whole period per unit force amplitude, and the phase lag is the fundamental's.
     """
+    from smdcli.forcing import build_signal
+
     sc, omega, force_index = args
-    doc0 = tomllib.loads(sc.text)
+    base = build(sc)
     amplitude = np.full((len(omega), len(sc.dof_names)), np.nan)
     lag = np.full_like(amplitude, np.nan)
     steady = np.zeros(len(omega), bool)
@@ -1069,9 +1065,9 @@ def _measure_direction(args: tuple[Scenario, np.ndarray, int]) -> tuple[np.ndarr
         if w <= 0:
             _tick()
             continue
-        doc = copy.deepcopy(doc0)
-        set_parameter(doc, f"force[{force_index}].omega", w)
-        model = build(scenario_mod.parse_document(doc, sc.text, sc.path))
+        signals = list(base.signals)
+        signals[force_index] = build_signal(replace(sc.forces[force_index], omega=float(w)))
+        model = replace(base, signals=tuple(signals))
         n = model.n
         if y is None:
             y = np.concatenate([model.x0, model.v0])
@@ -1198,8 +1194,12 @@ def run_and_write(path, out, cli: dict[str, Any], workers: int | None = None, pl
             run.result = solve_family(family, spec.method, workers, tick)
             run.metrics = metrics(family, run.result)
     took = run.response.wall_time_s if run.response else run.result.wall_time_s
-    how = ("exact receptance, all members at once" if run.response and run.response.exact and not run.response.measured
-           else run.result.how if run.result else f"simulated to steady state in a process pool")
+    if run.result is not None:
+        how = run.result.how
+    elif run.response.measured:
+        how = "simulated to steady state (shooting), one task per sweep direction"
+    else:
+        how = "exact receptance, all members at once"
     h5 = out_dir / f"{sc.stem}_sweep.h5"
     io_hdf5.write_sweep(h5, family, run.result, run.metrics, run.response, {"how": how, "wall_time_s": took})
     run.outputs.append(h5)

@@ -31,7 +31,7 @@ BLOCK = 64  # output steps per stacked propagation
 _POWERS_BYTES = 64 * 2**20
 
 
-def _augmented(model: Model) -> tuple[np.ndarray, list[tuple[int, int, object]]]:
+def augmented(model: Model) -> tuple[np.ndarray, list[tuple[int, int, object]]]:
     """Aaug and, per signal, the slice of z that holds its exosystem state."""
     n2 = 2 * model.n
     exos = [s.exo() for s in model.signals]
@@ -72,7 +72,7 @@ class Exact(Solver):
 
         start = time.perf_counter()
         model, held = first_order_hold(model, grid)
-        Aaug, blocks = _augmented(model)
+        Aaug, blocks = augmented(model)
         size = Aaug.shape[0]
         n, N = model.n, len(grid)
         h = (grid[-1] - grid[0]) / (N - 1) if N > 1 else 0.0

@@ -36,7 +36,6 @@ def downsample(src: Path, dst: Path, stride: int) -> None:
         for key, value in fin.attrs.items():
             fout.attrs[key] = value
         fout.attrs["golden_stride"] = stride
-        time_axis = {}
 
         def copy(name, obj):
             if isinstance(obj, h5py.Group):
@@ -50,7 +49,6 @@ def downsample(src: Path, dst: Path, stride: int) -> None:
                 axis = obj.ndim - 1
             if axis is not None and stride > 1:
                 data = np.take(data, np.arange(0, data.shape[axis], stride), axis=axis)
-                time_axis[name] = axis
             ds = fout.create_dataset(name, data=data)
             for key, value in obj.attrs.items():
                 if key not in ("DIMENSION_LIST", "REFERENCE_LIST", "CLASS", "NAME"):
@@ -64,11 +62,9 @@ def downsample(src: Path, dst: Path, stride: int) -> None:
 
         def attach(name, obj):
             if isinstance(obj, h5py.Dataset) and name not in scales:
-                with h5py.File(src, "r") as again:
-                    dims = again[name].dims
-                    for axis, dim in enumerate(dims):
-                        if len(dim) and dim[0].name.lstrip("/") in scales:
-                            obj.dims[axis].attach_scale(fout[dim[0].name.lstrip("/")])
+                for axis, dim in enumerate(fin[name].dims):
+                    if len(dim) and dim[0].name.lstrip("/") in scales:
+                        obj.dims[axis].attach_scale(fout[dim[0].name.lstrip("/")])
 
         fout.visititems(attach)
 
