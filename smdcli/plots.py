@@ -322,19 +322,18 @@ def frequency_figure(family, response, title: str, unit: str = "rad/s", normaliz
                           ls="-" if not response.exact else "none", lw=0.8, label=tag)
                 ax_p.plot(x, lag[s, :, j], markers[direction], color=color, ms=4, mfc="none",
                           ls="-" if not response.exact else "none", lw=0.8)
-    for peak in response.peaks:
-        if "direction" in peak:
-            continue
+    exact_peaks = [p for p in response.peaks if "direction" not in p]  # measured maxima are listed, not marked
+    for peak in exact_peaks:
         s = peak["member"]
         w = peak["omega"] / per[s]
         if math.isfinite(peak["amplitude"]):
             ax_a.plot(w, peak["amplitude"] * k[s], "o", color="k", ms=5, mfc="none")
         else:
             ax_a.axvline(w, color="0.5", ls=":", lw=1)
-    if any(math.isfinite(p["amplitude"]) for p in response.peaks):
+    if any(math.isfinite(p["amplitude"]) for p in exact_peaks):
         ax_a.plot([], [], "o", color="k", mfc="none", label="resonance peak")
-    if any(not math.isfinite(p["amplitude"]) for p in response.peaks):
-        ax_a.plot([], [], ":", color="0.5", label="undamped resonance (unbounded)")
+    if any(not math.isfinite(p["amplitude"]) for p in exact_peaks):
+        ax_a.plot([], [], ":", color="0.5", label="undamped: unbounded")
     ax_a.set_yscale("log")
     if normalized:
         ax_a.set_ylabel("Normalized amplitude X K / F0")
