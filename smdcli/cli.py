@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 from typing import List, Optional
 
 import typer
 
-from smdcli import __version__
+from smdcli import __version__, interrupts, strict_json
+from smdcli.progress import wanted as progress_wanted
 
 app = typer.Typer(
     add_completion=False,
@@ -24,31 +24,68 @@ def _fail(message: str) -> None:
     typer.echo(f"smd: {message}", err=True)
 
 
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised where the program is, so that files being written are removed on the way out."""
-
-
-def _on_sigterm(signum, frame):
-    raise Terminated()
-
-
 def _interrupted(exc: KeyboardInterrupt) -> typer.Exit:
     """Say what stopped the run; the exit code a shell expects (130 for SIGINT, 143 for SIGTERM)."""
-    terminated = isinstance(exc, Terminated)
-    _fail(f"{'terminated' if terminated else 'interrupted'}; no partial file was left under a final name")
-    return typer.Exit(143 if terminated else 130)
+    import signal
+
+    global _announced
+    signum = interrupts.received() or (signal.SIGTERM if isinstance(exc, interrupts.Terminated) else signal.SIGINT)
+    if not _announced:
+        _fail(f"{'terminated' if signum == signal.SIGTERM else 'interrupted'}; no partial file was left under a "
+              "final name")
+        _announced = True
+    return typer.Exit(interrupts.exit_code(signum))
+
+
+_announced = False  # the interrupt has been reported
+
+
+def _print_json(data) -> None:
+    """Strict JSON on stdout: no NaN or Infinity (see strict_json)."""
+    typer.echo(strict_json.dumps(data))
+
+
+def _positive(name: str):
+    """A typer callback refusing a tolerance that is not a positive number."""
+    def check(value: Optional[float]) -> Optional[float]:
+        if value is not None and not (value > 0 and value < float("inf")):
+            raise typer.BadParameter(f"expected a positive number, found {value:g}", param_hint=name)
+        return value
+    return check
+
+
+def _message(exc: Exception, doing: str = "write") -> str:
+    """The one line that says what went wrong."""
+    from smdcli.errors import SmdError
+
+    if isinstance(exc, SmdError):
+        return str(exc)
+    where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+    return f"{where}cannot {doing}: {exc.strerror or exc}"
 
 
 def _report(exc: Exception, doing: str = "write") -> int:
     """One line for an error smd reports (its exit code) or a file that could not be written or read (2)."""
     from smdcli.errors import SmdError
 
-    if isinstance(exc, SmdError):
-        _fail(str(exc))
-        return exc.exit_code
-    where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
-    _fail(f"{where}cannot {doing}: {exc.strerror or exc}")
-    return 2
+    _fail(_message(exc, doing))
+    return exc.exit_code if isinstance(exc, SmdError) else 2
+
+
+def _report_json(exc: Exception, scenario: Path, as_json: bool) -> int:
+    """_report, and with --json the same facts as a JSON object on stdout, so that a script always gets JSON."""
+    code = _report(exc)
+    if as_json:
+        _print_json({"scenario": str(scenario), "success": False, "status": strict_json.status(code),
+                     "exit_code": code, "message": _message(exc)})
+    return code
+
+
+def _count(n: int, singular: str, plural: str | None = None) -> str:
+    """'1 frame', '2 frames'."""
+    return f"{n} {singular if n == 1 else (plural or singular + 's')}"
+
+
 
 
 def _version(value: bool):
@@ -68,39 +105,48 @@ def simulate(
     scenarios: List[Path] = typer.Argument(..., help="Scenario TOML files."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
     method: Optional[str] = typer.Option(None, "--method", help="Solver, overriding the scenario's solver.method."),
-    rtol: Optional[float] = typer.Option(None, "--rtol", min=0.0, help="Relative tolerance override."),
-    atol: Optional[float] = typer.Option(None, "--atol", min=0.0, help="Absolute tolerance override."),
+    rtol: Optional[float] = typer.Option(None, "--rtol", callback=_positive("--rtol"),
+                                         help="Relative tolerance override (> 0)."),
+    atol: Optional[float] = typer.Option(None, "--atol", callback=_positive("--atol"),
+                                         help="Absolute tolerance override (> 0)."),
     no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
-    as_json: bool = typer.Option(False, "--json", help="Print the summaries as JSON."),
+    as_json: bool = typer.Option(False, "--json", help="Print the summaries as JSON: one entry per file, failed ones too."),
     fail_fast: bool = typer.Option(False, "--fail-fast", help="Stop at the first scenario that fails."),
     save_partial: bool = typer.Option(False, "--save-partial", help="When a solver fails, write what it computed "
                                       "to OUT/<stem>_partial.h5, marked failed."),
 ):
     """Solve each scenario; write OUT/<stem>.h5 and OUT/<stem>_response.png, _phase.png."""
     from smdcli.errors import SmdError
-    from smdcli.simulate import Options, format_summary, simulate as run_one, summary
+    from smdcli.progress import bar
+    from smdcli.simulate import Options, failed_summary, format_summary, simulate as run_one, summary
 
-    options = Options(method=method, rtol=rtol or None, atol=atol or None, plots=not no_plots,
-                      save_partial=save_partial)
+    options = Options(method=method, rtol=rtol, atol=atol, plots=not no_plots, save_partial=save_partial)
     worst = 0
     summaries = []
-    for path in scenarios:
-        try:
-            run = run_one(path, out, options)
-        except (SmdError, OSError) as exc:
-            worst = max(worst, _report(exc))
-            if fail_fast:
-                break
-            continue
-        except KeyboardInterrupt as exc:
-            raise _interrupted(exc)
-        data = summary(run)
-        summaries.append(data)
-        if not quiet and not as_json:
-            typer.echo(format_summary(data))
+    with bar("simulating", len(scenarios), len(scenarios) > 1 and progress_wanted(quiet, as_json)) as advance:
+        for index, path in enumerate(scenarios):
+            advance(0, str(path))
+            try:
+                run = run_one(path, out, options)
+            except (SmdError, OSError) as exc:
+                code = _report(exc)
+                worst = max(worst, code)
+                summaries.append(failed_summary(path, exc, code))
+                advance(1)
+                if fail_fast:
+                    summaries += [failed_summary(p, None, None) for p in scenarios[index + 1:]]
+                    break
+                continue
+            except KeyboardInterrupt as exc:
+                raise _interrupted(exc)
+            data = summary(run)
+            summaries.append(data)
+            if not quiet and not as_json:
+                typer.echo(format_summary(data))
+            advance(1)
     if as_json:
-        typer.echo(json.dumps(summaries, indent=2))
+        _print_json(summaries)
     raise typer.Exit(worst)
 
 
@@ -116,8 +162,11 @@ def info(
     try:
         data = describe(scenario)
     except (SmdError, OSError) as exc:
-        raise typer.Exit(_report(exc))
-    typer.echo(json.dumps(data, indent=2) if as_json else format_info(data))
+        raise typer.Exit(_report_json(exc, scenario, as_json))
+    if as_json:
+        _print_json(data)
+    else:
+        typer.echo(format_info(data))
 
 
 @app.command("compare-solvers")
@@ -139,17 +188,16 @@ def compare_solvers(
     from smdcli.compare import as_dict, format_table, run_and_write
     from smdcli.errors import SmdError
 
-    show_progress = not (quiet or as_json) and sys.stderr.isatty()
     try:
         comparison, written = run_and_write(scenario, out, methods, tolerances, steps, repeats,
                                             breakpoints=not no_breakpoints, plots=not no_plots,
-                                            progress=_ProgressBar if show_progress else None)
+                                            progress=progress_wanted(quiet, as_json))
     except (SmdError, OSError) as exc:
-        raise typer.Exit(_report(exc))
+        raise typer.Exit(_report_json(exc, scenario, as_json))
     except KeyboardInterrupt as exc:
         raise _interrupted(exc)
     if as_json:
-        typer.echo(json.dumps(as_dict(comparison), indent=2))
+        _print_json(as_dict(comparison))
     elif not quiet:
         typer.echo(format_table(comparison))
         typer.echo("wrote " + ", ".join(str(p) for p in written))
@@ -191,24 +239,22 @@ def sweep(
 
         problem = check_method_name(method)
         if problem:
-            _fail(f"--method: {problem}")
-            raise typer.Exit(2)
+            raise typer.BadParameter(problem, param_hint="--method")
     options = {"parameter": tuple(param or ()), "values": tuple(values or ()),
                "labels": tuple(x.strip() for x in labels.split(",")) if labels else (),
                "ic": tuple(ic or ()), "frequency": frequency, "normalized": normalized or None,
                "input": input_dof, "direction": direction, "measure": measure or None, "quantity": quantity,
                "metric": metric, "method": method}
-    show_progress = not (quiet or as_json) and sys.stderr.isatty()
     try:
         run = run_and_write(scenario, out, options, workers, plots=not no_plots,
-                            progress=_CountBar if show_progress else None)
+                            progress=progress_wanted(quiet, as_json))
     except (SmdError, OSError) as exc:
-        raise typer.Exit(_report(exc))
+        raise typer.Exit(_report_json(exc, scenario, as_json))
     except KeyboardInterrupt as exc:
         raise _interrupted(exc)
     data = summary(run)
     if as_json:
-        typer.echo(json.dumps(data, indent=2, default=float))
+        _print_json(data)
     elif not quiet:
         typer.echo(format_summary(data))
     failed = run.result is not None and not run.result.success.all()
@@ -225,6 +271,8 @@ def phase(
                                           "scenario's time span."),
     skip_periods: int = typer.Option(0, "--skip-periods", help="Poincare: leave out the first periods (transient)."),
     method: Optional[str] = typer.Option(None, "--method", help="Solver, overriding the scenario's solver.method."),
+    name: Optional[str] = typer.Option(None, "--name", help="Output name: OUT/NAME_portrait.png and .h5 (default: "
+                                       "the scenario's stem, or FIRST_and_K_more for several)."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
 ):
@@ -233,14 +281,16 @@ def phase(
     from smdcli.phase import portraits
 
     try:
-        run = portraits(scenarios, out, dof, tuple(ic or ()), poincare, periods, skip_periods, method)
+        run = portraits(scenarios, out, dof, tuple(ic or ()), poincare, periods, skip_periods, method,
+                        progress=progress_wanted(quiet), name=name)
     except (SmdError, OSError) as exc:
         raise typer.Exit(_report(exc))
     except KeyboardInterrupt as exc:
         raise _interrupted(exc)
     if not quiet:
-        typer.echo(f"{len(run.curves)} trajectories" + (f", {sum(len(c.x) for c in run.poincare)} Poincare points "
-                                                         f"(T = {run.period:.4g} s)" if run.poincare else ""))
+        points = sum(len(c.x) for c in run.poincare or ())
+        typer.echo(_count(len(run.curves), "trajectory", "trajectories")
+                   + (f", {_count(points, 'Poincare point')} (T = {run.period:.4g} s)" if run.poincare else ""))
         typer.echo("wrote " + ", ".join(str(p) for p in run.outputs))
 
 
@@ -280,13 +330,13 @@ def animate(
     from smdcli.schematic import animate as make_gif
 
     try:
-        gif, facts = make_gif(scenario, out, fps, seconds, scale, start, end, method)
+        gif, facts = make_gif(scenario, out, fps, seconds, scale, start, end, method, progress=progress_wanted(quiet))
     except (SmdError, OSError) as exc:
         raise typer.Exit(_report(exc))
     except KeyboardInterrupt as exc:
         raise _interrupted(exc)
     if not quiet:
-        typer.echo(f"{facts['frames']} frames at {facts['fps']} fps, t = {facts['start']:g} .. {facts['end']:g} s, "
+        typer.echo(f"{_count(facts['frames'], 'frame')} at {facts['fps']} fps, t = {facts['start']:g} .. {facts['end']:g} s, "
                    f"displacements x {facts['scale']:.3g}, {facts['bytes'] / 2**20:.2f} MB")
         typer.echo(f"wrote {gif}")
 
@@ -297,6 +347,8 @@ def diff_files(
     b: Path = typer.Argument(..., help="Second smd .h5 file."),
     rtol: Optional[float] = typer.Option(None, "--rtol", help="Relative tolerance per sample (default 1e-9)."),
     atol: Optional[float] = typer.Option(None, "--atol", help="Absolute tolerance per sample (default 0)."),
+    tolerance: Optional[str] = typer.Option(None, "--tolerance", help="'stated': each data set within the accuracy "
+                                            "the two runs state (for another machine or method); not with --rtol/--atol."),
     datasets: Optional[str] = typer.Option(None, "--datasets", help="Comma list of data sets to compare (default: all)."),
     allow_failed: bool = typer.Option(False, "--allow-failed", help="Compare files whose run failed."),
     as_json: bool = typer.Option(False, "--json", help="Print the report as JSON."),
@@ -307,59 +359,87 @@ def diff_files(
     from smdcli.errors import SmdError
 
     given = {name: value for name, value in (("rtol", rtol), ("atol", atol)) if value is not None}
+    if tolerance is not None and tolerance != "stated":
+        raise typer.BadParameter(f"expected 'stated', found {tolerance!r}", param_hint="--tolerance")
+    if tolerance and given:
+        raise typer.BadParameter("give either --tolerance stated or --rtol/--atol, not both", param_hint="--tolerance")
     try:
-        report = diff(a, b, names=datasets.split(",") if datasets else None, allow_failed=allow_failed, **given)
+        report = diff(a, b, names=datasets.split(",") if datasets else None, allow_failed=allow_failed,
+                      stated=tolerance == "stated", **given)
     except (SmdError, OSError) as exc:
-        raise typer.Exit(_report(exc, doing="read"))
+        code = _report(exc, doing="read")
+        if as_json:
+            _print_json({"a": str(a), "b": str(b), "status": "unusable", "exit_code": code, "message": _message(exc)})
+        raise typer.Exit(code)
     if as_json:
-        typer.echo(json.dumps(as_dict(report), indent=2, default=str))
+        _print_json(as_dict(report))
     elif not quiet:
         typer.echo(format_report(report))
     raise typer.Exit(1 if report.differs else 0)
 
 
-class _ProgressBar:
-    """click's progress bar on stderr, advanced once per run, labelled with the run in progress."""
-
-    label = "comparing"
-
-    def __init__(self, total: int):
-        self.bar = typer.progressbar(length=total, label=self.label, file=sys.stderr, show_pos=True,
-                                     item_show_func=lambda label: label)
-
-    def __enter__(self):
-        self.bar.__enter__()
-        first = [True]
-
-        def tick(label: str):
-            if not first[0]:
-                self.bar.update(1)
-            first[0] = False
-            self.bar.update(0, label)
-
-        return tick
-
-    def __exit__(self, *exc):
-        return self.bar.__exit__(*exc)
+def _usage_line(exc) -> str:
+    """click's usage error as one line: the command, what is wrong, where to read more."""
+    context = getattr(exc, "ctx", None)
+    command = context.command_path if context is not None else "smd"
+    return f"{exc.format_message()} (see '{command} --help')"
 
 
-class _CountBar(_ProgressBar):
-    """The same bar, advanced by a count of finished members (or frequencies)."""
+def run(args: list[str]) -> int:
+    """Run `smd ARGS` and return its exit code: one line for a usage error, 130/143 for an interrupt."""
+    import shlex
 
-    label = "sweeping"
+    from smdcli import provenance
 
-    def __enter__(self):
-        self.bar.__enter__()
-        return self.bar.update
+    # typer >= 0.20 carries its own copy of click: take the classes from wherever typer's come from.
+    exceptions = sys.modules[typer.BadParameter.__module__]
+    usage_error = exceptions.UsageError
+    no_args = getattr(exceptions, "NoArgsIsHelpError", ())
+
+    provenance.set_command_line(shlex.join(["smd", *args]))
+    try:
+        code = app(args=args, prog_name="smd", standalone_mode=False)
+    except no_args:  # `smd` alone: the help was printed
+        code = 2
+    except usage_error as exc:
+        _fail(_usage_line(exc))
+        code = 2
+    except KeyboardInterrupt as exc:
+        _interrupted(exc)
+        code = interrupts.exit_code(interrupts.received() or 2)
+    except BrokenPipeError:  # `smd ... | head`: the reader left; nothing more to say
+        sys.stderr.close()
+        code = 1
+    except Exception as exc:  # a defect of smd's, not of the input: one line, unless asked for the traceback
+        import os
+
+        if interrupts.received() is not None:  # e.g. an import cut short by the signal: the interrupt decides below
+            return _interrupted(KeyboardInterrupt()).exit_code
+        if os.environ.get("SMD_DEBUG"):
+            raise
+        _fail(f"internal error: {type(exc).__name__}: {exc}; please report it (SMD_DEBUG=1 shows the traceback)")
+        code = 1
+    code = code if isinstance(code, int) else 0
+    if interrupts.received() is not None:  # a signal whose exception was swallowed (or turned into exit 130) decides
+        code = _interrupted(KeyboardInterrupt()).exit_code
+    return code
 
 
 def main() -> None:
     """Console-script entry point."""
     import signal
 
-    signal.signal(signal.SIGTERM, _on_sigterm)
-    try:
-        app()
-    except KeyboardInterrupt:
-        typer.echo("smd: interrupted", err=True)
-        sys.exit(130)
+    interrupts.install()
+    code = run(sys.argv[1:])
+    with interrupts.held():  # one last look, then a later signal changes nothing: the process is finishing
+        signum = interrupts.received()
+        for each in interrupts.SIGNALS:
+            signal.signal(each, signal.SIG_IGN)
+    if signum is not None:
+        import os
+
+        code = _interrupted(KeyboardInterrupt()).exit_code
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)  # files are already cleaned up; an import the signal cut short may not survive finalization
+    sys.exit(code)

@@ -8,7 +8,6 @@ as the reference's own error.
 
 from __future__ import annotations
 
-import contextlib
 import math
 import statistics
 from dataclasses import asdict, dataclass, field
@@ -19,6 +18,7 @@ import numpy as np
 
 from smdcli.errors import UsageError
 from smdcli.model import Model
+from smdcli.progress import bar, silent
 from smdcli.result import Result
 from smdcli.scenario import Scenario
 from smdcli.solvers.base import Tolerances
@@ -156,7 +156,7 @@ def plan(methods: list[str], tolerances, steps) -> list[tuple[str, Tolerances]]:
 
 def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], tolerances, steps,
             repeats: int = 3, breakpoints: bool = True, budget: int = STEP_BUDGET,
-            progress: Callable[[str], None] = lambda label: None) -> Comparison:
+            progress: Callable[..., None] = silent) -> Comparison:
     """Run the plan; failures are recorded, never raised. A method that ran out of budget skips its tighter rungs."""
     from smdcli.solvers.registry import get_solver, solve
 
@@ -167,12 +167,13 @@ def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], to
     exhausted: set[str] = set()
     span = float(grid[-1] - grid[0])
     for method, tol in plan(methods, tolerances, steps):
-        progress(f"{method} {'dt ' + format(tol.dt, '.3g') if tol.dt else 'rtol ' + format(tol.rtol, '.0e')}")
+        progress(0, f"{method} {'dt ' + format(tol.dt, '.3g') if tol.dt else 'rtol ' + format(tol.rtol, '.0e')}")
         adaptive = get_solver(method).adaptive
         tol = Tolerances(rtol=tol.rtol, atol=tol.atol, dt=tol.dt, max_steps=budget, breakpoints=breakpoints)
         if method in exhausted or (tol.dt and span / tol.dt > budget):
             needed = f"{math.ceil(span / tol.dt)} steps" if tol.dt else "more steps than a looser tolerance"
             out.runs.append(_skipped(method, adaptive, tol, omega_max, f"skipped: needs {needed}, budget {budget}"))
+            progress(1)
             continue
         times, result = [], None
         for _ in range(max(1, repeats)):
@@ -193,6 +194,7 @@ def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], to
             wall_time_s=statistics.median(times), nfev=s.nfev, njev=s.njev, nlu=s.nlu,
             steps_accepted=s.steps_accepted, steps_rejected=s.steps_rejected, success=s.success,
             message=s.message))
+        progress(1)
     return out
 
 
@@ -286,7 +288,7 @@ def stability_limits(methods: list[str]) -> dict[str, float]:
 
 def run_and_write(path: str | Path, out: str | Path, methods: str | None = None, tolerances: str | None = None,
                   steps: str | None = None, repeats: int = 3, breakpoints: bool = True, plots: bool = True,
-                  progress=None) -> tuple[Comparison, list[Path]]:
+                  progress: bool = False) -> tuple[Comparison, list[Path]]:
     """The whole command: validate everything first, run, then write HDF5 and charts atomically."""
     from smdcli.simulate import output_folder, prepare
 
@@ -298,20 +300,23 @@ def run_and_write(path: str | Path, out: str | Path, methods: str | None = None,
         raise UsageError(f"--repeats: expected an integer >= 1, found {repeats}")
     out_dir = output_folder(out)
     jobs = len(plan(method_list, tolerance_list, step_list))
-    with progress(jobs) if progress else contextlib.nullcontext(lambda label: None) as tick:
+    with bar("comparing", jobs, progress) as tick:
         comparison = compare(sc, model, grid, method_list, tolerance_list, step_list, repeats=repeats,
                              breakpoints=breakpoints, progress=tick)
     stem = sc.stem
     written = [out_dir / f"{stem}_compare.h5"]
-    write_hdf5(written[0], comparison)
-    if plots:
-        from smdcli.plots import save_figure, stability_figure, work_precision_figure
+    from smdcli.io_hdf5 import together
 
-        title = sc.title or stem
-        save_figure(work_precision_figure(comparison, title), out_dir / f"{stem}_work_precision.png")
-        written.append(out_dir / f"{stem}_work_precision.png")
-        limits = stability_limits(method_list)
-        if limits:
-            save_figure(stability_figure(comparison, title, limits), out_dir / f"{stem}_stability.png")
-            written.append(out_dir / f"{stem}_stability.png")
+    with together():  # the files appear together, or none of them
+        write_hdf5(written[0], comparison)
+        if plots:
+            from smdcli.plots import save_figure, stability_figure, work_precision_figure
+
+            title = sc.title or stem
+            save_figure(work_precision_figure(comparison, title), out_dir / f"{stem}_work_precision.png")
+            written.append(out_dir / f"{stem}_work_precision.png")
+            limits = stability_limits(method_list)
+            if limits:
+                save_figure(stability_figure(comparison, title, limits), out_dir / f"{stem}_stability.png")
+                written.append(out_dir / f"{stem}_stability.png")
     return comparison, written

@@ -22,6 +22,9 @@ from smdcli.errors import UsageError
 
 DEFAULT_RTOL = 1e-9
 DEFAULT_ATOL = 0.0
+# --tolerance stated: data sets without a stated accuracy (matrices, modes, forces) are a few roundings deep.
+STATED_OTHER_RTOL = 1e-9
+STATED_OTHER_ATOL = 1e-12  # times the data set's peak
 RUN_METADATA = frozenset({"created", "wall_time_s", "smd_version"})  # attribute or data set names
 RUN_METADATA_GROUPS = ("run",)
 
@@ -119,7 +122,28 @@ def _where(ds, index: tuple) -> dict:
     return where
 
 
-def _compare(name: str, da, db, rtol: float, atol: float) -> DatasetDiff:
+def stated_accuracy(ds) -> float | None:
+    """The accuracy a data set's run vouches for, relative to its peak (its `stated_accuracy` attribute), or None."""
+    value = ds.attrs.get("stated_accuracy")
+    if value is None:
+        return None
+    value = float(np.max(value))
+    return value if np.isfinite(value) else None
+
+
+def _stated_tolerances(da, db, a, b) -> tuple[float, float, str]:
+    """rtol, atol for --tolerance stated: the two files' stated accuracies times the peak, else rounding."""
+    with np.errstate(invalid="ignore"):
+        finite = [np.abs(x[np.isfinite(x)]) for x in (a, b)]
+    peak = max((float(x.max()) for x in finite if x.size), default=0.0)
+    sa, sb = stated_accuracy(da), stated_accuracy(db)
+    if sa is not None and sb is not None:
+        return 0.0, (sa + sb) * peak, f"stated {sa:.2g} + {sb:.2g} of the peak"
+    return STATED_OTHER_RTOL, STATED_OTHER_ATOL * peak, "rounding"
+
+
+def _compare(name: str, da, db, rtol: float | None, atol: float | None) -> DatasetDiff:
+    """rtol None: the stated tolerances of the two data sets."""
     a, b = da[()], db[()]
     shape_a, shape_b = np.shape(a), np.shape(b)
     if shape_a != shape_b:
@@ -130,6 +154,8 @@ def _compare(name: str, da, db, rtol: float, atol: float) -> DatasetDiff:
         return DatasetDiff(name, "different" if count else "same", shape_a, shape_b, count, int(np.size(a)))
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
+    if rtol is None:
+        rtol, atol, _ = _stated_tolerances(da, db, a, b)
     with np.errstate(invalid="ignore", over="ignore"):
         gap = np.abs(a - b)
         both_nan = np.isnan(a) & np.isnan(b)
@@ -153,10 +179,15 @@ def _scenario_hash(f) -> str:
     return hashlib.sha256(_text(f.attrs.get("scenario", "")).encode()).hexdigest()
 
 
-def diff(path_a: Path, path_b: Path, rtol: float = DEFAULT_RTOL, atol: float = DEFAULT_ATOL,
-         names: list[str] | None = None, allow_failed: bool = False) -> Report:
-    """Compare two smd files; UsageError (exit 2) for a file that cannot be compared."""
-    if rtol < 0 or atol < 0:
+def diff(path_a: Path, path_b: Path, rtol: float | None = DEFAULT_RTOL, atol: float | None = DEFAULT_ATOL,
+         names: list[str] | None = None, allow_failed: bool = False, stated: bool = False) -> Report:
+    """Compare two smd files; UsageError (exit 2) for a file that cannot be compared.
+
+    stated: each data set within what the two runs vouch for (their `stated_accuracy` times the peak),
+    data sets without one within rounding (rtol 1e-9, atol 1e-12 of the peak); rtol and atol are then unused."""
+    if stated:
+        rtol = atol = None
+    elif rtol < 0 or atol < 0:
         raise UsageError("--rtol and --atol must be >= 0")
     with _open(path_a) as fa, _open(path_b) as fb:
         notes = []
@@ -201,9 +232,11 @@ def diff(path_a: Path, path_b: Path, rtol: float = DEFAULT_RTOL, atol: float = D
 def format_report(report: Report) -> str:
     """Lines for the terminal: a verdict, then one line per differing data set and per note."""
     bad = [d for d in report.datasets if d.status != "same"]
+    within = "within the accuracy each run states" if report.rtol is None else \
+        f"rtol {report.rtol:g}, atol {report.atol:g}"
     head = (f"{report.a} vs {report.b}: " + (f"{len(bad)} of {len(report.datasets)} data sets differ"
                                               if bad else f"all {len(report.datasets)} data sets agree")
-            + f" (rtol {report.rtol:g}, atol {report.atol:g})")
+            + f" ({within})")
     lines = [head]
     for d in bad:
         label = "different time grids: " if d.name == "time" else ""
@@ -226,7 +259,9 @@ def format_report(report: Report) -> str:
 
 def as_dict(report: Report) -> dict:
     """The report as plain data (for --json)."""
-    return {"a": report.a, "b": report.b, "rtol": report.rtol, "atol": report.atol, "differ": report.differs,
+    return {"a": report.a, "b": report.b, "tolerance": "stated" if report.rtol is None else "given",
+            "rtol": report.rtol, "atol": report.atol, "differ": report.differs, "status": "different" if report.differs
+            else "same", "exit_code": 1 if report.differs else 0,
             "notes": report.notes,
             "datasets": [{"name": d.name, "status": d.status, "shape": list(d.shape), "other_shape": list(d.other_shape),
                           "count": d.count, "total": d.total, "largest": d.largest, "relative": d.relative,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import os
 import tempfile
 from contextlib import contextmanager, suppress
@@ -10,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from smdcli import __version__
+from smdcli import __version__, interrupts, provenance
 from smdcli.model import Model
 from smdcli.result import Result
 from smdcli.scenario import Scenario
@@ -18,9 +19,47 @@ from smdcli.scenario import Scenario
 SCHEMA_VERSION = 1
 
 
+_pending: list[tuple[str, Path]] | None = None  # inside together(): renames waiting for the block's end
+
+
+def _commit(renames: list[tuple[str, Path]]) -> None:
+    """Rename temporary files onto their final names, unless a signal came (even one whose exception was swallowed)."""
+    with interrupts.held():  # the check and the renames are one step for a signal
+        interrupts.raise_if_received()
+        for tmp, final in renames:
+            os.replace(tmp, final)
+
+
+def _discard(paths) -> None:
+    with interrupts.held():
+        for tmp in paths:
+            with suppress(OSError):
+                os.unlink(tmp)
+
+
+@contextmanager
+def together():
+    """Files written with atomic_path inside the block appear together when it ends, or none of them does."""
+    global _pending
+    outer, _pending = _pending, []
+    try:
+        yield
+        renames = _pending
+        if outer is not None:
+            outer.extend(renames)
+        else:
+            _commit(renames)
+    except BaseException:
+        _discard(tmp for tmp, _ in _pending)
+        raise
+    finally:
+        _pending = outer
+
+
 @contextmanager
 def atomic_path(final: Path):
-    """Yield a temporary path beside `final`; rename it onto `final` only if the block succeeds."""
+    """Yield a temporary path beside `final`; rename it onto `final` only if the block succeeds
+    (inside together(): when that block ends)."""
     final = Path(final)
     fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".part", dir=final.parent)
     os.close(fd)
@@ -30,15 +69,22 @@ def atomic_path(final: Path):
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, final)
+        if _pending is not None:
+            _pending.append((tmp, final))
+        else:
+            _commit([(tmp, final)])
     except BaseException:
-        with suppress(OSError):
-            os.unlink(tmp)
+        _discard([tmp])
         raise
 
 
 def write_header(f, scenario: Scenario, kind: str) -> None:
-    """The root attributes every smd file carries."""
+    """The root attributes every smd file carries, and the provenance to run it again from the file alone."""
+    import platform
+
+    import h5py
+    import scipy
+
     f.attrs["smd_version"] = __version__
     f.attrs["schema_version"] = SCHEMA_VERSION
     f.attrs["kind"] = kind
@@ -46,6 +92,27 @@ def write_header(f, scenario: Scenario, kind: str) -> None:
     f.attrs["title"] = scenario.title
     f.attrs["scenario"] = scenario.text
     f.attrs["scenario_path"] = str(scenario.path)
+    f.attrs["command_line"] = provenance.command_line()
+    f.attrs["python_version"] = platform.python_version()
+    f.attrs["numpy_version"] = np.__version__
+    f.attrs["scipy_version"] = scipy.__version__
+    f.attrs["h5py_version"] = h5py.__version__
+    f.attrs["machine"] = f"{platform.system()} {platform.machine()}"
+    tables = [force for force in scenario.forces if force.file]
+    if tables:  # the files a table force read, copied: the scenario text alone no longer says what they held
+        group = f.create_group("provenance/table_files")
+        for force in tables:
+            ds = group.create_dataset(force.path, data=force.file_text)
+            ds.attrs["file"] = force.file
+            ds.attrs["sha256"] = hashlib.sha256(force.file_text.encode()).hexdigest()
+
+
+def _with_scales(ds, *scales):
+    """Attach one dimension scale per axis (None leaves an axis bare); returns the data set."""
+    for axis, scale in enumerate(scales):
+        if scale is not None:
+            ds.dims[axis].attach_scale(scale)
+    return ds
 
 
 def write_simulation(path: Path, scenario: Scenario, model: Model, result: Result) -> None:
@@ -70,6 +137,8 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
             ds.attrs["units"] = units
             ds.dims[0].attach_scale(time)
             ds.dims[1].attach_scale(dof)
+            if name != "force":  # the applied force is evaluated, not solved for
+                ds.attrs["stated_accuracy"] = result.stats.stated_accuracy
 
         solver = f.create_group("solver")
         for key, value in result.stats.as_attrs().items():
@@ -78,20 +147,35 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
             solver.attrs["t_failed"] = result.t_failed
 
         group = f.create_group("model")
-        for name in ("M", "C", "K"):
-            group.create_dataset(name, data=getattr(model, name))
+        write_matrices(group, model, dof)
         modes = group.create_group("modes")
         m = model.modes
         modes.attrs["natural_frequencies_rad_s"] = m.natural_frequencies
         modes.attrs["damping_ratios"] = m.damping_ratios
         modes.attrs["regimes"] = np.array(m.regimes, dtype=object).astype(str).tolist()
         modes.attrs["stiffness_ratio"] = model.stiffness_ratio
-        modes.create_dataset("natural_frequencies_rad_s", data=m.natural_frequencies)
-        modes.create_dataset("damping_ratios", data=m.damping_ratios)
-        modes.create_dataset("shapes", data=m.shapes)
-        modes.create_dataset("eigenvalues", data=np.stack([m.eigenvalues.real, m.eigenvalues.imag], axis=1))
+        mode = modes.create_dataset("mode", data=np.arange(1, model.n + 1))
+        mode.make_scale("mode")
+        for name, data, units in (("natural_frequencies_rad_s", m.natural_frequencies, "rad/s"),
+                                  ("damping_ratios", m.damping_ratios, "1")):
+            _with_scales(modes.create_dataset(name, data=data), mode).attrs["units"] = units
+        shapes = _with_scales(modes.create_dataset("shapes", data=m.shapes), dof, mode)
+        shapes.attrs["units"] = "1"
+        shapes.attrs["normalization"] = "mass-normalized (shapes^T M shapes = I), largest entry of each column positive"
+        eigen = modes.create_dataset("eigenvalues", data=np.stack([m.eigenvalues.real, m.eigenvalues.imag], axis=1))
+        eigen.attrs["units"] = "1/s"
+        eigen.attrs["columns"] = ["real", "imag"]
         if model.nonlinear_paths:
             group.attrs["nonlinear_elements"] = list(model.nonlinear_paths)
+
+
+def write_matrices(group, model_or_family, dof, member=None) -> None:
+    """M, C, K with units, their axes named by the DOF scale (and the member scale for a family)."""
+    for name, units in (("M", "kg"), ("C", "N s/m"), ("K", "N/m")):
+        ds = group.create_dataset(name, data=getattr(model_or_family, name))
+        ds.attrs["units"] = units
+        axes = (dof, dof) if member is None else (member, dof, dof)
+        _with_scales(ds, *axes)
 
 
 def _strings(f, name: str, values):
@@ -127,8 +211,7 @@ def write_sweep(path: Path, family, result=None, metrics=None, response=None, ru
             ds.dims[0].attach_scale(member)
             ds.dims[1].attach_scale(dof)
         model = f.create_group("model")
-        for name in ("M", "C", "K"):
-            model.create_dataset(name, data=getattr(family, name))
+        write_matrices(model, family, dof, member)
         if run:
             group = f.create_group("run")
             for key, value in run.items():
@@ -147,6 +230,8 @@ def _write_time_family(f, result, metrics, member, dof) -> None:
     for name, units in (("displacement", "m"), ("velocity", "m/s"), ("acceleration", "m/s^2"), ("force", "N")):
         ds = f.create_dataset(name, data=np.ascontiguousarray(getattr(result, name)))
         ds.attrs["units"] = units
+        if name != "force" and result.stated_accuracy is not None:  # the worst member's, relative to the peak
+            ds.attrs["stated_accuracy"] = float(np.nanmax(result.stated_accuracy, initial=0.0))
         ds.dims[0].attach_scale(member)
         if result.time.ndim == 1:
             ds.dims[1].attach_scale(time)
@@ -154,12 +239,20 @@ def _write_time_family(f, result, metrics, member, dof) -> None:
     f.create_dataset("success", data=result.success).dims[0].attach_scale(member)
     _strings(f, "message", result.messages).dims[0].attach_scale(member)
     _strings(f, "method", result.methods).dims[0].attach_scale(member)
-    from smdcli.sweep import SETTLING_BAND
+    from smdcli.sweep import METRIC_UNITS, SETTLING_BAND
 
+    if result.stated_accuracy is not None:
+        ds = f.create_dataset("stated_accuracy", data=result.stated_accuracy)
+        ds.attrs["units"] = "1"
+        ds.attrs["meaning"] = "each member's vouched error, relative to its peak"
+        ds.dims[0].attach_scale(member)
     group = f.create_group("metrics")
     group.attrs["settling_band"] = SETTLING_BAND
     for name, values in metrics.items():
         ds = group.create_dataset(name, data=values)
+        ds.attrs["units"] = METRIC_UNITS[name]
+        if name != "settling_time" and result.stated_accuracy is not None:  # peaks and RMS carry the runs' error
+            ds.attrs["stated_accuracy"] = float(np.nanmax(result.stated_accuracy, initial=0.0))
         ds.dims[0].attach_scale(member)
         ds.dims[1].attach_scale(dof)
 

@@ -224,12 +224,18 @@ class Model:
             eig = np.roots([m, c, k]).astype(complex)
             return Modes(eig, np.array([wn]), np.array([zeta]), (regime(zeta),), np.array([[1 / math.sqrt(m)]]))
         eig = np.linalg.eigvals(self.state_matrix)
+        eig = eig[np.lexsort((eig.real, eig.imag))]  # one order whatever LAPACK returns
         wn, zeta = _pair_modes(eig)
         order = np.argsort(wn)
         wn, zeta = wn[order], zeta[order]
         from scipy.linalg import eigh
 
         _, shapes = eigh(self.K, self.M)
+        # The sign LAPACK leaves free, fixed: the first entry within 1e-6 of the column's largest is positive
+        # (a tie broken by position, not by which rounding came out larger).
+        size = np.abs(shapes)
+        lead = np.argmax(size >= (1 - 1e-6) * size.max(axis=0), axis=0)
+        shapes = shapes * np.where(shapes[lead, np.arange(n)] < 0, -1.0, 1.0)
         return Modes(eig, wn, zeta, tuple(regime(z) for z in zeta), shapes)
 
     @cached_property

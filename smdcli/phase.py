@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -11,10 +12,12 @@ import numpy as np
 
 from smdcli import scenario as scenario_mod
 from smdcli.errors import UsageError
+from smdcli.progress import bar
 from smdcli.model import time_grid
 from smdcli.scenario import Scenario, TimeSpec
 
 POINTS_PER_PERIOD = 64  # portrait resolution when --periods sets the run's length
+_NAME = re.compile(r"[A-Za-z0-9._-]{1,100}")
 
 
 @dataclass
@@ -66,17 +69,21 @@ def _solve(sc: Scenario, method: str | None) -> tuple[np.ndarray, np.ndarray, np
 
 def portraits(paths: list[Path], out: Path, dofs: str | None = None, ics: tuple[str, ...] = (),
               poincare: bool = False, periods: int | None = None, skip_periods: int = 0,
-              method: str | None = None, plots: bool = True) -> PhaseRun:
-    """Load every scenario first (input errors before any work), solve, draw and write `<stem>_phase.*`."""
+              method: str | None = None, plots: bool = True, progress: bool = False,
+              name: str | None = None) -> PhaseRun:
+    """Load every scenario first (input errors before any work), solve, draw and write `<name>_portrait.*`.
+
+    The name is the scenario's stem, `<first>_and_<k>_more` for several scenarios, or `name`."""
     from smdcli.simulate import output_folder
 
     scenarios = [scenario_mod.load(p) for p in paths]
     if ics and len(scenarios) > 1:
         raise UsageError("--ic: give one scenario with an initial-condition family")
-    names = scenarios[0].dof_names
-    chosen = list(names) if not dofs else [d.strip() for d in dofs.split(",") if d.strip()]
+    if name is not None and not _NAME.fullmatch(name):
+        raise UsageError(f"--name: expected letters, digits, '.', '_' or '-' (a file name stem), found {name!r}")
+    chosen = [d.strip() for d in dofs.split(",") if d.strip()] if dofs else None  # None: each scenario's own DOFs
     for sc in scenarios:
-        missing = [d for d in chosen if d not in sc.dof_names]
+        missing = [d for d in chosen or () if d not in sc.dof_names]
         if missing:
             raise UsageError(f"--dof: {sc.path} has no DOF {missing[0]!r}; its DOFs are {', '.join(sc.dof_names)}")
     runs = [(label if len(scenarios) == 1 else f"{sc.stem}: {label}", member, sc)
@@ -91,52 +98,65 @@ def portraits(paths: list[Path], out: Path, dofs: str | None = None, ics: tuple[
                 raise UsageError(f"--poincare: {member.path} has another forcing period; overlay scenes of one period")
     out_dir = output_folder(out)
     curves, sections = [], [] if poincare else None
-    for label, member, sc in runs:
-        if periods is not None:
-            span = (period or forcing_period(member)) if period or member.forces else None
-            if span is None:
-                raise UsageError(f"--periods: {member.path} has no periodic force to count periods of")
-            spacing = np.diff(time_grid(member.time)[:2])[0]
-            member = dataclasses.replace(member, time=TimeSpec(member.time.start, member.time.start + periods * span,
-                                                               step=min(spacing, span / POINTS_PER_PERIOD)))
-        t, x, v = _solve(member, method)
-        alone = len(runs) == 1
-        for dof in chosen:
-            j = member.dof_names.index(dof)
-            name = dof if alone else (label if len(chosen) == 1 else f"{label}: {dof}")
-            curves.append(Curve(name, t, x[:, j], v[:, j]))
-        if poincare:
-            count = int(math.floor((member.time.end - member.time.start) / period * (1 + 1e-12)))
-            if count < 1:
-                raise UsageError(f"{member.path}: the run is shorter than one forcing period ({period:.4g} s); "
-                                 "use --periods")
-            sampled = dataclasses.replace(member, time=TimeSpec(member.time.start,
-                                                                member.time.start + count * period, step=period))
-            ts, xs, vs = _solve(sampled, method)
-            keep = slice(min(skip_periods, len(ts) - 1), None)
-            for dof in chosen:
-                j = member.dof_names.index(dof)
-                sections.append(Curve(dof if alone else (label if len(chosen) == 1 else f"{label}: {dof}"),
-                                      ts[keep], xs[keep, j], vs[keep, j]))
+    with bar("phase portraits", len(runs) * (2 if poincare else 1), progress) as advance:
+        for label, member, sc in runs:
+            _trace(label, member, method, chosen, len(runs) == 1, periods, period, poincare, skip_periods,
+                   curves, sections, advance)
     run = PhaseRun(curves, sections, period)
-    stem = scenarios[0].stem if len(scenarios) == 1 else f"{scenarios[0].stem}_and_{len(scenarios) - 1}_more"
-    h5 = out_dir / f"{stem}_phase.h5"
-    _write(h5, scenarios[0], run)
-    run.outputs.append(h5)
-    if plots:
-        from smdcli import plots as plotting
+    stem = name or (scenarios[0].stem if len(scenarios) == 1 else f"{scenarios[0].stem}_and_{len(scenarios) - 1}_more")
+    from smdcli.io_hdf5 import together
 
-        title = scenarios[0].title or scenarios[0].stem if len(scenarios) == 1 else \
-            " vs ".join(sc.stem for sc in scenarios)
-        title += "\nphase plot: displacement vs velocity" + (
-            f"; Poincare section: dots once per forcing period T = {period:.4g} s"
-            + (f" after {skip_periods} periods" if skip_periods else "") if poincare else "")
-        figure = plotting.portrait_figure([(c.label, c.x, c.v) for c in curves], title,
-                                          [(c.label, c.x, c.v) for c in sections] if poincare else None)
-        png = out_dir / f"{stem}_phase.png"
-        plotting.save_figure(figure, png)
-        run.outputs.append(png)
+    with together():  # the files appear together, or none of them
+        h5 = out_dir / f"{stem}_portrait.h5"
+        _write(h5, scenarios[0], run)
+        run.outputs.append(h5)
+        if plots:
+            from smdcli import plots as plotting
+
+            title = scenarios[0].title or scenarios[0].stem if len(scenarios) == 1 else \
+                " vs ".join(sc.stem for sc in scenarios)
+            title += "\nphase plot: displacement vs velocity" + (
+                f"; Poincare section: dots once per forcing period T = {period:.4g} s"
+                + (f" after {skip_periods} periods" if skip_periods else "") if poincare else "")
+            figure = plotting.portrait_figure([(c.label, c.x, c.v) for c in curves], title,
+                                              [(c.label, c.x, c.v) for c in sections] if poincare else None)
+            png = out_dir / f"{stem}_portrait.png"
+            plotting.save_figure(figure, png)
+            run.outputs.append(png)
     return run
+
+
+def _trace(label: str, member: Scenario, method: str | None, chosen: list[str], alone: bool, periods: int | None,
+           period: float | None, poincare: bool, skip_periods: int, curves: list, sections: list | None,
+           advance) -> None:
+    """Solve one run (and its Poincare samples) and append its curves."""
+    if periods is not None:
+        span = (period or forcing_period(member)) if period or member.forces else None
+        if span is None:
+            raise UsageError(f"--periods: {member.path} has no periodic force to count periods of")
+        spacing = np.diff(time_grid(member.time)[:2])[0]
+        member = dataclasses.replace(member, time=TimeSpec(member.time.start, member.time.start + periods * span,
+                                                           step=min(spacing, span / POINTS_PER_PERIOD)))
+    t, x, v = _solve(member, method)
+    advance(1, label)
+    for dof in chosen or member.dof_names:
+        j = member.dof_names.index(dof)
+        name = dof if alone else (label if len(chosen or member.dof_names) == 1 else f"{label}: {dof}")
+        curves.append(Curve(name, t, x[:, j], v[:, j]))
+    if poincare:
+        count = int(math.floor((member.time.end - member.time.start) / period * (1 + 1e-12)))
+        if count < 1:
+            raise UsageError(f"{member.path}: the run is shorter than one forcing period ({period:.4g} s); "
+                             "use --periods")
+        sampled = dataclasses.replace(member, time=TimeSpec(member.time.start,
+                                                            member.time.start + count * period, step=period))
+        ts, xs, vs = _solve(sampled, method)
+        advance(1, f"{label}: Poincare")
+        keep = slice(min(skip_periods, len(ts) - 1), None)
+        for dof in chosen or member.dof_names:
+            j = member.dof_names.index(dof)
+            sections.append(Curve(dof if alone else (label if len(chosen or member.dof_names) == 1 else f"{label}: {dof}"),
+                                  ts[keep], xs[keep, j], vs[keep, j]))
 
 
 def _write(path: Path, sc: Scenario, run: PhaseRun) -> None:

@@ -25,6 +25,9 @@ class SolverStats:
     wall_time_s: float = 0.0
     success: bool = True
     message: str = "ok"
+    # The largest error of the trajectories this run vouches for, relative to each quantity's peak: rounding
+    # for exact methods, the tolerances for adaptive ones, the step's truncation for fixed-step ones.
+    stated_accuracy: float = float("nan")
 
     def as_attrs(self) -> dict:
         """Flat attributes for HDF5 and JSON; None becomes NaN (tolerances) or -1."""

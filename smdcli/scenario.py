@@ -98,6 +98,8 @@ class ForceSpec:
     values: tuple[float, ...] = ()
     interpolation: str = "linear"
     expr: str | None = None
+    file: str | None = None  # a table force's file, as resolved, and its text: the result keeps a copy
+    file_text: str | None = None
 
     @property
     def path(self) -> str:
@@ -152,7 +154,9 @@ class Scenario:
 def _kind(value: Any) -> str:
     if isinstance(value, bool):
         return f"boolean {str(value).lower()}"
-    if isinstance(value, (int, float)):
+    if isinstance(value, int):
+        return f"number {_short(value)}"
+    if isinstance(value, float):
         return f"number {value!r}"
     if isinstance(value, str):
         shown = value if len(value) <= 40 else value[:37] + "..."
@@ -164,14 +168,47 @@ def _kind(value: Any) -> str:
     return type(value).__name__
 
 
+MAX_INTEGER = 10**15  # any whole-number field (points, terms): beyond this is no scene, and not exact as a float
+
+
+def _short(value: int) -> str:
+    """An integer as text, or its size when it is long (str() of a huge int is slow, and refused past 4300 digits)."""
+    if abs(value) < 10**20:
+        return str(value)
+    return f"an integer of about {int(abs(value).bit_length() * 0.30103) + 1} digits"
+
+
+def _control_character(text: str, multiline: bool) -> str | None:
+    """The first control character of `text` (terminal escapes, NUL...), or None."""
+    allowed = "\t\n\r" if multiline else "\t"
+    for char in text:
+        if (ord(char) < 32 or 127 <= ord(char) < 160) and char not in allowed:
+            return char
+    return None
+
+
 class _Table:
     """Reads the keys of one TOML table, checking each, then refuses leftovers."""
 
-    def __init__(self, file: str, path: str, data: Any):
+    def __init__(self, file: str, path: str, data: Any, allowed: tuple[str, ...] | None = None):
         if not isinstance(data, dict):
             raise ScenarioError(file, path, f"expected a table, found {_kind(data)}")
         self.file, self.path, self.data = file, path, data
         self.used: set[str] = set()
+        if allowed is not None:  # a misspelt key is named first, before any message about what it left missing
+            for key in data:
+                if key not in allowed:
+                    raise self.unknown(key, allowed)
+
+    def unknown(self, key: str, allowed: tuple[str, ...]) -> ScenarioError:
+        """An unknown key, with the allowed key it most likely means (by spelling, or by a word for it)."""
+        hint = difflib.get_close_matches(key, allowed, n=1, cutoff=0.6)
+        if not hint:
+            word = difflib.get_close_matches(key.lower(), _SYNONYMS, n=1, cutoff=0.75)
+            hint = [_SYNONYMS[word[0]]] if word and _SYNONYMS[word[0]] in allowed else []
+        extra = f" (did you mean {hint[0]!r}?)" if hint else ""
+        known = f"; known keys: {', '.join(allowed)}" if allowed and not hint else ""
+        return self.fail(key, f"unknown key{extra}{known}")
 
     def fail(self, key: str | None, message: str) -> ScenarioError:
         """An error at this table's key."""
@@ -207,7 +244,10 @@ class _Table:
     def _check_number(self, key, value, minimum, positive) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise self.fail(key, f"expected a number, found {_kind(value)}")
-        value = float(value)
+        try:
+            value = float(value)
+        except OverflowError:  # a TOML integer literal beyond any float
+            raise self.fail(key, f"expected a finite number, found {_short(value)}, too large for a float") from None
         if not math.isfinite(value):
             raise self.fail(key, f"expected a finite number, found {value}")
         if positive and value <= 0:
@@ -226,11 +266,14 @@ class _Table:
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.fail(key, f"expected a whole number, found {_kind(value)}")
         if value < minimum:
-            raise self.fail(key, f"expected a whole number >= {minimum}, found {value}")
+            raise self.fail(key, f"expected a whole number >= {minimum}, found {_short(value)}")
+        if value > MAX_INTEGER:
+            raise self.fail(key, f"expected a whole number <= {MAX_INTEGER:.0e}, found {_short(value)}")
         return value
 
-    def string(self, key: str, default: Any = ..., *, choices: tuple[str, ...] | None = None) -> str:
-        """A string, optionally one of `choices`."""
+    def string(self, key: str, default: Any = ..., *, choices: tuple[str, ...] | None = None,
+               multiline: bool = False) -> str:
+        """A string without control characters (tabs and, if `multiline`, line breaks allowed), optionally one of `choices`."""
         if key not in self.data:
             if default is ...:
                 raise self.missing(key, "a string")
@@ -238,6 +281,9 @@ class _Table:
         value = self.raw(key)
         if not isinstance(value, str):
             raise self.fail(key, f"expected a string, found {_kind(value)}")
+        control = _control_character(value, multiline)
+        if control is not None:
+            raise self.fail(key, f"expected printable text, found the control character {control!r}")
         if choices is not None and value not in choices:
             hint = difflib.get_close_matches(value, choices, n=1)
             extra = f" (did you mean {hint[0]!r}?)" if hint else ""
@@ -270,17 +316,62 @@ class _Table:
     def finish(self, allowed: tuple[str, ...] | None = None) -> None:
         """Refuse keys nobody read, suggesting the nearest allowed key."""
         for key in self.data:
-            if key in self.used:
-                continue
-            candidates = allowed if allowed is not None else tuple(self.used)
-            hint = difflib.get_close_matches(key, candidates, n=1, cutoff=0.6)
-            extra = f" (did you mean {hint[0]!r}?)" if hint else ""
-            known = f"; known keys: {', '.join(candidates)}" if candidates and not hint else ""
-            raise self.fail(key, f"unknown key{extra}{known}")
+            if key not in self.used:
+                raise self.unknown(key, allowed if allowed is not None else tuple(self.used))
+
+
+# Words users write for a key, and the key they mean (found by spelling: "stifness" finds "stiffness").
+_SYNONYMS = {"stiffness": "k", "spring_constant": "k", "spring_rate": "k", "damping": "c",
+             "damping_coefficient": "c", "viscous_damping": "c", "mass": "m", "weight": "m",
+             "displacement": "x0", "initial_displacement": "x0", "position": "x0", "velocity": "v0",
+             "initial_velocity": "v0", "speed": "v0", "amp": "amplitude", "magnitude": "amplitude",
+             "freq": "frequency", "hz": "frequency", "angular_frequency": "omega", "w": "omega",
+             "duration_s": "duration", "stop": "end", "t_end": "end", "tend": "end", "t_start": "start",
+             "dt_out": "step", "solver": "method", "integrator": "method", "reltol": "rtol", "abstol": "atol",
+             "nodes": "connects", "connect": "connects", "between": "connects", "target": "on", "dof": "on",
+             "kind": "type", "expression": "expr", "formula": "expr"}
 
 
 _TOP_KEYS = ("title", "description", "time", "mass", "spring", "damper", "system",
              "force", "solver", "sweep")
+_TIME_KEYS = ("start", "end", "step", "points")
+_MASS_KEYS = ("name", "m", "x0", "v0")
+_SYSTEM_KEYS = ("dofs", "M", "C", "K", "x0", "v0")
+
+
+def _solver_keys() -> tuple[str, ...]:
+    from smdcli.solvers.registry import METHOD_OPTIONS
+
+    return ("method", "rtol", "atol", "dt", *METHOD_OPTIONS)
+
+
+MAX_SCENARIO_BYTES = 16 * 2**20
+MAX_TABLE_BYTES = 256 * 2**20
+
+
+class _NotRegular(Exception):
+    """A path that is a device, a FIFO or a socket, or a file too large: reading it could block or exhaust memory."""
+
+
+def read_regular_file(path: Path, limit: int) -> bytes:
+    """The bytes of a regular file of at most `limit` bytes; never blocks on a FIFO or reads a device."""
+    import os
+    import stat
+
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))  # a FIFO opens at once instead of waiting
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            kind = ("a named pipe (FIFO)" if stat.S_ISFIFO(info.st_mode) else "a device"
+                    if stat.S_ISCHR(info.st_mode) or stat.S_ISBLK(info.st_mode) else "a socket"
+                    if stat.S_ISSOCK(info.st_mode) else "not a regular file")
+            raise _NotRegular(f"is {kind}")
+        if info.st_size > limit:
+            raise _NotRegular(f"is {info.st_size / 2**20:.0f} MB, more than the {limit / 2**20:.0f} MB allowed")
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            return f.read(limit + 1)
+    finally:
+        os.close(fd)
 
 
 def load(path: str | Path) -> Scenario:
@@ -290,9 +381,11 @@ def load(path: str | Path) -> Scenario:
     if path.is_dir():
         raise ScenarioError(file, None, "is a directory, expected a scenario .toml file")
     try:
-        data = path.read_bytes()
+        data = read_regular_file(path, MAX_SCENARIO_BYTES)
     except FileNotFoundError:
         raise ScenarioError(file, None, "no such file") from None
+    except _NotRegular as exc:
+        raise ScenarioError(file, None, f"{exc}, expected a scenario .toml file") from None
     except OSError as exc:
         raise ScenarioError(file, None, f"cannot be read: {exc.strerror}") from None
     try:
@@ -309,6 +402,10 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
         raise ScenarioError(file, None, "is empty; a scenario needs at least [time] and one [[mass]] or [system]")
     try:
         doc = tomllib.loads(text)
+    except RecursionError:
+        raise ScenarioError(file, None, "invalid TOML: arrays or tables nested too deeply") from None
+    except ValueError as exc:  # Python refuses integer literals of more than 4300 digits
+        raise ScenarioError(file, None, f"invalid TOML: a number literal too long ({str(exc).split(':')[0]})") from None
     except tomllib.TOMLDecodeError as exc:
         message = str(exc)
         match = re.search(r"\(at line (\d+), column \d+\)", message)
@@ -320,16 +417,16 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
 
 def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
     """Validate an already-decoded TOML document (a sweep member is one, edited)."""
-    top = _Table(file, "", doc)
+    top = _Table(file, "", doc, _TOP_KEYS)
     title = top.string("title", "")
-    description = top.string("description", "")
-    time = _read_time(_Table(file, "time", top.raw("time")) if top.has("time") else None, file)
+    description = top.string("description", "", multiline=True)
+    time = _read_time(_Table(file, "time", top.raw("time"), _TIME_KEYS) if top.has("time") else None, file)
 
     if top.has("system"):
         for element in ("mass", "spring", "damper"):
             if top.has(element):
                 raise ScenarioError(file, element, "cannot be combined with [system]; use one form or the other")
-        system = _read_system(_Table(file, "system", top.raw("system")))
+        system = _read_system(_Table(file, "system", top.raw("system"), _SYSTEM_KEYS))
         masses, springs, dampers = (), (), ()
         dofs = system.dofs
     else:
@@ -340,10 +437,10 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
         dampers = _read_elements(top, file, "damper", dofs)
 
     forces = tuple(
-        _read_force(_Table(file, f"force[{i}]", raw), i, dofs) for i, raw in enumerate(top.tables("force"))
+        _read_force(_Table(file, f"force[{i}]", raw, _ANY_FORCE_KEYS), i, dofs) for i, raw in enumerate(top.tables("force"))
     )
-    solver = _read_solver(_Table(file, "solver", top.raw("solver"))) if top.has("solver") else SolverSpec()
-    sweep = _read_sweep(_Table(file, "sweep", top.raw("sweep"))) if top.has("sweep") else ()
+    solver = _read_solver(_Table(file, "solver", top.raw("solver"), _solver_keys())) if top.has("solver") else SolverSpec()
+    sweep = _read_sweep(_Table(file, "sweep", top.raw("sweep"), SWEEP_KEYS)) if top.has("sweep") else ()
     top.finish(_TOP_KEYS)
 
     if not math.isfinite(time.end - time.start):
@@ -357,11 +454,27 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
             f"output grid of {n_points:.3g} points x {len(dofs)} DOF is too large "
             f"(limit {MAX_SAMPLES:.0e} samples); use a larger step or fewer points",
         )
+    for force in forces:
+        if force.type == "chirp":
+            _check_chirp_resolved(file, force, time, n_points)
     return Scenario(
         path=file, text=text, time=time, masses=masses, springs=springs, dampers=dampers,
         system=system, forces=forces, solver=solver, title=title, description=description,
         sweep=sweep,
     )
+
+
+def _check_chirp_resolved(file: str, force: ForceSpec, time: TimeSpec, n_points: float) -> None:
+    """A chirp whose frequency passes the output grid's Nyquist frequency cannot be seen or held: refuse it."""
+    rate = (force.f1 - force.f0) / force.t1
+    top = max(abs(force.f0 + rate * time.start), abs(force.f0 + rate * time.end))  # Hz; it sweeps on past t1
+    step = (time.end - time.start) / max(n_points - 1, 1)
+    if not top * step <= 0.5:
+        need = 0.5 / top if top > 0 else math.inf
+        raise ScenarioError(file, f"{force.path}.f1",
+                            f"the chirp reaches {top:.4g} Hz by t = {time.end:g} s, above the output grid's Nyquist "
+                            f"frequency {0.5 / step:.4g} Hz (step {step:.3g} s); the force cannot be resolved: use a "
+                            f"[time] step of at most {need:.3g} s, or lower f1 or t1")
 
 
 def _read_time(table: _Table | None, file: str) -> TimeSpec:
@@ -379,7 +492,7 @@ def _read_time(table: _Table | None, file: str) -> TimeSpec:
         raise table.fail("step", f"expected a step no longer than end - start = {end - start:g}, found {step:g}")
     if step is None and points is None:
         points = DEFAULT_POINTS
-    table.finish(("start", "end", "step", "points"))
+    table.finish(_TIME_KEYS)
     return TimeSpec(start=start, end=end, step=step, points=points)
 
 
@@ -389,7 +502,7 @@ def _read_masses(top: _Table, file: str) -> tuple[MassSpec, ...]:
         raise ScenarioError(file, "mass", "no masses: give [[mass]] tables or a [system] table")
     masses, seen = [], {}
     for i, item in enumerate(raw):
-        t = _Table(file, f"mass[{i}]", item)
+        t = _Table(file, f"mass[{i}]", item, _MASS_KEYS)
         name = t.string("name")
         if not name.strip():
             raise t.fail("name", "expected a non-empty name")
@@ -401,7 +514,7 @@ def _read_masses(top: _Table, file: str) -> tuple[MassSpec, ...]:
         m = t.number("m", positive=True)
         x0 = t.number("x0", 0.0)
         v0 = t.number("v0", 0.0)
-        t.finish(("name", "m", "x0", "v0"))
+        t.finish(_MASS_KEYS)
         masses.append(MassSpec(name=name, m=m, x0=x0, v0=v0))
     return tuple(masses)
 
@@ -410,7 +523,7 @@ def _read_elements(top: _Table, file: str, kind: str, dofs: tuple[str, ...]) -> 
     coef_key, laws = ("k", ("linear", "cubic")) if kind == "spring" else ("c", ("linear", "quadratic"))
     elements = []
     for i, item in enumerate(top.tables(kind)):
-        t = _Table(file, f"{kind}[{i}]", item)
+        t = _Table(file, f"{kind}[{i}]", item, ("connects", coef_key, "law") + (("k3",) if kind == "spring" else ()))
         connects = _read_connects(t, dofs)
         law = t.string("law", "linear", choices=laws)
         coef = t.number(coef_key, minimum=0.0)
@@ -489,6 +602,10 @@ def _read_system(t: _Table) -> MatrixSystem:
     dofs = t.raw("dofs")
     if not isinstance(dofs, list) or not dofs or not all(isinstance(d, str) and d.strip() for d in dofs):
         raise t.fail("dofs", f"expected a non-empty array of names, found {_kind(dofs)}")
+    for i, name in enumerate(dofs):
+        control = _control_character(name, False)
+        if control is not None:
+            raise t.fail(f"dofs[{i}]", f"expected printable text, found the control character {control!r}")
     if len(set(dofs)) != len(dofs):
         raise t.fail("dofs", "duplicate DOF names")
     if GROUND in dofs:
@@ -499,7 +616,7 @@ def _read_system(t: _Table) -> MatrixSystem:
     K = _read_matrix(t, "K", n)
     x0 = t.numbers("x0", (0.0,) * n, length=n)
     v0 = t.numbers("v0", (0.0,) * n, length=n)
-    t.finish(("dofs", "M", "C", "K", "x0", "v0"))
+    t.finish(_SYSTEM_KEYS)
     return MatrixSystem(dofs=tuple(dofs), M=M, C=C, K=K, x0=x0, v0=v0)
 
 
@@ -515,6 +632,7 @@ _FORCE_FIELDS = {
     "table": ("t", "values", "file", "interpolation"),
     "expression": ("expr",),
 }
+_ANY_FORCE_KEYS = ("on", "type") + tuple(dict.fromkeys(k for keys in _FORCE_FIELDS.values() for k in keys))
 
 
 def _read_omega(t: _Table, allow_period: bool) -> float:
@@ -587,7 +705,7 @@ def _read_table_force(t: _Table) -> dict[str, Any]:
     if t.has("file"):
         if t.has("t") or t.has("values"):
             raise t.fail("file", "give either file or t and values, not both")
-        times, values = _read_csv(t, t.string("file"))
+        times, values, file, file_text = _read_csv(t, t.string("file"))
     else:
         times = t.numbers("t")
         values = t.numbers("values")
@@ -598,17 +716,23 @@ def _read_table_force(t: _Table) -> dict[str, Any]:
     for i in range(1, len(times)):
         if times[i] <= times[i - 1]:
             raise t.fail(f"t[{i}]", f"expected strictly increasing times, found {times[i]:g} after {times[i - 1]:g}")
-    return {"t": times, "values": values, "interpolation": interpolation}
+    spec = {"t": times, "values": values, "interpolation": interpolation}
+    if t.has("file"):
+        spec.update(file=file, file_text=file_text)
+    return spec
 
 
-def _read_csv(t: _Table, name: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
+def _read_csv(t: _Table, name: str) -> tuple[tuple[float, ...], tuple[float, ...], str, str]:
     csv_path = Path(name)
     if not csv_path.is_absolute():
         csv_path = Path(t.file).parent / csv_path
     try:
-        text = csv_path.read_text(encoding="utf-8")
+        text = read_regular_file(csv_path, MAX_TABLE_BYTES).decode("utf-8")
+    except _NotRegular as exc:
+        raise t.fail("file", f"{csv_path}: {exc}, expected a CSV file") from None
     except (OSError, UnicodeDecodeError) as exc:
-        reason = "no such file" if isinstance(exc, FileNotFoundError) else "cannot be read as UTF-8 text"
+        reason = "no such file" if isinstance(exc, FileNotFoundError) else (
+            "is a directory" if isinstance(exc, IsADirectoryError) else "cannot be read as UTF-8 text")
         raise t.fail("file", f"{csv_path}: {reason}") from None
     times, values = [], []
     for number, line in enumerate(text.splitlines(), start=1):
@@ -628,7 +752,7 @@ def _read_csv(t: _Table, name: str) -> tuple[tuple[float, ...], tuple[float, ...
         values.append(b)
     if not times:
         raise t.fail("file", f"{csv_path}: no data rows")
-    return tuple(times), tuple(values)
+    return tuple(times), tuple(values), str(csv_path), text
 
 
 def _read_solver(t: _Table) -> SolverSpec:

@@ -219,7 +219,7 @@ def write_schematic(path: str | Path, out: str | Path) -> Path:
 
 def animate(path: str | Path, out: str | Path, fps: int = 20, seconds: float | None = None,
             scale: float | None = None, start: float | None = None, end: float | None = None,
-            method: str | None = None) -> tuple[Path, dict]:
+            method: str | None = None, progress: bool = False) -> tuple[Path, dict]:
     """`smd animate`: OUT/<stem>.gif of the masses moving, displacements scaled to be seen, time stamped."""
     import dataclasses
 
@@ -259,15 +259,20 @@ def animate(path: str | Path, out: str | Path, fps: int = 20, seconds: float | N
     images = []
     from PIL import Image
 
-    for k in range(len(t)):
-        ax.clear()
-        draw(ax, plan, x[k], scale, labels=False)
-        fig.texts.clear()
-        fig.text(0.02, 0.93, f"t = {t[k]:7.2f} s", fontsize=9, family="monospace")
-        fig.text(0.98, 0.93, f"displacements x {scale:.3g}", fontsize=8, ha="right", color="0.35")
-        fig.canvas.draw()
-        rgba = np.asarray(fig.canvas.buffer_rgba())
-        images.append(Image.fromarray(rgba[..., :3]).quantize(colors=32, method=Image.Quantize.MEDIANCUT, dither=0))
+    from smdcli.progress import bar
+
+    with bar("drawing frames", len(t), progress) as advance:
+        for k in range(len(t)):
+            ax.clear()
+            draw(ax, plan, x[k], scale, labels=False)
+            fig.texts.clear()
+            fig.text(0.02, 0.93, f"t = {t[k]:7.2f} s", fontsize=9, family="monospace")
+            fig.text(0.98, 0.93, f"displacements x {scale:.3g}", fontsize=8, ha="right", color="0.35")
+            fig.canvas.draw()
+            rgba = np.asarray(fig.canvas.buffer_rgba())
+            images.append(Image.fromarray(rgba[..., :3]).quantize(colors=32, method=Image.Quantize.MEDIANCUT,
+                                                                  dither=0))
+            advance(1)
     gif = out_dir / f"{sc.stem}.gif"
     with atomic_path(gif) as tmp:
         images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:], duration=int(1000 / fps),

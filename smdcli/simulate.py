@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,7 +49,8 @@ def solve_scenario(sc: Scenario, model: Model, grid: np.ndarray, options: Option
     from smdcli.solvers.registry import solve
 
     method = options.method or sc.solver.method
-    tol = Tolerances(rtol=options.rtol or sc.solver.rtol, atol=options.atol or sc.solver.atol, dt=sc.solver.dt,
+    tol = Tolerances(rtol=sc.solver.rtol if options.rtol is None else options.rtol,
+                     atol=sc.solver.atol if options.atol is None else options.atol, dt=sc.solver.dt,
                      options=sc.solver.options)
     field_name = "--method" if options.method else "solver.method"
     return solve(model, grid, method, tol, field=field_name)
@@ -77,6 +79,10 @@ def simulate(path: str | Path, out: str | Path, options: Options = Options()) ->
     sc, model, grid = prepare(path)
     out_dir = output_folder(out)
     result = solve_scenario(sc, model, grid, options)
+    if sc.sweep:
+        note = ("this file's [sweep] table was not run: simulate solved the scene as written "
+                f"(its base member); `smd sweep {sc.path}` runs the family")
+        result = dataclasses.replace(result, notes=(note, *result.notes))
     run = Run(sc, model, result)
     from smdcli.io_hdf5 import write_simulation
 
@@ -88,17 +94,20 @@ def simulate(path: str | Path, out: str | Path, options: Options = Options()) ->
             message += f"; what was computed (to t = {result.t_failed:g} s, NaN after) is in {partial}, marked failed"
         raise SolverFailed(message, result=result)
 
-    h5 = out_dir / f"{sc.stem}.h5"
-    write_simulation(h5, sc, model, result)
-    run.outputs.append(h5)
-    if options.plots:
-        from smdcli import plots
+    from smdcli.io_hdf5 import together
 
-        title = sc.title or sc.stem
-        for name, figure in (("response", plots.response_figure), ("phase", plots.phase_figure)):
-            png = out_dir / f"{sc.stem}_{name}.png"
-            plots.save_figure(figure(result, title), png)
-            run.outputs.append(png)
+    with together():  # the run's files appear together, or none of them
+        h5 = out_dir / f"{sc.stem}.h5"
+        write_simulation(h5, sc, model, result)
+        run.outputs.append(h5)
+        if options.plots:
+            from smdcli import plots
+
+            title = sc.title or sc.stem
+            for name, figure in (("response", plots.response_figure), ("phase", plots.phase_figure)):
+                png = out_dir / f"{sc.stem}_{name}.png"
+                plots.save_figure(figure(result, title), png)
+                run.outputs.append(png)
     return run
 
 
@@ -151,6 +160,7 @@ def summary(run: Run) -> dict:
     s = run.result.stats
     return {
         "scenario": run.scenario.path,
+        "status": "ok", "exit_code": 0,
         "title": run.scenario.title,
         "method": s.method,
         "requested_method": s.requested_method,
@@ -164,6 +174,16 @@ def summary(run: Run) -> dict:
         "notes": list(run.result.notes),
         "outputs": [str(p) for p in run.outputs],
     }
+
+
+def failed_summary(path: str | Path, exc: Exception | None, exit_code: int | None) -> dict:
+    """The JSON entry of a file that failed (exc, exit_code) or was not run after --fail-fast stopped (None, None)."""
+    from smdcli.strict_json import status
+
+    return {"scenario": str(path), "status": status(exit_code), "exit_code": exit_code, "success": False,
+            "message": str(exc) if exc is not None and not isinstance(exc, OSError)
+            else (f"{exc.filename}: {exc.strerror}" if exc is not None else "not run: an earlier file failed (--fail-fast)"),
+            "outputs": []}
 
 
 def format_summary(data: dict) -> str:

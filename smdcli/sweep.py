@@ -23,12 +23,14 @@ import numpy as np
 from smdcli import scenario as scenario_mod
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import Model, build, time_grid
+from smdcli.progress import bar
 from smdcli.scenario import GROUND, Scenario
 
 MAX_MEMBERS = 100_000
 _trapezoid = getattr(np, "trapezoid", None) or np.trapz
 MAX_STACKED = 40_000_000  # samples per stacked data set (members x time points x DOFs)
 METRICS = ("peak_displacement", "rms_displacement", "settling_time", "peak_ground_force")
+METRIC_UNITS = {"peak_displacement": "m", "rms_displacement": "m", "settling_time": "s", "peak_ground_force": "N"}
 QUANTITIES = ("displacement", "velocity", "acceleration", "force")
 DIRECTIONS = ("up", "down", "both")
 SETTLING_BAND = 0.02  # settling time: the last time the response leaves 2 % of its largest excursion
@@ -663,6 +665,7 @@ class FamilyResult:
     methods: list[str]
     how: str
     wall_time_s: float
+    stated_accuracy: np.ndarray | None = None  # (S,) each member's vouched error relative to its peaks
 
     @property
     def acceleration(self) -> np.ndarray:
@@ -680,7 +683,7 @@ def _solve_member(args: tuple[Scenario, str | None]) -> tuple:
     result = solve_scenario(sc, build(sc), time_grid(sc.time), Options(method=method))
     message = "ok" if result.success else f"{result.stats.message} (t = {result.t_failed:g} s)"
     return (result.time, result.displacement, result.velocity, result.acceleration, result.force,
-            result.success, message, result.stats.method)
+            result.success, message, result.stats.method, result.stats.stated_accuracy)
 
 
 _TICKS = None  # in a worker: where it reports finished steps of a long task (see run_pool's steps mode)
@@ -800,7 +803,7 @@ def solve_family(family: Family, method: str | None = None, workers: int | None 
         messages = ["ok" if ok else "the solution is not finite (NaN or inf): the member's numbers overflow "
                     "double precision" for ok in finite]
         return FamilyResult(grid, family.base.dofs, x, v, acc, force, finite, messages,
-                            ["exact"] * S, how, time.perf_counter() - start)
+                            ["exact"] * S, how, time.perf_counter() - start, _batched_stated(family, grid))
     workers = workers or default_workers()
     tasks = [(family.member_scenario(s), method) for s in range(S)]
     outcomes = run_pool(_solve_member, tasks, workers, progress)
@@ -815,7 +818,18 @@ def solve_family(family: Family, method: str | None = None, workers: int | None 
     return FamilyResult(grid if same_grid else times, family.base.dofs, stacks["displacement"],
                         stacks["velocity"], stacks["acceleration"], stacks["force"],
                         np.array([o[5] for o in outcomes]), [o[6] for o in outcomes], [o[7] for o in outcomes],
-                        how, time.perf_counter() - start)
+                        how, time.perf_counter() - start, np.array([o[8] for o in outcomes]))
+
+
+def _batched_stated(family: Family, grid: np.ndarray) -> np.ndarray:
+    """Rounding the batched exact recurrence vouches for, per member: 8 u N max(1, ||A h||_1) (see stated_rounding)."""
+    from smdcli.solvers.base import stated_rounding
+
+    h = float(grid[1] - grid[0]) if len(grid) > 1 else 0.0
+    stiffness = np.abs(np.linalg.solve(family.M, family.K)).sum(axis=1).max(axis=-1)
+    damping = 1 + np.abs(np.linalg.solve(family.M, family.C)).sum(axis=1).max(axis=-1)
+    norm = np.maximum(stiffness, damping) * h
+    return np.array([stated_rounding(len(grid), g) for g in norm])
 
 
 def ground_force(family: Family, result: FamilyResult) -> np.ndarray:
@@ -1165,10 +1179,8 @@ class SweepRun:
 
 
 def run_and_write(path, out, cli: dict[str, Any], workers: int | None = None, plots: bool = True,
-                  progress: Callable[[int], Any] | None = None) -> SweepRun:
+                  progress: bool = False) -> SweepRun:
     """Load, build the family, solve it, write `<stem>_sweep.h5` and the plots; input errors before any work."""
-    from contextlib import nullcontext
-
     from smdcli import io_hdf5
     from smdcli.simulate import output_folder
 
@@ -1187,7 +1199,10 @@ def run_and_write(path, out, cli: dict[str, Any], workers: int | None = None, pl
     run = SweepRun(family)
     measured = spec.frequency is not None and (not family.base.is_linear or spec.measure)
     total = len(family) * ((2 if spec.direction == "both" else 1) * len(spec.frequency) if measured else 1)
-    with (progress(total) if progress else nullcontext(None)) as tick:
+    label = "frequency response" if spec.frequency is not None else "sweeping"
+    shown = progress and total > 1
+    with bar(label, total, shown) as advance:
+        tick = advance if shown else None  # None: workers need not report over a queue
         if spec.frequency is not None:
             run.response = frequency_response(family, workers, tick)
         else:
@@ -1200,27 +1215,28 @@ def run_and_write(path, out, cli: dict[str, Any], workers: int | None = None, pl
         how = "simulated to steady state (shooting), one task per sweep direction"
     else:
         how = "exact receptance, all members at once"
-    h5 = out_dir / f"{sc.stem}_sweep.h5"
-    io_hdf5.write_sweep(h5, family, run.result, run.metrics, run.response, {"how": how, "wall_time_s": took})
-    run.outputs.append(h5)
-    if plots:
-        from smdcli import plots as plotting
+    with io_hdf5.together():  # the files appear together, or none of them
+        h5 = out_dir / f"{sc.stem}_sweep.h5"
+        io_hdf5.write_sweep(h5, family, run.result, run.metrics, run.response, {"how": how, "wall_time_s": took})
+        run.outputs.append(h5)
+        if plots:
+            from smdcli import plots as plotting
 
-        title = sc.title or sc.stem
-        figures = []
-        if run.response is not None:
-            figures.append(("frequency", plotting.frequency_figure(family, run.response, title, spec.frequency_unit,
-                                                                   spec.normalized)))
-        else:
-            figures.append((spec.quantity, plotting.overlay_figure(family, run.result, spec.quantity, title)))
-            if len(family) > 1 and spec.kind == "parameter":
-                name = "heatmap" if len(spec.parameters) == 2 else "metric"
-                figures.append((name, plotting.metric_figure(family, run.metrics[spec.metric], spec.metric,
-                                                             family.base.dofs, title)))
-        for name, figure in figures:
-            png = out_dir / f"{sc.stem}_sweep_{name}.png"
-            plotting.save_figure(figure, png)
-            run.outputs.append(png)
+            title = sc.title or sc.stem
+            figures = []
+            if run.response is not None:
+                figures.append(("frequency", plotting.frequency_figure(family, run.response, title, spec.frequency_unit,
+                                                                       spec.normalized)))
+            else:
+                figures.append((spec.quantity, plotting.overlay_figure(family, run.result, spec.quantity, title)))
+                if len(family) > 1 and spec.kind == "parameter":
+                    name = "heatmap" if len(spec.parameters) == 2 else "metric"
+                    figures.append((name, plotting.metric_figure(family, run.metrics[spec.metric], spec.metric,
+                                                                 family.base.dofs, title)))
+            for name, figure in figures:
+                png = out_dir / f"{sc.stem}_sweep_{name}.png"
+                plotting.save_figure(figure, png)
+                run.outputs.append(png)
     return run
 
 

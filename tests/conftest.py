@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -51,14 +53,30 @@ def force_block(kind: str, on: str = "m", **fields) -> str:
     return "\n".join(lines) + "\n"
 
 
+@dataclass
+class Ran:
+    """What a run of `smd` printed, and its exit code."""
+
+    exit_code: int
+    stdout: str
+    stderr: str
+    output: str  # stdout and stderr as interleaved on a terminal
+
+
 @pytest.fixture
 def cli():
-    """Run `smd ...` in-process; returns the click Result (stdout and stderr apart)."""
-    from smdcli.cli import app
+    """Run `smd ...` in-process exactly as the console script does (smdcli.cli.run), output captured."""
+    from smdcli.cli import run as smd
 
     runner = CliRunner()
 
     def run(*args):
-        return runner.invoke(app, [str(a) for a in args])
+        with runner.isolation() as streams:
+            code = smd([str(a) for a in args])
+            sys.stdout.flush()
+            sys.stderr.flush()
+            texts = [s.getvalue().decode() if s is not None else "" for s in streams]
+        stdout, stderr = texts[0], texts[1]
+        return Ran(code, stdout, stderr, texts[2] if len(texts) > 2 else stdout + stderr)
 
     return run

@@ -22,7 +22,7 @@ def test_phase_of_the_regimes_family_is_figure_9_3(cli, tmp_path):
 
     result = cli("phase", SCENARIOS / "one_dof_regimes_sweep.toml", "-o", tmp_path)
     assert result.exit_code == 0, result.output
-    drawn = curves(tmp_path / "one_dof_regimes_sweep_phase.h5")
+    drawn = curves(tmp_path / "one_dof_regimes_sweep_portrait.h5")
     assert [c[0] for c in drawn] == ["No damping: zeta = 0", "Underdamped: 0 < zeta < 1", "Overdamped: zeta > 1",
                                      "Critically damped: zeta = 1"]
     for (label, t, x, v), D in zip(drawn, (0.0, 2.0, 13.0, 10.0)):
@@ -30,7 +30,7 @@ def test_phase_of_the_regimes_family_is_figure_9_3(cli, tmp_path):
         h = 1e-6
         velocity = (book_smdsyssim(1.0, D, 25.0, 0.1, 0.0, t + h) - book_smdsyssim(1.0, D, 25.0, 0.1, 0.0, t - h)) / (2 * h)
         assert np.abs(v - velocity).max() < 1e-7
-    assert (tmp_path / "one_dof_regimes_sweep_phase.png").stat().st_size > 20_000
+    assert (tmp_path / "one_dof_regimes_sweep_portrait.png").stat().st_size > 20_000
 
 
 def test_poincare_points_converge_to_the_exact_steady_state(cli, tmp_path):
@@ -44,7 +44,7 @@ def test_poincare_points_converge_to_the_exact_steady_state(cli, tmp_path):
     w = force.omega
     H = 1 / (k - w**2 * m + 1j * w * c)
     theta = -np.angle(H)
-    with h5py.File(tmp_path / "one_dof_harmonic_phase.h5") as f:
+    with h5py.File(tmp_path / "one_dof_harmonic_portrait.h5") as f:
         x, v = f["poincare/000/displacement"][()], f["poincare/000/velocity"][()]
         period = f["poincare"].attrs["period_s"]
     assert period == pytest.approx(2 * math.pi / w)
@@ -60,11 +60,11 @@ def test_phase_overlays_scenarios_and_initial_conditions(cli, tmp_path):
     result = cli("phase", SCENARIOS / "three_dof_forced.toml", SCENARIOS / "three_dof_free.toml", "--dof", "m1,m3",
                  "-o", tmp_path)
     assert result.exit_code == 0, result.output
-    assert len(curves(tmp_path / "three_dof_forced_and_1_more_phase.h5")) == 4
+    assert len(curves(tmp_path / "three_dof_forced_and_1_more_portrait.h5")) == 4
     result = cli("phase", SCENARIOS / "one_dof_underdamped.toml", "--ic", "x0=0.1,v0=0", "--ic", "x0=0,v0=1",
                  "-o", tmp_path)
     assert result.exit_code == 0, result.output
-    drawn = curves(tmp_path / "one_dof_underdamped_phase.h5")
+    drawn = curves(tmp_path / "one_dof_underdamped_portrait.h5")
     assert [(c[2][0], c[3][0]) for c in drawn] == [(0.1, 0.0), (0.0, 1.0)]
 
 

@@ -52,6 +52,28 @@ class Solver:
         raise NotImplementedError
 
 
+UNIT_ROUNDOFF = 2.0**-53
+
+
+def stated_rounding(operations: int, growth: float = 1.0) -> float:
+    """The error, relative to the peak, that rounding can leave after `operations` dependent steps, each
+    amplifying it by up to `growth` (the norm a matrix exponential was squared from): 8 u N growth."""
+    return 8 * UNIT_ROUNDOFF * max(operations, 1) * max(growth, 1.0)
+
+
+def stated_tolerance(rtol: float | None, atol: float | None, peak: float) -> float:
+    """What an adaptive method's tolerances let the global error reach, relative to the peak: 10 rtol + atol / peak.
+
+    Local error control does not bound the global error; ten times the tolerance is the margin measured on
+    the bundled scenes (tests/test_golden.py checks every golden against a tighter method)."""
+    return 10 * (rtol or 0.0) + (atol or 0.0) / peak if peak > 0 else 10 * (rtol or 0.0)
+
+
+def plural(count: int, noun: str) -> str:
+    """'1 force segment', '3 force segments'."""
+    return f"{count} {noun}{'' if count == 1 else 's'}"
+
+
 def make_result(model: Model, grid: np.ndarray, x: np.ndarray, v: np.ndarray, stats: SolverStats,
                 t_failed: float | None = None, notes: tuple[str, ...] = ()) -> Result:
     """A Result from displacement and velocity on the grid; force and acceleration derived."""

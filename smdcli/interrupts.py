@@ -1,0 +1,78 @@
+"""Interrupts (Ctrl-C, SIGTERM) that are never lost.
+
+A signal is recorded before it is raised as KeyboardInterrupt, so even when
+the exception is swallowed (Python ignores exceptions raised inside weakref
+callbacks and __del__, which h5py and numpy run), the record stays: a file is
+only renamed onto its final name while no signal has been received, with
+signals held for the check and the rename, and the process's exit code is
+decided the same way. Imports nothing from smd.
+"""
+
+from __future__ import annotations
+
+import signal
+from contextlib import contextmanager
+
+SIGNALS = frozenset({signal.SIGINT, signal.SIGTERM})
+_received: int | None = None
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is, so that files being written are removed on the way out."""
+
+
+def _handler(signum, frame):
+    global _received
+    _received = _received or signum
+    raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+
+def install() -> None:
+    """Record and raise SIGINT and SIGTERM (call once, from the main thread)."""
+    import sys
+
+    for signum in SIGNALS:
+        signal.signal(signum, _handler)
+    default = sys.unraisablehook
+
+    def unraisable(info) -> None:
+        # An interrupt raised inside a weakref callback or __del__ cannot propagate; it is recorded, so no
+        # "Exception ignored" traceback: the run still stops at the next check with 130/143.
+        if not isinstance(info.exc_value, KeyboardInterrupt):
+            default(info)
+
+    sys.unraisablehook = unraisable
+
+
+def received() -> int | None:
+    """The first signal received, recorded even if its exception was swallowed; a held one counts too."""
+    if _received is None and hasattr(signal, "sigpending"):
+        held = signal.sigpending() & SIGNALS
+        if held:
+            return min(held)
+    return _received
+
+
+def exit_code(signum: int) -> int:
+    """What a shell expects of a process stopped by this signal: 130 for SIGINT, 143 for SIGTERM."""
+    return 128 + int(signum)
+
+
+@contextmanager
+def held():
+    """Hold SIGINT and SIGTERM in the block: one that arrives waits until the block ends, then raises."""
+    if not hasattr(signal, "pthread_sigmask"):  # Windows: no signal masks; the check in commit still applies
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+def raise_if_received() -> None:
+    """Raise the interrupt a received signal stands for (KeyboardInterrupt or Terminated)."""
+    signum = received()
+    if signum is not None:
+        raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()

@@ -1,0 +1,47 @@
+"""Progress of long commands: one Rich bar on stderr, shown on a terminal only.
+
+Every long command (simulate batches, sweep, compare-solvers, frequency
+responses, phase, animate) reports through `bar(label, total)`, a context
+manager yielding `advance(count=1, note=None)`. The library calls `advance`
+whatever the output is; the CLI decides with `wanted(...)` whether a bar is
+drawn. Imports nothing from smd.
+"""
+
+from __future__ import annotations
+
+import sys
+from contextlib import contextmanager
+from typing import Callable, Iterator
+
+Advance = Callable[..., None]
+
+
+def silent(count: int = 1, note: str | None = None) -> None:
+    """An advance that draws nothing (piped output, --quiet, --json, library use)."""
+
+
+def wanted(quiet: bool = False, as_json: bool = False) -> bool:
+    """Whether a bar should be drawn: stderr is a terminal and the user asked for text."""
+    return not (quiet or as_json) and sys.stderr.isatty()
+
+
+@contextmanager
+def bar(label: str, total: int, enabled: bool = True) -> Iterator[Advance]:
+    """A bar of `total` steps labelled `label`; yields advance(count=1, note=None), where `note` names the work now running."""
+    if not enabled:
+        yield silent
+        return
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    console = Console(file=sys.stderr)
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+               TextColumn("eta"), TimeRemainingColumn(), TextColumn("{task.fields[note]}", style="dim"))
+    with Progress(*columns, console=console, transient=False, refresh_per_second=8) as progress:
+        task = progress.add_task(label, total=max(total, 1), note="")
+
+        def advance(count: int = 1, note: str | None = None) -> None:
+            fields = {} if note is None else {"note": note}
+            progress.update(task, advance=count, **fields)
+
+        yield advance
