@@ -15,6 +15,7 @@ from smdcli import __version__, interrupts, provenance
 from smdcli.model import Model
 from smdcli.result import Result
 from smdcli.scenario import Scenario
+from smdcli.solvers.base import acceleration_accuracy
 
 SCHEMA_VERSION = 1
 
@@ -137,8 +138,12 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
             ds.attrs["units"] = units
             ds.dims[0].attach_scale(time)
             ds.dims[1].attach_scale(dof)
-            if name != "force":  # the applied force is evaluated, not solved for
+            if name in ("displacement", "velocity"):  # the applied force is evaluated, not solved for
                 ds.attrs["stated_accuracy"] = result.stats.stated_accuracy
+            elif name == "acceleration":
+                ds.attrs["stated_accuracy"] = acceleration_accuracy(model.M, model.C, model.K,
+                                                                    result.stats.stated_accuracy, result.displacement,
+                                                                    result.velocity, result.acceleration, result.force)
 
         solver = f.create_group("solver")
         for key, value in result.stats.as_attrs().items():
@@ -217,12 +222,12 @@ def write_sweep(path: Path, family, result=None, metrics=None, response=None, ru
             for key, value in run.items():
                 group.attrs[key] = value
         if result is not None:
-            _write_time_family(f, result, metrics, member, dof)
+            _write_time_family(f, family, result, metrics, member, dof)
         if response is not None:
             _write_response(f, response, member, dof, family, spec.normalized)
 
 
-def _write_time_family(f, result, metrics, member, dof) -> None:
+def _write_time_family(f, family, result, metrics, member, dof) -> None:
     time = f.create_dataset("time", data=result.time)
     time.attrs["units"] = "s"
     if result.time.ndim == 1:
@@ -230,8 +235,14 @@ def _write_time_family(f, result, metrics, member, dof) -> None:
     for name, units in (("displacement", "m"), ("velocity", "m/s"), ("acceleration", "m/s^2"), ("force", "N")):
         ds = f.create_dataset(name, data=np.ascontiguousarray(getattr(result, name)))
         ds.attrs["units"] = units
-        if name != "force" and result.stated_accuracy is not None:  # the worst member's, relative to the peak
-            ds.attrs["stated_accuracy"] = float(np.nanmax(result.stated_accuracy, initial=0.0))
+        if result.stated_accuracy is not None and name != "force":  # the worst member's, relative to the peak
+            stated = float(np.nanmax(result.stated_accuracy, initial=0.0))
+            if name == "acceleration":
+                stated = max(acceleration_accuracy(family.M[s], family.C[s], family.K[s], result.stated_accuracy[s],
+                                                   result.displacement[s], result.velocity[s],
+                                                   result.acceleration[s], result.force[s])
+                             for s in range(len(family)))
+            ds.attrs["stated_accuracy"] = stated
         ds.dims[0].attach_scale(member)
         if result.time.ndim == 1:
             ds.dims[1].attach_scale(time)

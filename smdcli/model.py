@@ -81,6 +81,7 @@ class Model:
     signals: tuple[Signal, ...] = ()
     force_dofs: tuple[int, ...] = ()  # DOF index each signal acts on
     force_paths: tuple[str, ...] = ()
+    force_types: tuple[str, ...] = ()  # each force's `type` as the scenario names it (sine, fourier_square, ...)
     cubic: Incidence | None = None  # force k3 d^3
     quadratic: Incidence | None = None  # force c |d'| d'
     source: str = "<model>"
@@ -309,6 +310,7 @@ def build(scenario: Scenario) -> Model:
         dofs=dofs, M=M, C=C, K=K, x0=x0, v0=v0, signals=signals,
         force_dofs=tuple(index[f.on] for f in scenario.forces),
         force_paths=tuple(f.path for f in scenario.forces),
+        force_types=tuple(f.type for f in scenario.forces),
         cubic=cubic, quadratic=quadratic, source=scenario.path,
         element_form=scenario.system is None,
     )

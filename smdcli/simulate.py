@@ -215,8 +215,8 @@ def info(path: str | Path) -> dict:
         "form": "element" if model.element_form else "matrix",
         "M": model.M.tolist(), "C": model.C.tolist(), "K": model.K.tolist(),
         "linear": model.is_linear, "nonlinear_elements": list(model.nonlinear_paths),
-        "forces": [f"{p} on {model.dofs[d]}: {type(s).__name__.lower()}"
-                   for p, s, d in zip(model.force_paths, model.signals, model.force_dofs)],
+        "forces": [f"{p} on {model.dofs[d]}: {kind}"
+                   for p, kind, d in zip(model.force_paths, model.force_types, model.force_dofs)],
         "modes": [
             {"natural_frequency_rad_s": float(w), "natural_frequency_hz": float(w / (2 * math.pi)),
              "damping_ratio": float(z), "regime": r}

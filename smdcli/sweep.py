@@ -1251,9 +1251,11 @@ def summary(run: SweepRun) -> dict:
         data["failed"] = [family.labels[s] + ": " + run.result.messages[s]
                           for s in np.flatnonzero(~run.result.success)]
         metric = run.metrics[family.spec.metric]
-        data["metric"] = {"name": family.spec.metric,
+        data["metric"] = {"name": family.spec.metric, "units": METRIC_UNITS[family.spec.metric],
                           "per_member": {family.labels[s]: dict(zip(family.base.dofs, map(float, metric[s])))
                                          for s in range(min(len(family), 50))}}
+        if family.spec.metric == "settling_time":
+            data["metric"]["null_means"] = "not settled within the run"
     if run.response is not None:
         r = run.response
         data["how"] = "exact receptance" if r.exact else "measured by simulation to steady state"
@@ -1276,7 +1278,10 @@ def format_summary(data: dict) -> str:
     if "metric" in data:
         name = data["metric"]["name"]
         for label, values in list(data["metric"]["per_member"].items())[:12]:
-            cells = ", ".join(f"{dof} {value:.4g}" for dof, value in values.items())
+            unit = METRIC_UNITS[name]
+            cells = ", ".join(f"{dof} = {value:.4g} {unit}" if value is not None and math.isfinite(value)
+                              else f"{dof} = {'not settled' if name == 'settling_time' else 'n/a'}"
+                              for dof, value in values.items())
             lines.append(f"  {label}: {name} {cells}")
         if data["members"] > 12:
             lines.append(f"  ... {data['members'] - 12} more in the HDF5 file")

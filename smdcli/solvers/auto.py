@@ -15,9 +15,18 @@ from smdcli.solvers.exact import Exact
 from smdcli.solvers.ivp import DOP853, Radau, StiffnessDetected, StiffnessMonitor
 
 
-def _force_kinds(model: Model) -> str:
-    kinds = sorted({type(s).__name__.lower() for s in model.signals})
-    return ", ".join(kinds)
+def _force_kinds(model: Model, exact: bool | None = None) -> str:
+    """The forces' types as the scenario names them ("sine and step"); only those (not) exactly integrable if asked."""
+    kinds = sorted({kind for kind, s in zip(model.force_types, model.signals)
+                    if exact is None or (s.exo() is not None) == exact})
+    return " and ".join(kinds) if len(kinds) < 3 else ", ".join(kinds[:-1]) + " and " + kinds[-1]
+
+
+def _unheld(model: Model) -> str:
+    """The forces without an exact integral, by path and type: 'force[0] (chirp)'."""
+    held = [f"{path} ({kind})" for path, kind, s in zip(model.force_paths, model.force_types, model.signals)
+            if s.exo() is None]
+    return ", ".join(held)
 
 
 class Auto(Solver):
@@ -64,8 +73,8 @@ class Auto(Solver):
                     if model.is_forced else "free response"
                 return Exact(), f"linear time-invariant, {forced}: matrix exponential, exact to rounding{stiff}"
             if model.is_stiff:
-                return Radau(), (f"linear but the {_force_kinds(model)} force has no exact integral, and stiff "
+                return Radau(), (f"linear, but {_unheld(model)} has no exact integral, and stiff "
                                  f"(stiffness ratio {model.stiffness_ratio:.3g}): implicit Radau at the scenario's tolerances")
-            return DOP853(), (f"linear but the {_force_kinds(model)} force has no exact integral; not stiff "
+            return DOP853(), (f"linear, but {_unheld(model)} has no exact integral; not stiff "
                               f"(stiffness ratio {model.stiffness_ratio:.3g}): DOP853 at the scenario's tolerances")
         return None, ""
