@@ -175,7 +175,10 @@ def _short(value: int) -> str:
     """An integer as text, or its size when it is long (str() of a huge int is slow, and refused past 4300 digits)."""
     if abs(value) < 10**20:
         return str(value)
-    return f"an integer of about {int(abs(value).bit_length() * 0.30103) + 1} digits"
+    try:
+        return f"an integer of {len(str(abs(value)))} digits"
+    except ValueError:  # past Python's 4300-digit limit for int to str
+        return f"an integer of about {int(abs(value).bit_length() * 0.30103) + 1} digits"
 
 
 def _control_character(text: str, multiline: bool) -> str | None:
