@@ -194,6 +194,8 @@ def write_sweep(path: Path, family, result=None, metrics=None, response=None, ru
     """Write a sweep: members on a leading axis (a dimension scale), the swept values, stacked results or a frequency response."""
     import h5py
 
+    from smdcli.sweep import parameter_units
+
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
         write_header(f, family.scenario, "sweep")
         spec = family.spec
@@ -205,9 +207,19 @@ def write_sweep(path: Path, family, result=None, metrics=None, response=None, ru
         member.make_scale("member")
         _strings(f, "label", family.labels).dims[0].attach_scale(member)
         params = f.create_group("parameters")
+        grid = f.create_group("grid") if spec.parameters else None
+        if grid is not None:
+            grid.attrs["grid_shape"] = list(family.shape)
+            grid.attrs["order"] = "C: the last parameter varies fastest along member"
         for i, name in enumerate(spec.parameters):
             ds = params.create_dataset(name, data=family.values[:, i])
+            ds.attrs["units"] = parameter_units(name)
             ds.dims[0].attach_scale(member)
+            # The grid's own axis: member reshapes to grid_shape, and these are its coordinates.
+            axis = grid.create_dataset(name, data=np.asarray(spec.values[i], dtype=float))
+            axis.attrs["units"] = parameter_units(name)
+            axis.attrs["axis"] = i
+            axis.make_scale(name)
         dof = _strings(f, "dof", family.base.dofs)
         dof.make_scale("dof")
         initial = f.create_group("initial_conditions")

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from smdcli.result import Result
+from smdcli.sweep import parameter_label
 
 
 def _figure(**kwargs):
@@ -39,44 +40,127 @@ def envelope(t: np.ndarray, y: np.ndarray, max_points: int = MAX_DRAWN) -> tuple
     return t[idx], y[idx]
 
 
-def _title(title: str, result: Result) -> str:
-    return f"{title}\n{result.stats.method}: {result.stats.reason}" if len(result.stats.reason) < 90 else \
-        f"{title}\n{result.stats.method}"
+def _band(t: np.ndarray, y: np.ndarray, max_points: int = MAX_DRAWN):
+    """For a series that oscillates faster than the axes can draw (a 120 rad/s force over 120 s): per-bucket
+    (times, low, high, mean), so the plot shows the band it fills and the motion it rides on; None otherwise."""
+    n = len(t)
+    if n <= max_points:
+        return None
+    dy = np.diff(y)
+    turns = np.count_nonzero(np.sign(dy[1:]) * np.sign(dy[:-1]) < 0)
+    buckets = max_points // 2
+    if turns < 2 * buckets:  # fewer than one oscillation per bucket: a line shows it
+        return None
+    edges = np.linspace(0, n, buckets + 1).astype(int)
+    low = np.minimum.reduceat(y, edges[:-1])
+    high = np.maximum.reduceat(y, edges[:-1])
+    # The running mean over two buckets, twice (a triangular window): a plain bucket mean of an oscillation
+    # that does not fit a bucket a whole number of times aliases into wiggles that are not in the motion.
+    width = max(1, n // buckets)
+    mean = _running_mean(_running_mean(y, width), width)
+    centres = np.minimum((edges[:-1] + edges[1:]) // 2, n - 1)
+    return t[edges[:-1]], low, high, mean[centres]
+
+
+def _running_mean(y: np.ndarray, width: int) -> np.ndarray:
+    """Mean of y over a centred window of `width` samples (shorter at the ends)."""
+    total = np.concatenate([[0.0], np.cumsum(y)])
+    lo = np.clip(np.arange(len(y)) - width // 2, 0, len(y))
+    hi = np.clip(lo + width, 0, len(y))
+    return (total[hi] - total[lo]) / (hi - lo)
+
+
+def _fast_window(result: Result) -> tuple[float, float] | None:
+    """A window of about five periods of the fastest oscillation at the end of the run, if one is too fast to see."""
+    t = result.time
+    if len(t) <= MAX_DRAWN:
+        return None
+    turns = 0
+    for data in (result.displacement, result.acceleration):
+        dy = np.diff(data, axis=0)
+        turns = max(turns, int((np.sign(dy[1:]) * np.sign(dy[:-1]) < 0).sum(axis=0).max()))
+    if turns < MAX_DRAWN // 2:
+        return None
+    width = min(10 * (t[-1] - t[0]) / turns, (t[-1] - t[0]) / 10)  # two turns a period: five periods
+    return t[-1] - width, t[-1]
+
+
+FORCE_STYLES = ("-", "--", ":", "-.")
 
 
 def response_figure(result: Result, title: str):
-    """Displacement, velocity and acceleration against time, one line per DOF; force on a second axis."""
-    fig = _figure(figsize=(9, 8.5))
-    axes = fig.subplots(3, 1, sharex=True)
-    fig.subplots_adjust(left=0.1, right=0.88, top=0.88, bottom=0.07, hspace=0.12)
-    quantities = (("displacement", "Displacement x [m]"), ("velocity", "Velocity v [m/s]"),
-                  ("acceleration", "Acceleration a [m/s²]"))
-    for ax, (name, label) in zip(axes, quantities):
+    """Applied forces, then displacement, velocity and acceleration against time, one colour per DOF.
+
+    An oscillation too fast to draw over the whole run is shown as a faint band (its range) with its running
+    mean, and a zoomed inset shows its last few periods."""
+    forced = np.any(result.force != 0)
+    rows = (("force", "Force F [N]"),) if forced else ()
+    rows += (("displacement", "Displacement x [m]"), ("velocity", "Velocity v [m/s]"),
+             ("acceleration", "Acceleration a [m/s²]"))
+    heights = [0.55 if name == "force" else 1.0 for name, _ in rows]
+    fig = _figure(figsize=(9, 2.6 * sum(heights) + 1.2))
+    axes = fig.subplots(len(rows), 1, sharex=True, gridspec_kw={"height_ratios": heights})
+    fig.subplots_adjust(left=0.1, right=0.97, top=0.9, bottom=0.07, hspace=0.12)
+    window = _fast_window(result)
+    banded = set()
+    for ax, (name, label) in zip(axes, rows):
         data = getattr(result, name)
         for j, dof in enumerate(result.dofs):
-            ax.plot(*envelope(result.time, data[:, j]), lw=1.1, label=dof, color=f"C{j}")
+            if name == "force":
+                if not np.any(data[:, j] != 0):
+                    continue
+                style = FORCE_STYLES[len(ax.get_lines()) % len(FORCE_STYLES)]
+                band = _band(result.time, data[:, j])
+                if band is not None:
+                    ax.fill_between(band[0], band[1], band[2], color=f"C{j}", alpha=0.25, lw=0,
+                                    label=f"F on {dof} (range of a fast oscillation)")
+                else:
+                    ax.plot(*envelope(result.time, data[:, j]), ls=style, lw=1.2, color=f"C{j}", label=f"F on {dof}")
+                continue
+            band = _band(result.time, data[:, j])
+            if band is None:
+                ax.plot(*envelope(result.time, data[:, j]), lw=1.1, color=f"C{j}", label=dof)
+            else:
+                banded.add(dof)
+                ax.fill_between(band[0], band[1], band[2], color=f"C{j}", alpha=0.22, lw=0)
+                ax.plot(band[0], band[3], lw=1.1, color=f"C{j}", label=dof)
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.4)
-    forced = np.any(result.force != 0)
-    if forced:
-        twin = axes[0].twinx()
-        for j, dof in enumerate(result.dofs):
-            if np.any(result.force[:, j] != 0):
-                twin.plot(*envelope(result.time, result.force[:, j]), lw=0.7, ls="--", color=f"C{j}", alpha=0.3,
-                          label=f"F on {dof}")
-        twin.set_ylabel("Applied force F [N] (dashed, faint)")
-        # The force axis goes behind the displacements, which are what the panel is about.
-        axes[0].set_zorder(twin.get_zorder() + 1)
-        axes[0].patch.set_visible(False)
-        lines = axes[0].get_lines() + twin.get_lines()
-    else:
-        lines = axes[0].get_lines()
-    axes[0].legend(lines, [ln.get_label() for ln in lines], loc="lower left", bbox_to_anchor=(0.0, 1.0),
-                   fontsize=8, ncol=min(len(lines), 6), frameon=False)
+        if name == "force":
+            ax.legend(loc="upper right", fontsize=8, framealpha=0.85)
+        if window is not None and name == "acceleration":
+            _zoom_inset(ax, result, data, window)
+    motion = axes[1] if forced else axes[0]
+    handles, labels = motion.get_legend_handles_labels()
+    if banded:
+        from matplotlib.patches import Patch
+
+        handles.append(Patch(color="0.6", alpha=0.35, lw=0))
+        labels.append("shaded: range of an oscillation too fast to draw (line: its running mean)")
+    motion.legend(handles, labels, loc="upper right", fontsize=8, framealpha=0.85, ncol=1)
     axes[-1].set_xlabel("Time t [s]")
     axes[0].set_xlim(result.time[0], result.time[-1])
-    fig.suptitle(_title(title, result), fontsize=10)
+    fig.suptitle(title, fontsize=11)
     return fig
+
+
+def _zoom_inset(ax, result: Result, data: np.ndarray, window: tuple[float, float]) -> None:
+    """The last few periods of the fastest oscillation, drawn in full, in an inset of `ax`."""
+    inset = ax.inset_axes((0.56, 0.56, 0.42, 0.4))
+    keep = (result.time >= window[0]) & (result.time <= window[1])
+    for j, dof in enumerate(result.dofs):
+        inset.plot(result.time[keep], data[keep, j], lw=0.9, color=f"C{j}")
+    from matplotlib.ticker import MaxNLocator
+
+    inset.set_xlim(*window)
+    inset.tick_params(labelsize=7)
+    inset.xaxis.set_major_locator(MaxNLocator(3))
+    inset.ticklabel_format(axis="x", useOffset=False)
+    inset.yaxis.set_major_locator(MaxNLocator(3))
+    inset.text(0.02, 0.96, f"zoom on the last {window[1] - window[0]:.3g} s, every sample", transform=inset.transAxes,
+               fontsize=7, va="top", bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8, "pad": 1})
+    inset.grid(True, alpha=0.3)
+    inset.set_facecolor("white")
 
 
 def phase_figure(result: Result, title: str):
@@ -158,8 +242,9 @@ def stability_figure(comparison, title: str, limits: dict[str, float]):
         limit = limits.get(m, math.inf)
         if 0 < limit < math.inf:
             ax.axvline(limit, color=style["color"], ls=":", lw=1.5)
-            ax.text(limit, 0.02, f" {m} limit {limit:.3g}", transform=ax.get_xaxis_transform(), rotation=90,
-                    va="bottom", ha="right", fontsize=8, color=style["color"])
+            # In the band above the data, where no run is drawn: the label never covers a curve.
+            ax.text(limit, 0.985, f"{m} limit {limit:.3g} ", transform=ax.get_xaxis_transform(), rotation=90,
+                    va="top", ha="right", fontsize=7, color=style["color"])
     notes = [f"{m}: {'unconditionally stable' if limits.get(m, math.inf) == math.inf else 'unstable at any h'}"
              for m in dict.fromkeys(r.method for r in runs) if limits.get(m, math.inf) in (0.0, math.inf)]
     ax.set_xscale("log")
@@ -168,10 +253,11 @@ def stability_figure(comparison, title: str, limits: dict[str, float]):
     ax.set_ylim(min(0.1, min(grown, default=0.1) / 2), 1e10)
     ax.axhspan(1e9, 1e10, color="0.9", zorder=0)
     ax.axhline(1.0, color="k", lw=0.8, alpha=0.5)
-    ax.text(0.99, 1.1e9, "band: diverged or failed (x)", transform=ax.get_yaxis_transform(), ha="right",
+    ax.set_ylim(top=1e13)  # room above the band for the limits' labels
+    ax.text(0.01, 1.1e9, "band: diverged or failed (x)", transform=ax.get_yaxis_transform(), ha="left",
             va="bottom", fontsize=7, color="0.35")
-    ax.set_xlabel(f"Step times highest natural frequency, h * omega_max  (omega_max = {comparison.omega_max:.4g} rad/s)")
-    ax.set_ylabel("Growth: peak |x| of the run / peak |x| of the reference")
+    ax.set_xlabel(f"Step times highest natural frequency, h·ω_max [1]  (ω_max = {comparison.omega_max:.4g} rad/s)")
+    ax.set_ylabel("Growth: peak |x| of the run / peak |x| of the reference [1]")
     ax.grid(True, which="major", alpha=0.4)
     handles = ax.get_legend_handles_labels()
     ax.legend(*handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, frameon=False,
@@ -242,7 +328,7 @@ def _colorbar(fig, axes, cmap, family):
     values = family.values[:, 0] if family.values.shape[1] else np.arange(len(family))
     mappable = ScalarMappable(norm=Normalize(values.min(), values.max()), cmap=cmap)
     bar = fig.colorbar(mappable, ax=list(axes), fraction=0.04, pad=0.02)
-    bar.set_label(family.spec.parameters[0] if family.spec.parameters else "member")
+    bar.set_label(parameter_label(family.spec.parameters[0]) if family.spec.parameters else "member")
 
 
 def metric_figure(family, values: np.ndarray, metric: str, dofs, title: str):
@@ -259,8 +345,8 @@ def metric_figure(family, values: np.ndarray, metric: str, dofs, title: str):
             grid = values[:, j].reshape(len(a), len(b)).T
             mesh = ax.pcolormesh(a, b, grid, shading="nearest", cmap="viridis")
             fig.colorbar(mesh, ax=ax).set_label(METRIC_LABELS[metric])
-            ax.set_xlabel(params[0])
-            ax.set_ylabel(params[1])
+            ax.set_xlabel(parameter_label(params[0]))
+            ax.set_ylabel(parameter_label(params[1]))
             ax.set_title(str(dofs[j]), fontsize=9)
         for ax in axes[n:]:
             ax.set_visible(False)
@@ -276,13 +362,14 @@ def metric_figure(family, values: np.ndarray, metric: str, dofs, title: str):
             ax.plot(x[order], values[order, j], "o-", ms=4, lw=1.2, label=str(dofs[j]), color=f"C{j}")
             missing = ~np.isfinite(values[:, j])
             if missing.any():
-                ax.plot(x[missing], np.full(missing.sum(), top), "x", ms=8, mew=2, color=f"C{j}",
-                        label=f"{dofs[j]}: no value (not settled by the end)" if metric == "settling_time" else
-                        f"{dofs[j]}: no value")
-        ax.set_xlabel(params[0] if params else "member")
+                ax.plot(x[missing], np.full(missing.sum(), top), "x", ms=8, mew=2, color=f"C{j}")
+        if (~np.isfinite(values)).any():  # its own legend entry: not a value, a verdict
+            ax.plot([], [], "x", ms=8, mew=2, color="0.3",
+                    label="not settled by the end of the run" if metric == "settling_time" else "no value")
+        ax.set_xlabel(parameter_label(params[0]) if params else "member")
         ax.set_ylabel(METRIC_LABELS[metric])
         ax.grid(True, alpha=0.4)
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=8, loc="best")
     fig.suptitle(f"{title}\n{METRIC_LABELS[metric]} of every run", fontsize=10)
     return fig
 
@@ -297,12 +384,14 @@ def frequency_figure(family, response, title: str, unit: str = "rad/s", normaliz
     colors, cmap = _member_colors(S * n if S == 1 else S)
     fig = _figure(figsize=(9.5, 8))
     ax_a, ax_p = fig.subplots(2, 1, sharex=True)
-    fig.subplots_adjust(left=0.1, right=0.78, top=0.88, bottom=0.08, hspace=0.08)
+    fig.subplots_adjust(left=0.1, right=0.95 if cmap is None else 0.86, top=0.88, bottom=0.08, hspace=0.08)
     k = family.K[:, 0, 0] if normalized else np.ones(S)  # amplitude scale: X K / F0, or m/N
     # the x axis per member: r = omega / omega_n, or the frequency in the unit it was given in
     per = np.sqrt(family.K[:, 0, 0] / family.M[:, 0, 0]) if normalized else \
         np.full(S, 2 * math.pi if unit == "Hz" else 1.0)
     markers = {"up": "^", "down": "v"}
+    # A measured response's two sweeps in colours of their own, so the branches of a jump tell apart.
+    direction_colors = {"up": "tab:red", "down": "tab:blue"}
     for s in range(S):
         for j in range(n):
             color = colors[s] if S > 1 else colors[j]
@@ -318,9 +407,10 @@ def frequency_figure(family, response, title: str, unit: str = "rad/s", normaliz
                     tag = f"simulated, sweep {direction}" if s == 0 and j == 0 else None
                 else:
                     tag = f"sweep {direction}" + (f": {label}" if S > 1 or n > 1 else "")
-                ax_a.plot(x, amp[s, :, j] * k[s], markers[direction], color=color, ms=4, mfc="none",
+                shade = direction_colors[direction] if S * n == 1 else color
+                ax_a.plot(x, amp[s, :, j] * k[s], markers[direction], color=shade, ms=4, mfc="none",
                           ls="-" if not response.exact else "none", lw=0.8, label=tag)
-                ax_p.plot(x, lag[s, :, j], markers[direction], color=color, ms=4, mfc="none",
+                ax_p.plot(x, lag[s, :, j], markers[direction], color=shade, ms=4, mfc="none",
                           ls="-" if not response.exact else "none", lw=0.8)
     exact_peaks = [p for p in response.peaks if "direction" not in p]  # measured maxima are listed, not marked
     for peak in exact_peaks:
@@ -336,27 +426,27 @@ def frequency_figure(family, response, title: str, unit: str = "rad/s", normaliz
         ax_a.plot([], [], ":", color="0.5", label="undamped: unbounded")
     ax_a.set_yscale("log")
     if normalized:
-        ax_a.set_ylabel("Normalized amplitude X K / F0")
-        ax_p.set_xlabel("Frequency ratio r = omega / omega_n")
+        ax_a.set_ylabel("Normalized amplitude X K / F₀ [1]")
+        ax_p.set_xlabel("Frequency ratio r = ω / ωₙ [1]")
     else:
         ax_a.set_ylabel(f"Amplitude per unit force on {response.input_dof} [m/N]")
-        ax_p.set_xlabel(f"Forcing frequency [{unit}]")
+        ax_p.set_xlabel(f"Forcing frequency {'f' if unit == 'Hz' else 'ω'} [{unit}]")
     finite = response.amplitude[np.isfinite(response.amplitude) & (response.amplitude > 0)]
     measured = [a[np.isfinite(a) & (a > 0)] for a, _ in response.measured.values()]
     pool = np.concatenate([finite] + measured) * k.max()
     if pool.size:
         ax_a.set_ylim(max(pool.min() / 2, pool.max() * 1e-6), pool.max() * 2)
-    ax_p.set_ylabel("Phase lag theta [rad]")
+    ax_p.set_ylabel("Phase lag θ [rad]")
     ticks = 5 if np.nanmax(response.phase, initial=0) > 3.3 else 3  # to 2 pi where a lag passes pi
     ax_p.set_yticks([i * math.pi / 2 for i in range(ticks)])
     ax_p.set_yticklabels(["0", "π/2", "π", "3π/2", "2π"][:ticks])
     for ax in (ax_a, ax_p):
         ax.grid(True, which="both", alpha=0.35)
     if cmap is None:
-        ax_a.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+        ax_a.legend(loc="upper right", fontsize=8, framealpha=0.85)
     else:
         _colorbar(fig, [ax_a, ax_p], cmap, family)
-    kind = "exact receptance (K - w²M + iwC)⁻¹" if response.exact else "measured by simulation to steady state"
+    kind = "exact receptance (K - ω²M + iωC)⁻¹" if response.exact else "measured by simulation to steady state"
     extra = f"; measured vs exact: {response.difference:.1e} of the peak" if response.difference is not None else ""
     fig.suptitle(f"{title}\nfrequency response, {kind}{extra}", fontsize=10)
     return fig

@@ -30,6 +30,25 @@ MAX_MEMBERS = 100_000
 _trapezoid = getattr(np, "trapezoid", None) or np.trapz
 MAX_STACKED = 40_000_000  # samples per stacked data set (members x time points x DOFs)
 METRICS = ("peak_displacement", "rms_displacement", "settling_time", "peak_ground_force")
+_FIELD_UNITS = {"k": "N/m", "k3": "N/m^3", "c": "N s/m", "m": "kg", "x0": "m", "v0": "m/s", "omega": "rad/s",
+                "frequency": "Hz", "amplitude": "N", "t0": "s", "duration": "s", "period": "s", "t1": "s", "f0": "Hz",
+                "f1": "Hz", "phase": "rad", "duty": "1", "end": "s", "start": "s", "step": "s", "zeta": "1",
+                "M": "kg", "C": "N s/m", "K": "N/m"}
+
+
+def parameter_units(path: str) -> str:
+    """The units of a swept field by its path: 'spring[0].k' -> 'N/m', 'system.K[0][1]' -> 'N/m', 'zeta' -> '1'."""
+    field = re.split(r"[.\[]", path.split(".")[-1])[0] if "." in path else path
+    return _FIELD_UNITS.get(field, "")
+
+
+def parameter_label(path: str) -> str:
+    """An axis label for a swept field: 'damper[0].c [N s/m]'; Greek letters for zeta and omega."""
+    units = parameter_units(path)
+    shown = {"zeta": "ζ (damping ratio)"}.get(path, path.replace(".omega", ".ω"))
+    return f"{shown} [{units}]" if units and units != "1" else shown
+
+
 METRIC_UNITS = {"peak_displacement": "m", "rms_displacement": "m", "settling_time": "s", "peak_ground_force": "N"}
 QUANTITIES = ("displacement", "velocity", "acceleration", "force")
 DIRECTIONS = ("up", "down", "both")

@@ -140,7 +140,8 @@ def readme_commands() -> list[str]:
     for command in found:
         command = command.strip()
         placeholder = any(re.fullmatch(r"[A-Z]+(\.[a-z0-9]+)?", word) for word in shlex.split(command))
-        if placeholder or re.search(r"\[|\.\.\.|<", command) or len(shlex.split(command)) < 3:
+        names_a_file = any(re.search(r"\.(toml|h5)$", word) for word in shlex.split(command))
+        if placeholder or not names_a_file or re.search(r"\[|\.\.\.|<", command):
             continue
         if command not in commands:
             commands.append(command)
