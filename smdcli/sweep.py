@@ -357,7 +357,10 @@ class Family:
             return list(self.given_labels)
         if not self.spec.parameters:
             return [self.scenario.title or self.scenario.stem]
-        return [", ".join(f"{p} = {v:.4g}" for p, v in zip(self.spec.parameters, combo)) for combo in self.values]
+        names = [{"zeta": "ζ"}.get(p, p.replace(".omega", ".ω")) for p in self.spec.parameters]
+        units = [parameter_units(p) for p in self.spec.parameters]
+        return [", ".join(f"{name} = {v:.4g}" + (f" {unit}" if unit not in ("", "1") else "")
+                          for name, unit, v in zip(names, units, combo)) for combo in self.values]
 
     def model(self, s: int) -> Model:
         """Member s as a Model."""

@@ -151,3 +151,40 @@ def test_compare_solvers_bad_method_is_exit_2_and_writes_nothing(cli, tmp_path):
     assert not (tmp_path / "out").exists()
     r = cli("compare-solvers", scene, "--tolerances", "1e-3/x", "-o", tmp_path / "out")
     assert r.exit_code == 2 and "--tolerances" in r.stderr
+
+
+def test_the_silent_cases_are_loud(cli, tmp_path):
+    """A [sweep] table given to simulate is named in the summary; --rtol 0 is refused in one line; a typo is
+    named before the field it leaves missing; usage errors are one line."""
+    result = cli("simulate", SCENARIOS / "ic_critical.toml", "-o", tmp_path, "--no-plots")
+    assert result.exit_code == 0 and "[sweep] table was not run" in result.stdout
+    assert "smd sweep" in result.stdout
+    for option in ("--rtol", "--atol"):
+        result = cli("simulate", SCENARIOS / "one_dof_underdamped.toml", option, "0", "-o", tmp_path)
+        assert result.exit_code == 2 and result.stderr.count("\n") == 1 and "positive" in result.stderr
+    scene = tmp_path / "typo.toml"
+    scene.write_text((SCENARIOS / "one_dof_underdamped.toml").read_text().replace("k = 25.0", "stifness = 25.0"))
+    result = cli("simulate", scene, "-o", tmp_path)
+    assert result.exit_code == 2 and "stifness: unknown key (did you mean 'k'?)" in result.stderr
+    for args in (["simulate"], ["simulate", "x.toml", "--bogus"], ["bogus"], ["sweep", scene, "--method", "ode99"]):
+        result = cli(*args)
+        assert result.exit_code == 2 and result.stderr.count("\n") == 1, (args, result.stderr)
+        assert "╭" not in result.stderr and result.stderr.startswith("smd: ")
+
+
+def test_messages_use_the_scenario_words(cli, tmp_path):
+    """Force types as the scenario names them, units after values, correct plurals."""
+    info = cli("info", SCENARIOS / "one_dof_square_fourier.toml")
+    assert "fourier_square" in info.stdout and "fouriersquare" not in info.stdout
+    info = cli("info", SCENARIOS / "three_dof_forced.toml")
+    assert ": sine" in info.stdout and "harmonic" not in info.stdout
+    run = cli("simulate", SCENARIOS / "one_dof_underdamped.toml", "-o", tmp_path, "--no-plots", "--json")
+    sweep = cli("sweep", SCENARIOS / "one_dof_regimes_sweep.toml", "--metric", "settling_time", "-o", tmp_path,
+                "--no-plots")
+    assert "m = 3.5 s" in sweep.stdout and "m = not settled" in sweep.stdout
+    expression = tmp_path / "expression.toml"
+    expression.write_text((SCENARIOS / "one_dof_underdamped.toml").read_text()
+                          + '\n[[force]]\non = "m"\ntype = "expression"\nexpr = "sin(t)"\n')
+    result = cli("simulate", expression, "-o", tmp_path, "--no-plots")
+    assert "force[0] (expression) has no exact integral" in result.stdout and "table" not in result.stdout
+    assert run.exit_code == 0

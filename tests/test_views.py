@@ -118,3 +118,18 @@ def test_bad_animate_input_is_exit_2(cli, tmp_path):
     result = cli("animate", SCENARIOS / "three_dof_free.toml", "--end", "999", "-o", tmp_path / "out")
     assert result.exit_code == 2 and "--start/--end" in result.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_phase_of_scenes_with_different_dofs_and_its_own_name(cli, tmp_path):
+    """Without --dof each scenario draws its own DOFs (the issue: 'has no DOF m1' when --dof was never given);
+    phase writes <name>_portrait.*, never simulate's <stem>_phase.png, and --name sets the name."""
+    a, b = SCENARIOS / "one_dof_underdamped.toml", SCENARIOS / "three_dof_free.toml"
+    result = cli("phase", a, b, "-o", tmp_path)
+    assert result.exit_code == 0, result.output
+    assert len(curves(tmp_path / "one_dof_underdamped_and_1_more_portrait.h5")) == 4  # m, then m1..m3
+    result = cli("phase", a, "--name", "mine", "-o", tmp_path)
+    assert result.exit_code == 0 and (tmp_path / "mine_portrait.png").exists()
+    simulate = cli("simulate", a, "-o", tmp_path)
+    assert simulate.exit_code == 0 and (tmp_path / "one_dof_underdamped_phase.png").exists()
+    bad = cli("phase", a, "--name", "../escape", "-o", tmp_path)
+    assert bad.exit_code == 2 and "--name" in bad.stderr
