@@ -1,4 +1,7 @@
-"""Allow ``python -m smdcli``."""
+"""Allow ``python -m smdcli``.
+
+The top, beside cli.py: may import anything.
+"""
 
 from smdcli.cli import main
 

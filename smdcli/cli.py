@@ -1,4 +1,8 @@
-"""The `smd` command: parse, call the library, print, choose the exit code."""
+"""The `smd` command: parse, call the library, print, choose the exit code.
+
+The top layer: imports the commands lazily, inside each command, so that `smd --help` imports
+none of numpy, scipy, matplotlib or h5py. Must not import: scipy, matplotlib, h5py at module level.
+"""
 
 from __future__ import annotations
 
@@ -119,7 +123,7 @@ def simulate(
     """Solve each scenario; write OUT/<stem>.h5 and OUT/<stem>_response.png, _phase.png."""
     from smdcli.errors import SmdError
     from smdcli.progress import bar
-    from smdcli.simulate import Options, failed_summary, format_summary, simulate as run_one, summary
+    from smdcli.commands.simulate import Options, failed_summary, format_summary, simulate as run_one, summary
 
     options = Options(method=method, rtol=rtol, atol=atol, plots=not no_plots, save_partial=save_partial)
     worst = 0
@@ -157,7 +161,7 @@ def info(
 ):
     """DOFs, M C K, natural frequencies, damping ratios and regimes, stiffness, what auto would pick."""
     from smdcli.errors import SmdError
-    from smdcli.simulate import format_info, info as describe
+    from smdcli.commands.simulate import format_info, info as describe
 
     try:
         data = describe(scenario)
@@ -185,7 +189,7 @@ def compare_solvers(
     as_json: bool = typer.Option(False, "--json", help="Print the runs as JSON."),
 ):
     """Run methods over ladders of tolerances and steps against a reference; chart error against cost."""
-    from smdcli.compare import as_dict, format_table, run_and_write
+    from smdcli.commands.compare import as_dict, format_table, run_and_write
     from smdcli.errors import SmdError
 
     try:
@@ -232,10 +236,10 @@ def sweep(
 ):
     """Run a family: parameters over grids, initial conditions, or a frequency response; one HDF5 and plots."""
     from smdcli.errors import SmdError
-    from smdcli.sweep import format_summary, run_and_write, summary
+    from smdcli.commands.sweep import format_summary, run_and_write, summary
 
     if method is not None:
-        from smdcli.solvers.registry import check_method_name
+        from smdcli.solvers.catalog import check_method_name
 
         problem = check_method_name(method)
         if problem:
@@ -278,7 +282,7 @@ def phase(
 ):
     """Phase portraits (x against v) of DOFs, scenarios or a family, start and direction marked; --poincare."""
     from smdcli.errors import SmdError
-    from smdcli.phase import portraits
+    from smdcli.commands.phase import portraits
 
     try:
         run = portraits(scenarios, out, dof, tuple(ic or ()), poincare, periods, skip_periods, method,
@@ -302,7 +306,7 @@ def draw(
 ):
     """A schematic of the system from its elements: masses, springs, dampers (nonlinear in red), walls, forces."""
     from smdcli.errors import SmdError
-    from smdcli.schematic import write_schematic
+    from smdcli.commands.draw import write_schematic
 
     try:
         png = write_schematic(scenario, out)
@@ -327,7 +331,7 @@ def animate(
 ):
     """A GIF of the masses moving, springs and dampers drawn, with a time stamp on each frame."""
     from smdcli.errors import SmdError
-    from smdcli.schematic import animate as make_gif
+    from smdcli.commands.draw import animate as make_gif
 
     try:
         gif, facts = make_gif(scenario, out, fps, seconds, scale, start, end, method, progress=progress_wanted(quiet))
@@ -355,7 +359,7 @@ def diff_files(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing; the exit code says it."),
 ):
     """Compare two result files: exit 0 when every data set agrees within tolerance, 1 when not, 2 if unreadable."""
-    from smdcli.diff import as_dict, diff, format_report
+    from smdcli.commands.diff import as_dict, diff, format_report
     from smdcli.errors import SmdError
 
     given = {name: value for name, value in (("rtol", rtol), ("atol", atol)) if value is not None}

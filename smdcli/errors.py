@@ -1,4 +1,7 @@
-"""The exceptions smd raises; the CLI turns each into one line and an exit code."""
+"""The exceptions smd raises; the CLI turns each into one line and an exit code.
+
+Imports nothing of smd (the bottom layer).
+"""
 
 from __future__ import annotations
 

@@ -5,6 +5,8 @@ sin cos tan exp log sqrt abs sign tanh heaviside with one argument.
 Python's ``ast`` module only parses the text; every node kind outside the
 whitelist is refused, so attribute access, subscripts, lambdas,
 comprehensions, names other than t/pi/e and any other call cannot run.
+
+Imports nothing of smd (the bottom layer).
 """
 
 from __future__ import annotations

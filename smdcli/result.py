@@ -1,4 +1,7 @@
-"""Result of one solve: time-major arrays, labels, statistics. Writers only read it."""
+"""Result of one solve: time-major arrays, labels, statistics. Writers only read it.
+
+Imports nothing of smd (the bottom layer).
+"""
 
 from __future__ import annotations
 

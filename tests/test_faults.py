@@ -13,7 +13,7 @@ from conftest import ROOT, SCENARIOS
 # temporary file, so the signal lands while a file is being written, every time.
 SLOW_WRITER = """
 import sys, time
-import smdcli.io_hdf5 as io
+import smdcli.io.hdf5 as io
 original = io.write_header
 def slow(*args):
     original(*args)

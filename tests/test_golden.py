@@ -12,7 +12,7 @@ import pytest
 from conftest import ROOT, SCENARIOS
 
 from smdcli import scenario
-from smdcli.diff import diff, format_report
+from smdcli.commands.diff import diff, format_report
 from smdcli.model import build
 from smdcli.solvers import solve
 from smdcli.solvers.base import Tolerances

@@ -123,7 +123,7 @@ FAST = [s for s in sorted(BUNDLED) if s.startswith(("one_dof", "ic_", "two_dof_f
 def test_any_number_a_valid_scene_accepts_solves_or_fails_cleanly(tmp_path, stem, data, number):
     """Past the loader: a scene that validates is solved, or its solver fails (exit 1); nothing else."""
     from smdcli.errors import SmdError
-    from smdcli.simulate import Options, simulate
+    from smdcli.commands.simulate import Options, simulate
 
     doc = BUNDLED[stem]
     paths = [p for p in leaves(doc) if p and isinstance(_get(doc, p), (int, float)) and not isinstance(_get(doc, p), bool)]

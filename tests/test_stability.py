@@ -7,7 +7,7 @@ import pytest
 from conftest import SCENARIOS, model_of, one_dof
 
 from smdcli import scenario
-from smdcli.compare import compare, parse_steps
+from smdcli.commands.compare import compare, parse_steps
 from smdcli.model import build, time_grid
 from smdcli.solvers import solve
 from smdcli.solvers.base import Tolerances

@@ -8,7 +8,7 @@ import pytest
 from conftest import SCENARIOS
 
 from smdcli import scenario
-from smdcli.schematic import layout
+from smdcli.plots.schematic import layout
 
 
 def curves(path):

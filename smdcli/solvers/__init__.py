@@ -1,5 +1,15 @@
-"""Solvers: one module a family; ``registry`` turns a name into a solver."""
+"""Solvers: a registry of names, options and capabilities (catalog.py, registry.py), one module per family.
 
-from smdcli.solvers.registry import get_solver, solve
+`solve` and `get_solver` are loaded on first use, so that the scenario layer can read catalog.py (plain data)
+without importing any solver.
 
-__all__ = ["get_solver", "solve"]
+Must not import (at import time): any solver module, so the scenario layer can read the catalog.
+"""
+
+
+def __getattr__(name: str):
+    if name in ("solve", "get_solver"):
+        from smdcli.solvers import registry
+
+        return getattr(registry, name)
+    raise AttributeError(name)

@@ -1,4 +1,7 @@
-"""auto: the cheapest method that is exact or accurate enough, and why it was chosen."""
+"""auto: the cheapest method that is exact or accurate enough, and why it was chosen.
+
+Must not import: sweep, io, plots, commands, cli.
+"""
 
 from __future__ import annotations
 

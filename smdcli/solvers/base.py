@@ -1,4 +1,7 @@
-"""What a solver is: a name, what it can handle, its order, and solve(model, grid)."""
+"""What a solver is: a name, what it can handle, its order, and solve(model, grid).
+
+Must not import: sweep, io, plots, commands, cli.
+"""
 
 from __future__ import annotations
 

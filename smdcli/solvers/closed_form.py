@@ -6,6 +6,8 @@ Sh = sinh(mu t)/mu (cos and sin/|mu| when mu^2 < 0) covers every regime with
 one formula. Sh and Ch are entire functions of z = mu^2 t^2, evaluated by
 Taylor series near z = 0, so the response is smooth across zeta = 1 instead
 of switching formulas on float equality as the book's SMDsysSim does.
+
+Must not import: sweep, io, plots, commands, cli.
 """
 
 from __future__ import annotations

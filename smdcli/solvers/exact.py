@@ -13,6 +13,8 @@ points are honoured. On the uniform output grid, blocks of J steps are taken
 at once with the stacked powers expm(Aaug j h), j = 1..J, which keeps the
 Python loop short and the accumulated rounding small; w is reseeded at the
 start of every block as well.
+
+Must not import: sweep, io, plots, commands, cli.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import time
 
 import numpy as np
 
-from smdcli.forcing import Table
+from smdcli.model.forcing import Table
 from smdcli.model import Model
 from smdcli.result import Result, SolverStats
 from smdcli.solvers.accurate_expm import expm_times, needed

@@ -7,6 +7,8 @@ stretch between force discontinuities is cut into equal steps no longer than dt,
 never straddles a jump; the method restarts there from equilibrium. Results on the output
 grid come from cubic Hermite interpolation of (x, v) with their derivatives (v, a) at the
 steps, which is as accurate as any of these methods.
+
+Must not import: sweep, io, plots, commands, cli.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import numpy as np
 
 from smdcli.model import Model
 from smdcli.result import Result, SolverStats
+from smdcli.solvers.catalog import NEWMARK_SCHEMES
 from smdcli.solvers.base import (MAX_STEPS, Solver, Tolerances, divergence_bound, diverged, force_function,
                                  make_result, segments)
 
@@ -309,8 +312,7 @@ class Newmark(GeneralizedAlpha):
 
     name = "newmark"
     description = "Newmark-beta, average acceleration unless beta/gamma or scheme say otherwise"
-    SCHEMES: ClassVar[dict[str, tuple[float, float]]] = {
-        "average_acceleration": (0.25, 0.5), "linear_acceleration": (1 / 6, 0.5)}
+    SCHEMES: ClassVar[dict[str, tuple[float, float]]] = NEWMARK_SCHEMES
 
     def coefficients(self):
         beta, gamma = self.SCHEMES[self.params.get("scheme", "average_acceleration")]

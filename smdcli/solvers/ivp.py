@@ -5,6 +5,8 @@ lets smd restart at every force breakpoint, count accepted and rejected
 steps, stop at divergence with the time reached, and watch h * |lambda|max
 along the trajectory to tell whether an explicit method is held back by
 stability (stiffness) rather than accuracy.
+
+Must not import: sweep, io, plots, commands, cli.
 """
 
 from __future__ import annotations

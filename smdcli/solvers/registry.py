@@ -1,4 +1,7 @@
-"""The one place where a method name becomes a solver."""
+"""The one place where a method name becomes a solver.
+
+Must not import: sweep, io, plots, commands, cli.
+"""
 
 from __future__ import annotations
 
@@ -11,12 +14,8 @@ from smdcli.errors import ScenarioError
 from smdcli.model import Model
 from smdcli.result import Result
 from smdcli.solvers.base import Solver, Tolerances, stated_rounding, stated_tolerance
+from smdcli.solvers.catalog import check_method_name
 
-# Parameters of the [solver] table that belong to one method each.
-METHOD_OPTIONS = {"beta": "newmark", "gamma": "newmark", "scheme": "newmark", "alpha": "hht",
-                  "rho_inf": "generalized_alpha"}
-# Where each numeric parameter is meaningful: Newmark's beta and gamma, Hilber's alpha, Chung-Hulbert's rho_inf.
-OPTION_RANGES = {"beta": (0.0, 0.5), "gamma": (0.5, 1.0), "alpha": (-1 / 3, 0.0), "rho_inf": (0.0, 1.0)}
 
 
 def _solvers() -> dict[str, type[Solver]]:
@@ -30,18 +29,6 @@ def _solvers() -> dict[str, type[Solver]]:
     classes = (Auto, ClosedForm, Exact, RK45, RK23, DOP853, Radau, BDF, LSODA, ode45, ode23, Ode113, ode15s,
                ode23s, ode23t, ode23tb, Newmark, HHT, GeneralizedAlpha, CentralDifference, Euler, RK4)
     return {cls.name: cls for cls in classes}
-
-
-def check_method_name(name: str) -> str | None:
-    """Why a method name cannot be used, or None."""
-    solvers = _solvers()
-    if name in solvers:
-        return None
-    import difflib
-
-    hint = difflib.get_close_matches(name, list(solvers), n=1)
-    extra = f" (did you mean {hint[0]!r}?)" if hint else ""
-    return f"unknown method {name!r}{extra}; available: {', '.join(solvers)}"
 
 
 def get_solver(name: str) -> Solver:

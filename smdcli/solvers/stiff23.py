@@ -14,6 +14,8 @@ All three take the model's analytic Jacobian. Error estimates of the implicit
 ones are filtered through the iteration matrix, as in Shampine's codes, so
 that stiff components that have decayed do not hold the step down. Error
 norms are scipy's: RMS of err / (atol + rtol * max(|y|, |y_new|)).
+
+Must not import: sweep, io, plots, commands, cli.
 """
 
 from __future__ import annotations

@@ -6,6 +6,8 @@ steps, harmonics, square waves, Fourier series and piecewise-linear tables.
 The exact solver augments the structure's state with w and propagates both
 with one matrix exponential, reseeding w from ``exo_state`` at every
 breakpoint. Chirps and expressions have no such form.
+
+Must not import: solvers, sweep, io, plots, commands, cli.
 """
 
 from __future__ import annotations

@@ -8,6 +8,8 @@ differ. Run metadata (the creation time, wall times, the smd version, the /run
 group) never makes files differ. A different scenario (by the SHA-256 of its text)
 or solver is named, but only data decide the exit code: 0 same, 1 different,
 2 a file unreadable, not an smd file, or (without --allow-failed) from a failed run.
+
+Must not import: cli.
 """
 
 from __future__ import annotations

@@ -4,6 +4,8 @@ Error is the largest displacement difference from the reference over the output 
 DOFs, divided by the reference's peak displacement. The reference is the exact solution for a
 linear scene; for a nonlinear one, Radau and DOP853 at rtol 1e-12, whose difference is reported
 as the reference's own error.
+
+Must not import: cli.
 """
 
 from __future__ import annotations
@@ -72,7 +74,7 @@ class Comparison:
 
 def parse_methods(text: str | None) -> list[str]:
     """A comma list of method names, checked against the registry."""
-    from smdcli.solvers.registry import check_method_name
+    from smdcli.solvers.catalog import check_method_name
 
     if not text:
         return list(DEFAULT_ADAPTIVE + DEFAULT_FIXED)
@@ -239,7 +241,8 @@ def write_hdf5(path: Path, c: Comparison) -> None:
     """One file with every run's figures and the reference (kind = "compare")."""
     import h5py
 
-    from smdcli.io_hdf5 import atomic_path, write_header
+    from smdcli.io.atomic import atomic_path
+    from smdcli.io.hdf5 import write_header
 
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
         write_header(f, c.scenario, "compare")
@@ -290,7 +293,8 @@ def run_and_write(path: str | Path, out: str | Path, methods: str | None = None,
                   steps: str | None = None, repeats: int = 3, breakpoints: bool = True, plots: bool = True,
                   progress: bool = False) -> tuple[Comparison, list[Path]]:
     """The whole command: validate everything first, run, then write HDF5 and charts atomically."""
-    from smdcli.simulate import output_folder, prepare
+    from smdcli.commands.simulate import prepare
+    from smdcli.io.folders import output_folder
 
     sc, model, grid = prepare(path)
     method_list = parse_methods(methods)
@@ -305,12 +309,13 @@ def run_and_write(path: str | Path, out: str | Path, methods: str | None = None,
                              breakpoints=breakpoints, progress=tick)
     stem = sc.stem
     written = [out_dir / f"{stem}_compare.h5"]
-    from smdcli.io_hdf5 import together
+    from smdcli.io.atomic import together
 
     with together():  # the files appear together, or none of them
         write_hdf5(written[0], comparison)
         if plots:
-            from smdcli.plots import save_figure, stability_figure, work_precision_figure
+            from smdcli.plots.common import save_figure
+            from smdcli.plots.compare import stability_figure, work_precision_figure
 
             title = sc.title or stem
             save_figure(work_precision_figure(comparison, title), out_dir / f"{stem}_work_precision.png")

@@ -5,6 +5,8 @@ Springs and dampers are two-terminal elements: each stamps a 2x2 block
 ground). Nonlinear parts (cubic springs, quadratic dampers) act through an
 incidence matrix D, one row per element: relative motion d = D x, and the
 element forces return to the DOFs as D^T g(d).
+
+Must not import: solvers, sweep, io, plots, commands, cli.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from functools import cached_property
 import numpy as np
 
 from smdcli.errors import ScenarioError
-from smdcli.forcing import Signal, build_signal
+from smdcli.model.forcing import Signal, build_signal
 from smdcli.scenario import GROUND, Scenario, TimeSpec
 
 # Relative width around zeta = 1 inside which a mode is called critically damped.

@@ -1,4 +1,7 @@
-"""Library entry points behind `smd simulate` and `smd info`: scenario -> model -> solver -> writers."""
+"""Library entry points behind `smd simulate` and `smd info`: scenario -> model -> solver -> writers.
+
+Must not import: cli.
+"""
 
 from __future__ import annotations
 
@@ -10,11 +13,12 @@ from pathlib import Path
 import numpy as np
 
 from smdcli import scenario as scenario_mod
-from smdcli.errors import SolverFailed, UsageError
+from smdcli.errors import SolverFailed
 from smdcli.model import Model, build, time_grid
 from smdcli.result import Result
 from smdcli.scenario import Scenario
-from smdcli.solvers.base import Tolerances
+from smdcli.io.folders import output_folder
+from smdcli.solvers.checked import failure_message, solve_scenario
 
 
 @dataclass(frozen=True)
@@ -44,47 +48,17 @@ def prepare(path: str | Path) -> tuple[Scenario, Model, np.ndarray]:
     return sc, build(sc), time_grid(sc.time)
 
 
-def solve_scenario(sc: Scenario, model: Model, grid: np.ndarray, options: Options = Options()) -> Result:
-    """Solve with the scenario's solver settings, overridden by the options."""
-    from smdcli.solvers.registry import solve
-
-    method = options.method or sc.solver.method
-    tol = Tolerances(rtol=sc.solver.rtol if options.rtol is None else options.rtol,
-                     atol=sc.solver.atol if options.atol is None else options.atol, dt=sc.solver.dt,
-                     options=sc.solver.options)
-    field_name = "--method" if options.method else "solver.method"
-    return solve(model, grid, method, tol, field=field_name)
-
-
-def output_folder(out: str | Path) -> Path:
-    """Create the output folder if needed; refuse one that cannot be written."""
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise UsageError(f"{out}: is not a folder (a file of that name exists); give an output folder with -o")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise UsageError(f"{out}: cannot create output folder: {exc.strerror}") from None
-    if not out.is_dir():
-        raise UsageError(f"{out}: is not a folder")
-    import os
-
-    if not os.access(out, os.W_OK | os.X_OK):
-        raise UsageError(f"{out}: output folder is not writable")
-    return out
-
-
 def simulate(path: str | Path, out: str | Path, options: Options = Options()) -> Run:
     """Validate, solve and write one scenario; a solver failure raises SolverFailed and writes nothing."""
     sc, model, grid = prepare(path)
     out_dir = output_folder(out)
-    result = solve_scenario(sc, model, grid, options)
+    result = solve_scenario(sc, model, grid, options.method, options.rtol, options.atol)
     if sc.sweep:
         note = ("this file's [sweep] table was not run: simulate solved the scene as written "
                 f"(its base member); `smd sweep {sc.path}` runs the family")
         result = dataclasses.replace(result, notes=(note, *result.notes))
     run = Run(sc, model, result)
-    from smdcli.io_hdf5 import write_simulation
+    from smdcli.io.hdf5 import write_simulation
 
     if not result.success:
         message = failure_message(sc, model, result)
@@ -94,65 +68,22 @@ def simulate(path: str | Path, out: str | Path, options: Options = Options()) ->
             message += f"; what was computed (to t = {result.t_failed:g} s, NaN after) is in {partial}, marked failed"
         raise SolverFailed(message, result=result)
 
-    from smdcli.io_hdf5 import together
+    from smdcli.io.atomic import together
 
     with together():  # the run's files appear together, or none of them
         h5 = out_dir / f"{sc.stem}.h5"
         write_simulation(h5, sc, model, result)
         run.outputs.append(h5)
         if options.plots:
-            from smdcli import plots
+            from smdcli.plots.common import save_figure
+            from smdcli.plots.response import phase_figure, response_figure
 
             title = sc.title or sc.stem
-            for name, figure in (("response", plots.response_figure), ("phase", plots.phase_figure)):
+            for name, figure in (("response", response_figure), ("phase", phase_figure)):
                 png = out_dir / f"{sc.stem}_{name}.png"
-                plots.save_figure(figure(result, title), png)
+                save_figure(figure(result, title), png)
                 run.outputs.append(png)
     return run
-
-
-def solve_checked(sc: Scenario, method: str | None = None) -> Result:
-    """Solve a validated scenario on its own grid; a solver failure raises SolverFailed (exit 1)."""
-    model, grid = build(sc), time_grid(sc.time)
-    result = solve_scenario(sc, model, grid, Options(method=method))
-    if not result.success:
-        raise SolverFailed(failure_message(sc, model, result), result=result)
-    return result
-
-
-def failure_message(sc: Scenario, model: Model, result: Result) -> str:
-    """Which scenario failed, with what method, where and why, and what to try."""
-    return f"{sc.path}: {result.stats.method} {result.stats.message}; {failure_hint(model, result)}"
-
-
-def failure_hint(model: Model, result: Result) -> str:
-    """What to try after a failed run."""
-    from smdcli.solvers.registry import get_solver
-
-    from smdcli.solvers.fixed_step import FixedStep
-
-    solver = get_solver(result.stats.method)
-    if "not finite" in result.stats.message:  # a solution that overflowed, not a step that went unstable
-        return "check the units of the masses, springs, dampers and forces"
-    fixed_step = isinstance(solver, FixedStep)
-    if fixed_step and "steps" in result.stats.message:
-        span = result.time[-1] - result.time[0]
-        return (f"fixed step {result.stats.dt:.4g} s needs {span / result.stats.dt:.3g} steps for this run; "
-                "set a larger solver.dt (or use an adaptive method)")
-    if not solver.adaptive and not fixed_step:  # closed_form, exact
-        return "try another method"
-    if fixed_step:
-        limit = solver.omega_limit()
-        w_max = model.omega_max
-        if w_max > 0 and limit < math.inf:
-            stable = f"below {limit / w_max:.4g} s ({limit:.3g} / omega_max, omega_max = {w_max:.4g} rad/s)" \
-                if limit > 0 else "nowhere on an undamped scene"
-            return (f"fixed step {result.stats.dt:.4g} s: {solver.name}'s stable step is {stable}; "
-                    "set a smaller solver.dt or use an implicit method")
-        return "set a smaller solver.dt or use another method"
-    if not solver.implicit and (model.is_stiff or "steps" in result.stats.message):
-        return "the scene may be stiff: try an implicit method ('Radau', 'BDF', 'ode15s') or 'auto'"
-    return "try tighter tolerances (--rtol, --atol) or another method"
 
 
 def summary(run: Run) -> dict:

@@ -1,4 +1,7 @@
-"""smd phase: phase portraits (displacement against velocity) of runs, families and Poincare sections."""
+"""smd phase: phase portraits (displacement against velocity) of runs, families and Poincare sections.
+
+Must not import: cli.
+"""
 
 from __future__ import annotations
 
@@ -61,7 +64,7 @@ def _runs(sc: Scenario, ics: tuple[str, ...]) -> list[tuple[str, Scenario]]:
 
 
 def _solve(sc: Scenario, method: str | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    from smdcli.simulate import solve_checked
+    from smdcli.solvers.checked import solve_checked
 
     result = solve_checked(sc, method)
     return result.time, result.displacement, result.velocity
@@ -74,7 +77,7 @@ def portraits(paths: list[Path], out: Path, dofs: str | None = None, ics: tuple[
     """Load every scenario first (input errors before any work), solve, draw and write `<name>_portrait.*`.
 
     The name is the scenario's stem, `<first>_and_<k>_more` for several scenarios, or `name`."""
-    from smdcli.simulate import output_folder
+    from smdcli.io.folders import output_folder
 
     scenarios = [scenario_mod.load(p) for p in paths]
     if ics and len(scenarios) > 1:
@@ -104,24 +107,25 @@ def portraits(paths: list[Path], out: Path, dofs: str | None = None, ics: tuple[
                    curves, sections, advance)
     run = PhaseRun(curves, sections, period)
     stem = name or (scenarios[0].stem if len(scenarios) == 1 else f"{scenarios[0].stem}_and_{len(scenarios) - 1}_more")
-    from smdcli.io_hdf5 import together
+    from smdcli.io.atomic import together
 
     with together():  # the files appear together, or none of them
         h5 = out_dir / f"{stem}_portrait.h5"
         _write(h5, scenarios[0], run)
         run.outputs.append(h5)
         if plots:
-            from smdcli import plots as plotting
+            from smdcli.plots.common import save_figure
+            from smdcli.plots.response import portrait_figure
 
             title = scenarios[0].title or scenarios[0].stem if len(scenarios) == 1 else \
                 " vs ".join(sc.stem for sc in scenarios)
             title += "\nphase plot: displacement vs velocity" + (
                 f"; Poincare section: dots once per forcing period T = {period:.4g} s"
                 + (f" after {skip_periods} periods" if skip_periods else "") if poincare else "")
-            figure = plotting.portrait_figure([(c.label, c.x, c.v) for c in curves], title,
+            figure = portrait_figure([(c.label, c.x, c.v) for c in curves], title,
                                               [(c.label, c.x, c.v) for c in sections] if poincare else None)
             png = out_dir / f"{stem}_portrait.png"
-            plotting.save_figure(figure, png)
+            save_figure(figure, png)
             run.outputs.append(png)
     return run
 
@@ -163,7 +167,8 @@ def _write(path: Path, sc: Scenario, run: PhaseRun) -> None:
     """One group per curve (time, displacement, velocity), Poincare points apart."""
     import h5py
 
-    from smdcli.io_hdf5 import atomic_path, write_header
+    from smdcli.io.atomic import atomic_path
+    from smdcli.io.hdf5 import write_header
 
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
         write_header(f, sc, "phase")

@@ -1,0 +1,96 @@
+"""`smd draw` and `smd animate`: the schematic as a PNG, and a GIF of the masses moving, time-stamped.
+
+Must not import: cli."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from smdcli.errors import UsageError
+from smdcli.plots.schematic import SPACING, draw, layout, schematic_figure
+
+
+MAX_GIF_BYTES = 5 * 2**20
+
+
+def write_schematic(path: str | Path, out: str | Path) -> Path:
+    """`smd draw`: OUT/<stem>_schematic.png."""
+    from smdcli import scenario as scenario_mod
+    from smdcli.model import build
+    from smdcli.plots.common import save_figure
+    from smdcli.io.folders import output_folder
+
+    sc = scenario_mod.load(path)
+    build(sc)
+    out_dir = output_folder(out)
+    png = out_dir / f"{sc.stem}_schematic.png"
+    save_figure(schematic_figure(sc), png)
+    return png
+
+
+def animate(path: str | Path, out: str | Path, fps: int = 20, seconds: float | None = None,
+            scale: float | None = None, start: float | None = None, end: float | None = None,
+            method: str | None = None, progress: bool = False) -> tuple[Path, dict]:
+    """`smd animate`: OUT/<stem>.gif of the masses moving, displacements scaled to be seen, time stamped."""
+    import dataclasses
+
+    from smdcli import scenario as scenario_mod
+    from smdcli.io.atomic import atomic_path
+    from smdcli.plots.common import _figure
+    from smdcli.scenario import TimeSpec
+    from smdcli.io.folders import output_folder
+    from smdcli.solvers.checked import solve_checked
+
+    if not 1 <= fps <= 50:
+        raise UsageError(f"--fps: expected 1 to 50 frames per second, found {fps}")
+    sc = scenario_mod.load(path)
+    t0 = sc.time.start if start is None else start
+    t1 = sc.time.end if end is None else end
+    if not sc.time.start <= t0 < t1 <= sc.time.end:
+        raise UsageError(f"--start/--end: expected {sc.time.start:g} <= start < end <= {sc.time.end:g}, "
+                         f"found {t0:g} and {t1:g}")
+    length = min(t1 - t0, 20.0) if seconds is None else seconds
+    if not 0 < length <= 60:
+        raise UsageError(f"--seconds: expected a GIF length in (0, 60] s, found {length:g}")
+    frames = max(2, int(round(length * fps)))
+    # The whole run from the scenario's start (the state at t0 depends on it), sampled at the frames.
+    lead = t0 - sc.time.start
+    step = (t1 - t0) / (frames - 1)
+    skip = int(round(lead / step)) if lead > 0 else 0
+    grid = TimeSpec(sc.time.start, sc.time.start + (skip + frames - 1) * step, points=skip + frames)
+    out_dir = output_folder(out)
+    result = solve_checked(dataclasses.replace(sc, time=grid), method)
+    t, x = result.time[skip:], result.displacement[skip:]
+    peak = np.abs(x).max()
+    if scale is None:
+        scale = 0.3 * SPACING / peak if peak > 0 else 1.0
+    plan = layout(sc)
+    n = len(plan.names)
+    fig = _figure(figsize=(1.6 + 1.9 * n, 2.2), dpi=80)
+    ax = fig.add_axes((0.0, 0.0, 1.0, 0.86))
+    images = []
+    from PIL import Image
+
+    from smdcli.progress import bar
+
+    with bar("drawing frames", len(t), progress) as advance:
+        for k in range(len(t)):
+            ax.clear()
+            draw(ax, plan, x[k], scale, labels=False)
+            fig.texts.clear()
+            fig.text(0.02, 0.93, f"t = {t[k]:7.2f} s", fontsize=9, family="monospace")
+            fig.text(0.98, 0.93, f"displacements x {scale:.3g}", fontsize=8, ha="right", color="0.35")
+            fig.canvas.draw()
+            rgba = np.asarray(fig.canvas.buffer_rgba())
+            images.append(Image.fromarray(rgba[..., :3]).quantize(colors=32, method=Image.Quantize.MEDIANCUT,
+                                                                  dither=0))
+            advance(1)
+    gif = out_dir / f"{sc.stem}.gif"
+    with atomic_path(gif) as tmp:
+        images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:], duration=int(1000 / fps),
+                       loop=0, optimize=True, disposal=1)
+    size = gif.stat().st_size
+    return gif, {"frames": len(images), "fps": fps, "scale": scale, "bytes": size, "start": float(t[0]),
+                 "end": float(t[-1])}

@@ -1,0 +1,74 @@
+"""Atomic writing, the one helper every writer uses: a file is written under a temporary name beside its
+final one and renamed when complete; inside together(), a run's files are renamed together at its end.
+A signal received while writing (even one whose exception was swallowed) stops the rename.
+
+Must not import: anything of smd but interrupts."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from contextlib import contextmanager, suppress
+from pathlib import Path
+
+
+from smdcli import interrupts
+
+
+_pending: list[tuple[str, Path]] | None = None  # inside together(): renames waiting for the block's end
+
+
+def _commit(renames: list[tuple[str, Path]]) -> None:
+    """Rename temporary files onto their final names, unless a signal came (even one whose exception was swallowed)."""
+    with interrupts.held():  # the check and the renames are one step for a signal
+        interrupts.raise_if_received()
+        for tmp, final in renames:
+            os.replace(tmp, final)
+
+
+def _discard(paths) -> None:
+    with interrupts.held():
+        for tmp in paths:
+            with suppress(OSError):
+                os.unlink(tmp)
+
+
+@contextmanager
+def together():
+    """Files written with atomic_path inside the block appear together when it ends, or none of them does."""
+    global _pending
+    outer, _pending = _pending, []
+    try:
+        yield
+        renames = _pending
+        if outer is not None:
+            outer.extend(renames)
+        else:
+            _commit(renames)
+    except BaseException:
+        _discard(tmp for tmp, _ in _pending)
+        raise
+    finally:
+        _pending = outer
+
+
+@contextmanager
+def atomic_path(final: Path):
+    """Yield a temporary path beside `final`; rename it onto `final` only if the block succeeds
+    (inside together(): when that block ends)."""
+    final = Path(final)
+    fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".part", dir=final.parent)
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        # mkstemp makes the file private (0600); the result gets what the user's umask gives any new file.
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        if _pending is not None:
+            _pending.append((tmp, final))
+        else:
+            _commit([(tmp, final)])
+    except BaseException:
+        _discard([tmp])
+        raise

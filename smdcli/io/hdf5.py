@@ -1,0 +1,132 @@
+"""HDF5 files: the header and provenance every smd file carries, and a simulate run's layout.
+
+Must not import: commands, cli."""
+
+from __future__ import annotations
+
+import hashlib
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+from smdcli import __version__, provenance
+from smdcli.model import Model
+from smdcli.result import Result
+from smdcli.scenario import Scenario
+from smdcli.solvers.base import acceleration_accuracy
+from smdcli.io.atomic import atomic_path
+
+
+SCHEMA_VERSION = 1
+
+
+def write_header(f, scenario: Scenario, kind: str) -> None:
+    """The root attributes every smd file carries, and the provenance to run it again from the file alone."""
+    import platform
+
+    import h5py
+    import scipy
+
+    f.attrs["smd_version"] = __version__
+    f.attrs["schema_version"] = SCHEMA_VERSION
+    f.attrs["kind"] = kind
+    f.attrs["created"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    f.attrs["title"] = scenario.title
+    f.attrs["scenario"] = scenario.text
+    f.attrs["scenario_path"] = str(scenario.path)
+    f.attrs["command_line"] = provenance.command_line()
+    f.attrs["python_version"] = platform.python_version()
+    f.attrs["numpy_version"] = np.__version__
+    f.attrs["scipy_version"] = scipy.__version__
+    f.attrs["h5py_version"] = h5py.__version__
+    f.attrs["machine"] = f"{platform.system()} {platform.machine()}"
+    tables = [force for force in scenario.forces if force.file]
+    if tables:  # the files a table force read, copied: the scenario text alone no longer says what they held
+        group = f.create_group("provenance/table_files")
+        for force in tables:
+            ds = group.create_dataset(force.path, data=force.file_text)
+            ds.attrs["file"] = force.file
+            ds.attrs["sha256"] = hashlib.sha256(force.file_text.encode()).hexdigest()
+
+
+def _with_scales(ds, *scales):
+    """Attach one dimension scale per axis (None leaves an axis bare); returns the data set."""
+    for axis, scale in enumerate(scales):
+        if scale is not None:
+            ds.dims[axis].attach_scale(scale)
+    return ds
+
+
+def write_simulation(path: Path, scenario: Scenario, model: Model, result: Result) -> None:
+    """Write one simulate run in the layout of DESIGN.md."""
+    import h5py
+
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        write_header(f, scenario, "simulate")
+
+        time = f.create_dataset("time", data=result.time)
+        time.attrs["units"] = "s"
+        time.make_scale("time")
+        dof = _strings(f, "dof", result.dofs)
+        dof.make_scale("dof")
+        for name, data, units in (
+            ("displacement", result.displacement, "m"),
+            ("velocity", result.velocity, "m/s"),
+            ("acceleration", result.acceleration, "m/s^2"),
+            ("force", result.force, "N"),
+        ):
+            ds = f.create_dataset(name, data=data)
+            ds.attrs["units"] = units
+            ds.dims[0].attach_scale(time)
+            ds.dims[1].attach_scale(dof)
+            if name in ("displacement", "velocity"):  # the applied force is evaluated, not solved for
+                ds.attrs["stated_accuracy"] = result.stats.stated_accuracy
+            elif name == "acceleration":
+                ds.attrs["stated_accuracy"] = acceleration_accuracy(model.M, model.C, model.K,
+                                                                    result.stats.stated_accuracy, result.displacement,
+                                                                    result.velocity, result.acceleration, result.force)
+
+        solver = f.create_group("solver")
+        for key, value in result.stats.as_attrs().items():
+            solver.attrs[key] = value
+        if result.t_failed is not None:
+            solver.attrs["t_failed"] = result.t_failed
+
+        group = f.create_group("model")
+        write_matrices(group, model, dof)
+        modes = group.create_group("modes")
+        m = model.modes
+        modes.attrs["natural_frequencies_rad_s"] = m.natural_frequencies
+        modes.attrs["damping_ratios"] = m.damping_ratios
+        modes.attrs["regimes"] = np.array(m.regimes, dtype=object).astype(str).tolist()
+        modes.attrs["stiffness_ratio"] = model.stiffness_ratio
+        mode = modes.create_dataset("mode", data=np.arange(1, model.n + 1))
+        mode.make_scale("mode")
+        for name, data, units in (("natural_frequencies_rad_s", m.natural_frequencies, "rad/s"),
+                                  ("damping_ratios", m.damping_ratios, "1")):
+            _with_scales(modes.create_dataset(name, data=data), mode).attrs["units"] = units
+        shapes = _with_scales(modes.create_dataset("shapes", data=m.shapes), dof, mode)
+        shapes.attrs["units"] = "1"
+        shapes.attrs["normalization"] = "mass-normalized (shapes^T M shapes = I), largest entry of each column positive"
+        eigen = modes.create_dataset("eigenvalues", data=np.stack([m.eigenvalues.real, m.eigenvalues.imag], axis=1))
+        eigen.attrs["units"] = "1/s"
+        eigen.attrs["columns"] = ["real", "imag"]
+        if model.nonlinear_paths:
+            group.attrs["nonlinear_elements"] = list(model.nonlinear_paths)
+
+
+def write_matrices(group, model_or_family, dof, member=None) -> None:
+    """M, C, K with units, their axes named by the DOF scale (and the member scale for a family)."""
+    for name, units in (("M", "kg"), ("C", "N s/m"), ("K", "N/m")):
+        ds = group.create_dataset(name, data=getattr(model_or_family, name))
+        ds.attrs["units"] = units
+        axes = (dof, dof) if member is None else (member, dof, dof)
+        _with_scales(ds, *axes)
+
+
+def _strings(f, name: str, values):
+    """A data set of UTF-8 strings."""
+    import h5py
+
+    return f.create_dataset(name, data=np.array(list(values), dtype=object), dtype=h5py.string_dtype("utf-8"))

@@ -1,0 +1,9 @@
+"""Model layer: Scenario -> Model, the assembled M x'' + C x' + K x + f_nl(x, x') = B u(t).
+
+Modules: system (assembly, modes, stiffness, the nonlinear element tables), forcing (force signals: values,
+discontinuities, exosystems for exact integration). Must not import: solvers, sweep, io, plots, commands, cli.
+"""
+
+from smdcli.model.system import Incidence, Model, Modes, build, regime, time_grid
+
+__all__ = ["Incidence", "Model", "Modes", "build", "regime", "time_grid"]

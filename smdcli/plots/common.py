@@ -1,0 +1,54 @@
+"""What every figure shares: a Figure without pyplot, thinning of long series, atomic saving.
+
+Plot functions return a Figure; only save_figure touches disk. Must not import: commands, cli."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+
+def _figure(**kwargs):
+    """A Figure on the Agg canvas, without pyplot's global state (and its import cost)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(**kwargs)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+MAX_DRAWN = 2000  # points per line: about two per pixel column of the axes
+
+
+def envelope(t: np.ndarray, y: np.ndarray, max_points: int = MAX_DRAWN) -> tuple[np.ndarray, np.ndarray]:
+    """Thin a long series to min/max pairs per bucket, in time order: the drawn line looks the same."""
+    n = len(t)
+    if n <= max_points:
+        return t, y
+    buckets = max_points // 2
+    edges = np.linspace(0, n, buckets + 1).astype(int)
+    arg_lo = np.array([a + np.argmin(y[a:b]) for a, b in zip(edges[:-1], edges[1:])])
+    arg_hi = np.array([a + np.argmax(y[a:b]) for a, b in zip(edges[:-1], edges[1:])])
+    first = arg_lo <= arg_hi
+    idx = np.empty(2 * buckets, dtype=int)
+    idx[0::2] = np.where(first, arg_lo, arg_hi)
+    idx[1::2] = np.where(first, arg_hi, arg_lo)
+    return t[idx], y[idx]
+
+
+def _wrap(text: str, width: int) -> str:
+    """Break a long label or title line at spaces, keeping existing line breaks."""
+    import textwrap
+
+    return "\n".join(textwrap.fill(line, width) for line in text.split("\n"))
+
+
+def save_figure(fig, path: Path) -> None:
+    """Save a figure atomically as PNG and release it."""
+    from smdcli.io.atomic import atomic_path
+
+    with atomic_path(Path(path)) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")

@@ -1,0 +1,109 @@
+"""compare-solvers' charts: error against cost (work-precision), growth against step (stability).
+
+Plot functions return a Figure; only save_figure touches disk. Must not import: commands, cli."""
+
+from __future__ import annotations
+
+import math
+from smdcli.plots.common import _figure
+
+
+
+
+FAILED_LEVEL = 3.0  # failed runs are drawn as crosses on a band above error = 1
+
+
+def _method_styles(methods: list[str]) -> dict[str, dict]:
+    """A fixed colour and marker per method, so both panels and both charts agree."""
+    markers = "osD^v<>pPhX*"
+    return {m: {"color": f"C{i % 10}", "marker": markers[i % len(markers)]} for i, m in enumerate(methods)}
+
+
+def work_precision_figure(comparison, title: str):
+    """Error against wall time and against RHS evaluations, log-log, one line per method; failures as crosses."""
+    runs = comparison.runs
+    methods = list(dict.fromkeys(r.method for r in runs))
+    styles = _method_styles(methods)
+    fig = _figure(figsize=(12, 6))
+    axes = fig.subplots(1, 2, sharey=True)
+    fig.subplots_adjust(left=0.07, right=0.8, top=0.86, bottom=0.1, wspace=0.06)
+    costs = (("wall_time_s", "Wall time [s] (median of repeats)"), ("nfev", "Right-hand-side evaluations"))
+    for ax, (cost, label) in zip(axes, costs):
+        for m in methods:
+            mine = [r for r in runs if r.method == m]
+            ok = [r for r in mine if r.success and r.error < 1.0 and getattr(r, cost) > 0]
+            fixed = not mine[0].adaptive
+            style = styles[m]
+            if ok:
+                ax.plot([getattr(r, cost) for r in ok], [max(r.error, 1e-17) for r in ok], ls="--" if fixed else "-",
+                        lw=1.2, ms=5, label=m + (" (fixed step)" if fixed else ""), **style)
+            else:
+                ax.plot([], [], ls="--" if fixed else "-", label=f"{m} (all failed)", **style)
+            bad = [r for r in mine if (not r.success or r.error >= 1.0) and getattr(r, cost) > 0]
+            if bad:
+                ax.plot([getattr(r, cost) for r in bad], [FAILED_LEVEL] * len(bad), "x", color=style["color"], ms=8)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.axhspan(1.0, 10.0, color="0.9", zorder=0)
+        ax.text(0.99, 1.15, "band: failed, or error >= 1 (x)", transform=ax.get_yaxis_transform(), ha="right",
+                va="bottom", fontsize=7, color="0.35")
+        ax.set_xlabel(label)
+        ax.grid(True, which="major", alpha=0.4)
+    axes[0].set_ylabel("Error: max |x - x_ref| / peak |x_ref|")
+    axes[0].set_ylim(top=10.0)
+    axes[1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, frameon=False)
+    ref = f"reference: {comparison.reference_method}"
+    if comparison.reference_error:
+        ref += f" (own error {comparison.reference_error:.1e})"
+    extra = "" if comparison.breakpoints else "; integration NOT restarted at force discontinuities"
+    fig.suptitle(f"{title}\nwork-precision: solid adaptive (one point per rtol), dashed fixed step (one per h); "
+                 f"{ref}{extra}", fontsize=10)
+    return fig
+
+
+GROWTH_FAILED = 3e9  # diverged runs (stopped past 1e8 times their scale) are crosses in a band up here
+
+
+def stability_figure(comparison, title: str, limits: dict[str, float]):
+    """Fixed-step growth (peak |x| / reference peak) against h * omega_max, each method's undamped limit drawn."""
+    runs = [r for r in comparison.runs if not r.adaptive and math.isfinite(r.h_omega)]
+    methods = list(dict.fromkeys(r.method for r in comparison.runs))
+    styles = _method_styles(methods)
+    fig = _figure(figsize=(10, 6))
+    ax = fig.subplots()
+    fig.subplots_adjust(left=0.09, right=0.72, top=0.86, bottom=0.1)
+    for m in dict.fromkeys(r.method for r in runs):
+        mine = sorted((r for r in runs if r.method == m), key=lambda r: r.h_omega)
+        style = styles[m]
+        ok = [r for r in mine if r.success]
+        ax.plot([r.h_omega for r in ok], [r.growth for r in ok], "-", lw=1.2, ms=5, label=m, **style)
+        bad = [r for r in mine if not r.success and not r.message.startswith("skipped")]
+        if bad:
+            ax.plot([r.h_omega for r in bad], [GROWTH_FAILED] * len(bad), "x", color=style["color"], ms=9, mew=2)
+        limit = limits.get(m, math.inf)
+        if 0 < limit < math.inf:
+            ax.axvline(limit, color=style["color"], ls=":", lw=1.5)
+            # In the band above the data, where no run is drawn: the label never covers a curve.
+            ax.text(limit, 0.985, f"{m} limit {limit:.3g} ", transform=ax.get_xaxis_transform(), rotation=90,
+                    va="top", ha="right", fontsize=7, color=style["color"])
+    notes = [f"{m}: {'unconditionally stable' if limits.get(m, math.inf) == math.inf else 'unstable at any h'}"
+             for m in dict.fromkeys(r.method for r in runs) if limits.get(m, math.inf) in (0.0, math.inf)]
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    grown = [r.growth for r in runs if r.success and r.growth > 0]
+    ax.set_ylim(min(0.1, min(grown, default=0.1) / 2), 1e10)
+    ax.axhspan(1e9, 1e10, color="0.9", zorder=0)
+    ax.axhline(1.0, color="k", lw=0.8, alpha=0.5)
+    ax.set_ylim(top=1e13)  # room above the band for the limits' labels
+    ax.text(0.01, 1.1e9, "band: diverged or failed (x)", transform=ax.get_yaxis_transform(), ha="left",
+            va="bottom", fontsize=7, color="0.35")
+    ax.set_xlabel(f"Step times highest natural frequency, h·ω_max [1]  (ω_max = {comparison.omega_max:.4g} rad/s)")
+    ax.set_ylabel("Growth: peak |x| of the run / peak |x| of the reference [1]")
+    ax.grid(True, which="major", alpha=0.4)
+    handles = ax.get_legend_handles_labels()
+    ax.legend(*handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, frameon=False,
+              title="dotted: stability limit\n(undamped theory)")
+    if notes:
+        ax.text(1.02, 0.0, "\n".join(notes), transform=ax.transAxes, fontsize=8, va="bottom")
+    fig.suptitle(f"{title}\nstability of fixed-step methods: a bounded run stays near 1", fontsize=10)
+    return fig

@@ -1,0 +1,182 @@
+"""A run against time (forces, displacement, velocity, acceleration) and phase portraits.
+
+Plot functions return a Figure; only save_figure touches disk. Must not import: commands, cli."""
+
+from __future__ import annotations
+
+
+import numpy as np
+
+from smdcli.result import Result
+from smdcli.plots.common import MAX_DRAWN, _figure, _wrap, envelope
+from smdcli.plots.sweep import _STYLES
+
+
+def _band(t: np.ndarray, y: np.ndarray, max_points: int = MAX_DRAWN):
+    """For a series that oscillates faster than the axes can draw (a 120 rad/s force over 120 s): per-bucket
+    (times, low, high, mean), so the plot shows the band it fills and the motion it rides on; None otherwise."""
+    n = len(t)
+    if n <= max_points:
+        return None
+    dy = np.diff(y)
+    turns = np.count_nonzero(np.sign(dy[1:]) * np.sign(dy[:-1]) < 0)
+    buckets = max_points // 2
+    if turns < 2 * buckets:  # fewer than one oscillation per bucket: a line shows it
+        return None
+    edges = np.linspace(0, n, buckets + 1).astype(int)
+    low = np.minimum.reduceat(y, edges[:-1])
+    high = np.maximum.reduceat(y, edges[:-1])
+    # The running mean over two buckets, twice (a triangular window): a plain bucket mean of an oscillation
+    # that does not fit a bucket a whole number of times aliases into wiggles that are not in the motion.
+    width = max(1, n // buckets)
+    mean = _running_mean(_running_mean(y, width), width)
+    centres = np.minimum((edges[:-1] + edges[1:]) // 2, n - 1)
+    return t[edges[:-1]], low, high, mean[centres]
+
+
+def _running_mean(y: np.ndarray, width: int) -> np.ndarray:
+    """Mean of y over a centred window of `width` samples (shorter at the ends)."""
+    total = np.concatenate([[0.0], np.cumsum(y)])
+    lo = np.clip(np.arange(len(y)) - width // 2, 0, len(y))
+    hi = np.clip(lo + width, 0, len(y))
+    return (total[hi] - total[lo]) / (hi - lo)
+
+
+def _fast_window(result: Result) -> tuple[float, float] | None:
+    """A window of about five periods of the fastest oscillation at the end of the run, if one is too fast to see."""
+    t = result.time
+    if len(t) <= MAX_DRAWN:
+        return None
+    turns = 0
+    for data in (result.displacement, result.acceleration):
+        dy = np.diff(data, axis=0)
+        turns = max(turns, int((np.sign(dy[1:]) * np.sign(dy[:-1]) < 0).sum(axis=0).max()))
+    if turns < MAX_DRAWN // 2:
+        return None
+    width = min(10 * (t[-1] - t[0]) / turns, (t[-1] - t[0]) / 10)  # two turns a period: five periods
+    return t[-1] - width, t[-1]
+
+
+FORCE_STYLES = ("-", "--", ":", "-.")
+
+
+def response_figure(result: Result, title: str):
+    """Applied forces, then displacement, velocity and acceleration against time, one colour per DOF.
+
+    An oscillation too fast to draw over the whole run is shown as a faint band (its range) with its running
+    mean, and a zoomed inset shows its last few periods."""
+    forced = np.any(result.force != 0)
+    rows = (("force", "Force F [N]"),) if forced else ()
+    rows += (("displacement", "Displacement x [m]"), ("velocity", "Velocity v [m/s]"),
+             ("acceleration", "Acceleration a [m/s²]"))
+    heights = [0.55 if name == "force" else 1.0 for name, _ in rows]
+    fig = _figure(figsize=(9, 2.6 * sum(heights) + 1.2))
+    axes = fig.subplots(len(rows), 1, sharex=True, gridspec_kw={"height_ratios": heights})
+    fig.subplots_adjust(left=0.1, right=0.97, top=0.9, bottom=0.07, hspace=0.12)
+    window = _fast_window(result)
+    banded = set()
+    for ax, (name, label) in zip(axes, rows):
+        data = getattr(result, name)
+        for j, dof in enumerate(result.dofs):
+            if name == "force":
+                if not np.any(data[:, j] != 0):
+                    continue
+                style = FORCE_STYLES[len(ax.get_lines()) % len(FORCE_STYLES)]
+                band = _band(result.time, data[:, j])
+                if band is not None:
+                    ax.fill_between(band[0], band[1], band[2], color=f"C{j}", alpha=0.25, lw=0,
+                                    label=f"F on {dof} (range of a fast oscillation)")
+                else:
+                    ax.plot(*envelope(result.time, data[:, j]), ls=style, lw=1.2, color=f"C{j}", label=f"F on {dof}")
+                continue
+            band = _band(result.time, data[:, j])
+            if band is None:
+                ax.plot(*envelope(result.time, data[:, j]), lw=1.1, color=f"C{j}", label=dof)
+            else:
+                banded.add(dof)
+                ax.fill_between(band[0], band[1], band[2], color=f"C{j}", alpha=0.22, lw=0)
+                ax.plot(band[0], band[3], lw=1.1, color=f"C{j}", label=dof)
+        ax.set_ylabel(label)
+        ax.grid(True, alpha=0.4)
+        if name == "force":
+            ax.legend(loc="upper right", fontsize=8, framealpha=0.85)
+        if window is not None and name == "acceleration":
+            _zoom_inset(ax, result, data, window)
+    motion = axes[1] if forced else axes[0]
+    handles, labels = motion.get_legend_handles_labels()
+    if banded:
+        from matplotlib.patches import Patch
+
+        handles.append(Patch(color="0.6", alpha=0.35, lw=0))
+        labels.append("shaded: range of an oscillation too fast to draw (line: its running mean)")
+    motion.legend(handles, labels, loc="upper right", fontsize=8, framealpha=0.85, ncol=1)
+    axes[-1].set_xlabel("Time t [s]")
+    axes[0].set_xlim(result.time[0], result.time[-1])
+    fig.suptitle(title, fontsize=11)
+    return fig
+
+
+def _zoom_inset(ax, result: Result, data: np.ndarray, window: tuple[float, float]) -> None:
+    """The last few periods of the fastest oscillation, drawn in full, in an inset of `ax`."""
+    inset = ax.inset_axes((0.56, 0.56, 0.42, 0.4))
+    keep = (result.time >= window[0]) & (result.time <= window[1])
+    for j, dof in enumerate(result.dofs):
+        inset.plot(result.time[keep], data[keep, j], lw=0.9, color=f"C{j}")
+    from matplotlib.ticker import MaxNLocator
+
+    inset.set_xlim(*window)
+    inset.tick_params(labelsize=7)
+    inset.xaxis.set_major_locator(MaxNLocator(3))
+    inset.ticklabel_format(axis="x", useOffset=False)
+    inset.yaxis.set_major_locator(MaxNLocator(3))
+    inset.text(0.02, 0.96, f"zoom on the last {window[1] - window[0]:.3g} s, every sample", transform=inset.transAxes,
+               fontsize=7, va="top", bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8, "pad": 1})
+    inset.grid(True, alpha=0.3)
+    inset.set_facecolor("white")
+
+
+def phase_figure(result: Result, title: str):
+    """Phase portrait of a run: velocity against displacement per DOF, start and direction marked."""
+    curves = [(dof, result.displacement[:, j], result.velocity[:, j]) for j, dof in enumerate(result.dofs)]
+    return portrait_figure(curves, f"{title}\nphase portrait")
+
+
+def portrait_figure(curves, title: str, poincare=None):
+    """Phase portraits: velocity against displacement per curve (label, x, v), start marked, direction arrowed;
+    Poincare points (label, x, v) drawn as dots."""
+    fig = _figure(figsize=(7.5, 6.5))
+    ax = fig.subplots()
+    fig.subplots_adjust(left=0.13, right=0.72, top=0.88, bottom=0.1)
+    for i, (label, x, v) in enumerate(curves):
+        color = f"C{i % 10}"
+        faint = poincare is not None
+        ax.plot(x, v, _STYLES[i % len(_STYLES)] if len(curves) <= 4 else "-", lw=0.6 if faint else 1.3, color=color,
+                alpha=0.35 if faint else 1.0, label=_wrap(label, 32))
+        ax.plot(x[0], v[0], "o", color=color, ms=7, mfc="white", mew=1.5)
+        _direction_arrows(ax, x, v, color)
+    if poincare is not None:
+        for i, (label, x, v) in enumerate(poincare):
+            ax.plot(x, v, "o", color=f"C{i % 10}", ms=6, mec="k", mew=0.6, zorder=5,
+                    label=_wrap(f"{label}: once per period", 32))
+    ax.plot([], [], "o", color="k", mfc="white", label="start")
+    ax.set_xlabel("Displacement x [m]")
+    ax.set_ylabel("Velocity v [m/s]")
+    ax.grid(True, alpha=0.4)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    ax.set_title(_wrap(title, 80), fontsize=10)
+    return fig
+
+
+def _direction_arrows(ax, x: np.ndarray, v: np.ndarray, color, count: int = 4) -> None:
+    """Arrowheads along a trajectory, spaced by arc length in the plot's own scale, showing the direction of motion."""
+    if len(x) < 3:
+        return
+    sx, sv = np.ptp(x) or 1.0, np.ptp(v) or 1.0
+    arc = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x) / sx, np.diff(v) / sv))])
+    if arc[-1] == 0:
+        return
+    # Early along the path, where the motion is largest and the arrows are clear of the end point.
+    for target in arc[-1] * np.array([0.04, 0.12, 0.25, 0.45][:count]):
+        i = min(int(np.searchsorted(arc, target)), len(x) - 2)
+        ax.annotate("", xy=(x[i + 1], v[i + 1]), xytext=(x[i], v[i]),
+                    arrowprops={"arrowstyle": "-|>", "color": color, "lw": 1.2, "mutation_scale": 14})

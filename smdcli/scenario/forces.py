@@ -1,0 +1,149 @@
+"""[[force]] tables: every force type's fields, table forces read from files.
+
+Must not import: model, solvers, or any layer above."""
+
+from __future__ import annotations
+
+import difflib
+import math
+import re
+from pathlib import Path
+from typing import Any
+from smdcli.scenario.reader import MAX_TABLE_BYTES, _NotRegular, _Table, read_regular_file
+from smdcli.scenario.spec import FORCE_TYPES, ForceSpec
+
+
+
+_FORCE_FIELDS = {
+    "constant": ("amplitude",),
+    "step": ("amplitude", "t0"),
+    "sine": ("amplitude", "omega", "frequency", "phase"),
+    "cosine": ("amplitude", "omega", "frequency", "phase"),
+    "square": ("amplitude", "omega", "frequency", "period", "duty", "t0"),
+    "fourier_square": ("amplitude", "omega", "frequency", "period", "terms", "t0"),
+    "pulse": ("amplitude", "t0", "duration"),
+    "chirp": ("amplitude", "f0", "f1", "t1", "phase"),
+    "table": ("t", "values", "file", "interpolation"),
+    "expression": ("expr",),
+}
+_ANY_FORCE_KEYS = ("on", "type") + tuple(dict.fromkeys(k for keys in _FORCE_FIELDS.values() for k in keys))
+
+
+def _read_omega(t: _Table, allow_period: bool) -> float:
+    keys = ("omega", "frequency") + (("period",) if allow_period else ())
+    given = [k for k in keys if t.has(k)]
+    if len(given) != 1:
+        want = " or ".join(keys)
+        if not given:
+            raise t.fail(keys[0], f"required field is missing (expected exactly one of {want})")
+        raise t.fail(given[1], f"give exactly one of {want}, found {' and '.join(given)}")
+    key = given[0]
+    value = t.number(key, positive=(key != "omega"), minimum=0.0)
+    if key == "omega":
+        return value
+    if key == "frequency":
+        return 2 * math.pi * value
+    return 2 * math.pi / value
+
+
+def _read_force(t: _Table, index: int, dofs: tuple[str, ...]) -> ForceSpec:
+    on = t.string("on")
+    if on not in dofs:
+        hint = difflib.get_close_matches(on, dofs, n=1)
+        extra = f" (did you mean {hint[0]!r}?)" if hint else f"; DOFs are {', '.join(dofs)}"
+        raise t.fail("on", f"unknown DOF {on!r}{extra}")
+    kind = t.string("type", choices=FORCE_TYPES)
+    spec: dict[str, Any] = {"index": index, "on": on, "type": kind}
+    if kind in ("constant", "step", "sine", "cosine", "square", "fourier_square", "pulse", "chirp"):
+        spec["amplitude"] = t.number("amplitude")
+    if kind in ("step", "square", "fourier_square", "pulse"):
+        spec["t0"] = t.number("t0", 0.0)
+    if kind in ("sine", "cosine"):
+        spec["omega"] = _read_omega(t, allow_period=False)
+        spec["phase"] = t.number("phase", 0.0)
+    elif kind == "square":
+        spec["omega"] = _read_omega(t, allow_period=True)
+        duty = t.number("duty", 0.5)
+        if not 0.0 < duty < 1.0:
+            raise t.fail("duty", f"expected a fraction between 0 and 1 (exclusive), found {duty:g}")
+        spec["duty"] = duty
+    elif kind == "fourier_square":
+        spec["omega"] = _read_omega(t, allow_period=True)
+        spec["terms"] = t.integer("terms", minimum=1)
+        if spec["terms"] > 10_000:
+            raise t.fail("terms", f"expected at most 10000 harmonics, found {spec['terms']}")
+    elif kind == "pulse":
+        spec["duration"] = t.number("duration", positive=True)
+    elif kind == "chirp":
+        spec["f0"] = t.number("f0", minimum=0.0)
+        spec["f1"] = t.number("f1", minimum=0.0)
+        spec["t1"] = t.number("t1", positive=True)
+        spec["phase"] = t.number("phase", 0.0)
+    elif kind == "table":
+        spec.update(_read_table_force(t))
+    elif kind == "expression":
+        from smdcli.expression import Expression, ExpressionError
+
+        text = t.string("expr")
+        try:
+            Expression(text)
+        except ExpressionError as exc:
+            raise t.fail("expr", str(exc)) from None
+        spec["expr"] = text
+    t.finish(("on", "type") + _FORCE_FIELDS[kind])
+    return ForceSpec(**spec)
+
+
+def _read_table_force(t: _Table) -> dict[str, Any]:
+    interpolation = t.string("interpolation", "linear", choices=("linear", "previous"))
+    if t.has("file"):
+        if t.has("t") or t.has("values"):
+            raise t.fail("file", "give either file or t and values, not both")
+        times, values, file, file_text = _read_csv(t, t.string("file"))
+    else:
+        times = t.numbers("t")
+        values = t.numbers("values")
+        if len(values) != len(times):
+            raise t.fail("values", f"expected {len(times)} numbers (one per entry of t), found {len(values)}")
+    if len(times) < 1:
+        raise t.fail("t", "expected at least one point")
+    for i in range(1, len(times)):
+        if times[i] <= times[i - 1]:
+            raise t.fail(f"t[{i}]", f"expected strictly increasing times, found {times[i]:g} after {times[i - 1]:g}")
+    spec = {"t": times, "values": values, "interpolation": interpolation}
+    if t.has("file"):
+        spec.update(file=file, file_text=file_text)
+    return spec
+
+
+def _read_csv(t: _Table, name: str) -> tuple[tuple[float, ...], tuple[float, ...], str, str]:
+    csv_path = Path(name)
+    if not csv_path.is_absolute():
+        csv_path = Path(t.file).parent / csv_path
+    try:
+        text = read_regular_file(csv_path, MAX_TABLE_BYTES).decode("utf-8")
+    except _NotRegular as exc:
+        raise t.fail("file", f"{csv_path}: {exc}, expected a CSV file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        reason = "no such file" if isinstance(exc, FileNotFoundError) else (
+            "is a directory" if isinstance(exc, IsADirectoryError) else "cannot be read as UTF-8 text")
+        raise t.fail("file", f"{csv_path}: {reason}") from None
+    times, values = [], []
+    for number, line in enumerate(text.splitlines(), start=1):
+        stripped = line.strip()
+        if not stripped or stripped.startswith("#"):
+            continue
+        cells = [c.strip() for c in re.split(r"[,;\t]", stripped)]
+        try:
+            a, b = (float(c) for c in cells)
+        except ValueError:
+            if not times and number == 1 and len(cells) == 2:
+                continue  # a header row
+            raise t.fail("file", f"{csv_path} line {number}: expected two numbers (t, value), found {stripped[:40]!r}") from None
+        if not (math.isfinite(a) and math.isfinite(b)):
+            raise t.fail("file", f"{csv_path} line {number}: expected finite numbers")
+        times.append(a)
+        values.append(b)
+    if not times:
+        raise t.fail("file", f"{csv_path}: no data rows")
+    return tuple(times), tuple(values), str(csv_path), text

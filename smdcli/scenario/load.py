@@ -1,0 +1,120 @@
+"""TOML file or text -> validated Scenario: load, parse, parse_document, and the checks across tables.
+
+Must not import: model, solvers (but the catalog's data), or any layer above."""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from pathlib import Path
+
+from smdcli.errors import ScenarioError
+from smdcli.scenario.forces import _ANY_FORCE_KEYS, _read_force
+from smdcli.scenario.options import SWEEP_KEYS, _read_solver, _read_sweep
+from smdcli.scenario.reader import MAX_SCENARIO_BYTES, _NotRegular, _SYSTEM_KEYS, _TIME_KEYS, _TOP_KEYS, _Table, _solver_keys, read_regular_file
+from smdcli.scenario.spec import ForceSpec, MAX_SAMPLES, Scenario, SolverSpec, TimeSpec
+from smdcli.scenario.structure import _read_elements, _read_masses, _read_system, _read_time
+
+
+def load(path: str | Path) -> Scenario:
+    """Read and validate a scenario file; raises ScenarioError on any bad input."""
+    path = Path(path)
+    file = str(path)
+    if path.is_dir():
+        raise ScenarioError(file, None, "is a directory, expected a scenario .toml file")
+    try:
+        data = read_regular_file(path, MAX_SCENARIO_BYTES)
+    except FileNotFoundError:
+        raise ScenarioError(file, None, "no such file") from None
+    except _NotRegular as exc:
+        raise ScenarioError(file, None, f"{exc}, expected a scenario .toml file") from None
+    except OSError as exc:
+        raise ScenarioError(file, None, f"cannot be read: {exc.strerror}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise ScenarioError(file, None, "is not UTF-8 text", line=line) from None
+    return parse(text, file)
+
+
+def parse(text: str, file: str = "<scenario>") -> Scenario:
+    """Validate scenario text; `file` names it in messages and anchors relative paths."""
+    if not text.strip():
+        raise ScenarioError(file, None, "is empty; a scenario needs at least [time] and one [[mass]] or [system]")
+    try:
+        doc = tomllib.loads(text)
+    except RecursionError:
+        raise ScenarioError(file, None, "invalid TOML: arrays or tables nested too deeply") from None
+    except ValueError as exc:  # Python refuses integer literals of more than 4300 digits
+        raise ScenarioError(file, None, f"invalid TOML: a number literal too long ({str(exc).split(':')[0]})") from None
+    except tomllib.TOMLDecodeError as exc:
+        message = str(exc)
+        match = re.search(r"\(at line (\d+), column \d+\)", message)
+        line = int(match.group(1)) if match else None
+        message = re.sub(r"\s*\(at line \d+, column \d+\)", "", message)
+        raise ScenarioError(file, None, f"invalid TOML: {message}", line=line) from None
+    return parse_document(doc, text, file)
+
+
+def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
+    """Validate an already-decoded TOML document (a sweep member is one, edited)."""
+    top = _Table(file, "", doc, _TOP_KEYS)
+    title = top.string("title", "")
+    description = top.string("description", "", multiline=True)
+    time = _read_time(_Table(file, "time", top.raw("time"), _TIME_KEYS) if top.has("time") else None, file)
+
+    if top.has("system"):
+        for element in ("mass", "spring", "damper"):
+            if top.has(element):
+                raise ScenarioError(file, element, "cannot be combined with [system]; use one form or the other")
+        system = _read_system(_Table(file, "system", top.raw("system"), _SYSTEM_KEYS))
+        masses, springs, dampers = (), (), ()
+        dofs = system.dofs
+    else:
+        system = None
+        masses = _read_masses(top, file)
+        dofs = tuple(m.name for m in masses)
+        springs = _read_elements(top, file, "spring", dofs)
+        dampers = _read_elements(top, file, "damper", dofs)
+
+    forces = tuple(
+        _read_force(_Table(file, f"force[{i}]", raw, _ANY_FORCE_KEYS), i, dofs) for i, raw in enumerate(top.tables("force"))
+    )
+    solver = _read_solver(_Table(file, "solver", top.raw("solver"), _solver_keys())) if top.has("solver") else SolverSpec()
+    sweep = _read_sweep(_Table(file, "sweep", top.raw("sweep"), SWEEP_KEYS)) if top.has("sweep") else ()
+    top.finish(_TOP_KEYS)
+
+    if not math.isfinite(time.end - time.start):
+        raise ScenarioError(file, "time.end", f"expected a time span that is a finite number, found {time.end:g} - {time.start:g}")
+    # In floating point: a huge span over a small step is refused before it becomes an integer.
+    n_points = time.points if time.points is not None else (time.end - time.start) / time.step * (1 + 1e-12) + 1
+    if not n_points * max(len(dofs), 1) <= MAX_SAMPLES:
+        key = "time.points" if time.points is not None else "time.step"
+        raise ScenarioError(
+            file, key,
+            f"output grid of {n_points:.3g} points x {len(dofs)} DOF is too large "
+            f"(limit {MAX_SAMPLES:.0e} samples); use a larger step or fewer points",
+        )
+    for force in forces:
+        if force.type == "chirp":
+            _check_chirp_resolved(file, force, time, n_points)
+    return Scenario(
+        path=file, text=text, time=time, masses=masses, springs=springs, dampers=dampers,
+        system=system, forces=forces, solver=solver, title=title, description=description,
+        sweep=sweep,
+    )
+
+
+def _check_chirp_resolved(file: str, force: ForceSpec, time: TimeSpec, n_points: float) -> None:
+    """A chirp whose frequency passes the output grid's Nyquist frequency cannot be seen or held: refuse it."""
+    rate = (force.f1 - force.f0) / force.t1
+    top = max(abs(force.f0 + rate * time.start), abs(force.f0 + rate * time.end))  # Hz; it sweeps on past t1
+    step = (time.end - time.start) / max(n_points - 1, 1)
+    if not top * step <= 0.5:
+        need = 0.5 / top if top > 0 else math.inf
+        raise ScenarioError(file, f"{force.path}.f1",
+                            f"the chirp reaches {top:.4g} Hz by t = {time.end:g} s, above the output grid's Nyquist "
+                            f"frequency {0.5 / step:.4g} Hz (step {step:.3g} s); the force cannot be resolved: use a "
+                            f"[time] step of at most {need:.3g} s, or lower f1 or t1")

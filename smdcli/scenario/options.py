@@ -1,0 +1,87 @@
+"""The [solver] table (checked against the solver catalog's data) and the [sweep] table.
+
+Must not import: any solver class, model, or any layer above."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from smdcli.solvers.catalog import METHOD_OPTIONS, NEWMARK_SCHEMES, OPTION_RANGES, check_method_name
+from smdcli.scenario.reader import _Table, _kind
+from smdcli.scenario.spec import SolverSpec
+
+
+def _read_solver(t: _Table) -> SolverSpec:
+    method = t.string("method", "auto")
+    problem = check_method_name(method)
+    if problem:
+        raise t.fail("method", problem)
+    rtol = t.number("rtol", 1e-6, positive=True)
+    atol = t.number("atol", 1e-9, positive=True)
+    dt = t.number("dt", None, positive=True)
+    options = []
+    for key, owner in METHOD_OPTIONS.items():
+        if not t.has(key):
+            continue
+        if method != owner:
+            raise t.fail(key, f"applies to method {owner!r} only, found method {method!r}")
+        if key == "scheme":
+            value = t.string(key)
+            if value not in NEWMARK_SCHEMES:
+                raise t.fail(key, f"expected one of {', '.join(map(repr, NEWMARK_SCHEMES))}, found {value!r}")
+        else:
+            low, high = OPTION_RANGES[key]
+            value = t.number(key)
+            if not low <= value <= high:
+                raise t.fail(key, f"expected a number in [{low:.4g}, {high:.4g}], found {value!r}")
+        options.append((key, value))
+    t.finish(("method", "rtol", "atol", "dt", *METHOD_OPTIONS))
+    return SolverSpec(method=method, rtol=rtol, atol=atol, dt=dt, options=tuple(options))
+
+
+SWEEP_KEYS = ("parameter", "values", "labels", "ic", "frequency", "normalized", "input", "direction",
+              "measure", "quantity", "metric", "method")
+
+
+def _read_sweep(t: _Table) -> tuple[tuple[str, Any], ...]:
+    # Types only: the sweep command reads the contents and names this file in its errors.
+    items = []
+    for key in SWEEP_KEYS:
+        if not t.has(key):
+            continue
+        value = t.raw(key)
+        if key in ("normalized", "measure"):
+            if not isinstance(value, bool):
+                raise t.fail(key, f"expected true or false, found {_kind(value)}")
+        elif key in ("parameter", "labels", "ic"):
+            if isinstance(value, str) and key == "parameter":
+                value = [value]
+            if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+                raise t.fail(key, f"expected a string or an array of strings, found {_kind(value)}")
+            value = tuple(value)
+        elif key == "values":
+            value = _sweep_values(t, value)
+        elif key == "frequency":
+            if isinstance(value, list):
+                value = t.numbers(key)
+            elif not isinstance(value, str):
+                raise t.fail(key, f"expected an array of numbers or a range string, found {_kind(value)}")
+        elif not isinstance(value, str):
+            raise t.fail(key, f"expected a string, found {_kind(value)}")
+        items.append((key, value))
+    t.finish(SWEEP_KEYS)
+    return tuple(items)
+
+
+def _sweep_values(t: _Table, value: Any) -> tuple:
+    """One value spec (a range string or an array of numbers), or an array of such specs (one per parameter)."""
+    def one(v, where):
+        if isinstance(v, str):
+            return v
+        if isinstance(v, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+            return tuple(t._check_number(f"{where}[{i}]", x, None, False) for i, x in enumerate(v))
+        raise t.fail(where, f"expected an array of numbers or a range string, found {_kind(v)}")
+
+    if isinstance(value, list) and value and all(isinstance(v, (list, str)) for v in value):
+        return tuple(one(v, f"values[{i}]") for i, v in enumerate(value))
+    return (one(value, "values"),)

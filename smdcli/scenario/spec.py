@@ -1,0 +1,144 @@
+"""What a scenario is: frozen dataclasses and the limits they are read under.
+
+Must not import: anything of smd but errors (the bottom of the scenario layer)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+
+
+GROUND = "ground"
+FORCE_TYPES = (
+    "constant", "step", "sine", "cosine", "square", "fourier_square",
+    "pulse", "chirp", "table", "expression",
+)
+# Output samples (time points x DOFs) one run may hold; beyond this the grid
+# is refused before anything is allocated.
+MAX_SAMPLES = 20_000_000
+DEFAULT_POINTS = 1001
+
+
+@dataclass(frozen=True)
+class TimeSpec:
+    """Output grid: from start to end, spaced by step, or `points` points."""
+
+    start: float
+    end: float
+    step: float | None = None
+    points: int | None = None
+
+
+@dataclass(frozen=True)
+class MassSpec:
+    """A point mass [kg] with its initial displacement [m] and velocity [m/s]."""
+
+    name: str
+    m: float
+    x0: float = 0.0
+    v0: float = 0.0
+
+
+@dataclass(frozen=True)
+class ElementSpec:
+    """A two-terminal spring (coef = k [N/m]) or damper (coef = c [N s/m])."""
+
+    kind: str  # "spring" | "damper"
+    index: int
+    connects: tuple[str, str]
+    coef: float
+    law: str = "linear"  # spring: linear | cubic; damper: linear | quadratic
+    k3: float = 0.0  # cubic spring coefficient [N/m^3]
+
+    @property
+    def path(self) -> str:
+        """Field path of this element in the scenario file."""
+        return f"{self.kind}[{self.index}]"
+
+
+@dataclass(frozen=True)
+class MatrixSystem:
+    """The book's matrix form: M, C, K given whole."""
+
+    dofs: tuple[str, ...]
+    M: tuple[tuple[float, ...], ...]
+    C: tuple[tuple[float, ...], ...]
+    K: tuple[tuple[float, ...], ...]
+    x0: tuple[float, ...]
+    v0: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class ForceSpec:
+    """One applied force; the fields used depend on `type` (see DESIGN.md)."""
+
+    index: int
+    on: str
+    type: str
+    amplitude: float = 0.0
+    omega: float | None = None  # rad/s, resolved from frequency or period
+    phase: float = 0.0
+    t0: float = 0.0
+    duration: float | None = None
+    duty: float = 0.5
+    terms: int | None = None
+    f0: float | None = None
+    f1: float | None = None
+    t1: float | None = None
+    t: tuple[float, ...] = ()
+    values: tuple[float, ...] = ()
+    interpolation: str = "linear"
+    expr: str | None = None
+    file: str | None = None  # a table force's file, as resolved, and its text: the result keeps a copy
+    file_text: str | None = None
+
+    @property
+    def path(self) -> str:
+        """Field path of this force in the scenario file."""
+        return f"force[{self.index}]"
+
+
+@dataclass(frozen=True)
+class SolverSpec:
+    """Requested method and tolerances; dt only for fixed-step methods."""
+
+    method: str = "auto"
+    rtol: float = 1e-6
+    atol: float = 1e-9
+    dt: float | None = None
+    options: tuple[tuple[str, float | str], ...] = ()  # beta, gamma, scheme (newmark), alpha (hht), rho_inf
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario file, frozen; variants are made with dataclasses.replace."""
+
+    path: str
+    text: str
+    time: TimeSpec
+    masses: tuple[MassSpec, ...] = ()
+    springs: tuple[ElementSpec, ...] = ()
+    dampers: tuple[ElementSpec, ...] = ()
+    system: MatrixSystem | None = None
+    forces: tuple[ForceSpec, ...] = ()
+    solver: SolverSpec = field(default_factory=SolverSpec)
+    title: str = ""
+    description: str = ""
+    sweep: tuple[tuple[str, Any], ...] = ()
+
+    @property
+    def stem(self) -> str:
+        """File name without folder and extension: the base of output names."""
+        return Path(self.path).stem
+
+    @property
+    def dof_names(self) -> tuple[str, ...]:
+        """Degree-of-freedom names in model order."""
+        if self.system is not None:
+            return self.system.dofs
+        return tuple(m.name for m in self.masses)
+
+
+# ---------------------------------------------------------------- reading

@@ -1,0 +1,155 @@
+"""The structure's tables: [time], [[mass]], [[spring]], [[damper]] and [system].
+
+Must not import: model, solvers, or any layer above."""
+
+from __future__ import annotations
+
+import difflib
+import math
+
+from smdcli.errors import ScenarioError
+from smdcli.scenario.reader import _MASS_KEYS, _SYSTEM_KEYS, _TIME_KEYS, _Table, _control_character, _kind
+from smdcli.scenario.spec import DEFAULT_POINTS, ElementSpec, GROUND, MassSpec, MatrixSystem, TimeSpec
+
+
+def _read_time(table: _Table | None, file: str) -> TimeSpec:
+    if table is None:
+        raise ScenarioError(file, "time", "required table is missing (expected [time] with end = ...)")
+    start = table.number("start", 0.0)
+    end = table.number("end")
+    if end <= start:
+        raise table.fail("end", f"expected a time after start = {start:g}, found {end:g}")
+    if table.has("step") and table.has("points"):
+        raise table.fail("points", "give either step or points, not both")
+    step = table.number("step", None, positive=True)
+    points = table.integer("points", None, minimum=2)
+    if step is not None and step > end - start:
+        raise table.fail("step", f"expected a step no longer than end - start = {end - start:g}, found {step:g}")
+    if step is None and points is None:
+        points = DEFAULT_POINTS
+    table.finish(_TIME_KEYS)
+    return TimeSpec(start=start, end=end, step=step, points=points)
+
+
+def _read_masses(top: _Table, file: str) -> tuple[MassSpec, ...]:
+    raw = top.tables("mass")
+    if not raw:
+        raise ScenarioError(file, "mass", "no masses: give [[mass]] tables or a [system] table")
+    masses, seen = [], {}
+    for i, item in enumerate(raw):
+        t = _Table(file, f"mass[{i}]", item, _MASS_KEYS)
+        name = t.string("name")
+        if not name.strip():
+            raise t.fail("name", "expected a non-empty name")
+        if name == GROUND:
+            raise t.fail("name", f"{GROUND!r} is reserved for the fixed wall")
+        if name in seen:
+            raise t.fail("name", f"duplicate name {name!r} (also mass[{seen[name]}])")
+        seen[name] = i
+        m = t.number("m", positive=True)
+        x0 = t.number("x0", 0.0)
+        v0 = t.number("v0", 0.0)
+        t.finish(_MASS_KEYS)
+        masses.append(MassSpec(name=name, m=m, x0=x0, v0=v0))
+    return tuple(masses)
+
+
+def _read_elements(top: _Table, file: str, kind: str, dofs: tuple[str, ...]) -> tuple[ElementSpec, ...]:
+    coef_key, laws = ("k", ("linear", "cubic")) if kind == "spring" else ("c", ("linear", "quadratic"))
+    elements = []
+    for i, item in enumerate(top.tables(kind)):
+        t = _Table(file, f"{kind}[{i}]", item, ("connects", coef_key, "law") + (("k3",) if kind == "spring" else ()))
+        connects = _read_connects(t, dofs)
+        law = t.string("law", "linear", choices=laws)
+        coef = t.number(coef_key, minimum=0.0)
+        k3 = 0.0
+        allowed = ("connects", coef_key, "law")
+        if kind == "spring":
+            allowed += ("k3",)
+            if law == "cubic":
+                k3 = t.number("k3")
+            elif t.has("k3"):
+                raise t.fail("k3", 'only a cubic spring has k3; set law = "cubic"')
+        t.finish(allowed)
+        elements.append(ElementSpec(kind=kind, index=i, connects=connects, coef=coef, law=law, k3=k3))
+    return tuple(elements)
+
+
+def _read_connects(t: _Table, dofs: tuple[str, ...]) -> tuple[str, str]:
+    if not t.has("connects"):
+        raise t.fail("connects", 'required field is missing (expected ["ground", "m1"] or ["m1", "m2"])')
+    value = t.raw("connects")
+    if not isinstance(value, list) or len(value) != 2 or not all(isinstance(v, str) for v in value):
+        raise t.fail("connects", f"expected two node names, found {_kind(value)}")
+    for node in value:
+        if node != GROUND and node not in dofs:
+            hint = difflib.get_close_matches(node, dofs + (GROUND,), n=1)
+            extra = f" (did you mean {hint[0]!r}?)" if hint else f"; nodes are {', '.join(dofs + (GROUND,))}"
+            raise t.fail("connects", f"unknown node {node!r}{extra}")
+    if value[0] == value[1]:
+        what = "ground to ground" if value[0] == GROUND else f"{value[0]!r} to itself"
+        raise t.fail("connects", f"an element from {what} does nothing; connect two different nodes")
+    return (value[0], value[1])
+
+
+def _read_matrix(t: _Table, key: str, n: int) -> tuple[tuple[float, ...], ...]:
+    if not t.has(key):
+        raise t.fail(key, f"required field is missing (expected a {n}x{n} matrix)")
+    value = t.raw(key)
+    if not isinstance(value, list) or len(value) != n or not all(isinstance(r, list) for r in value):
+        raise t.fail(key, f"expected a {n}x{n} matrix (one row per DOF), found {_kind(value)}")
+    rows = []
+    for i, row in enumerate(value):
+        if len(row) != n:
+            raise t.fail(f"{key}[{i}]", f"expected {n} numbers (a square matrix), found {len(row)}")
+        rows.append(tuple(t._check_number(f"{key}[{i}][{j}]", v, None, False) for j, v in enumerate(row)))
+    matrix = tuple(rows)
+    for i in range(n):
+        for j in range(i + 1, n):
+            a, b = matrix[i][j], matrix[j][i]
+            if abs(a - b) > 1e-12 * max(abs(a), abs(b), 1.0):
+                raise t.fail(key, f"expected a symmetric matrix, found {key}[{i}][{j}] = {a:g} but {key}[{j}][{i}] = {b:g}")
+    _check_definite(t, key, matrix, strict=(key == "M"))
+    return matrix
+
+
+def _check_definite(t: _Table, key: str, matrix, strict: bool) -> None:
+    # Sylvester-free check without numpy: Cholesky (semi-definite with a small slack).
+    n = len(matrix)
+    scale = max((abs(v) for row in matrix for v in row), default=0.0) or 1.0
+    tol = 1e-12 * scale * n
+    L = [[0.0] * n for _ in range(n)]
+    for i in range(n):
+        for j in range(i + 1):
+            s = matrix[i][j] - sum(L[i][k] * L[j][k] for k in range(j))
+            if i == j:
+                if s <= (tol if strict else -tol):
+                    need = "positive definite" if strict else "positive semi-definite"
+                    raise t.fail(key, f"expected a symmetric {need} matrix; pivot {i} is {s:.3g}")
+                L[i][i] = math.sqrt(max(s, 0.0))
+            else:
+                L[i][j] = s / L[j][j] if L[j][j] > 0 else 0.0
+
+
+def _read_system(t: _Table) -> MatrixSystem:
+    if not t.has("dofs"):
+        raise t.fail("dofs", 'required field is missing (expected names, e.g. ["x1", "x2"])')
+    dofs = t.raw("dofs")
+    if not isinstance(dofs, list) or not dofs or not all(isinstance(d, str) and d.strip() for d in dofs):
+        raise t.fail("dofs", f"expected a non-empty array of names, found {_kind(dofs)}")
+    for i, name in enumerate(dofs):
+        control = _control_character(name, False)
+        if control is not None:
+            raise t.fail(f"dofs[{i}]", f"expected printable text, found the control character {control!r}")
+    if len(set(dofs)) != len(dofs):
+        raise t.fail("dofs", "duplicate DOF names")
+    if GROUND in dofs:
+        raise t.fail("dofs", f"{GROUND!r} is reserved for the fixed wall")
+    n = len(dofs)
+    M = _read_matrix(t, "M", n)
+    C = _read_matrix(t, "C", n) if t.has("C") else tuple(tuple(0.0 for _ in range(n)) for _ in range(n))
+    K = _read_matrix(t, "K", n)
+    x0 = t.numbers("x0", (0.0,) * n, length=n)
+    v0 = t.numbers("v0", (0.0,) * n, length=n)
+    t.finish(_SYSTEM_KEYS)
+    return MatrixSystem(dofs=tuple(dofs), M=M, C=C, K=K, x0=x0, v0=v0)

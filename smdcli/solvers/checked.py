@@ -1,0 +1,72 @@
+"""A scenario solved with its own [solver] settings (or overrides), and what to say when a solver fails.
+
+Must not import: sweep, io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from smdcli.errors import SolverFailed
+from smdcli.model import Model, build, time_grid
+from smdcli.result import Result
+from smdcli.scenario import Scenario
+from smdcli.solvers.base import Tolerances
+
+
+def solve_scenario(sc: Scenario, model: Model, grid: np.ndarray, method: str | None = None,
+                   rtol: float | None = None, atol: float | None = None) -> Result:
+    """Solve with the scenario's [solver] settings, overridden by those given (the command line's)."""
+    from smdcli.solvers.registry import solve
+
+    tol = Tolerances(rtol=sc.solver.rtol if rtol is None else rtol, atol=sc.solver.atol if atol is None else atol,
+                     dt=sc.solver.dt, options=sc.solver.options)
+    field_name = "--method" if method else "solver.method"
+    method = method or sc.solver.method
+    return solve(model, grid, method, tol, field=field_name)
+
+
+def solve_checked(sc: Scenario, method: str | None = None) -> Result:
+    """Solve a validated scenario on its own grid; a solver failure raises SolverFailed (exit 1)."""
+    model, grid = build(sc), time_grid(sc.time)
+    result = solve_scenario(sc, model, grid, method)
+    if not result.success:
+        raise SolverFailed(failure_message(sc, model, result), result=result)
+    return result
+
+
+def failure_message(sc: Scenario, model: Model, result: Result) -> str:
+    """Which scenario failed, with what method, where and why, and what to try."""
+    return f"{sc.path}: {result.stats.method} {result.stats.message}; {failure_hint(model, result)}"
+
+
+def failure_hint(model: Model, result: Result) -> str:
+    """What to try after a failed run."""
+    from smdcli.solvers.registry import get_solver
+
+    from smdcli.solvers.fixed_step import FixedStep
+
+    solver = get_solver(result.stats.method)
+    if "not finite" in result.stats.message:  # a solution that overflowed, not a step that went unstable
+        return "check the units of the masses, springs, dampers and forces"
+    fixed_step = isinstance(solver, FixedStep)
+    if fixed_step and "steps" in result.stats.message:
+        span = result.time[-1] - result.time[0]
+        return (f"fixed step {result.stats.dt:.4g} s needs {span / result.stats.dt:.3g} steps for this run; "
+                "set a larger solver.dt (or use an adaptive method)")
+    if not solver.adaptive and not fixed_step:  # closed_form, exact
+        return "try another method"
+    if fixed_step:
+        limit = solver.omega_limit()
+        w_max = model.omega_max
+        if w_max > 0 and limit < math.inf:
+            stable = f"below {limit / w_max:.4g} s ({limit:.3g} / omega_max, omega_max = {w_max:.4g} rad/s)" \
+                if limit > 0 else "nowhere on an undamped scene"
+            return (f"fixed step {result.stats.dt:.4g} s: {solver.name}'s stable step is {stable}; "
+                    "set a smaller solver.dt or use an implicit method")
+        return "set a smaller solver.dt or use another method"
+    if not solver.implicit and (model.is_stiff or "steps" in result.stats.message):
+        return "the scene may be stiff: try an implicit method ('Radau', 'BDF', 'ode15s') or 'auto'"
+    return "try tighter tolerances (--rtol, --atol) or another method"

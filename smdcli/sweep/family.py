@@ -1,0 +1,261 @@
+"""The members of a sweep: each the scenario with its values written into the TOML document and validated
+again; members of a linear scene that differ only in structure are new matrices, interpolated.
+
+Must not import: io, plots, commands, cli."""
+
+from __future__ import annotations
+
+import copy
+import difflib
+import math
+import re
+import tomllib
+from dataclasses import dataclass, replace
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+from smdcli import scenario as scenario_mod
+from smdcli.errors import ScenarioError, UsageError
+from smdcli.model import Model, build
+from smdcli.scenario import GROUND, Scenario
+from smdcli.sweep.spec import SweepSpec, parameter_units, parse_ic
+
+
+# ------------------------------------------------------------ parameters
+
+
+_STEP = re.compile(r"[A-Za-z_][A-Za-z0-9_\-]*|\[\d+\]")
+_OMEGA_KEYS = ("omega", "frequency", "period")
+
+
+def _path_steps(path: str) -> list[str | int]:
+    steps: list[str | int] = []
+    for part in path.split("."):
+        tokens = _STEP.findall(part)
+        if not part or "".join(tokens) != part or isinstance(tokens[0], str) and tokens[0].startswith("["):
+            raise UsageError(f"--param {path}: cannot read {part!r}; expected a path such as "
+                             "damper[0].c, mass.m1.m, force[1].omega, time.end or system.K[0][0]")
+        steps.extend(int(t[1:-1]) if t.startswith("[") else t for t in tokens)
+    return steps
+
+
+def set_parameter(doc: dict, path: str, value: float) -> None:
+    """Write one number into a decoded scenario document at a path like damper[0].c or mass.m1.m."""
+    steps = _path_steps(path)
+    node: Any = doc
+    walked = ""
+    for step in steps[:-1]:
+        node, walked = _descend(node, step, path, walked)
+    last = steps[-1]
+    if isinstance(last, int):
+        if not isinstance(node, list) or last >= len(node):
+            raise UsageError(f"--param {path}: {walked} has no entry [{last}]")
+        current = node[last]
+    else:
+        if not isinstance(node, dict):
+            raise UsageError(f"--param {path}: {walked or 'the file'} is not a table")
+        current = node.get(last, 0.0)  # an absent optional field (x0, t0, ...); validation refuses unknown ones
+        if last in _OMEGA_KEYS:
+            for other in _OMEGA_KEYS:
+                node.pop(other, None)
+    if isinstance(current, bool) or not isinstance(current, (int, float)):
+        raise UsageError(f"--param {path}: is not a number in the scenario (found {type(current).__name__})")
+    node[last] = float(value)
+    if len(steps) == 4 and steps[0] == "system" and isinstance(steps[2], int) and steps[2] != steps[3]:
+        doc["system"][steps[1]][steps[3]][steps[2]] = float(value)  # keep M, C, K symmetric
+
+
+def _descend(node: Any, step: str | int, path: str, walked: str) -> tuple[Any, str]:
+    if isinstance(step, int):
+        if not isinstance(node, list) or step >= len(node):
+            raise UsageError(f"--param {path}: {walked} has no entry [{step}]")
+        return node[step], f"{walked}[{step}]"
+    if isinstance(node, list):  # mass.m1: the table of that name
+        named = [t for t in node if isinstance(t, dict) and t.get("name") == step]
+        if not named:
+            names = [t.get("name") for t in node if isinstance(t, dict) and isinstance(t.get("name"), str)]
+            hint = difflib.get_close_matches(step, names, n=1)
+            raise UsageError(f"--param {path}: no {walked} named {step!r}"
+                             + (f" (did you mean {hint[0]!r}?)" if hint else f"; names are {', '.join(names)}"))
+        return named[0], f"{walked}.{step}"
+    if not isinstance(node, dict) or step not in node:
+        keys = list(node) if isinstance(node, dict) else []
+        hint = difflib.get_close_matches(step, keys, n=1)
+        raise UsageError(f"--param {path}: {walked or 'the file'} has no {step!r}"
+                         + (f" (did you mean {hint[0]!r}?)" if hint else ""))
+    return node[step], f"{walked}.{step}" if walked else step
+
+
+def set_damping_ratio(doc: dict, base: Model, zeta: float, path: str) -> None:
+    """The pseudo-parameter zeta of a 1-DOF scene: its linear damper gets c = 2 zeta sqrt(k m)."""
+    if base.n != 1:
+        raise UsageError(f"--param {path}: zeta is defined for a 1-DOF scene; this one has {base.n} DOFs")
+    c = 2.0 * zeta * math.sqrt(base.K[0, 0] * base.M[0, 0])
+    if "system" in doc:
+        doc["system"]["C"] = [[c]]
+        return
+    dampers = [d for d in doc.get("damper", []) if d.get("law", "linear") == "linear"]
+    if len(dampers) > 1:
+        raise UsageError(f"--param {path}: zeta needs at most one linear damper; this scene has {len(dampers)}")
+    if dampers:
+        dampers[0]["c"] = c
+    else:
+        doc.setdefault("damper", []).append({"connects": [GROUND, base.dofs[0]], "c": c})
+
+
+# ---------------------------------------------------------------- members
+
+# Paths whose value enters M, C, K, x0 or v0 affinely and nothing else: members of a linear
+# scene that differ only in these are new matrices, not new scenarios.
+STRUCTURAL = re.compile(r"^(mass(\.[^.\[\]]+|\[\d+\])\.(m|x0|v0)|spring\[\d+\]\.k|damper\[\d+\]\.c"
+                        r"|system\.[MCK]\[\d+\]\[\d+\]|system\.(x0|v0)\[\d+\]|zeta)$")
+
+
+@dataclass
+class Family:
+    """The members of a sweep: labels, swept values and every member's matrices, stacked."""
+
+    scenario: Scenario
+    spec: SweepSpec
+    given_labels: tuple[str, ...]  # legend entries given (labels, or the --ic texts); else made from values
+    values: np.ndarray  # (S, number of parameters)
+    shape: tuple[int, ...]  # members as a grid: one axis per parameter (or per initial condition)
+    base: Model
+    M: np.ndarray  # (S, n, n)
+    C: np.ndarray
+    K: np.ndarray
+    x0: np.ndarray  # (S, n)
+    v0: np.ndarray
+    scenarios: list[Scenario] | None = None  # per member, where members differ in more than matrices
+
+    def __len__(self) -> int:
+        return len(self.x0)
+
+    @cached_property
+    def labels(self) -> list[str]:
+        """A legend entry per member: as given, else "path = value" (made on first use: a big family rarely needs them)."""
+        if self.given_labels:
+            return list(self.given_labels)
+        if not self.spec.parameters:
+            return [self.scenario.title or self.scenario.stem]
+        names = [{"zeta": "ζ"}.get(p, p.replace(".omega", ".ω")) for p in self.spec.parameters]
+        units = [parameter_units(p) for p in self.spec.parameters]
+        return [", ".join(f"{name} = {v:.4g}" + (f" {unit}" if unit not in ("", "1") else "")
+                          for name, unit, v in zip(names, units, combo)) for combo in self.values]
+
+    def model(self, s: int) -> Model:
+        """Member s as a Model."""
+        if self.scenarios is not None:
+            return build(self.scenarios[s])
+        return replace(self.base, M=self.M[s], C=self.C[s], K=self.K[s], x0=self.x0[s], v0=self.v0[s])
+
+    def member_scenario(self, s: int) -> Scenario:
+        """Member s as a Scenario (made on demand where the family holds only matrices)."""
+        if self.scenarios is not None:
+            return self.scenarios[s]
+        doc = tomllib.loads(self.scenario.text)
+        if self.spec.ics:
+            _set_initial_state(doc, self.x0[s], self.v0[s])
+        else:
+            _apply(doc, self.base, self.spec.parameters, self.values[s])
+        return _validated(doc, self.scenario, self.labels[s])
+
+
+def _apply(doc: dict, base: Model, parameters: tuple[str, ...], combo) -> None:
+    for path, value in zip(parameters, combo):
+        if path == "zeta":
+            set_damping_ratio(doc, base, float(value), path)
+        else:
+            set_parameter(doc, path, float(value))
+
+
+def _set_initial_state(doc: dict, x0: np.ndarray, v0: np.ndarray) -> None:
+    if "system" in doc:
+        doc["system"]["x0"], doc["system"]["v0"] = x0.tolist(), v0.tolist()
+    else:
+        for mass, a, b in zip(doc["mass"], x0, v0):
+            mass["x0"], mass["v0"] = float(a), float(b)
+
+
+def _validated(doc: dict, sc: Scenario, what: str) -> Scenario:
+    """A member's document as a Scenario, validated; its text is the member's own TOML."""
+    import tomli_w
+
+    try:
+        member = scenario_mod.parse_document(doc, tomli_w.dumps(doc), sc.path)
+        build(member)
+    except ScenarioError as exc:
+        raise ScenarioError(sc.path, exc.field, f"with {what}: {exc.message}") from None
+    return member
+
+
+def _stack(models: list[Model]) -> dict[str, np.ndarray]:
+    return {name: np.stack([getattr(m, name) for m in models]) for name in ("M", "C", "K", "x0", "v0")}
+
+
+def build_family(sc: Scenario, spec: SweepSpec) -> Family:
+    """The sweep's members, validated. Structural sweeps of a linear scene become matrices interpolated
+    between validated corner members (every check on a value is an interval, so the corners vouch for
+    the grid); anything else becomes one validated scenario per member."""
+    base = build(sc)
+    if spec.ics:
+        states = []
+        for text in spec.ics:
+            try:
+                states.append(parse_ic(text, sc.dof_names))
+            except ValueError as exc:
+                raise UsageError(f"{sc.path}: ic {text!r}: {exc}") from None
+        labels = tuple(spec.labels) if spec.labels else tuple(spec.ics)
+        x0 = np.array([a for a, _ in states])
+        v0 = np.array([b for _, b in states])
+        S = len(states)
+        scenarios = None
+        if not base.is_linear:
+            scenarios = []
+            for text, a, b in zip(spec.ics, x0, v0):
+                doc = tomllib.loads(sc.text)
+                _set_initial_state(doc, a, b)
+                scenarios.append(_validated(doc, sc, f"ic {text}"))
+        return Family(sc, spec, labels, np.empty((S, 0)), (S,), base,
+                      *(np.broadcast_to(getattr(base, k), (S,) + getattr(base, k).shape) for k in "MCK"),
+                      x0, v0, scenarios)
+    if not spec.parameters:
+        stacks = _stack([base])
+        return Family(sc, spec, (), np.empty((1, 0)), (1,), base, **stacks)
+    if "zeta" in spec.parameters and len(spec.parameters) > 1:
+        raise UsageError("--param zeta: cannot be combined with a second parameter (zeta is set from k and m)")
+    grids = np.meshgrid(*spec.values, indexing="ij")
+    combos = np.stack([g.ravel() for g in grids], axis=1)
+    shape = tuple(len(v) for v in spec.values)
+    labels = tuple(spec.labels)
+    doc0 = tomllib.loads(sc.text)
+
+    def member(combo) -> Scenario:
+        doc = copy.deepcopy(doc0)
+        _apply(doc, base, spec.parameters, combo)
+        return _validated(doc, sc, ", ".join(f"{p} = {v:g}" for p, v in zip(spec.parameters, combo)))
+
+    if not (base.is_linear and all(STRUCTURAL.match(p) for p in spec.parameters)):
+        scenarios = [member(combo) for combo in combos]
+        return Family(sc, spec, labels, combos, shape, base, **_stack([build(m) for m in scenarios]),
+                      scenarios=scenarios)
+    low = np.array([v.min() for v in spec.values])
+    high = np.array([v.max() for v in spec.values])
+    corners = {}
+    for pick in np.ndindex(*(2,) * len(low)):
+        corner = np.where(np.array(pick) == 1, high, low)
+        corners[pick] = build(member(corner))
+    origin = corners[(0,) * len(low)]
+    stacks = {name: np.broadcast_to(getattr(origin, name), (len(combos),) + getattr(origin, name).shape).copy()
+              for name in ("M", "C", "K", "x0", "v0")}
+    for i in range(len(low)):
+        if high[i] == low[i]:
+            continue
+        far = corners[tuple(1 if j == i else 0 for j in range(len(low)))]
+        weight = (combos[:, i] - low[i]) / (high[i] - low[i])
+        for name in stacks:
+            delta = getattr(far, name) - getattr(origin, name)
+            stacks[name] += weight.reshape((-1,) + (1,) * delta.ndim) * delta
+    return Family(sc, spec, labels, combos, shape, base, **stacks)

@@ -1,0 +1,189 @@
+"""Frequency responses: the exact receptance of linear members, resonance peaks, and measured responses of
+nonlinear ones (see shooting.py).
+
+Must not import: io, plots, commands, cli."""
+
+from __future__ import annotations
+
+import difflib
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from smdcli.errors import ScenarioError, UsageError
+from smdcli.model import Model
+from smdcli.scenario import Scenario
+from smdcli.sweep.family import Family
+from smdcli.sweep.pool import default_workers, run_pool
+from smdcli.sweep.shooting import _measure_direction
+
+
+# ------------------------------------------------------- frequency response
+
+
+@dataclass
+class FrequencyResponse:
+    """Steady-state amplitude per unit force and phase lag, (S, F, n) each, of every member."""
+
+    omega: np.ndarray  # (F,) rad/s
+    dofs: tuple[str, ...]
+    input_dof: str
+    amplitude: np.ndarray  # m/N
+    phase: np.ndarray  # rad, lag of displacement behind force
+    peaks: list[dict] = field(default_factory=list)
+    measured: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)  # direction -> (amp, phase)
+    steady: dict[str, np.ndarray] = field(default_factory=dict)  # direction -> (S, F) bool: settled to a period
+    exact: bool = True
+    difference: float | None = None  # largest |measured - exact| / max exact amplitude, linear scenes
+    wall_time_s: float = 0.0
+
+
+def input_index(model: Model, name: str | None, source: str) -> int:
+    """The DOF a unit force acts on: the one named, else that of the first force, else the first DOF."""
+    if name is None:
+        return model.force_dofs[0] if model.force_dofs else 0
+    if name not in model.dofs:
+        hint = difflib.get_close_matches(name, model.dofs, n=1)
+        raise UsageError(f"--input: unknown DOF {name!r} in {source}"
+                         + (f" (did you mean {hint[0]!r}?)" if hint else f"; DOFs are {', '.join(model.dofs)}"))
+    return model.dofs.index(name)
+
+
+def receptance(M: np.ndarray, C: np.ndarray, K: np.ndarray, omega: np.ndarray, dof: int) -> np.ndarray:
+    """H = (K - w^2 M + i w C)^-1 b for a unit force on `dof`: (S, F, n) complex, all members and frequencies at once.
+
+    A singular dynamic stiffness (an undamped resonance hit exactly) gives an infinite amplitude.
+    """
+    w = omega[None, :, None, None]
+    Z = K[:, None] - w**2 * M[:, None] + 1j * w * C[:, None]
+    n = Z.shape[-1]
+    b = np.zeros(n, complex)
+    b[dof] = 1.0
+    if n == 1:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            H = 1.0 / Z[..., 0]
+        return np.where(Z[..., 0] == 0, np.inf, H)
+    try:
+        return np.linalg.solve(Z, np.broadcast_to(b, Z.shape[:-1])[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        H = np.empty(Z.shape[:-1], complex)
+        for index in np.ndindex(Z.shape[:2]):
+            try:
+                H[index] = np.linalg.solve(Z[index], b)
+            except np.linalg.LinAlgError:
+                H[index] = np.inf
+        return H
+
+
+def phase_lag(family: Family, omega: np.ndarray, H: np.ndarray) -> np.ndarray:
+    """Lag of displacement behind force: for one DOF atan2(w c, k - w^2 m) in [0, pi] (the book's 9-35); unwrapped along frequency for several."""
+    if H.shape[-1] == 1:
+        c, k, mass = family.C[:, 0, :1], family.K[:, 0, :1], family.M[:, 0, :1]
+        return np.arctan2(omega * c, k - omega**2 * mass)[..., None]
+    with np.errstate(invalid="ignore"):
+        lag = np.unwrap(-np.angle(H), axis=1)
+    first = lag[:, :1]
+    return lag - 2 * np.pi * np.round(first / (2 * np.pi))
+
+
+def resonance_peaks(family: Family, omega: np.ndarray, amplitude: np.ndarray, dof: int) -> list[dict]:
+    """Local maxima of every member's amplitude per DOF, refined on the exact receptance between grid neighbours."""
+    from scipy.optimize import minimize_scalar
+
+    peaks = []
+    labels = family.labels
+    for s in range(len(family)):
+        if not np.any(family.C[s]):
+            # Undamped: the peaks are poles at the natural frequencies, of unbounded amplitude.
+            modes = family.model(s).modes
+            for w, shape in zip(modes.natural_frequencies, modes.shapes.T):
+                if omega[0] <= w <= omega[-1] and abs(shape[dof]) > 1e-12 * np.abs(shape).max():
+                    for j, name in enumerate(family.base.dofs):
+                        if abs(shape[j]) > 1e-12 * np.abs(shape).max():
+                            peaks.append({"member": s, "label": labels[s], "dof": name, "omega": float(w),
+                                          "amplitude": math.inf})
+            continue
+        for j, name in enumerate(family.base.dofs):
+            a = amplitude[s, :, j]
+            for f in range(1, len(omega) - 1):
+                if not (a[f] > a[f - 1] and a[f] >= a[f + 1]):
+                    continue
+                if not np.isfinite(a[f]):
+                    peaks.append({"member": s, "label": labels[s], "dof": name, "omega": float(omega[f]),
+                                  "amplitude": math.inf})
+                    continue
+
+                def negative(w, s=s, j=j):
+                    return -abs(receptance(family.M[s:s + 1], family.C[s:s + 1], family.K[s:s + 1],
+                                           np.array([w]), dof)[0, 0, j])
+
+                best = minimize_scalar(negative, bounds=(omega[f - 1], omega[f + 1]), method="bounded",
+                                       options={"xatol": 1e-10 * max(omega[f], 1.0)})
+                peaks.append({"member": s, "label": labels[s], "dof": name, "omega": float(best.x),
+                              "amplitude": float(-best.fun)})
+    return peaks
+
+
+def _driving_force(sc: Scenario) -> int:
+    """Index of the sine or cosine force whose frequency a measured response steps through."""
+    for force in sc.forces:
+        if force.type in ("sine", "cosine"):
+            return force.index
+    raise ScenarioError(sc.path, "force", "a measured frequency response needs a sine or cosine force to step "
+                        "through the frequencies; add one (its amplitude sets the force level)")
+
+
+def frequency_response(family: Family, workers: int | None = None,
+                       progress: Callable[[int], None] | None = None) -> FrequencyResponse:
+    """Exact receptance of linear members; measured by simulation to steady state for nonlinear ones (or on request)."""
+    start = time.perf_counter()
+    spec = family.spec
+    omega = spec.frequency
+    base = family.base
+    dof = input_index(base, spec.input, family.scenario.path)
+    linear = base.is_linear
+    S, F, n = len(family), len(omega), base.n
+    if linear:
+        H = receptance(family.M, family.C, family.K, omega, dof)
+        amplitude, phase = np.abs(H), phase_lag(family, omega, H)
+        peaks = resonance_peaks(family, omega, amplitude, dof)
+    else:
+        amplitude = phase = np.full((S, F, n), np.nan)
+        peaks = []
+    response = FrequencyResponse(omega, base.dofs, base.dofs[dof], amplitude, phase, peaks, exact=linear)
+    if linear and not spec.measure:
+        response.wall_time_s = time.perf_counter() - start
+        if progress:
+            progress(S)
+        return response
+    directions = ("up", "down") if spec.direction == "both" else (spec.direction,)
+    tasks = []
+    for s in range(S):
+        member = family.member_scenario(s)
+        index = _driving_force(member)
+        for d in directions:
+            tasks.append((member, omega if d == "up" else omega[::-1], index))
+    outcomes = run_pool(_measure_direction, tasks, workers or default_workers(), progress, steps=True)
+    for i, d in enumerate(directions):
+        amp = np.stack([outcomes[s * len(directions) + i][0] for s in range(S)])
+        lag = np.stack([outcomes[s * len(directions) + i][1] for s in range(S)])
+        settled = np.stack([outcomes[s * len(directions) + i][2] for s in range(S)])
+        if d == "down":
+            amp, lag, settled = amp[:, ::-1], lag[:, ::-1], settled[:, ::-1]
+        response.measured[d] = (amp, lag)
+        response.steady[d] = settled
+        for s in range(S):
+            for j, name in enumerate(base.dofs):
+                if np.isfinite(amp[s, :, j]).any():
+                    f = int(np.nanargmax(amp[s, :, j]))
+                    response.peaks.append({"member": s, "label": family.labels[s], "dof": name, "direction": d,
+                                           "omega": float(omega[f]), "amplitude": float(amp[s, f, j])})
+    if linear:
+        amp = response.measured[directions[0]][0]
+        ok = np.isfinite(amplitude) & np.isfinite(amp)
+        response.difference = float(np.abs(amp - amplitude)[ok].max() / amplitude[ok].max())
+    response.wall_time_s = time.perf_counter() - start
+    return response

@@ -1,0 +1,230 @@
+"""What a sweep asks for: value specs, the [sweep] table and its command-line overrides, units of swept fields.
+
+Must not import: io, plots, commands, cli."""
+
+from __future__ import annotations
+
+import difflib
+import math
+import re
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from smdcli.errors import ScenarioError, UsageError
+from smdcli.scenario import Scenario
+
+
+MAX_MEMBERS = 100_000
+_trapezoid = getattr(np, "trapezoid", None) or np.trapz
+MAX_STACKED = 40_000_000  # samples per stacked data set (members x time points x DOFs)
+METRICS = ("peak_displacement", "rms_displacement", "settling_time", "peak_ground_force")
+_FIELD_UNITS = {"k": "N/m", "k3": "N/m^3", "c": "N s/m", "m": "kg", "x0": "m", "v0": "m/s", "omega": "rad/s",
+                "frequency": "Hz", "amplitude": "N", "t0": "s", "duration": "s", "period": "s", "t1": "s", "f0": "Hz",
+                "f1": "Hz", "phase": "rad", "duty": "1", "end": "s", "start": "s", "step": "s", "zeta": "1",
+                "M": "kg", "C": "N s/m", "K": "N/m"}
+
+
+def parameter_units(path: str) -> str:
+    """The units of a swept field by its path: 'spring[0].k' -> 'N/m', 'system.K[0][1]' -> 'N/m', 'zeta' -> '1'."""
+    field = re.split(r"[.\[]", path.split(".")[-1])[0] if "." in path else path
+    return _FIELD_UNITS.get(field, "")
+
+
+def parameter_label(path: str) -> str:
+    """An axis label for a swept field: 'damper[0].c [N s/m]'; Greek letters for zeta and omega."""
+    units = parameter_units(path)
+    shown = {"zeta": "ζ (damping ratio)"}.get(path, path.replace(".omega", ".ω"))
+    return f"{shown} [{units}]" if units and units != "1" else shown
+
+
+METRIC_UNITS = {"peak_displacement": "m", "rms_displacement": "m", "settling_time": "s", "peak_ground_force": "N"}
+QUANTITIES = ("displacement", "velocity", "acceleration", "force")
+DIRECTIONS = ("up", "down", "both")
+SETTLING_BAND = 0.02  # settling time: the last time the response leaves 2 % of its largest excursion
+EXACT_METHODS = ("auto", "exact", "closed_form")
+
+
+# ------------------------------------------------------------------ specs
+
+
+def parse_values(spec: Any) -> np.ndarray:
+    """Numbers from an array, "a, b, c", "start:stop:step" (stop included), "linspace(a, b, n)" or "logspace(a, b, n)"."""
+    if isinstance(spec, (list, tuple)):
+        values = np.array(spec, dtype=float)
+    else:
+        text = str(spec).strip()
+        call = re.fullmatch(r"(linspace|logspace)\s*\((.*)\)", text)
+        try:
+            if call:
+                args = [a.strip() for a in call.group(2).split(",")]
+                if len(args) != 3:
+                    raise ValueError
+                a, b, n = float(args[0]), float(args[1]), int(args[2])
+                if n < 1:
+                    raise ValueError
+                values = np.linspace(a, b, n) if call.group(1) == "linspace" else np.logspace(a, b, n)
+            elif ":" in text:
+                parts = [float(p) for p in text.split(":")]
+                if len(parts) == 2:
+                    parts.append(1.0)
+                if len(parts) != 3:
+                    raise ValueError
+                start, stop, step = parts
+                if step == 0 or (stop - start) * step < 0:
+                    raise ValueError(f"a step of {step:g} never goes from {start:g} to {stop:g}")
+                count = int(math.floor((stop - start) / step * (1 + 1e-12) + 1e-9)) + 1
+                if count > MAX_MEMBERS:
+                    raise ValueError(f"{count} values; at most {MAX_MEMBERS}")
+                values = start + step * np.arange(count)
+            else:
+                values = np.array([float(p) for p in text.split(",")])
+        except ValueError as exc:
+            detail = f" ({exc})" if str(exc) and "could not convert" not in str(exc) and "invalid literal" not in str(exc) else ""
+            raise ValueError(f"expected numbers, start:stop:step, linspace(a, b, n) or logspace(a, b, n), "
+                             f"found {text[:40]!r}{detail}") from None
+    if values.size == 0:
+        raise ValueError("expected at least one value")
+    if not np.all(np.isfinite(values)):
+        raise ValueError("expected finite values")
+    if values.size > MAX_MEMBERS:
+        raise ValueError(f"{values.size} values; at most {MAX_MEMBERS}")
+    return values
+
+
+def parse_frequency(spec: Any) -> tuple[np.ndarray, str]:
+    """Angular frequencies in rad/s and the unit they were given in ("rad/s" or "Hz")."""
+    unit = "rad/s"
+    if isinstance(spec, str):
+        text = spec.strip()
+        for suffix, name in (("hz", "Hz"), ("rad/s", "rad/s")):
+            if text.lower().endswith(suffix):
+                text, unit = text[: -len(suffix)].strip(), name
+        spec = text
+    values = parse_values(spec)
+    if np.any(values < 0):
+        raise ValueError(f"expected frequencies >= 0, found {values.min():g}")
+    return (2 * math.pi * values if unit == "Hz" else values), unit
+
+
+def parse_ic(text: str, dofs: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """x0 and v0 from "x0=0.1,v0=1" (one DOF) or "m1.x0=0.1,m2.v0=-1"; what is not given is zero."""
+    x0, v0 = np.zeros(len(dofs)), np.zeros(len(dofs))
+    for item in filter(None, (p.strip() for p in text.split(","))):
+        key, sep, value = item.partition("=")
+        key = key.strip()
+        dof, _, name = key.rpartition(".")
+        if not sep or name not in ("x0", "v0"):
+            raise ValueError(f"expected x0=VALUE, v0=VALUE or DOF.x0=VALUE, found {item!r}")
+        if not dof:
+            if len(dofs) != 1:
+                raise ValueError(f"{len(dofs)} DOFs: name one, e.g. {dofs[0]}.{name}={value.strip()}")
+            dof = dofs[0]
+        if dof not in dofs:
+            hint = difflib.get_close_matches(dof, dofs, n=1)
+            raise ValueError(f"unknown DOF {dof!r}" + (f" (did you mean {hint[0]!r}?)" if hint else
+                                                       f"; DOFs are {', '.join(dofs)}"))
+        try:
+            number = float(value)
+        except ValueError:
+            raise ValueError(f"expected a number after {key}=, found {value.strip()!r}") from None
+        if not math.isfinite(number):
+            raise ValueError(f"expected a finite number for {key}")
+        (x0 if name == "x0" else v0)[dofs.index(dof)] = number
+    return x0, v0
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """What to sweep and what to show, from the [sweep] table and the command line."""
+
+    parameters: tuple[str, ...] = ()
+    values: tuple[np.ndarray, ...] = ()
+    labels: tuple[str, ...] = ()
+    ics: tuple[str, ...] = ()
+    frequency: np.ndarray | None = None
+    frequency_unit: str = "rad/s"
+    normalized: bool = False
+    input: str | None = None
+    direction: str = "both"
+    measure: bool = False
+    quantity: str = "displacement"
+    metric: str = "peak_displacement"
+    method: str | None = None
+
+    @property
+    def kind(self) -> str:
+        """"frequency", "ic" or "parameter"."""
+        if self.frequency is not None:
+            return "frequency"
+        return "ic" if self.ics else "parameter"
+
+
+def read_spec(sc: Scenario, cli: dict[str, Any]) -> SweepSpec:
+    """Merge the scenario's [sweep] table with command-line options (these win) and check every part."""
+    table = dict(sc.sweep)
+
+    def fail(key: str, message: str):
+        if key in cli and cli[key] not in (None, (), [], False):
+            return UsageError(f"--{key.replace('parameter', 'param')}: {message}")
+        return ScenarioError(sc.path, f"sweep.{key}", message)
+
+    def pick(key, default=None):
+        value = cli.get(key)
+        if value not in (None, (), []):
+            return value
+        return table.get(key, default)
+
+    parameters = tuple(pick("parameter", ()))
+    raw_values = tuple(pick("values", ()))
+    if len(parameters) != len(raw_values):
+        raise fail("values", f"expected one value spec per parameter ({len(parameters)}), found {len(raw_values)}")
+    if len(parameters) > 2:
+        raise fail("parameter", f"expected one or two parameters, found {len(parameters)}")
+    values = []
+    for raw in raw_values:
+        try:
+            values.append(parse_values(raw))
+        except ValueError as exc:
+            raise fail("values", str(exc)) from None
+    labels = tuple(pick("labels", ()))
+    ics = tuple(pick("ic", ()))
+    frequency, unit = None, "rad/s"
+    if pick("frequency") is not None:
+        try:
+            frequency, unit = parse_frequency(pick("frequency"))
+        except ValueError as exc:
+            raise fail("frequency", str(exc)) from None
+    normalized = bool(pick("normalized", False))
+    direction = pick("direction", "both")
+    quantity = pick("quantity", "displacement")
+    metric = pick("metric", "peak_displacement")
+    for key, value, choices in (("direction", direction, DIRECTIONS), ("quantity", quantity, QUANTITIES),
+                                ("metric", metric, METRICS)):
+        if value not in choices:
+            hint = difflib.get_close_matches(value, choices, n=1)
+            raise fail(key, f"expected one of {', '.join(choices)}, found {value!r}"
+                       + (f" (did you mean {hint[0]!r}?)" if hint else ""))
+    if ics and parameters:
+        raise fail("ic", "an initial-condition family cannot be combined with --param; sweep one or the other")
+    if ics and frequency is not None:
+        raise fail("ic", "a frequency response does not depend on initial conditions")
+    if not ics and not parameters and frequency is None:
+        raise UsageError(f"{sc.path}: nothing to sweep: give --param and --values, --ic or --frequency "
+                         "(or a [sweep] table in the scenario)")
+    if frequency is not None and len(parameters) > 1:
+        raise fail("parameter", "a frequency response takes at most one parameter (one curve per value)")
+    if labels:
+        count = len(ics) if ics else (len(values[0]) if len(values) == 1 else 0)
+        if len(labels) != count:
+            raise fail("labels", f"expected {count} labels (one per member), found {len(labels)}")
+    if normalized and frequency is None:
+        raise fail("normalized", "applies to a frequency response (--frequency) only")
+    if frequency is not None and pick("method") is not None:
+        raise fail("method", "does not apply to a frequency response: it is exact for a linear scene, "
+                   "and measured with DOP853 at rtol 1e-10 otherwise")
+    return SweepSpec(parameters=parameters, values=tuple(values), labels=labels, ics=ics, frequency=frequency,
+                     frequency_unit=unit, normalized=normalized, input=pick("input"), direction=direction,
+                     measure=bool(pick("measure", False)), quantity=quantity, metric=metric,
+                     method=pick("method"))

@@ -1,0 +1,142 @@
+"""The house's shape: imports run one way, from the commands down to the scenario, with no circle, and no
+module grows past what a newcomer can read."""
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "smdcli"
+
+# Lowest first. A module may import its own layer and the layers below it, never one above.
+LAYERS = [
+    ("base", ["smdcli", "smdcli.errors", "smdcli.expression", "smdcli.result", "smdcli.interrupts",
+              "smdcli.progress", "smdcli.provenance", "smdcli.strict_json", "smdcli.solvers.catalog"]),
+    ("scenario", ["smdcli.scenario"]),
+    ("model", ["smdcli.model"]),
+    ("kernels", ["smdcli.kernels"]),
+    ("solvers", ["smdcli.solvers"]),
+    ("sweep", ["smdcli.sweep"]),
+    ("writers", ["smdcli.io", "smdcli.plots"]),
+    ("commands", ["smdcli.commands"]),
+    ("cli", ["smdcli.cli", "smdcli.__main__"]),
+]
+MAX_LINES = 450
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+MODULES = {module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+
+
+def layer_of(module: str) -> int:
+    """The layer of a module: the most specific prefix listed (smdcli.solvers.catalog before smdcli.solvers)."""
+    best, best_len = None, -1
+    for index, (_, prefixes) in enumerate(LAYERS):
+        for prefix in prefixes:
+            if (module == prefix or module.startswith(prefix + ".")) and len(prefix) > best_len:
+                best, best_len = index, len(prefix)
+    assert best is not None, f"{module} is in no layer: add it to LAYERS"
+    return best
+
+
+def imports(path: Path) -> set[str]:
+    """The smd modules a file imports, at the top or inside functions."""
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found |= {a.name for a in node.names if a.name.startswith("smdcli")}
+        elif isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("smdcli"):
+            for alias in node.names:
+                candidate = f"{node.module}.{alias.name}"
+                found.add(candidate if candidate in MODULES else node.module)
+    return found
+
+
+GRAPH = {name: imports(path) for name, path in MODULES.items()}
+
+
+def test_every_module_has_a_layer_and_a_docstring_saying_what_it_must_not_import():
+    for name, path in MODULES.items():
+        layer_of(name)
+        doc = ast.get_docstring(ast.parse(path.read_text())) or ""
+        assert doc, f"{name} has no module docstring"
+        if name.count(".") >= 1 and name not in ("smdcli.__main__",) and layer_of(name) > 0:
+            assert "must not import" in doc.lower() or "imports nothing" in doc.lower(), \
+                f"{name}: its docstring does not say what it must not import"
+
+
+def test_no_import_goes_up_a_layer():
+    back = [f"{a} ({LAYERS[layer_of(a)][0]}) imports {b} ({LAYERS[layer_of(b)][0]})"
+            for a, targets in GRAPH.items() for b in targets if layer_of(b) > layer_of(a)]
+    assert not back, "back edges:\n" + "\n".join(back)
+
+
+def test_no_import_circle():
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(node: str) -> None:
+        state[node] = 1
+        stack.append(node)
+        for target in sorted(GRAPH.get(node, ())):
+            if target == node or target not in GRAPH:
+                continue
+            if state.get(target) == 1:
+                cycle = stack[stack.index(target):] + [target]
+                pytest.fail("import circle: " + " -> ".join(cycle))
+            if target not in state:
+                visit(target)
+        stack.pop()
+        state[node] = 2
+
+    for name in GRAPH:
+        if name not in state:
+            visit(name)
+
+
+def test_the_check_catches_a_back_edge_and_a_circle():
+    """The two checks above on a made-up graph: they are not vacuous."""
+    assert layer_of("smdcli.scenario.load") < layer_of("smdcli.solvers.registry")
+    assert layer_of("smdcli.solvers.catalog") == 0
+    fake = {"smdcli.sweep.a": {"smdcli.sweep.b"}, "smdcli.sweep.b": {"smdcli.sweep.a"}}
+    seen, circle = set(), False
+    for start in fake:
+        node, path = start, []
+        while node in fake and node not in path:
+            path.append(node)
+            node = next(iter(fake[node]))
+        circle |= node in path
+        seen |= set(path)
+    assert circle
+
+
+def test_no_module_is_over_450_lines():
+    long = {name: len(path.read_text().splitlines()) for name, path in MODULES.items()}
+    assert all(n <= MAX_LINES for n in long.values()), {k: v for k, v in long.items() if v > MAX_LINES}
+
+
+def test_the_catalog_names_exactly_the_registered_solvers():
+    from smdcli.solvers.catalog import METHOD_NAMES, NEWMARK_SCHEMES
+    from smdcli.solvers.fixed_step import Newmark
+    from smdcli.solvers.registry import _solvers
+
+    assert tuple(_solvers()) == METHOD_NAMES
+    assert Newmark.SCHEMES == NEWMARK_SCHEMES
+
+
+def test_help_and_scenario_loading_import_no_heavy_module():
+    """`smd --help` imports none of scipy, matplotlib, h5py, numba; reading a scenario imports no solver."""
+    probe = ("import sys; from smdcli.cli import run; run(['--help']); "
+             "heavy = [m for m in ('scipy', 'matplotlib', 'h5py', 'numba') if m in sys.modules]; "
+             "from smdcli import scenario; scenario.load('scenarios/three_dof_forced.toml'); "
+             "solvers = sorted(m for m in sys.modules if m.startswith('smdcli.solvers.') and m != 'smdcli.solvers.catalog'); "
+             "print(heavy, solvers)")
+    result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, cwd=PACKAGE.parent)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip().splitlines()[-1] == "[] []", result.stdout
