@@ -6,10 +6,18 @@ Imports nothing of smd (the bottom layer).
 from __future__ import annotations
 
 
+def printable(text: str) -> str:
+    """Text with control characters (terminal escapes, NUL, bells, line breaks) shown as escapes: one safe line."""
+    return "".join(c if c.isprintable() or c == " " else repr(c)[1:-1] for c in text)
+
+
 class SmdError(Exception):
-    """Base of every error smd reports to a user."""
+    """Base of every error smd reports to a user; its message is one printable line."""
 
     exit_code = 1
+
+    def __str__(self) -> str:
+        return printable(super().__str__())
 
 
 class ScenarioError(SmdError):

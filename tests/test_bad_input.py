@@ -46,3 +46,21 @@ def test_unwritable_output_folder(tmp_path, cli):
     result = cli("simulate", scenario, "-o", blocker / "sub")
     assert result.exit_code == 2
     assert "cannot create output folder" in result.stderr
+
+
+def test_a_fifo_is_refused_at_once_as_scenario_and_as_table_file(tmp_path, cli):
+    """Reading a named pipe would wait for a writer forever: it is refused without being read."""
+    import os
+    import time
+
+    fifo = tmp_path / "pipe.toml"
+    os.mkfifo(fifo)
+    scene = tmp_path / "table.toml"
+    scene.write_text(VALID + '\n[[force]]\non = "m1"\ntype = "table"\nfile = "pipe.toml"\n')
+    for target, message in ((fifo, "is a named pipe (FIFO), expected a scenario"),
+                            (scene, "file: " + str(fifo) + ": is a named pipe (FIFO)")):
+        start = time.monotonic()
+        result = cli("simulate", target, "-o", tmp_path / "out")
+        assert time.monotonic() - start < 10
+        assert result.exit_code == 2 and message in result.stderr and result.stderr.count("\n") == 1
+    assert not (tmp_path / "out").exists() or not list((tmp_path / "out").iterdir())

@@ -382,6 +382,7 @@ def test_two_parameter_cli_writes_a_heat_map(cli, tmp_path):
     (["--ic", "x0=1,v9=2"], "expected x0=VALUE"),
     (["--metric", "peak_displacment"], "did you mean 'peak_displacement'"),
     (["--method", "ode99", "--ic", "x0=1"], "unknown method"),
+    (["--param", "spring[0].k", "--values", "linspace(1,2,100000000000)"], "expected 1 to 100000"),
     (["--method", "RK45", "--frequency", "1:2:1"], "--method: does not apply to a frequency response"),
     ([], "nothing to sweep"),
 ])

@@ -88,10 +88,11 @@ def stability_figure(comparison, title: str, limits: dict[str, float]):
                     va="top", ha="right", fontsize=7, color=style["color"])
     notes = [f"{m}: {'unconditionally stable' if limits.get(m, math.inf) == math.inf else 'unstable at any h'}"
              for m in dict.fromkeys(r.method for r in runs) if limits.get(m, math.inf) in (0.0, math.inf)]
-    ax.set_xscale("log")
-    ax.set_yscale("log")
+    if any(r.h_omega > 0 for r in runs):  # a scene at rest has no omega_max: nothing on a log axis
+        ax.set_xscale("log")
     grown = [r.growth for r in runs if r.success and r.growth > 0]
-    ax.set_ylim(min(0.1, min(grown, default=0.1) / 2), 1e10)
+    ax.set_ylim(min(0.1, min(grown, default=0.1) / 2), 1e10)  # limits first: a scene at rest has no positive growth
+    ax.set_yscale("log")
     ax.axhspan(1e9, 1e10, color="0.9", zorder=0)
     ax.axhline(1.0, color="k", lw=0.8, alpha=0.5)
     ax.set_ylim(top=1e13)  # room above the band for the limits' labels

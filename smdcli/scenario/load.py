@@ -15,6 +15,7 @@ from smdcli.scenario.options import SWEEP_KEYS, _read_solver, _read_sweep
 from smdcli.scenario.reader import MAX_SCENARIO_BYTES, _NotRegular, _SYSTEM_KEYS, _TIME_KEYS, _TOP_KEYS, _Table, _solver_keys, read_regular_file
 from smdcli.scenario.spec import ForceSpec, MAX_SAMPLES, Scenario, SolverSpec, TimeSpec
 from smdcli.scenario.structure import _read_elements, _read_masses, _read_system, _read_time
+from smdcli.scenario.reader import _control_character
 
 
 def load(path: str | Path) -> Scenario:
@@ -60,6 +61,7 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
 
 def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
     """Validate an already-decoded TOML document (a sweep member is one, edited)."""
+    _refuse_control_characters(file, doc, "")
     top = _Table(file, "", doc, _TOP_KEYS)
     title = top.string("title", "")
     description = top.string("description", "", multiline=True)
@@ -110,6 +112,9 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
 def _check_chirp_resolved(file: str, force: ForceSpec, time: TimeSpec, n_points: float) -> None:
     """A chirp whose frequency passes the output grid's Nyquist frequency cannot be seen or held: refuse it."""
     rate = (force.f1 - force.f0) / force.t1
+    if not math.isfinite(rate):
+        raise ScenarioError(file, f"{force.path}.t1", f"the chirp's sweep rate (f1 - f0) / t1 overflows (t1 = "
+                                                      f"{force.t1:g} s); the force cannot be resolved")
     top = max(abs(force.f0 + rate * time.start), abs(force.f0 + rate * time.end))  # Hz; it sweeps on past t1
     step = (time.end - time.start) / max(n_points - 1, 1)
     if not top * step <= 0.5:
@@ -118,3 +123,18 @@ def _check_chirp_resolved(file: str, force: ForceSpec, time: TimeSpec, n_points:
                             f"the chirp reaches {top:.4g} Hz by t = {time.end:g} s, above the output grid's Nyquist "
                             f"frequency {0.5 / step:.4g} Hz (step {step:.3g} s); the force cannot be resolved: use a "
                             f"[time] step of at most {need:.3g} s, or lower f1 or t1")
+
+
+def _refuse_control_characters(file: str, node, path: str) -> None:
+    """Any text in the document (names, labels, expressions, file names) must print as itself: a terminal
+    escape or a NUL in a scenario is refused, whatever table it is in; `description` may hold line breaks."""
+    if isinstance(node, dict):
+        for key, value in node.items():
+            _refuse_control_characters(file, value, f"{path}.{key}" if path else key)
+    elif isinstance(node, list):
+        for i, value in enumerate(node):
+            _refuse_control_characters(file, value, f"{path}[{i}]")
+    elif isinstance(node, str):
+        control = _control_character(node, multiline=path == "description")
+        if control is not None:
+            raise ScenarioError(file, path, f"expected printable text, found the control character {control!r}")

@@ -62,6 +62,8 @@ def parse_values(spec: Any) -> np.ndarray:
                 if len(args) != 3:
                     raise ValueError
                 a, b, n = float(args[0]), float(args[1]), int(args[2])
+                if not 1 <= n <= MAX_MEMBERS:
+                    raise ValueError(f"{n} values; expected 1 to {MAX_MEMBERS}")
                 if n < 1:
                     raise ValueError
                 values = np.linspace(a, b, n) if call.group(1) == "linspace" else np.logspace(a, b, n)
