@@ -4,7 +4,6 @@ and every golden checked against an independent reference so that none can enshr
 After an intended change: `python tests/golden/bless.py` (or with stems), then this file."""
 
 import sys
-from pathlib import Path
 
 import h5py
 import numpy as np

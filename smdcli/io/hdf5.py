@@ -83,9 +83,9 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
             if name in ("displacement", "velocity"):  # the applied force is evaluated, not solved for
                 ds.attrs["stated_accuracy"] = result.stats.stated_accuracy
             elif name == "acceleration":
-                ds.attrs["stated_accuracy"] = acceleration_accuracy(model.M, model.C, model.K,
-                                                                    result.stats.stated_accuracy, result.displacement,
-                                                                    result.velocity, result.acceleration, result.force)
+                ds.attrs["stated_accuracy"] = float(acceleration_accuracy(
+                    model.M, model.C, model.K, result.stats.stated_accuracy, result.displacement, result.velocity,
+                    result.acceleration, result.force)[0])
 
         solver = f.create_group("solver")
         for key, value in result.stats.as_attrs().items():

@@ -73,10 +73,9 @@ def _write_time_family(f, family, result, metrics, member, dof) -> None:
         if result.stated_accuracy is not None and name != "force":  # the worst member's, relative to the peak
             stated = float(np.nanmax(result.stated_accuracy, initial=0.0))
             if name == "acceleration":
-                stated = max(acceleration_accuracy(family.M[s], family.C[s], family.K[s], result.stated_accuracy[s],
-                                                   result.displacement[s], result.velocity[s],
-                                                   result.acceleration[s], result.force[s])
-                             for s in range(len(family)))
+                stated = float(np.nanmax(acceleration_accuracy(
+                    family.M, family.C, family.K, result.stated_accuracy, result.displacement, result.velocity,
+                    result.acceleration, result.force), initial=0.0))
             ds.attrs["stated_accuracy"] = stated
         ds.dims[0].attach_scale(member)
         if result.time.ndim == 1:

@@ -72,22 +72,30 @@ def stated_tolerance(rtol: float | None, atol: float | None, peak: float) -> flo
     return 10 * (rtol or 0.0) + (atol or 0.0) / peak if peak > 0 else 10 * (rtol or 0.0)
 
 
-def acceleration_accuracy(M: np.ndarray, C: np.ndarray, K: np.ndarray, stated: float, x: np.ndarray,
-                          v: np.ndarray, a: np.ndarray, f: np.ndarray) -> float:
+def acceleration_accuracy(M: np.ndarray, C: np.ndarray, K: np.ndarray, stated, x: np.ndarray, v: np.ndarray,
+                          a: np.ndarray, f: np.ndarray) -> np.ndarray:
     """The stated accuracy of a = M^-1 (f - C v - K x), relative to its peak, from that of x and v.
 
     A stiff scene's K x and C v are large terms that cancel (1e4 N against an acceleration of 0.04 m/s^2 in the
-    1e6:1 chain), so the acceleration is only as good as those terms' errors and roundings over its own size."""
-    peaks = [float(np.abs(q[np.isfinite(q)]).max(initial=0.0)) for q in (x, v, a, f)]
-    peak_x, peak_v, peak_a, peak_f = peaks
-    if peak_a == 0:
-        return stated
-    norm = lambda A: float(np.abs(np.linalg.solve(M, A)).sum(axis=1).max(initial=0.0))  # noqa: E731
+    1e6:1 chain), so the acceleration is only as good as those terms' errors and roundings over its own size.
+    One run: M, C, K (n, n) and x, v, a, f (N, n); a family: a leading member axis on all, stated (S,)."""
+    M, C, K = (np.asarray(A, dtype=float).reshape((-1,) + np.shape(A)[-2:]) for A in (M, C, K))
+    S = M.shape[0]
+    stated = np.broadcast_to(np.asarray(stated, dtype=float), (S,))
+
+    def peak(q):
+        q = np.abs(np.asarray(q, dtype=float).reshape(S, -1))
+        return np.where(np.isfinite(q), q, 0.0).max(axis=1, initial=0.0)
+
+    peak_x, peak_v, peak_a, peak_f = (peak(q) for q in (x, v, a, f))
+    norm = lambda A: np.abs(np.linalg.solve(M, A)).sum(axis=2).max(axis=1)  # noqa: E731 (inf-norm of M^-1 A)
     k, c = norm(K), norm(C)
-    forcing = float(np.abs(np.linalg.inv(M)).sum(axis=1).max(initial=0.0)) * peak_f
+    forcing = np.abs(np.linalg.inv(M)).sum(axis=2).max(axis=1) * peak_f
     carried = stated * (k * peak_x + c * peak_v)
     rounding = 8 * UNIT_ROUNDOFF * (k * peak_x + c * peak_v + forcing)
-    return max(stated, (carried + rounding) / peak_a)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        derived = np.where(peak_a > 0, (carried + rounding) / peak_a, stated)
+    return np.maximum(stated, derived)
 
 
 def plural(count: int, noun: str) -> str:
