@@ -14,6 +14,7 @@ import typer
 
 from smdcli import __version__, interrupts, strict_json
 from smdcli.progress import wanted as progress_wanted
+from smdcli.text import plural
 
 app = typer.Typer(
     add_completion=False,
@@ -76,20 +77,13 @@ def _report(exc: Exception, doing: str = "write") -> int:
     return exc.exit_code if isinstance(exc, SmdError) else 2
 
 
-def _report_json(exc: Exception, scenario: Path, as_json: bool) -> int:
+def _report_json(exc: Exception, about: dict, as_json: bool, doing: str = "write", status: str | None = None) -> int:
     """_report, and with --json the same facts as a JSON object on stdout, so that a script always gets JSON."""
-    code = _report(exc)
+    code = _report(exc, doing)
     if as_json:
-        _print_json({"scenario": str(scenario), "success": False, "status": strict_json.status(code),
-                     "exit_code": code, "message": _message(exc)})
+        _print_json({**about, "success": False, "status": status or strict_json.status(code), "exit_code": code,
+                     "message": _message(exc, doing)})
     return code
-
-
-def _count(n: int, singular: str, plural: str | None = None) -> str:
-    """'1 frame', '2 frames'."""
-    return f"{n} {singular if n == 1 else (plural or singular + 's')}"
-
-
 
 
 def _version(value: bool):
@@ -115,15 +109,18 @@ def simulate(
                                          help="Absolute tolerance override (> 0)."),
     no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
-    as_json: bool = typer.Option(False, "--json", help="Print the summaries as JSON: one entry per file, failed ones too."),
+    as_json: bool = typer.Option(False, "--json",
+                                 help="Print the summaries as JSON: one entry per file, failed ones too."),
     fail_fast: bool = typer.Option(False, "--fail-fast", help="Stop at the first scenario that fails."),
     save_partial: bool = typer.Option(False, "--save-partial", help="When a solver fails, write what it computed "
                                       "to OUT/<stem>_partial.h5, marked failed."),
 ):
     """Solve each scenario; write OUT/<stem>.h5 and OUT/<stem>_response.png, _phase.png."""
+    from smdcli.commands.simulate import Options, failed_summary, format_summary
+    from smdcli.commands.simulate import simulate as run_one
+    from smdcli.commands.simulate import summary
     from smdcli.errors import SmdError
     from smdcli.progress import bar
-    from smdcli.commands.simulate import Options, failed_summary, format_summary, simulate as run_one, summary
 
     options = Options(method=method, rtol=rtol, atol=atol, plots=not no_plots, save_partial=save_partial)
     worst = 0
@@ -136,7 +133,7 @@ def simulate(
             except (SmdError, OSError) as exc:
                 code = _report(exc)
                 worst = max(worst, code)
-                summaries.append(failed_summary(path, exc, code))
+                summaries.append(failed_summary(path, _message(exc), code))
                 advance(1)
                 if fail_fast:
                     summaries += [failed_summary(p, None, None) for p in scenarios[index + 1:]]
@@ -160,13 +157,14 @@ def info(
     as_json: bool = typer.Option(False, "--json", help="Print as JSON."),
 ):
     """DOFs, M C K, natural frequencies, damping ratios and regimes, stiffness, what auto would pick."""
+    from smdcli.commands.simulate import format_info
+    from smdcli.commands.simulate import info as describe
     from smdcli.errors import SmdError
-    from smdcli.commands.simulate import format_info, info as describe
 
     try:
         data = describe(scenario)
     except (SmdError, OSError) as exc:
-        raise typer.Exit(_report_json(exc, scenario, as_json))
+        raise typer.Exit(_report_json(exc, {"scenario": str(scenario)}, as_json))
     if as_json:
         _print_json(data)
     else:
@@ -197,7 +195,7 @@ def compare_solvers(
                                             breakpoints=not no_breakpoints, plots=not no_plots,
                                             progress=progress_wanted(quiet, as_json))
     except (SmdError, OSError) as exc:
-        raise typer.Exit(_report_json(exc, scenario, as_json))
+        raise typer.Exit(_report_json(exc, {"scenario": str(scenario)}, as_json))
     except KeyboardInterrupt as exc:
         raise _interrupted(exc)
     if as_json:
@@ -235,8 +233,8 @@ def sweep(
     as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
 ):
     """Run a family: parameters over grids, initial conditions, or a frequency response; one HDF5 and plots."""
-    from smdcli.errors import SmdError
     from smdcli.commands.sweep import format_summary, run_and_write, summary
+    from smdcli.errors import SmdError
 
     if method is not None:
         from smdcli.solvers.catalog import check_method_name
@@ -253,7 +251,7 @@ def sweep(
         run = run_and_write(scenario, out, options, workers, plots=not no_plots,
                             progress=progress_wanted(quiet, as_json))
     except (SmdError, OSError) as exc:
-        raise typer.Exit(_report_json(exc, scenario, as_json))
+        raise typer.Exit(_report_json(exc, {"scenario": str(scenario)}, as_json))
     except KeyboardInterrupt as exc:
         raise _interrupted(exc)
     data = summary(run)
@@ -281,8 +279,8 @@ def phase(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
 ):
     """Phase portraits (x against v) of DOFs, scenarios or a family, start and direction marked; --poincare."""
-    from smdcli.errors import SmdError
     from smdcli.commands.phase import portraits
+    from smdcli.errors import SmdError
 
     try:
         run = portraits(scenarios, out, dof, tuple(ic or ()), poincare, periods, skip_periods, method,
@@ -293,8 +291,8 @@ def phase(
         raise _interrupted(exc)
     if not quiet:
         points = sum(len(c.x) for c in run.poincare or ())
-        typer.echo(_count(len(run.curves), "trajectory", "trajectories")
-                   + (f", {_count(points, 'Poincare point')} (T = {run.period:.4g} s)" if run.poincare else ""))
+        typer.echo(plural(len(run.curves), "trajectory", "trajectories")
+                   + (f", {plural(points, 'Poincare point')} (T = {run.period:.4g} s)" if run.poincare else ""))
         typer.echo("wrote " + ", ".join(str(p) for p in run.outputs))
 
 
@@ -305,8 +303,8 @@ def draw(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
 ):
     """A schematic of the system from its elements: masses, springs, dampers (nonlinear in red), walls, forces."""
-    from smdcli.errors import SmdError
     from smdcli.commands.draw import write_schematic
+    from smdcli.errors import SmdError
 
     try:
         png = write_schematic(scenario, out)
@@ -330,8 +328,8 @@ def animate(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
 ):
     """A GIF of the masses moving, springs and dampers drawn, with a time stamp on each frame."""
-    from smdcli.errors import SmdError
     from smdcli.commands.draw import animate as make_gif
+    from smdcli.errors import SmdError
 
     try:
         gif, facts = make_gif(scenario, out, fps, seconds, scale, start, end, method, progress=progress_wanted(quiet))
@@ -340,8 +338,8 @@ def animate(
     except KeyboardInterrupt as exc:
         raise _interrupted(exc)
     if not quiet:
-        typer.echo(f"{_count(facts['frames'], 'frame')} at {facts['fps']} fps, t = {facts['start']:g} .. {facts['end']:g} s, "
-                   f"displacements x {facts['scale']:.3g}, {facts['bytes'] / 2**20:.2f} MB")
+        typer.echo(f"{plural(facts['frames'], 'frame')} at {facts['fps']} fps, "
+                   f"t = {facts['start']:g} .. {facts['end']:g} s, displacements x {facts['scale']:.3g}, {facts['bytes'] / 2**20:.2f} MB")
         typer.echo(f"wrote {gif}")
 
 
@@ -371,10 +369,8 @@ def diff_files(
         report = diff(a, b, names=datasets.split(",") if datasets else None, allow_failed=allow_failed,
                       stated=tolerance == "stated", **given)
     except (SmdError, OSError) as exc:
-        code = _report(exc, doing="read")
-        if as_json:
-            _print_json({"a": str(a), "b": str(b), "status": "unusable", "exit_code": code, "message": _message(exc)})
-        raise typer.Exit(code)
+        raise typer.Exit(_report_json(exc, {"a": str(a), "b": str(b)}, as_json, doing="read",
+                                      status="unusable"))
     if as_json:
         _print_json(as_dict(report))
     elif not quiet:
@@ -409,24 +405,20 @@ def run(args: list[str]) -> int:
         _fail(_usage_line(exc))
         code = 2
     except KeyboardInterrupt as exc:
-        _interrupted(exc)
-        code = interrupts.exit_code(interrupts.received() or 2)
+        code = _interrupted(exc).exit_code
     except BrokenPipeError:  # `smd ... | head`: the reader left; nothing more to say
         sys.stderr.close()
         code = 1
     except Exception as exc:  # a defect of smd's, not of the input: one line, unless asked for the traceback
         import os
 
-        if interrupts.received() is not None:  # e.g. an import cut short by the signal: the interrupt decides below
+        if interrupts.received() is not None:  # e.g. an import cut short by the signal: an interrupt, not a defect
             return _interrupted(KeyboardInterrupt()).exit_code
         if os.environ.get("SMD_DEBUG"):
             raise
         _fail(f"internal error: {type(exc).__name__}: {exc}; please report it (SMD_DEBUG=1 shows the traceback)")
         code = 1
-    code = code if isinstance(code, int) else 0
-    if interrupts.received() is not None:  # a signal whose exception was swallowed (or turned into exit 130) decides
-        code = _interrupted(KeyboardInterrupt()).exit_code
-    return code
+    return code if isinstance(code, int) else 0
 
 
 def main() -> None:
@@ -435,7 +427,9 @@ def main() -> None:
 
     interrupts.install()
     code = run(sys.argv[1:])
-    with interrupts.held():  # one last look, then a later signal changes nothing: the process is finishing
+    # A signal that came at any point decides, even one whose exception was swallowed or that typer turned into
+    # a silent exit 130; one last look with signals held, then a later signal changes nothing.
+    with interrupts.held():
         signum = interrupts.received()
         for each in interrupts.SIGNALS:
             signal.signal(each, signal.SIG_IGN)

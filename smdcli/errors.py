@@ -1,14 +1,11 @@
 """The exceptions smd raises; the CLI turns each into one line and an exit code.
 
-Imports nothing of smd (the bottom layer).
+Imports nothing of smd but text (the bottom layer).
 """
 
 from __future__ import annotations
 
-
-def printable(text: str) -> str:
-    """Text with control characters (terminal escapes, NUL, bells, line breaks) shown as escapes: one safe line."""
-    return "".join(c if c.isprintable() or c == " " else repr(c)[1:-1] for c in text)
+from smdcli.text import printable
 
 
 class SmdError(Exception):

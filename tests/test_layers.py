@@ -12,7 +12,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "smdcli"
 # Lowest first. A module may import its own layer and the layers below it, never one above.
 LAYERS = [
     ("base", ["smdcli", "smdcli.errors", "smdcli.expression", "smdcli.result", "smdcli.interrupts",
-              "smdcli.progress", "smdcli.provenance", "smdcli.strict_json", "smdcli.solvers.catalog"]),
+              "smdcli.progress", "smdcli.provenance", "smdcli.strict_json", "smdcli.text", "smdcli.solvers.catalog"]),
     ("scenario", ["smdcli.scenario"]),
     ("model", ["smdcli.model"]),
     ("kernels", ["smdcli.kernels"]),

@@ -4,24 +4,25 @@ Must not import: cli."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
 
+from smdcli import scenario as scenario_mod
 from smdcli.errors import UsageError
+from smdcli.io.atomic import atomic_path
+from smdcli.io.folders import output_folder
+from smdcli.model import build
+from smdcli.plots.common import _figure, save_figure
 from smdcli.plots.schematic import SPACING, draw, layout, schematic_figure
-
-
-MAX_GIF_BYTES = 5 * 2**20
+from smdcli.progress import bar
+from smdcli.scenario import TimeSpec
+from smdcli.solvers.checked import solve_checked
 
 
 def write_schematic(path: str | Path, out: str | Path) -> Path:
     """`smd draw`: OUT/<stem>_schematic.png."""
-    from smdcli import scenario as scenario_mod
-    from smdcli.model import build
-    from smdcli.plots.common import save_figure
-    from smdcli.io.folders import output_folder
-
     sc = scenario_mod.load(path)
     build(sc)
     out_dir = output_folder(out)
@@ -34,15 +35,6 @@ def animate(path: str | Path, out: str | Path, fps: int = 20, seconds: float | N
             scale: float | None = None, start: float | None = None, end: float | None = None,
             method: str | None = None, progress: bool = False) -> tuple[Path, dict]:
     """`smd animate`: OUT/<stem>.gif of the masses moving, displacements scaled to be seen, time stamped."""
-    import dataclasses
-
-    from smdcli import scenario as scenario_mod
-    from smdcli.io.atomic import atomic_path
-    from smdcli.plots.common import _figure
-    from smdcli.scenario import TimeSpec
-    from smdcli.io.folders import output_folder
-    from smdcli.solvers.checked import solve_checked
-
     if not 1 <= fps <= 50:
         raise UsageError(f"--fps: expected 1 to 50 frames per second, found {fps}")
     sc = scenario_mod.load(path)
@@ -72,8 +64,6 @@ def animate(path: str | Path, out: str | Path, fps: int = 20, seconds: float | N
     ax = fig.add_axes((0.0, 0.0, 1.0, 0.86))
     images = []
     from PIL import Image
-
-    from smdcli.progress import bar
 
     with bar("drawing frames", len(t), progress) as advance:
         for k in range(len(t)):

@@ -15,8 +15,8 @@ import numpy as np
 
 from smdcli import scenario as scenario_mod
 from smdcli.errors import UsageError
-from smdcli.progress import bar
 from smdcli.model import time_grid
+from smdcli.progress import bar
 from smdcli.scenario import Scenario, TimeSpec
 
 POINTS_PER_PERIOD = 64  # portrait resolution when --periods sets the run's length
@@ -102,9 +102,35 @@ def portraits(paths: list[Path], out: Path, dofs: str | None = None, ics: tuple[
     out_dir = output_folder(out)
     curves, sections = [], [] if poincare else None
     with bar("phase portraits", len(runs) * (2 if poincare else 1), progress) as advance:
+        alone = len(runs) == 1
         for label, member, sc in runs:
-            _trace(label, member, method, chosen, len(runs) == 1, periods, period, poincare, skip_periods,
-                   curves, sections, advance)
+            if periods is not None:
+                span = (period or forcing_period(member)) if period or member.forces else None
+                if span is None:
+                    raise UsageError(f"--periods: {member.path} has no periodic force to count periods of")
+                spacing = np.diff(time_grid(member.time)[:2])[0]
+                member = dataclasses.replace(member, time=TimeSpec(
+                    member.time.start, member.time.start + periods * span, step=min(spacing, span / POINTS_PER_PERIOD)))
+            t, x, v = _solve(member, method)
+            advance(1, label)
+            dofs = chosen or member.dof_names
+            names = {dof: dof if alone else (label if len(dofs) == 1 else f"{label}: {dof}") for dof in dofs}
+            for dof in dofs:
+                j = member.dof_names.index(dof)
+                curves.append(Curve(names[dof], t, x[:, j], v[:, j]))
+            if poincare:
+                count = int(math.floor((member.time.end - member.time.start) / period * (1 + 1e-12)))
+                if count < 1:
+                    raise UsageError(f"{member.path}: the run is shorter than one forcing period ({period:.4g} s); "
+                                     "use --periods")
+                sampled = dataclasses.replace(member, time=TimeSpec(member.time.start,
+                                                                    member.time.start + count * period, step=period))
+                ts, xs, vs = _solve(sampled, method)
+                advance(1, f"{label}: Poincare")
+                keep = slice(min(skip_periods, len(ts) - 1), None)
+                for dof in dofs:
+                    j = member.dof_names.index(dof)
+                    sections.append(Curve(names[dof], ts[keep], xs[keep, j], vs[keep, j]))
     run = PhaseRun(curves, sections, period)
     stem = name or (scenarios[0].stem if len(scenarios) == 1 else f"{scenarios[0].stem}_and_{len(scenarios) - 1}_more")
     from smdcli.io.atomic import together
@@ -128,39 +154,6 @@ def portraits(paths: list[Path], out: Path, dofs: str | None = None, ics: tuple[
             save_figure(figure, png)
             run.outputs.append(png)
     return run
-
-
-def _trace(label: str, member: Scenario, method: str | None, chosen: list[str], alone: bool, periods: int | None,
-           period: float | None, poincare: bool, skip_periods: int, curves: list, sections: list | None,
-           advance) -> None:
-    """Solve one run (and its Poincare samples) and append its curves."""
-    if periods is not None:
-        span = (period or forcing_period(member)) if period or member.forces else None
-        if span is None:
-            raise UsageError(f"--periods: {member.path} has no periodic force to count periods of")
-        spacing = np.diff(time_grid(member.time)[:2])[0]
-        member = dataclasses.replace(member, time=TimeSpec(member.time.start, member.time.start + periods * span,
-                                                           step=min(spacing, span / POINTS_PER_PERIOD)))
-    t, x, v = _solve(member, method)
-    advance(1, label)
-    for dof in chosen or member.dof_names:
-        j = member.dof_names.index(dof)
-        name = dof if alone else (label if len(chosen or member.dof_names) == 1 else f"{label}: {dof}")
-        curves.append(Curve(name, t, x[:, j], v[:, j]))
-    if poincare:
-        count = int(math.floor((member.time.end - member.time.start) / period * (1 + 1e-12)))
-        if count < 1:
-            raise UsageError(f"{member.path}: the run is shorter than one forcing period ({period:.4g} s); "
-                             "use --periods")
-        sampled = dataclasses.replace(member, time=TimeSpec(member.time.start,
-                                                            member.time.start + count * period, step=period))
-        ts, xs, vs = _solve(sampled, method)
-        advance(1, f"{label}: Poincare")
-        keep = slice(min(skip_periods, len(ts) - 1), None)
-        for dof in chosen or member.dof_names:
-            j = member.dof_names.index(dof)
-            sections.append(Curve(dof if alone else (label if len(chosen or member.dof_names) == 1 else f"{label}: {dof}"),
-                                  ts[keep], xs[keep, j], vs[keep, j]))
 
 
 def _write(path: Path, sc: Scenario, run: PhaseRun) -> None:

@@ -14,11 +14,12 @@ import numpy as np
 
 from smdcli import scenario as scenario_mod
 from smdcli.errors import SolverFailed
+from smdcli.io.folders import output_folder
 from smdcli.model import Model, build, time_grid
 from smdcli.result import Result
 from smdcli.scenario import Scenario
-from smdcli.io.folders import output_folder
 from smdcli.solvers.checked import failure_message, solve_scenario
+from smdcli.strict_json import status
 
 
 @dataclass(frozen=True)
@@ -107,14 +108,11 @@ def summary(run: Run) -> dict:
     }
 
 
-def failed_summary(path: str | Path, exc: Exception | None, exit_code: int | None) -> dict:
-    """The JSON entry of a file that failed (exc, exit_code) or was not run after --fail-fast stopped (None, None)."""
-    from smdcli.strict_json import status
-
+def failed_summary(path: str | Path, message: str | None, exit_code: int | None) -> dict:
+    """The JSON entry of a file that failed (its one-line message and exit code), or was not run after
+    --fail-fast stopped (None, None)."""
     return {"scenario": str(path), "status": status(exit_code), "exit_code": exit_code, "success": False,
-            "message": str(exc) if exc is not None and not isinstance(exc, OSError)
-            else (f"{exc.filename}: {exc.strerror}" if exc is not None else "not run: an earlier file failed (--fail-fast)"),
-            "outputs": []}
+            "message": message or "not run: an earlier file failed (--fail-fast)", "outputs": []}
 
 
 def format_summary(data: dict) -> str:

@@ -18,7 +18,7 @@ from smdcli.sweep.frequency import FrequencyResponse, _driving_force, frequency_
 from smdcli.sweep.members import FamilyResult, metrics, solve_family
 from smdcli.sweep.shooting import MAX_PERIODS
 from smdcli.sweep.spec import METRIC_UNITS, read_spec
-
+from smdcli.text import plural
 
 # ------------------------------------------------------------------- command
 
@@ -38,8 +38,8 @@ def run_and_write(path, out, cli: dict[str, Any], workers: int | None = None, pl
                   progress: bool = False) -> SweepRun:
     """Load, build the family, solve it, write `<stem>_sweep.h5` and the plots; input errors before any work."""
     from smdcli.io.atomic import together
-    from smdcli.io.sweep_hdf5 import write_sweep
     from smdcli.io.folders import output_folder
+    from smdcli.io.sweep_hdf5 import write_sweep
 
     sc = scenario_mod.load(path)
     spec = read_spec(sc, cli)
@@ -129,7 +129,7 @@ def summary(run: SweepRun) -> dict:
 
 def format_summary(data: dict) -> str:
     """The summary as a few lines for the terminal."""
-    lines = [f"{data['scenario']}: {data['members']} member{'s' if data['members'] != 1 else ''} "
+    lines = [f"{data['scenario']}: {plural(data['members'], 'member')} "
              f"({data['kind']} sweep) in {data['wall_time_s'] * 1e3:.1f} ms, {data['how']}"]
     for failed in data.get("failed", []):
         lines.append(f"  failed: {failed}")

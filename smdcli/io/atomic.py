@@ -11,9 +11,7 @@ import tempfile
 from contextlib import contextmanager, suppress
 from pathlib import Path
 
-
 from smdcli import interrupts
-
 
 _pending: list[tuple[str, Path]] | None = None  # inside together(): renames waiting for the block's end
 
@@ -37,19 +35,18 @@ def _discard(paths) -> None:
 def together():
     """Files written with atomic_path inside the block appear together when it ends, or none of them does."""
     global _pending
-    outer, _pending = _pending, []
+    if _pending is not None:  # inside another: its end is the commit
+        yield
+        return
+    _pending = []
     try:
         yield
-        renames = _pending
-        if outer is not None:
-            outer.extend(renames)
-        else:
-            _commit(renames)
+        _commit(_pending)
     except BaseException:
         _discard(tmp for tmp, _ in _pending)
         raise
     finally:
-        _pending = outer
+        _pending = None
 
 
 @contextmanager

@@ -11,12 +11,11 @@ from pathlib import Path
 import numpy as np
 
 from smdcli import __version__, provenance
+from smdcli.io.atomic import atomic_path
 from smdcli.model import Model
 from smdcli.result import Result
 from smdcli.scenario import Scenario
 from smdcli.solvers.base import acceleration_accuracy
-from smdcli.io.atomic import atomic_path
-
 
 SCHEMA_VERSION = 1
 
@@ -24,9 +23,9 @@ SCHEMA_VERSION = 1
 def write_header(f, scenario: Scenario, kind: str) -> None:
     """The root attributes every smd file carries, and the provenance to run it again from the file alone."""
     import platform
+    from importlib.metadata import version
 
     import h5py
-    import scipy
 
     f.attrs["smd_version"] = __version__
     f.attrs["schema_version"] = SCHEMA_VERSION
@@ -38,7 +37,7 @@ def write_header(f, scenario: Scenario, kind: str) -> None:
     f.attrs["command_line"] = provenance.command_line()
     f.attrs["python_version"] = platform.python_version()
     f.attrs["numpy_version"] = np.__version__
-    f.attrs["scipy_version"] = scipy.__version__
+    f.attrs["scipy_version"] = version("scipy")  # without importing scipy for it
     f.attrs["h5py_version"] = h5py.__version__
     f.attrs["machine"] = f"{platform.system()} {platform.machine()}"
     tables = [force for force in scenario.forces if force.file]

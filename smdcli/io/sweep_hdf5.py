@@ -8,16 +8,16 @@ from pathlib import Path
 
 import numpy as np
 
-from smdcli.solvers.base import acceleration_accuracy
 from smdcli.io.atomic import atomic_path
 from smdcli.io.hdf5 import _strings, write_header, write_matrices
+from smdcli.solvers.base import acceleration_accuracy
+from smdcli.sweep.spec import METRIC_UNITS, SETTLING_BAND, parameter_units
 
 
 def write_sweep(path: Path, family, result=None, metrics=None, response=None, run: dict | None = None) -> None:
     """Write a sweep: members on a leading axis (a dimension scale), the swept values, stacked results or a frequency response."""
     import h5py
 
-    from smdcli.sweep import parameter_units
 
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
         write_header(f, family.scenario, "sweep")
@@ -84,7 +84,6 @@ def _write_time_family(f, family, result, metrics, member, dof) -> None:
     f.create_dataset("success", data=result.success).dims[0].attach_scale(member)
     _strings(f, "message", result.messages).dims[0].attach_scale(member)
     _strings(f, "method", result.methods).dims[0].attach_scale(member)
-    from smdcli.sweep import METRIC_UNITS, SETTLING_BAND
 
     if result.stated_accuracy is not None:
         ds = f.create_dataset("stated_accuracy", data=result.stated_accuracy)

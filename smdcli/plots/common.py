@@ -9,7 +9,6 @@ from pathlib import Path
 import numpy as np
 
 
-
 def _figure(**kwargs):
     """A Figure on the Agg canvas, without pyplot's global state (and its import cost)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg

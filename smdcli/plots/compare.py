@@ -5,10 +5,8 @@ Plot functions return a Figure; only save_figure touches disk. Must not import: 
 from __future__ import annotations
 
 import math
+
 from smdcli.plots.common import _figure
-
-
-
 
 FAILED_LEVEL = 3.0  # failed runs are drawn as crosses on a band above error = 1
 

@@ -4,34 +4,35 @@ Plot functions return a Figure; only save_figure touches disk. Must not import: 
 
 from __future__ import annotations
 
-
 import numpy as np
 
-from smdcli.result import Result
 from smdcli.plots.common import MAX_DRAWN, _figure, _wrap, envelope
 from smdcli.plots.sweep import _STYLES
+from smdcli.result import Result
 
 
 def _band(t: np.ndarray, y: np.ndarray, max_points: int = MAX_DRAWN):
     """For a series that oscillates faster than the axes can draw (a 120 rad/s force over 120 s): per-bucket
     (times, low, high, mean), so the plot shows the band it fills and the motion it rides on; None otherwise."""
     n = len(t)
-    if n <= max_points:
-        return None
-    dy = np.diff(y)
-    turns = np.count_nonzero(np.sign(dy[1:]) * np.sign(dy[:-1]) < 0)
     buckets = max_points // 2
-    if turns < 2 * buckets:  # fewer than one oscillation per bucket: a line shows it
+    if n <= max_points or _turns(y) < 2 * buckets:  # fewer than one oscillation per bucket: a line shows it
         return None
     edges = np.linspace(0, n, buckets + 1).astype(int)
     low = np.minimum.reduceat(y, edges[:-1])
     high = np.maximum.reduceat(y, edges[:-1])
-    # The running mean over two buckets, twice (a triangular window): a plain bucket mean of an oscillation
-    # that does not fit a bucket a whole number of times aliases into wiggles that are not in the motion.
+    # The running mean over a bucket, twice (a triangular window two buckets wide): a plain bucket mean of an
+    # oscillation that does not fit a bucket a whole number of times aliases into wiggles not in the motion.
     width = max(1, n // buckets)
     mean = _running_mean(_running_mean(y, width), width)
     centres = np.minimum((edges[:-1] + edges[1:]) // 2, n - 1)
     return t[edges[:-1]], low, high, mean[centres]
+
+
+def _turns(y: np.ndarray) -> int:
+    """How often a series changes direction (twice a period for an oscillation); the most over its columns."""
+    dy = np.diff(y, axis=0)
+    return int(np.max(np.count_nonzero(np.sign(dy[1:]) * np.sign(dy[:-1]) < 0, axis=0)))
 
 
 def _running_mean(y: np.ndarray, width: int) -> np.ndarray:
@@ -47,10 +48,7 @@ def _fast_window(result: Result) -> tuple[float, float] | None:
     t = result.time
     if len(t) <= MAX_DRAWN:
         return None
-    turns = 0
-    for data in (result.displacement, result.acceleration):
-        dy = np.diff(data, axis=0)
-        turns = max(turns, int((np.sign(dy[1:]) * np.sign(dy[:-1]) < 0).sum(axis=0).max()))
+    turns = max(_turns(result.displacement), _turns(result.acceleration))
     if turns < MAX_DRAWN // 2:
         return None
     width = min(10 * (t[-1] - t[0]) / turns, (t[-1] - t[0]) / 10)  # two turns a period: five periods
@@ -74,46 +72,50 @@ def response_figure(result: Result, title: str):
     axes = fig.subplots(len(rows), 1, sharex=True, gridspec_kw={"height_ratios": heights})
     fig.subplots_adjust(left=0.1, right=0.97, top=0.9, bottom=0.07, hspace=0.12)
     window = _fast_window(result)
-    banded = set()
+    shaded = {}
     for ax, (name, label) in zip(axes, rows):
         data = getattr(result, name)
+        shaded[name] = False
         for j, dof in enumerate(result.dofs):
-            if name == "force":
-                if not np.any(data[:, j] != 0):
-                    continue
-                style = FORCE_STYLES[len(ax.get_lines()) % len(FORCE_STYLES)]
-                band = _band(result.time, data[:, j])
-                if band is not None:
-                    ax.fill_between(band[0], band[1], band[2], color=f"C{j}", alpha=0.25, lw=0,
-                                    label=f"F on {dof} (range of a fast oscillation)")
-                else:
-                    ax.plot(*envelope(result.time, data[:, j]), ls=style, lw=1.2, color=f"C{j}", label=f"F on {dof}")
+            if name == "force" and not np.any(data[:, j] != 0):
                 continue
-            band = _band(result.time, data[:, j])
-            if band is None:
-                ax.plot(*envelope(result.time, data[:, j]), lw=1.1, color=f"C{j}", label=dof)
-            else:
-                banded.add(dof)
-                ax.fill_between(band[0], band[1], band[2], color=f"C{j}", alpha=0.22, lw=0)
-                ax.plot(band[0], band[3], lw=1.1, color=f"C{j}", label=dof)
+            style = FORCE_STYLES[len(ax.get_lines()) % len(FORCE_STYLES)] if name == "force" else "-"
+            shaded[name] |= _draw(ax, result.time, data[:, j], f"C{j}", f"F on {dof}" if name == "force" else dof,
+                                  style)
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.4)
-        if name == "force":
-            ax.legend(loc="upper right", fontsize=8, framealpha=0.85)
         if window is not None and name == "acceleration":
             _zoom_inset(ax, result, data, window)
-    motion = axes[1] if forced else axes[0]
-    handles, labels = motion.get_legend_handles_labels()
+    if forced:
+        _legend(axes[0], shaded["force"])
+    _legend(axes[1 if forced else 0], any(shaded[name] for name, _ in rows if name != "force"))  # the DOFs' once
+    axes[-1].set_xlabel("Time t [s]")
+    axes[0].set_xlim(result.time[0], result.time[-1])
+    fig.suptitle(title, fontsize=11)
+    return fig
+
+
+def _draw(ax, t: np.ndarray, y: np.ndarray, color, label: str, style: str = "-") -> bool:
+    """One series: its line, or for an oscillation too fast to draw, its range shaded and its running mean.
+    True when shaded."""
+    band = _band(t, y)
+    if band is None:
+        ax.plot(*envelope(t, y), ls=style, lw=1.1, color=color, label=label)
+        return False
+    ax.fill_between(band[0], band[1], band[2], color=color, alpha=0.22, lw=0)
+    ax.plot(band[0], band[3], ls=style, lw=1.1, color=color, label=label)
+    return True
+
+
+def _legend(ax, banded: bool) -> None:
+    """The axes' legend, with what the shading means where a series was shaded."""
+    handles, labels = ax.get_legend_handles_labels()
     if banded:
         from matplotlib.patches import Patch
 
         handles.append(Patch(color="0.6", alpha=0.35, lw=0))
         labels.append("shaded: range of an oscillation too fast to draw (line: its running mean)")
-    motion.legend(handles, labels, loc="upper right", fontsize=8, framealpha=0.85, ncol=1)
-    axes[-1].set_xlabel("Time t [s]")
-    axes[0].set_xlim(result.time[0], result.time[-1])
-    fig.suptitle(title, fontsize=11)
-    return fig
+    ax.legend(handles, labels, loc="upper right", fontsize=8, framealpha=0.85)
 
 
 def _zoom_inset(ax, result: Result, data: np.ndarray, window: tuple[float, float]) -> None:

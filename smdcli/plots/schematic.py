@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from smdcli.plots.common import _figure, _wrap
 from smdcli.scenario import GROUND, Scenario
-
 
 SPACING = 1.0  # between mass centres at rest
 BLOCK = 0.34  # block width and height
@@ -182,7 +182,6 @@ def draw(ax, plan: Layout, displacement: np.ndarray | None = None, scale: float 
 
 def schematic_figure(sc: Scenario):
     """The schematic of a scenario, labelled, as a Figure."""
-    from smdcli.plots.common import _figure, _wrap
 
     plan = layout(sc)
     n = len(plan.names)

@@ -8,9 +8,8 @@ import math
 
 import numpy as np
 
-from smdcli.sweep.spec import parameter_label
 from smdcli.plots.common import _figure, _wrap, envelope
-
+from smdcli.sweep.spec import parameter_label
 
 # ------------------------------------------------------------------ sweeps
 

@@ -9,10 +9,9 @@ import math
 import re
 from pathlib import Path
 from typing import Any
+
 from smdcli.scenario.reader import MAX_TABLE_BYTES, _NotRegular, _Table, read_regular_file
 from smdcli.scenario.spec import FORCE_TYPES, ForceSpec
-
-
 
 _FORCE_FIELDS = {
     "constant": ("amplitude",),

@@ -11,11 +11,11 @@ from pathlib import Path
 
 from smdcli.errors import ScenarioError
 from smdcli.scenario.forces import _ANY_FORCE_KEYS, _read_force
-from smdcli.scenario.options import SWEEP_KEYS, _read_solver, _read_sweep
-from smdcli.scenario.reader import MAX_SCENARIO_BYTES, _NotRegular, _SYSTEM_KEYS, _TIME_KEYS, _TOP_KEYS, _Table, _solver_keys, read_regular_file
-from smdcli.scenario.spec import ForceSpec, MAX_SAMPLES, Scenario, SolverSpec, TimeSpec
+from smdcli.scenario.options import SOLVER_KEYS, SWEEP_KEYS, _read_solver, _read_sweep
+from smdcli.scenario.reader import (_SYSTEM_KEYS, _TIME_KEYS, _TOP_KEYS, MAX_SCENARIO_BYTES, _NotRegular, _Table,
+                                    read_regular_file)
+from smdcli.scenario.spec import MAX_SAMPLES, ForceSpec, Scenario, SolverSpec, TimeSpec
 from smdcli.scenario.structure import _read_elements, _read_masses, _read_system, _read_time
-from smdcli.scenario.reader import _control_character
 
 
 def load(path: str | Path) -> Scenario:
@@ -64,7 +64,7 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
     _refuse_control_characters(file, doc, "")
     top = _Table(file, "", doc, _TOP_KEYS)
     title = top.string("title", "")
-    description = top.string("description", "", multiline=True)
+    description = top.string("description", "")
     time = _read_time(_Table(file, "time", top.raw("time"), _TIME_KEYS) if top.has("time") else None, file)
 
     if top.has("system"):
@@ -84,7 +84,7 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
     forces = tuple(
         _read_force(_Table(file, f"force[{i}]", raw, _ANY_FORCE_KEYS), i, dofs) for i, raw in enumerate(top.tables("force"))
     )
-    solver = _read_solver(_Table(file, "solver", top.raw("solver"), _solver_keys())) if top.has("solver") else SolverSpec()
+    solver = _read_solver(_Table(file, "solver", top.raw("solver"), SOLVER_KEYS)) if top.has("solver") else SolverSpec()
     sweep = _read_sweep(_Table(file, "sweep", top.raw("sweep"), SWEEP_KEYS)) if top.has("sweep") else ()
     top.finish(_TOP_KEYS)
 
@@ -138,3 +138,12 @@ def _refuse_control_characters(file: str, node, path: str) -> None:
         control = _control_character(node, multiline=path == "description")
         if control is not None:
             raise ScenarioError(file, path, f"expected printable text, found the control character {control!r}")
+
+
+def _control_character(text: str, multiline: bool) -> str | None:
+    """The first control character of `text` (terminal escapes, NUL...), or None."""
+    allowed = "\t\n\r" if multiline else "\t"
+    for char in text:
+        if (ord(char) < 32 or 127 <= ord(char) < 160) and char not in allowed:
+            return char
+    return None

@@ -6,9 +6,11 @@ from __future__ import annotations
 
 from typing import Any
 
-from smdcli.solvers.catalog import METHOD_OPTIONS, NEWMARK_SCHEMES, OPTION_RANGES, check_method_name
-from smdcli.scenario.reader import _Table, _kind
+from smdcli.scenario.reader import _kind, _Table
 from smdcli.scenario.spec import SolverSpec
+from smdcli.solvers.catalog import METHOD_OPTIONS, NEWMARK_SCHEMES, OPTION_RANGES, check_method_name
+
+SOLVER_KEYS = ("method", "rtol", "atol", "dt", *METHOD_OPTIONS)
 
 
 def _read_solver(t: _Table) -> SolverSpec:
@@ -35,7 +37,7 @@ def _read_solver(t: _Table) -> SolverSpec:
             if not low <= value <= high:
                 raise t.fail(key, f"expected a number in [{low:.4g}, {high:.4g}], found {value!r}")
         options.append((key, value))
-    t.finish(("method", "rtol", "atol", "dt", *METHOD_OPTIONS))
+    t.finish(SOLVER_KEYS)
     return SolverSpec(method=method, rtol=rtol, atol=atol, dt=dt, options=tuple(options))
 
 

@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import Any
 
 from smdcli.errors import ScenarioError
-from smdcli.solvers.catalog import METHOD_OPTIONS
 
 
 def _kind(value: Any) -> str:
@@ -42,15 +41,6 @@ def _short(value: int) -> str:
         return f"an integer of {len(str(abs(value)))} digits"
     except ValueError:  # past Python's 4300-digit limit for int to str
         return f"an integer of about {int(abs(value).bit_length() * 0.30103) + 1} digits"
-
-
-def _control_character(text: str, multiline: bool) -> str | None:
-    """The first control character of `text` (terminal escapes, NUL...), or None."""
-    allowed = "\t\n\r" if multiline else "\t"
-    for char in text:
-        if (ord(char) < 32 or 127 <= ord(char) < 160) and char not in allowed:
-            return char
-    return None
 
 
 class _Table:
@@ -92,6 +82,14 @@ class _Table:
         """Whether the key is present."""
         return key in self.data
 
+    def _given(self, key: str, default: Any, expected: str) -> bool:
+        """Whether the key is present; a required one (no default) that is absent is an error."""
+        if key in self.data:
+            return True
+        if default is ...:
+            raise self.missing(key, expected)
+        return False
+
     def raw(self, key: str) -> Any:
         """The value as TOML gave it, marked as used."""
         self.used.add(key)
@@ -100,9 +98,7 @@ class _Table:
     def number(self, key: str, default: Any = ..., *, minimum: float | None = None,
                positive: bool = False) -> float:
         """A finite real number; `minimum` inclusive, `positive` strict."""
-        if key not in self.data:
-            if default is ...:
-                raise self.missing(key, "a number")
+        if not self._given(key, default, "a number"):
             return default
         value = self.raw(key)
         return self._check_number(key, value, minimum, positive)
@@ -124,9 +120,7 @@ class _Table:
 
     def integer(self, key: str, default: Any = ..., *, minimum: int = 0) -> int:
         """A whole number >= minimum."""
-        if key not in self.data:
-            if default is ...:
-                raise self.missing(key, "a whole number")
+        if not self._given(key, default, "a whole number"):
             return default
         value = self.raw(key)
         if isinstance(value, bool) or not isinstance(value, int):
@@ -137,19 +131,13 @@ class _Table:
             raise self.fail(key, f"expected a whole number <= {MAX_INTEGER:.0e}, found {_short(value)}")
         return value
 
-    def string(self, key: str, default: Any = ..., *, choices: tuple[str, ...] | None = None,
-               multiline: bool = False) -> str:
-        """A string without control characters (tabs and, if `multiline`, line breaks allowed), optionally one of `choices`."""
-        if key not in self.data:
-            if default is ...:
-                raise self.missing(key, "a string")
+    def string(self, key: str, default: Any = ..., *, choices: tuple[str, ...] | None = None) -> str:
+        """A string, optionally one of `choices` (control characters were refused for the whole document)."""
+        if not self._given(key, default, "a string"):
             return default
         value = self.raw(key)
         if not isinstance(value, str):
             raise self.fail(key, f"expected a string, found {_kind(value)}")
-        control = _control_character(value, multiline)
-        if control is not None:
-            raise self.fail(key, f"expected printable text, found the control character {control!r}")
         if choices is not None and value not in choices:
             hint = difflib.get_close_matches(value, choices, n=1)
             extra = f" (did you mean {hint[0]!r}?)" if hint else ""
@@ -159,9 +147,7 @@ class _Table:
     def numbers(self, key: str, default: Any = ..., *, length: int | None = None,
                 minimum: float | None = None) -> tuple[float, ...]:
         """An array of finite numbers, optionally of a given length."""
-        if key not in self.data:
-            if default is ...:
-                raise self.missing(key, "an array of numbers")
+        if not self._given(key, default, "an array of numbers"):
             return default
         value = self.raw(key)
         if not isinstance(value, list):
@@ -203,10 +189,6 @@ _TOP_KEYS = ("title", "description", "time", "mass", "spring", "damper", "system
 _TIME_KEYS = ("start", "end", "step", "points")
 _MASS_KEYS = ("name", "m", "x0", "v0")
 _SYSTEM_KEYS = ("dofs", "M", "C", "K", "x0", "v0")
-
-
-def _solver_keys() -> tuple[str, ...]:
-    return ("method", "rtol", "atol", "dt", *METHOD_OPTIONS)
 
 
 MAX_SCENARIO_BYTES = 16 * 2**20

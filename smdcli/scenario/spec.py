@@ -8,8 +8,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-
-
 GROUND = "ground"
 FORCE_TYPES = (
     "constant", "step", "sine", "cosine", "square", "fourier_square",

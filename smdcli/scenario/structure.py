@@ -8,8 +8,8 @@ import difflib
 import math
 
 from smdcli.errors import ScenarioError
-from smdcli.scenario.reader import _MASS_KEYS, _SYSTEM_KEYS, _TIME_KEYS, _Table, _control_character, _kind
-from smdcli.scenario.spec import DEFAULT_POINTS, ElementSpec, GROUND, MassSpec, MatrixSystem, TimeSpec
+from smdcli.scenario.reader import _MASS_KEYS, _SYSTEM_KEYS, _TIME_KEYS, _kind, _Table
+from smdcli.scenario.spec import DEFAULT_POINTS, GROUND, ElementSpec, MassSpec, MatrixSystem, TimeSpec
 
 
 def _read_time(table: _Table | None, file: str) -> TimeSpec:
@@ -137,10 +137,6 @@ def _read_system(t: _Table) -> MatrixSystem:
     dofs = t.raw("dofs")
     if not isinstance(dofs, list) or not dofs or not all(isinstance(d, str) and d.strip() for d in dofs):
         raise t.fail("dofs", f"expected a non-empty array of names, found {_kind(dofs)}")
-    for i, name in enumerate(dofs):
-        control = _control_character(name, False)
-        if control is not None:
-            raise t.fail(f"dofs[{i}]", f"expected printable text, found the control character {control!r}")
     if len(set(dofs)) != len(dofs):
         raise t.fail("dofs", "duplicate DOF names")
     if GROUND in dofs:

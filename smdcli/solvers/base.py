@@ -98,11 +98,6 @@ def acceleration_accuracy(M: np.ndarray, C: np.ndarray, K: np.ndarray, stated, x
     return np.maximum(stated, derived)
 
 
-def plural(count: int, noun: str) -> str:
-    """'1 force segment', '3 force segments'."""
-    return f"{count} {noun}{'' if count == 1 else 's'}"
-
-
 def make_result(model: Model, grid: np.ndarray, x: np.ndarray, v: np.ndarray, stats: SolverStats,
                 t_failed: float | None = None, notes: tuple[str, ...] = ()) -> Result:
     """A Result from displacement and velocity on the grid; force and acceleration derived."""

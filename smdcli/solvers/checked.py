@@ -44,9 +44,8 @@ def failure_message(sc: Scenario, model: Model, result: Result) -> str:
 
 def failure_hint(model: Model, result: Result) -> str:
     """What to try after a failed run."""
-    from smdcli.solvers.registry import get_solver
-
     from smdcli.solvers.fixed_step import FixedStep
+    from smdcli.solvers.registry import get_solver
 
     solver = get_solver(result.stats.method)
     if "not finite" in result.stats.message:  # a solution that overflowed, not a step that went unstable

@@ -24,11 +24,12 @@ import time
 
 import numpy as np
 
-from smdcli.model.forcing import Table
 from smdcli.model import Model
+from smdcli.model.forcing import Table
 from smdcli.result import Result, SolverStats
 from smdcli.solvers.accurate_expm import expm_times, needed
-from smdcli.solvers.base import Solver, Tolerances, make_result, plural, segments, stated_rounding
+from smdcli.solvers.base import Solver, Tolerances, make_result, segments, stated_rounding
+from smdcli.text import plural
 
 BLOCK = 64  # output steps per stacked propagation
 _POWERS_BYTES = 64 * 2**20

@@ -17,14 +17,13 @@ from smdcli.solvers.base import Solver, Tolerances, stated_rounding, stated_tole
 from smdcli.solvers.catalog import check_method_name
 
 
-
 def _solvers() -> dict[str, type[Solver]]:
     from smdcli.solvers.auto import Auto
     from smdcli.solvers.closed_form import ClosedForm
     from smdcli.solvers.exact import Exact
     from smdcli.solvers.fixed_step import HHT, RK4, CentralDifference, Euler, GeneralizedAlpha, Newmark
-    from smdcli.solvers.ivp import (BDF, DOP853, LSODA, RK23, RK45, Ode113, Radau, ode15s, ode23, ode23s,
-                                    ode23t, ode23tb, ode45)
+    from smdcli.solvers.ivp import (BDF, DOP853, LSODA, RK23, RK45, Ode113, Radau, ode15s, ode23, ode23s, ode23t,
+                                    ode23tb, ode45)
 
     classes = (Auto, ClosedForm, Exact, RK45, RK23, DOP853, Radau, BDF, LSODA, ode45, ode23, Ode113, ode15s,
                ode23s, ode23t, ode23tb, Newmark, HHT, GeneralizedAlpha, CentralDifference, Euler, RK4)
@@ -73,7 +72,7 @@ def _stated_accuracy(solver: Solver, model: Model, result: Result) -> float:
         return stated_tolerance(s.rtol, s.atol, peak)
     span = float(result.time[-1] - result.time[0]) if len(result.time) > 1 else 0.0
     steps = int(span / s.dt) + 1 if s.dt else len(result.time)
-    if s.dt and solver.order:  # global truncation of an order-p method: (omega h)^p per radian, over omega * span radians
+    if s.dt and solver.order:  # global truncation of order p: (omega h)^p per radian, over omega * span radians
         w = model.omega_max
         return min(1.0, max((w * s.dt) ** solver.order * (1 + w * span), stated_rounding(steps)))
     return stated_rounding(steps)

@@ -13,7 +13,6 @@ import numpy as np
 from smdcli.model import Model
 from smdcli.sweep.family import Family
 
-
 # ------------------------------------------------------ batched linear runs
 
 

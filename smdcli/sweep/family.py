@@ -22,7 +22,6 @@ from smdcli.model import Model, build
 from smdcli.scenario import GROUND, Scenario
 from smdcli.sweep.spec import SweepSpec, parameter_units, parse_ic
 
-
 # ------------------------------------------------------------ parameters
 
 

@@ -20,7 +20,6 @@ from smdcli.sweep.family import Family
 from smdcli.sweep.pool import default_workers, run_pool
 from smdcli.sweep.shooting import _measure_direction
 
-
 # ------------------------------------------------------- frequency response
 
 

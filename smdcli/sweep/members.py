@@ -19,7 +19,6 @@ from smdcli.sweep.family import Family
 from smdcli.sweep.pool import default_workers, run_pool
 from smdcli.sweep.spec import EXACT_METHODS, MAX_STACKED, QUANTITIES, SETTLING_BAND, _trapezoid
 
-
 # --------------------------------------------------------------- families
 
 

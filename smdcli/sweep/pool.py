@@ -6,9 +6,6 @@ from __future__ import annotations
 
 from typing import Callable
 
-
-
-
 _TICKS = None  # in a worker: where it reports finished steps of a long task (see run_pool's steps mode)
 
 

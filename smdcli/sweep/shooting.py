@@ -14,7 +14,6 @@ from smdcli.model import Model, build
 from smdcli.scenario import Scenario
 from smdcli.sweep.pool import _tick
 
-
 PERIOD_SAMPLES = 256
 MAX_PERIODS = 600
 STEADY_RTOL = 1e-8

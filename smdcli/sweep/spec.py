@@ -15,7 +15,6 @@ import numpy as np
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.scenario import Scenario
 
-
 MAX_MEMBERS = 100_000
 _trapezoid = getattr(np, "trapezoid", None) or np.trapz
 MAX_STACKED = 40_000_000  # samples per stacked data set (members x time points x DOFs)
