@@ -120,6 +120,37 @@ def _interpret(node: ast.AST, t: np.ndarray):
     raise AssertionError("unchecked node")  # _check guarantees this is unreachable
 
 
+# Opcodes of the postfix program a compiled kernel runs (smdcli.kernels.forces): one per grammar element.
+OP_CONST, OP_T, OP_ADD, OP_SUB, OP_MUL, OP_DIV, OP_POW, OP_NEG = range(8)
+OP_FUNCTION = {name: 8 + i for i, name in enumerate(FUNCTIONS)}
+_OP_BINARY = {ast.Add: OP_ADD, ast.Sub: OP_SUB, ast.Mult: OP_MUL, ast.Div: OP_DIV, ast.Pow: OP_POW}
+
+
+def _postfix(node: ast.AST, codes: list[int], constants: list[float]) -> int:
+    """Append node's program to codes (constants alongside); returns the stack depth it needs."""
+    if isinstance(node, ast.Constant) or (isinstance(node, ast.Name) and node.id != "t"):
+        codes.append(OP_CONST)
+        constants.append(float(node.value) if isinstance(node, ast.Constant) else CONSTANTS[node.id])
+        return 1
+    if isinstance(node, ast.Name):
+        codes.append(OP_T)
+        return 1
+    if isinstance(node, ast.BinOp):
+        depth = max(_postfix(node.left, codes, constants), 1 + _postfix(node.right, codes, constants))
+        codes.append(_OP_BINARY[type(node.op)])
+        return depth
+    if isinstance(node, ast.UnaryOp):
+        depth = _postfix(node.operand, codes, constants)
+        if isinstance(node.op, ast.USub):
+            codes.append(OP_NEG)
+        return depth
+    if isinstance(node, ast.Call):
+        depth = _postfix(node.args[0], codes, constants)
+        codes.append(OP_FUNCTION[node.func.id])
+        return depth
+    raise AssertionError("unchecked node")  # _check guarantees this is unreachable
+
+
 class Expression:
     """A checked expression in t that evaluates on float arrays."""
 
@@ -144,3 +175,10 @@ class Expression:
         with np.errstate(all="ignore"):
             value = _interpret(self._body, t_arr)
         return np.broadcast_to(np.asarray(value, dtype=float), t_arr.shape).copy()
+
+    def program(self) -> tuple[list[int], list[float], int]:
+        """The checked tree as a postfix program: opcodes, the constants OP_CONST pushes in order, stack depth."""
+        codes: list[int] = []
+        constants: list[float] = []
+        depth = _postfix(self._body, codes, constants)
+        return codes, constants, depth

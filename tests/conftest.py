@@ -80,3 +80,10 @@ def cli():
         return Ran(code, stdout, stderr, texts[2] if len(texts) > 2 else stdout + stderr)
 
     return run
+
+
+def pytest_sessionstart(session):
+    """Compile the kernels (or load them from numba's cache) once, before any test's clock or captured output."""
+    from smdcli.solvers.compiled import warm
+
+    warm()

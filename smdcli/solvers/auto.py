@@ -6,7 +6,6 @@ Must not import: sweep, io, plots, commands, cli.
 from __future__ import annotations
 
 import dataclasses
-import time
 
 import numpy as np
 
@@ -15,7 +14,8 @@ from smdcli.result import Result
 from smdcli.solvers.base import Solver, Tolerances
 from smdcli.solvers.closed_form import ClosedForm
 from smdcli.solvers.exact import Exact
-from smdcli.solvers.ivp import DOP853, Radau, StiffnessDetected, StiffnessMonitor
+from smdcli.solvers.compiled import DOP853, StiffnessDetected
+from smdcli.solvers.ivp import Radau
 
 
 def _force_kinds(model: Model, exact: bool | None = None) -> str:
@@ -43,15 +43,15 @@ class Auto(Solver):
         solver, reason = self.choose(model)
         abandoned_s = 0.0  # an explicit attempt given up as stiff still cost its time
         if solver is None:  # nonlinear: try explicit with a stiffness watch
-            monitor = StiffnessMonitor(model, DOP853.stability_boundary)
-            attempt_start = time.perf_counter()
+            explicit = DOP853(watch=True)
             try:
-                result = DOP853(monitor=monitor).solve(model, grid, tol)
-                reason = (f"nonlinear ({', '.join(model.nonlinear_paths)}); explicit DOP853 was held by stability "
-                          f"on {monitor.fraction:.0%} of {monitor.steps} steps (max h*|lambda| = {monitor.max_rho:.2f}, "
+                result = explicit.solve(model, grid, tol)
+                watch = explicit.watch
+                reason = (f"nonlinear ({', '.join(model.nonlinear_paths)}); compiled DOP853 was held by stability "
+                          f"on {watch.share:.0%} of {watch.steps} steps (max h*|lambda| = {watch.max_rho:.2f}, "
                           f"limit {DOP853.stability_boundary}): not stiff along this trajectory")
             except StiffnessDetected as stiff:
-                abandoned_s = time.perf_counter() - attempt_start
+                abandoned_s = stiff.elapsed_s
                 result = Radau().solve(model, grid, tol)
                 reason = (f"nonlinear ({', '.join(model.nonlinear_paths)}) and stiff: explicit DOP853 was "
                           f"stability-limited on {stiff.fraction:.0%} of its steps by t = {stiff.t:.3g} s "

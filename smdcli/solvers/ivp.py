@@ -2,9 +2,9 @@
 
 Driving scipy's OdeSolver classes directly (rather than through solve_ivp)
 lets smd restart at every force breakpoint, count accepted and rejected
-steps, stop at divergence with the time reached, and watch h * |lambda|max
-along the trajectory to tell whether an explicit method is held back by
-stability (stiffness) rather than accuracy.
+steps and stop at divergence with the time reached. The explicit pairs run
+compiled (smdcli.solvers.compiled); scipy's stay here as `scipy:RK45`,
+`scipy:RK23` and `scipy:DOP853`, an independent cross-check.
 
 Must not import: sweep, io, plots, commands, cli.
 """
@@ -25,45 +25,6 @@ from smdcli.solvers.base import (MAX_STEPS, Solver, Tolerances, divergence_bound
 
 # OdeSolver subclasses that smd writes itself (smdcli.solvers.stiff23), for MATLAB's ode23s/t/tb.
 OWN_SOLVERS = ("Rosenbrock23", "Trapezoid", "TRBDF2")
-
-
-class StiffnessDetected(Exception):
-    """Raised by the monitor when an explicit method is stability-limited."""
-
-    def __init__(self, t: float, fraction: float, rho: float):
-        self.t, self.fraction, self.rho = t, fraction, rho
-        super().__init__(f"stability-limited on {fraction:.0%} of recent steps at t = {t:.4g} s")
-
-
-class StiffnessMonitor:
-    """Counts accepted explicit steps whose h * spectral radius of the Jacobian nears the stability boundary."""
-
-    def __init__(self, model: Model, boundary: float, window: int = 200, limit: float = 0.8):
-        self.model, self.boundary = model, boundary
-        self.window, self.limit = window, limit
-        self.recent: list[bool] = []
-        self.limited = 0
-        self.steps = 0
-        self.max_rho = 0.0
-
-    def __call__(self, t: float, h: float, y: np.ndarray) -> None:
-        rho = h * float(np.abs(np.linalg.eigvals(self.model.jacobian(t, y))).max())
-        self.max_rho = max(self.max_rho, rho)
-        is_limited = rho > 0.5 * self.boundary
-        self.steps += 1
-        self.limited += is_limited
-        self.recent.append(is_limited)
-        if len(self.recent) > self.window:
-            self.recent.pop(0)
-        if len(self.recent) == self.window:
-            fraction = sum(self.recent) / self.window
-            if fraction >= self.limit:
-                raise StiffnessDetected(t, fraction, rho)
-
-    @property
-    def fraction(self) -> float:
-        """Share of all monitored steps that were stability-limited."""
-        return self.limited / self.steps if self.steps else 0.0
 
 
 @contextlib.contextmanager
@@ -120,10 +81,7 @@ class ScipyMethod(Solver):
 
     scipy_name: ClassVar[str]
     stability_boundary: ClassVar[float] = 0.0  # on the negative real axis, explicit methods
-    monitor: StiffnessMonitor | None = None
-
-    def __init__(self, monitor: StiffnessMonitor | None = None, breakpoints: bool = True):
-        self.monitor = monitor
+    def __init__(self, breakpoints: bool = True):
         self.breakpoints = breakpoints
 
     def _solver_class(self):
@@ -179,7 +137,7 @@ class ScipyMethod(Solver):
                     if accepted > max_steps:
                         failure = f"more than {max_steps} steps"
                         break
-                    t_old, t_new = solver.t_old, solver.t
+                    t_new = solver.t
                     j = int(np.searchsorted(grid, t_new, side="right"))
                     if j > k:
                         out[k:j] = solver.dense_output()(grid[k:j]).T
@@ -188,8 +146,6 @@ class ScipyMethod(Solver):
                     t_reached = t_new
                     if failure:
                         break
-                    if self.monitor is not None:
-                        self.monitor(t_new, t_new - t_old, solver.y)
                 nfev += solver.nfev
                 njev += solver.njev
                 nlu += solver.nlu
@@ -218,14 +174,12 @@ def _scipy(name: str, scipy_name: str, implicit: bool, order: int, boundary: flo
     })
 
 
-RK45 = _scipy("RK45", "RK45", False, 5, 3.3, "explicit Dormand-Prince 5(4)")
-RK23 = _scipy("RK23", "RK23", False, 3, 2.5, "explicit Bogacki-Shampine 3(2)")
-DOP853 = _scipy("DOP853", "DOP853", False, 8, 6.0, "explicit Dormand-Prince 8(5,3)")
+ScipyRK45 = _scipy("scipy:RK45", "RK45", False, 5, 3.3, "scipy's RK45, Dormand-Prince 5(4), driven from Python")
+ScipyRK23 = _scipy("scipy:RK23", "RK23", False, 3, 2.5, "scipy's RK23, Bogacki-Shampine 3(2), driven from Python")
+ScipyDOP853 = _scipy("scipy:DOP853", "DOP853", False, 8, 6.0, "scipy's DOP853, Dormand-Prince 8(5,3), driven from Python")
 Radau = _scipy("Radau", "Radau", True, 5, 0.0, "implicit Radau IIA, order 5")
 BDF = _scipy("BDF", "BDF", True, 5, 0.0, "implicit variable-order BDF/NDF, orders 1-5")
 LSODA = _scipy("LSODA", "LSODA", True, 12, 0.0, "ODEPACK LSODA: Adams, switching to BDF when stiff")
-ode45 = _scipy("ode45", "RK45", False, 5, 3.3, "MATLAB ode45's formula: Dormand-Prince 5(4) (scipy RK45)")
-ode23 = _scipy("ode23", "RK23", False, 3, 2.5, "MATLAB ode23's formula: Bogacki-Shampine 3(2) (scipy RK23)")
 ode15s = _scipy("ode15s", "BDF", True, 5, 0.0,
                 "MATLAB ode15s's family: variable-order NDF (scipy BDF implements the NDF formulas)")
 ode23s = _scipy("ode23s", "Rosenbrock23", True, 2, 0.0,

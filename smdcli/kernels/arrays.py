@@ -1,0 +1,122 @@
+"""A Model as the flat arrays compiled kernels read: one compiled function serves every scenario.
+
+The linear part is stored as sparse rows (CSR) of [-M^-1 K, -M^-1 C] and of M^-1, so a chain of n masses
+costs O(n) per right-hand side; nonlinear elements are a table (law, nodes, coefficient), so a new element
+law is one more row kind; forces are a table of kinds and parameters, with tabulated data, Fourier terms
+and expression programs packed into shared arrays.
+
+Must not import: solvers, sweep, io, plots, commands, cli. Imports no numba: this is plain numpy.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from smdcli.model import Model
+from smdcli.model.forcing import (Chirp, Constant, ExpressionSignal, FourierSquare, Harmonic, Pulse, Signal, Square,
+                                  Step, Table)
+
+# Element laws: the row kinds of the nonlinear element table.
+CUBIC_SPRING, QUADRATIC_DAMPER = 0, 1
+# Force kinds: the row kinds of the force table.
+(CONSTANT, STEP, PULSE, SINE, COSINE, SQUARE, FOURIER_SQUARE, CHIRP, TABLE_LINEAR, TABLE_PREVIOUS,
+ EXPRESSION) = range(11)
+FORCE_PARAMETERS = 4
+
+
+class ModelArrays(NamedTuple):
+    """What a kernel needs of a model; every field an array (or the DOF count)."""
+
+    n: int
+    a_ptr: np.ndarray  # CSR of the n x 2n rows [-M^-1 K, -M^-1 C]
+    a_idx: np.ndarray
+    a_val: np.ndarray
+    mi_ptr: np.ndarray  # CSR of M^-1, applied to the applied force less the nonlinear element forces
+    mi_idx: np.ndarray
+    mi_val: np.ndarray
+    minv: np.ndarray  # dense M^-1, for Jacobians of nonlinear elements
+    el_law: np.ndarray  # (E,) int: CUBIC_SPRING or QUADRATIC_DAMPER
+    el_a: np.ndarray  # (E,) int: first node, -1 for ground (the element pulls it with -g)
+    el_b: np.ndarray  # (E,) int: second node, -1 for ground
+    el_coef: np.ndarray  # (E,) k3 or the quadratic damping coefficient
+    f_kind: np.ndarray  # (F,) int force kind
+    f_dof: np.ndarray  # (F,) int DOF the force acts on
+    f_par: np.ndarray  # (F, FORCE_PARAMETERS) float parameters, by kind
+    f_ptr: np.ndarray  # (F + 1,) int: each force's slice of f_data
+    f_data: np.ndarray  # tables (times then values), Fourier terms (harmonics then coefficients), constants
+    f_cptr: np.ndarray  # (F + 1,) int: each expression's slice of f_code
+    f_code: np.ndarray  # postfix opcodes of expression forces
+
+
+def _csr(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Row pointers, column indices and values of a dense matrix's nonzero entries."""
+    rows, cols = np.nonzero(matrix)
+    ptr = np.zeros(matrix.shape[0] + 1, dtype=np.int64)
+    np.add.at(ptr, rows + 1, 1)
+    return np.cumsum(ptr), cols.astype(np.int64), matrix[rows, cols].astype(float)
+
+
+def _elements(model: Model) -> tuple[np.ndarray, ...]:
+    """The nonlinear element table from the model's incidence rows (+1 on the first node, -1 on the second)."""
+    laws, first, second, coefs = [], [], [], []
+    for law, incidence in ((CUBIC_SPRING, model.cubic), (QUADRATIC_DAMPER, model.quadratic)):
+        if incidence is None:
+            continue
+        for row, coef in zip(incidence.D, incidence.coef):
+            plus, minus = np.flatnonzero(row > 0), np.flatnonzero(row < 0)
+            laws.append(law)
+            first.append(int(plus[0]) if len(plus) else -1)
+            second.append(int(minus[0]) if len(minus) else -1)
+            coefs.append(float(coef))
+    ints = lambda values: np.array(values, dtype=np.int64)  # noqa: E731
+    return ints(laws), ints(first), ints(second), np.array(coefs, dtype=float)
+
+
+def _force_row(signal: Signal) -> tuple[int, list[float], list[float], list[int]]:
+    """(kind, parameters, packed data, expression opcodes) of one force signal."""
+    if isinstance(signal, Step):
+        return STEP, [signal.amplitude, signal.t0], [], []
+    if isinstance(signal, Pulse):
+        return PULSE, [signal.amplitude, signal.t0, signal.t_end], [], []
+    if isinstance(signal, Constant):
+        return CONSTANT, [signal.amplitude], [], []
+    if isinstance(signal, Harmonic):
+        return (COSINE if signal.cosine else SINE), [signal.amplitude, signal.omega, signal.phase], [], []
+    if isinstance(signal, Square):
+        return SQUARE, [signal.amplitude, signal.period, signal.duty, signal.t0], [], []
+    if isinstance(signal, FourierSquare):
+        return FOURIER_SQUARE, [signal.omega, signal.t0], [*signal.harmonics, *signal.coefs], []
+    if isinstance(signal, Chirp):
+        return CHIRP, [signal.amplitude, signal.f0, signal.rate, signal.phase], [], []
+    if isinstance(signal, Table):
+        return (TABLE_PREVIOUS if signal.previous else TABLE_LINEAR), [], [*signal.t, *signal.v], []
+    if isinstance(signal, ExpressionSignal):
+        codes, constants, depth = signal.expression.program()
+        return EXPRESSION, [float(depth)], constants, codes
+    raise AssertionError(f"no compiled form for {type(signal).__name__}")
+
+
+def model_arrays(model: Model) -> ModelArrays:
+    """The arrays of a model, for the compiled kernels."""
+    n = model.n
+    a_ptr, a_idx, a_val = _csr(model.state_matrix[n:])
+    mi_ptr, mi_idx, mi_val = _csr(model.Minv)
+    rows = [_force_row(s) for s in model.signals]
+    par = np.zeros((len(rows), FORCE_PARAMETERS))
+    for j, (_, values, _, _) in enumerate(rows):
+        par[j, :len(values)] = values
+    sizes = [len(data) for _, _, data, _ in rows]
+    code_sizes = [len(codes) for _, _, _, codes in rows]
+    return ModelArrays(
+        n, a_ptr, a_idx, a_val, mi_ptr, mi_idx, mi_val, np.ascontiguousarray(model.Minv, dtype=float),
+        *_elements(model),
+        f_kind=np.array([kind for kind, _, _, _ in rows], dtype=np.int64),
+        f_dof=np.array(model.force_dofs, dtype=np.int64).reshape(len(rows)),
+        f_par=par,
+        f_ptr=np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
+        f_data=np.array([x for _, _, data, _ in rows for x in data], dtype=float),
+        f_cptr=np.concatenate([[0], np.cumsum(code_sizes)]).astype(np.int64),
+        f_code=np.array([c for _, _, _, codes in rows for c in codes], dtype=np.int64),
+    )

@@ -1,0 +1,266 @@
+"""Compiled forces, right-hand side and Jacobian of M x'' + C x' + K x + f_nl(x, x') = B u(t).
+
+Every function reads a ModelArrays (smdcli.kernels.arrays); values match smdcli.model.forcing's signals,
+left limits included (`left` is true in the second half of a stretch between force discontinuities, so
+a jump at its end never leaks in).
+
+Must not import: solvers, sweep, io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from smdcli.kernels.arrays import (CHIRP, CONSTANT, COSINE, CUBIC_SPRING, EXPRESSION, FOURIER_SQUARE, PULSE, SINE,
+                                   SQUARE, STEP, TABLE_LINEAR, TABLE_PREVIOUS)
+from smdcli.kernels.compiler import inlined, kernel, no_alloc
+
+EDGE_SNAP = 1e-9  # as smdcli.model.forcing._EDGE_SNAP: a phase within this of a square wave's edge is on it
+
+
+@kernel
+def _search(times, t, right):
+    """numpy.searchsorted(times, t, side='right' if right else 'left')."""
+    lo, hi = 0, len(times)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if times[mid] < t or (right and times[mid] == t):
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@kernel
+def _table(times, values, t, previous, left):
+    """A table force: first-order hold (numpy.interp, ends held) or previous value."""
+    count = len(times)
+    if previous:
+        i = _search(times, t, not left) - 1
+        return values[max(i, 0)]
+    if t <= times[0]:
+        return values[0]
+    if t >= times[count - 1]:
+        return values[count - 1]
+    i = _search(times, t, True) - 1
+    s = (t - times[i]) / (times[i + 1] - times[i])
+    return values[i] + s * (values[i + 1] - values[i])
+
+
+@kernel
+def _expression(codes, constants, t, stack):
+    """Run a postfix program (smdcli.expression's opcodes) at t; stack is scratch as deep as the program."""
+    top = -1
+    c = 0
+    for op in codes:
+        if op == 0:
+            top += 1
+            stack[top] = constants[c]
+            c += 1
+        elif op == 1:
+            top += 1
+            stack[top] = t
+        elif op <= 6:
+            b = stack[top]
+            top -= 1
+            a = stack[top]
+            if op == 2:
+                stack[top] = a + b
+            elif op == 3:
+                stack[top] = a - b
+            elif op == 4:
+                stack[top] = a * b
+            elif op == 5:
+                stack[top] = a / b
+            else:
+                stack[top] = np.power(a, b)
+        elif op == 7:
+            stack[top] = -stack[top]
+        else:
+            x = stack[top]
+            if op == 8:
+                x = np.sin(x)
+            elif op == 9:
+                x = np.cos(x)
+            elif op == 10:
+                x = np.tan(x)
+            elif op == 11:
+                x = np.exp(x)
+            elif op == 12:
+                x = np.log(x)
+            elif op == 13:
+                x = np.sqrt(x)
+            elif op == 14:
+                x = abs(x)
+            elif op == 15:
+                x = np.sign(x)
+            elif op == 16:
+                x = np.tanh(x)
+            else:
+                x = 1.0 if x >= 0 else 0.0
+            stack[top] = x
+    return stack[0]
+
+
+@inlined
+def force_value(m, j, t, left, stack):
+    """Force j of model arrays m at t (its left limit if `left`); stack is scratch for expressions."""
+    kind = m.f_kind[j]
+    p = m.f_par[j]
+    data = m.f_data[m.f_ptr[j]:m.f_ptr[j + 1]]
+    if kind == CONSTANT:
+        return p[0]
+    if kind == STEP:
+        on = t > p[1] if left else t >= p[1]
+        return p[0] if on else 0.0
+    if kind == PULSE:
+        on = (t > p[1] and t <= p[2]) if left else (t >= p[1] and t < p[2])
+        return p[0] if on else 0.0
+    if kind == SINE:
+        return p[0] * math.sin(p[1] * t + p[2])
+    if kind == COSINE:
+        return p[0] * math.cos(p[1] * t + p[2])
+    if kind == SQUARE:
+        phase = (t - p[3]) / p[1]
+        phase = phase - math.floor(phase)
+        if phase > 1 - EDGE_SNAP:
+            phase = 0.0
+        if abs(phase - p[2]) < EDGE_SNAP:
+            phase = p[2]
+        high = (phase > 0 and phase <= p[2]) if left else phase < p[2]
+        return p[0] if high else -p[0]
+    if kind == FOURIER_SQUARE:
+        terms = len(data) // 2
+        total = 0.0
+        for i in range(terms):
+            total += data[terms + i] * math.sin(data[i] * p[0] * (t - p[1]))
+        return total
+    if kind == CHIRP:
+        return p[0] * math.sin(2 * math.pi * (p[1] * t + 0.5 * p[2] * t * t) + p[3])
+    if kind == TABLE_LINEAR or kind == TABLE_PREVIOUS:
+        half = len(data) // 2
+        return _table(data[:half], data[half:], t, kind == TABLE_PREVIOUS, left)
+    if kind == EXPRESSION:
+        return _expression(m.f_code[m.f_cptr[j]:m.f_cptr[j + 1]], data, t, stack)
+    return math.nan
+
+
+@inlined
+def element_force(m, e, y):
+    """Force of nonlinear element e in state y = [x; v] (k3 d^3 or c |d'| d', d = x_a - x_b)."""
+    n = m.n
+    a, b = m.el_a[e], m.el_b[e]
+    offset = 0 if m.el_law[e] == CUBIC_SPRING else n
+    d = (y[offset + a] if a >= 0 else 0.0) - (y[offset + b] if b >= 0 else 0.0)
+    if m.el_law[e] == CUBIC_SPRING:
+        return m.el_coef[e] * d * d * d
+    return m.el_coef[e] * abs(d) * d
+
+
+@inlined
+def rhs(m, t, y, left, dy, work):
+    """dy = [v; M^-1 (B u(t) - C v - K x - f_nl)] for y = [x; v]; work is scratch of length work_size(m)."""
+    n = m.n
+    for i in range(n):
+        dy[i] = y[n + i]
+        work[i] = 0.0
+    for j in range(len(m.f_kind)):
+        work[m.f_dof[j]] += force_value(m, j, t, left, work[n:])
+    for e in range(len(m.el_law)):
+        g = element_force(m, e, y)
+        if m.el_a[e] >= 0:
+            work[m.el_a[e]] -= g
+        if m.el_b[e] >= 0:
+            work[m.el_b[e]] += g
+    for i in range(n):
+        s = 0.0
+        for k in range(m.a_ptr[i], m.a_ptr[i + 1]):
+            s += m.a_val[k] * y[m.a_idx[k]]
+        for k in range(m.mi_ptr[i], m.mi_ptr[i + 1]):
+            s += m.mi_val[k] * work[m.mi_idx[k]]
+        dy[n + i] = s
+
+
+@kernel
+def jacobian(m, y, J):
+    """J = d rhs / dy at y, nonlinear elements' tangents included: [[0, I], [-M^-1 Kt, -M^-1 Ct]]."""
+    n = m.n
+    J[:, :] = 0.0
+    for i in range(n):
+        J[i, n + i] = 1.0
+        for k in range(m.a_ptr[i], m.a_ptr[i + 1]):
+            J[n + i, m.a_idx[k]] = m.a_val[k]
+    for e in range(len(m.el_law)):
+        a, b = m.el_a[e], m.el_b[e]
+        offset = 0 if m.el_law[e] == CUBIC_SPRING else n
+        d = (y[offset + a] if a >= 0 else 0.0) - (y[offset + b] if b >= 0 else 0.0)
+        slope = 3 * m.el_coef[e] * d * d if m.el_law[e] == CUBIC_SPRING else 2 * m.el_coef[e] * abs(d)
+        for r in range(n):
+            w = ((m.minv[r, a] if a >= 0 else 0.0) - (m.minv[r, b] if b >= 0 else 0.0)) * slope
+            if a >= 0:
+                J[n + r, offset + a] -= w
+            if b >= 0:
+                J[n + r, offset + b] += w
+
+
+def work_size(m) -> int:
+    """Scratch a right-hand side needs: n, and the deepest expression's stack."""
+    depths = [int(p[0]) for kind, p in zip(m.f_kind, m.f_par) if kind == EXPRESSION]
+    return m.n + max(depths, default=0) + 1
+
+
+@no_alloc
+def state_rhs(m, t, y, left, dy, work, J):
+    """rhs for y = [x; v] (length 2n), or with the variational equation Phi' = J Phi appended (length
+    2n + (2n)^2, Phi row-major) for a monodromy matrix; J is scratch of (2n, 2n)."""
+    size = 2 * m.n
+    if len(y) == size:
+        rhs(m, t, y, left, dy, work)
+    else:
+        rhs(m, t, y[:size], left, dy[:size], work)
+        jacobian(m, y[:size], J)
+        phi = y[size:].reshape((size, size))
+        dphi = dy[size:].reshape((size, size))
+        for i in range(size):
+            for k in range(size):
+                s = 0.0
+                for q in range(size):
+                    s += J[i, q] * phi[q, k]
+                dphi[i, k] = s
+
+
+@no_alloc
+def spectral_bound(m, y, node):
+    """An upper bound on |lambda| of the Jacobian at y, in O(nonzeros): |lambda|^2 <= c |lambda| + k gives
+    |lambda| <= c + sqrt(k), with k and c the infinity norms of M^-1 Kt and M^-1 Ct (tangents included).
+    node is scratch of length 2n: each DOF's tangent stiffness and damping from nonlinear elements."""
+    n = m.n
+    for i in range(2 * n):
+        node[i] = 0.0
+    for e in range(len(m.el_law)):
+        a, b = m.el_a[e], m.el_b[e]
+        offset = 0 if m.el_law[e] == CUBIC_SPRING else n
+        d = (y[offset + a] if a >= 0 else 0.0) - (y[offset + b] if b >= 0 else 0.0)
+        slope = 3 * m.el_coef[e] * d * d if m.el_law[e] == CUBIC_SPRING else 2 * m.el_coef[e] * abs(d)
+        if a >= 0:
+            node[offset + a] += 2 * slope
+        if b >= 0:
+            node[offset + b] += 2 * slope
+    k = 0.0
+    c = 0.0
+    for i in range(n):
+        row_k = 0.0
+        row_c = 0.0
+        for q in range(m.a_ptr[i], m.a_ptr[i + 1]):
+            if m.a_idx[q] < n:
+                row_k += abs(m.a_val[q])
+            else:
+                row_c += abs(m.a_val[q])
+        for q in range(m.mi_ptr[i], m.mi_ptr[i + 1]):
+            row_k += abs(m.mi_val[q]) * node[m.mi_idx[q]]
+            row_c += abs(m.mi_val[q]) * node[n + m.mi_idx[q]]
+        k = max(k, row_k)
+        c = max(c, row_c)
+    return c + math.sqrt(k)
