@@ -21,32 +21,27 @@ NEWTON_ITERATIONS = 8
 WARMUP = 20  # periods integrated between Newton attempts
 
 
-def _one_period(model: Model, y: np.ndarray, t0: float, period: float, variational: bool):
-    """Integrate one forcing period from state y at t0 (DOP853, rtol 1e-10); with the monodromy matrix if asked."""
-    from scipy.integrate import solve_ivp
+def _one_period(model: Model, y: np.ndarray, period: float, variational: bool):
+    """Integrate one forcing period from state y at t = 0 (compiled DOP853, rtol 1e-10), with the monodromy
+    matrix if asked: (final state, monodromy or None, the state at PERIOD_SAMPLES even times over the period)."""
+    from smdcli.kernels.tableaus import DOP853
+    from smdcli.solvers.compiled import run_kernel, warm
 
+    warm()
     m = len(y)
-
-    def rhs(t, state):
-        u = model.forces(t)
-        dy = model.rhs(t, state[:m], u)
-        if not variational:
-            return dy
-        jac = model.jacobian(t, state[:m])
-        return np.concatenate([dy, (jac @ state[m:].reshape(m, m)).ravel()])
-
     start = np.concatenate([y, np.eye(m).ravel()]) if variational else y
     scale = max(np.abs(y).max(), 1e-6)
     atol = np.full(len(start), 1e-13 * scale)
     if variational:
         atol[m:] = 1e-12
-    sol = solve_ivp(rhs, (t0, t0 + period), start, method="DOP853", rtol=1e-10, atol=atol, dense_output=True)
-    end = sol.y[:, -1]
-    return end[:m], (end[m:].reshape(m, m) if variational else None), sol
+    grid = period * np.arange(PERIOD_SAMPLES + 1) / PERIOD_SAMPLES
+    _, out, _, _ = run_kernel(model, DOP853, grid, start, 1e-10, atol, 10**7, np.inf)
+    end = out[-1]
+    return end[:m], (end[m:].reshape(m, m) if variational else None), out[:-1, :m]
 
 
-def _steady_state(model: Model, y: np.ndarray, period: float) -> tuple[np.ndarray, bool, object]:
-    """A stable periodic state of the forced scene near y, and the solution over its last period.
+def _steady_state(model: Model, y: np.ndarray, period: float) -> tuple[np.ndarray, bool, np.ndarray]:
+    """A stable periodic state of the forced scene near y, and the states sampled over its last period.
 
     Newton's method on the period map (shooting, with the monodromy matrix from the variational
     equation) reaches a periodic orbit in a few periods; it is kept only if its Floquet multipliers
@@ -59,12 +54,12 @@ def _steady_state(model: Model, y: np.ndarray, period: float) -> tuple[np.ndarra
     while spent < MAX_PERIODS:
         guess = y.copy()
         for _ in range(NEWTON_ITERATIONS):
-            end, monodromy, sol = _one_period(model, guess, 0.0, period, variational=True)
+            end, monodromy, samples = _one_period(model, guess, period, variational=True)
             spent += 1
             residual = end - guess
             if np.abs(residual).max() <= STEADY_RTOL * scale(end):
                 if np.abs(np.linalg.eigvals(monodromy)).max() < 1.0 + 1e-6:
-                    return end, True, sol
+                    return end, True, samples
                 break
             try:
                 step = np.linalg.solve(monodromy - np.eye(len(guess)), residual)
@@ -77,11 +72,11 @@ def _steady_state(model: Model, y: np.ndarray, period: float) -> tuple[np.ndarra
             guess = guess - step
         for _ in range(WARMUP):
             previous = y
-            y, _, sol = _one_period(model, y, 0.0, period, variational=False)
+            y, _, samples = _one_period(model, y, period, variational=False)
             spent += 1
             if np.abs(y - previous).max() <= STEADY_RTOL * scale(y):
-                return y, True, sol
-    return y, False, sol
+                return y, True, samples
+    return y, False, samples
 
 
 def _measure_direction(args: tuple[Scenario, np.ndarray, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -110,9 +105,9 @@ def _measure_direction(args: tuple[Scenario, np.ndarray, int]) -> tuple[np.ndarr
             y = np.concatenate([model.x0, model.v0])
         period = 2 * math.pi / w
         f0 = abs(sc.forces[force_index].amplitude) or 1.0
-        y, steady[f], sol = _steady_state(model, y, period)
-        ts = sol.t[0] + period * np.arange(PERIOD_SAMPLES) / PERIOD_SAMPLES
-        xs = sol.sol(ts)[:n].T
+        y, steady[f], samples = _steady_state(model, y, period)
+        ts = period * np.arange(PERIOD_SAMPLES) / PERIOD_SAMPLES
+        xs = samples[:, :n]
         amplitude[f] = (_refined_extreme(xs, +1) - _refined_extreme(xs, -1)) / 2 / f0
         rotation = np.exp(-1j * w * ts)
         x1 = xs.T @ rotation
