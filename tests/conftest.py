@@ -16,6 +16,12 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
 
 
+def bundled(name: str):
+    """(scenario, model, grid) of a bundled scenario by stem."""
+    sc = scenario.load(SCENARIOS / f"{name}.toml")
+    return sc, build(sc), time_grid(sc.time)
+
+
 def model_of(text: str, name: str = "test.toml"):
     """(scenario, model, grid) of scenario text."""
     sc = scenario.parse(text, name)

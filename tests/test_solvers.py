@@ -2,18 +2,14 @@
 
 import numpy as np
 import pytest
-from conftest import SCENARIOS, model_of, one_dof
+from conftest import bundled, model_of, one_dof
 
-from smdcli import scenario
 from smdcli.errors import ScenarioError
-from smdcli.model import build, time_grid
 from smdcli.solvers import solve
 from smdcli.solvers.base import Tolerances
 
 
-def load(name):
-    sc = scenario.load(SCENARIOS / f"{name}.toml")
-    return sc, build(sc), time_grid(sc.time)
+load = bundled
 
 
 @pytest.mark.parametrize("method", ["RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA",

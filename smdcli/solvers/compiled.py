@@ -58,7 +58,7 @@ def warm() -> None:
     """Compile the kernels (or load them from numba's cache) before any clock starts, saying so if compiling."""
     from smdcli.kernels import erk
 
-    if erk.integrate.signatures:
+    if getattr(erk.integrate, "signatures", True):  # compiled already, or plain Python (NUMBA_DISABLE_JIT=1)
         return
     announce_compile(erk.integrate)
     tiny = Model(dofs=("m",), M=np.eye(1), C=np.zeros((1, 1)), K=np.eye(1), x0=np.ones(1), v0=np.zeros(1))

@@ -110,6 +110,10 @@ def set_damping_ratio(doc: dict, base: Model, zeta: float, path: str) -> None:
 # scene that differ only in these are new matrices, not new scenarios.
 STRUCTURAL = re.compile(r"^(mass(\.[^.\[\]]+|\[\d+\])\.(m|x0|v0)|spring\[\d+\]\.k|damper\[\d+\]\.c"
                         r"|system\.[MCK]\[\d+\]\[\d+\]|system\.(x0|v0)\[\d+\]|zeta)$")
+# Fields a nonlinear scene's members may differ in and still be one model with other numbers: the matrices,
+# the initial state and the nonlinear elements' coefficients (all affine in each field).
+STRUCTURAL_NONLINEAR = re.compile(r"^(mass(\.[^.\[\]]+|\[\d+\])\.(m|x0|v0)|spring\[\d+\]\.(k|k3)"
+                                  r"|damper\[\d+\]\.c)$")
 
 
 @dataclass
@@ -128,6 +132,8 @@ class Family:
     x0: np.ndarray  # (S, n)
     v0: np.ndarray
     scenarios: list[Scenario] | None = None  # per member, where members differ in more than matrices
+    cubic_coef: np.ndarray | None = None  # (S, cubic elements) of a nonlinear family, else None
+    quadratic_coef: np.ndarray | None = None  # (S, quadratic dampers)
 
     def __len__(self) -> int:
         return len(self.x0)
@@ -148,7 +154,13 @@ class Family:
         """Member s as a Model."""
         if self.scenarios is not None:
             return build(self.scenarios[s])
-        return replace(self.base, M=self.M[s], C=self.C[s], K=self.K[s], x0=self.x0[s], v0=self.v0[s])
+        cubic, quadratic = self.base.cubic, self.base.quadratic
+        if self.cubic_coef is not None:
+            cubic = replace(cubic, coef=self.cubic_coef[s])
+        if self.quadratic_coef is not None:
+            quadratic = replace(quadratic, coef=self.quadratic_coef[s])
+        return replace(self.base, M=self.M[s], C=self.C[s], K=self.K[s], x0=self.x0[s], v0=self.v0[s],
+                       cubic=cubic, quadratic=quadratic)
 
     def member_scenario(self, s: int) -> Scenario:
         """Member s as a Scenario (made on demand where the family holds only matrices)."""
@@ -190,14 +202,23 @@ def _validated(doc: dict, sc: Scenario, what: str) -> Scenario:
     return member
 
 
+def _coefficients(model: Model) -> dict[str, np.ndarray]:
+    """The arrays a structural member differs in: matrices, initial state and nonlinear coefficients."""
+    arrays = {name: getattr(model, name) for name in ("M", "C", "K", "x0", "v0")}
+    for name in ("cubic", "quadratic"):
+        if getattr(model, name) is not None:
+            arrays[f"{name}_coef"] = getattr(model, name).coef
+    return arrays
+
+
 def _stack(models: list[Model]) -> dict[str, np.ndarray]:
     return {name: np.stack([getattr(m, name) for m in models]) for name in ("M", "C", "K", "x0", "v0")}
 
 
 def build_family(sc: Scenario, spec: SweepSpec) -> Family:
-    """The sweep's members, validated. Structural sweeps of a linear scene become matrices interpolated
-    between validated corner members (every check on a value is an interval, so the corners vouch for
-    the grid); anything else becomes one validated scenario per member."""
+    """The sweep's members, validated. Structural sweeps become matrices (and a nonlinear scene's element
+    coefficients) interpolated between validated corner members (every check on a value is an interval, so
+    the corners vouch for the grid); anything else becomes one validated scenario per member."""
     base = build(sc)
     if spec.ics:
         states = []
@@ -236,7 +257,8 @@ def build_family(sc: Scenario, spec: SweepSpec) -> Family:
         _apply(doc, base, spec.parameters, combo)
         return _validated(doc, sc, ", ".join(f"{p} = {v:g}" for p, v in zip(spec.parameters, combo)))
 
-    if not (base.is_linear and all(STRUCTURAL.match(p) for p in spec.parameters)):
+    structural = STRUCTURAL if base.is_linear else STRUCTURAL_NONLINEAR
+    if not all(structural.match(p) for p in spec.parameters):
         scenarios = [member(combo) for combo in combos]
         return Family(sc, spec, labels, combos, shape, base, **_stack([build(m) for m in scenarios]),
                       scenarios=scenarios)
@@ -246,15 +268,14 @@ def build_family(sc: Scenario, spec: SweepSpec) -> Family:
     for pick in np.ndindex(*(2,) * len(low)):
         corner = np.where(np.array(pick) == 1, high, low)
         corners[pick] = build(member(corner))
-    origin = corners[(0,) * len(low)]
-    stacks = {name: np.broadcast_to(getattr(origin, name), (len(combos),) + getattr(origin, name).shape).copy()
-              for name in ("M", "C", "K", "x0", "v0")}
+    origin = _coefficients(corners[(0,) * len(low)])
+    stacks = {name: np.broadcast_to(value, (len(combos),) + value.shape).copy() for name, value in origin.items()}
     for i in range(len(low)):
         if high[i] == low[i]:
             continue
-        far = corners[tuple(1 if j == i else 0 for j in range(len(low)))]
+        far = _coefficients(corners[tuple(1 if j == i else 0 for j in range(len(low)))])
         weight = (combos[:, i] - low[i]) / (high[i] - low[i])
         for name in stacks:
-            delta = getattr(far, name) - getattr(origin, name)
+            delta = far[name] - origin[name]
             stacks[name] += weight.reshape((-1,) + (1,) * delta.ndim) * delta
     return Family(sc, spec, labels, combos, shape, base, **stacks)

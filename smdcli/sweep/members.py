@@ -58,6 +58,38 @@ def _solve_member(args: tuple[Scenario, str | None]) -> tuple:
             result.success, message, result.stats.method, result.stats.stated_accuracy)
 
 
+def _solve_model(args: tuple[Family, int, np.ndarray, str | None]) -> tuple:
+    """Thread task: solve member s of a family that holds matrices and coefficients, not scenarios."""
+    from smdcli.solvers.checked import solve_scenario
+
+    family, s, grid, method = args
+    result = solve_scenario(family.scenario, family.model(s), grid, method)
+    message = "ok" if result.success else f"{result.stats.message} (t = {result.t_failed:g} s)"
+    return (result.time, result.displacement, result.velocity, result.acceleration, result.force,
+            result.success, message, result.stats.method, result.stats.stated_accuracy)
+
+
+def _run_threads(function: Callable, tasks: list, workers: int, progress: Callable[[int], None] | None) -> list:
+    """Results of function over tasks, in order, on a thread pool: the compiled kernels release the GIL, and
+    members share this process's memory and kernels (no pickling, no start-up per worker)."""
+    from concurrent.futures import ThreadPoolExecutor, as_completed
+
+    from smdcli.solvers.compiled import warm
+
+    warm()  # once, here: threads must not race to compile
+    results: list = [None] * len(tasks)
+    pool = ThreadPoolExecutor(max_workers=max(1, min(workers, len(tasks))))
+    try:
+        futures = {pool.submit(function, task): i for i, task in enumerate(tasks)}
+        for future in as_completed(futures):
+            results[futures[future]] = future.result()
+            if progress:
+                progress(1)
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+    return results
+
+
 def solve_family(family: Family, method: str | None = None, workers: int | None = None,
                  progress: Callable[[int], None] | None = None) -> FamilyResult:
     """Every member's time response: one batched exact recurrence when linear, else a process pool."""
@@ -98,8 +130,12 @@ def solve_family(family: Family, method: str | None = None, workers: int | None 
         return FamilyResult(grid, family.base.dofs, x, v, acc, force, finite, messages,
                             ["exact"] * S, how, time.perf_counter() - start, _batched_stated(family, grid))
     workers = workers or default_workers()
-    tasks = [(family.member_scenario(s), method) for s in range(S)]
-    outcomes = run_pool(_solve_member, tasks, workers, progress)
+    threaded = scenarios is None and same_grid
+    if threaded:  # members are one model with other numbers: solved in this process, on threads
+        outcomes = _run_threads(_solve_model, [(family, s, grid, method) for s in range(S)], workers, progress)
+    else:
+        tasks = [(family.member_scenario(s), method) for s in range(S)]
+        outcomes = run_pool(_solve_member, tasks, workers, progress)
     shape = (S, longest, n)
     stacks = {name: np.full(shape, np.nan) for name in QUANTITIES}
     times = np.full((S, longest), np.nan)
@@ -107,7 +143,8 @@ def solve_family(family: Family, method: str | None = None, workers: int | None 
         times[s, :len(t)] = t
         for name, data in zip(QUANTITIES, (x, v, a, f)):
             stacks[name][s, :len(t)] = data
-    how = f"process pool of {min(workers, S)} workers" if workers > 1 and S > 1 else "one process"
+    pool = "threads" if threaded else "process pool"
+    how = f"{pool} of {min(workers, S)} workers" if workers > 1 and S > 1 else "one process"
     return FamilyResult(grid if same_grid else times, family.base.dofs, stacks["displacement"],
                         stacks["velocity"], stacks["acceleration"], stacks["force"],
                         np.array([o[5] for o in outcomes]), [o[6] for o in outcomes], [o[7] for o in outcomes],

@@ -1,0 +1,217 @@
+"""The compiled kernels against independent code: scipy's integrators of the same tableaus, the numpy force
+signals, the Model's own right-hand side and Jacobian, and the scipy path's results on the bundled scenes."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import bundled as load
+from conftest import model_of
+
+from smdcli.kernels.arrays import model_arrays
+from smdcli.kernels.rhs import force_value, jacobian, rhs, work_size
+from smdcli.solvers import solve
+from smdcli.solvers.base import Tolerances
+
+ROOT = Path(__file__).resolve().parents[1]
+
+FORCES = """
+[time]
+end = 4.0
+step = 0.01
+[[mass]]
+name = "a"
+m = 2.0
+[[mass]]
+name = "b"
+m = 1.0
+[[spring]]
+connects = ["ground", "a"]
+k = 30.0
+law = "cubic"
+k3 = 400.0
+[[spring]]
+connects = ["a", "b"]
+k = 10.0
+[[damper]]
+connects = ["a", "b"]
+c = 0.8
+law = "quadratic"
+[[damper]]
+connects = ["ground", "b"]
+c = 0.2
+[[force]]
+on = "a"
+type = "constant"
+amplitude = 1.5
+[[force]]
+on = "a"
+type = "step"
+amplitude = 2.0
+t0 = 0.5
+[[force]]
+on = "b"
+type = "pulse"
+amplitude = -1.0
+t0 = 1.0
+duration = 0.25
+[[force]]
+on = "b"
+type = "sine"
+amplitude = 3.0
+omega = 7.0
+phase = 0.3
+[[force]]
+on = "a"
+type = "cosine"
+amplitude = 1.0
+omega = 2.0
+[[force]]
+on = "b"
+type = "square"
+amplitude = 0.7
+omega = 6.0
+duty = 0.3
+[[force]]
+on = "a"
+type = "fourier_square"
+amplitude = 1.2
+omega = 4.0
+terms = 9
+[[force]]
+on = "b"
+type = "chirp"
+amplitude = 0.5
+f0 = 0.2
+f1 = 2.0
+t1 = 4.0
+[[force]]
+on = "a"
+type = "table"
+t = [0.0, 1.0, 2.5, 4.0]
+values = [0.0, 2.0, -1.0, 0.5]
+[[force]]
+on = "b"
+type = "table"
+t = [0.0, 1.5, 3.0]
+values = [1.0, -2.0, 0.5]
+interpolation = "previous"
+[[force]]
+on = "a"
+type = "expression"
+expr = "-sin(2*t)**2 + heaviside(t - 1) * exp(-t) / (1 + t) - abs(cos(3*t)) + sqrt(t) + tanh(t) * sign(t - 2)"
+"""
+
+
+@pytest.fixture(scope="module")
+def forced():
+    return model_of(FORCES)
+
+
+def test_every_force_type_matches_the_numpy_signal_on_both_sides_of_its_edges(forced):
+    _, model, grid = forced
+    arrays = model_arrays(model)
+    stack = np.zeros(work_size(arrays))
+    edges = model.breakpoints(grid[0], grid[-1])
+    times = np.concatenate([grid, edges, edges - 1e-9, edges + 1e-9, np.random.default_rng(1).uniform(0, 4, 200)])
+    for j, signal in enumerate(model.signals):
+        right = np.array([force_value(arrays, j, t, False, stack) for t in times])
+        left = np.array([force_value(arrays, j, t, True, stack) for t in times])
+        scale = max(1.0, np.abs(signal.value(times)).max())
+        assert np.abs(right - signal.value(times)).max() <= 1e-13 * scale, model.force_types[j]
+        assert np.abs(left - signal.value_left(times)).max() <= 1e-13 * scale, model.force_types[j]
+
+
+def test_right_hand_side_and_jacobian_match_the_model(forced):
+    _, model, _ = forced
+    arrays = model_arrays(model)
+    rng = np.random.default_rng(7)
+    work = np.zeros(work_size(arrays))
+    for t in (0.3, 1.1, 2.7):
+        y = rng.normal(size=2 * model.n)
+        dy = np.zeros_like(y)
+        rhs(arrays, t, y, False, dy, work)
+        expected = model.rhs(t, y, model.forces(t))
+        assert np.allclose(dy, expected, rtol=1e-13, atol=1e-13 * np.abs(expected).max())
+        J = np.zeros((2 * model.n, 2 * model.n))
+        jacobian(arrays, y, J)
+        assert np.allclose(J, model.jacobian(t, y), rtol=1e-13, atol=1e-12)
+
+
+@pytest.mark.parametrize("pair", ["RK45", "RK23", "DOP853"])
+def test_compiled_pairs_take_scipys_steps_on_every_force_type(forced, pair):
+    """Same tableau, same step control: the two agree far inside the tolerance, step counts within a few %."""
+    _, model, grid = forced
+    tol = Tolerances(rtol=1e-7, atol=1e-10)
+    ours = solve(model, grid, pair, tol)
+    theirs = solve(model, grid, f"scipy:{pair}", tol)
+    assert ours.success and theirs.success
+    peak = np.abs(theirs.displacement).max()
+    assert np.abs(ours.displacement - theirs.displacement).max() <= 10 * tol.rtol * peak
+    assert abs(ours.stats.steps_accepted - theirs.stats.steps_accepted) <= 0.05 * theirs.stats.steps_accepted + 2
+
+
+@pytest.mark.parametrize("name", ["one_dof_nonlinear_stiff", "duffing_frequency_response"])
+@pytest.mark.parametrize("pair", ["RK45", "DOP853"])
+def test_compiled_pairs_match_scipy_on_the_bundled_nonlinear_scenes(name, pair):
+    _, model, grid = load(name)
+    tol = Tolerances(rtol=1e-8, atol=1e-12)
+    ours = solve(model, grid, pair, tol)
+    theirs = solve(model, grid, f"scipy:{pair}", tol)
+    peak = np.abs(theirs.displacement).max()
+    # Each is within its stated accuracy of the truth, so of each other within the sum.
+    bound = (ours.stats.stated_accuracy + theirs.stats.stated_accuracy) * peak
+    assert np.abs(ours.displacement - theirs.displacement).max() <= bound
+
+
+def test_default_settings_of_the_books_stiff_case_are_within_1e_8_of_a_tight_reference():
+    sc, model, grid = load("one_dof_nonlinear_stiff")
+    from smdcli.solvers.checked import solve_scenario
+
+    ours = solve_scenario(sc, model, grid)
+    reference = solve(model, grid, "Radau", Tolerances(rtol=1e-12, atol=1e-16))
+    peak = np.abs(reference.displacement).max()
+    assert ours.stats.method == "DOP853"
+    assert np.abs(ours.displacement - reference.displacement).max() <= 1e-8 * peak
+
+
+def test_the_stiffness_watch_reads_the_books_damper_as_not_stiff():
+    """h |lambda| from the O(n) bound stays well under DOP853's boundary along the run (exact eigenvalues: 1.2)."""
+    sc, model, grid = load("one_dof_nonlinear_stiff")
+    r = solve(model, grid, "auto", Tolerances(rtol=1e-6, atol=1e-12))
+    assert r.stats.method == "DOP853" and "not stiff" in r.stats.reason
+    assert "on 0% of" in r.stats.reason
+
+
+def test_kernels_run_as_plain_python_without_the_compiler():
+    """NUMBA_DISABLE_JIT=1: the same kernels interpreted, for coverage and debugging; same answer as scipy's."""
+    code = ("import numpy as np\n"
+            "from conftest import bundled as load\n"
+            "from smdcli.solvers import solve\n"
+            "from smdcli.solvers.base import Tolerances\n"
+            "_, m, g = load('duffing_frequency_response')\n"
+            "g = g[:201]\n"
+            "a = solve(m, g, 'DOP853', Tolerances(rtol=1e-7, atol=1e-10))\n"
+            "b = solve(m, g, 'scipy:DOP853', Tolerances(rtol=1e-7, atol=1e-10))\n"
+            "print(np.abs(a.displacement - b.displacement).max() / np.abs(b.displacement).max())\n")
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT / "tests", env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert float(done.stdout) < 1e-6
+
+
+def test_a_first_run_says_it_is_compiling(tmp_path):
+    """With an empty kernel cache, smd says why it pauses (once), then runs; the next run is silent."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    args = [sys.executable, "-m", "smdcli", "simulate", str(ROOT / "scenarios" / "one_dof_nonlinear_stiff.toml"),
+            "--no-plots", "-o", str(tmp_path)]
+    first = subprocess.run(args, env=env, capture_output=True, text=True, timeout=600)
+    assert first.returncode == 0 and "compiling kernels, once per install" in first.stderr
+    second = subprocess.run(args, env=env, capture_output=True, text=True, timeout=600)
+    assert second.returncode == 0 and "compiling" not in second.stderr
