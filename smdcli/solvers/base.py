@@ -112,11 +112,17 @@ def make_result(model: Model, grid: np.ndarray, x: np.ndarray, v: np.ndarray, st
                   force=force, stats=stats, t_failed=t_failed, notes=notes)
 
 
+def cuts(model: Model, grid: np.ndarray, breakpoints: bool = True) -> np.ndarray:
+    """Start, force discontinuities (unless breakpoints is False) and end: where an integration restarts."""
+    t0, t1 = float(grid[0]), float(grid[-1])
+    inner = model.breakpoints(t0, t1) if breakpoints else np.empty(0)
+    return np.concatenate([[t0], inner, [t1]])
+
+
 def segments(model: Model, grid: np.ndarray) -> list[tuple[float, float]]:
     """The intervals between force discontinuities that cover the grid."""
-    t0, t1 = float(grid[0]), float(grid[-1])
-    cuts = [t0, *model.breakpoints(t0, t1), t1]
-    return list(zip(cuts[:-1], cuts[1:]))
+    edges = cuts(model, grid).tolist()
+    return list(zip(edges[:-1], edges[1:]))
 
 
 def force_function(model: Model, ta: float, tb: float) -> Callable[[float], np.ndarray]:

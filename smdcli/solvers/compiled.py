@@ -18,7 +18,7 @@ import numpy as np
 from smdcli.kernels import tableaus
 from smdcli.model import Model
 from smdcli.result import Result, SolverStats
-from smdcli.solvers.base import MAX_STEPS, Solver, Tolerances, divergence_bound, make_result
+from smdcli.solvers.base import MAX_STEPS, Solver, Tolerances, cuts, divergence_bound, make_result
 
 COMPILING_NOTE = "smd: compiling kernels, once per install (about 20 s; later runs load them from numba's cache)"
 _announced = False
@@ -89,13 +89,6 @@ class StiffnessDetected(Exception):
         self.watch, self.elapsed_s = watch, elapsed_s
         self.t, self.fraction, self.rho = watch.stopped_at, watch.fraction, watch.rho
         super().__init__(f"stability-limited on {watch.fraction:.0%} of recent steps at t = {watch.stopped_at:.4g} s")
-
-
-def cuts(model: Model, grid: np.ndarray, breakpoints: bool = True) -> np.ndarray:
-    """Start, force discontinuities and end: where an integration restarts."""
-    t0, t1 = float(grid[0]), float(grid[-1])
-    inner = model.breakpoints(t0, t1) if breakpoints else np.empty(0)
-    return np.concatenate([[t0], inner, [t1]])
 
 
 def failure_text(status: int, max_steps: int, bound: float) -> str:

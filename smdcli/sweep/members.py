@@ -47,15 +47,20 @@ class FamilyResult:
         return self.derived_acceleration
 
 
+def _outcome(result) -> tuple:
+    """What a member's solve hands back: arrays, success, a message with the failure time, method, accuracy."""
+    message = "ok" if result.success else f"{result.stats.message} (t = {result.t_failed:g} s)"
+    return (result.time, result.displacement, result.velocity, result.acceleration, result.force,
+            result.success, message, result.stats.method, result.stats.stated_accuracy)
+
+
 def _solve_member(args: tuple[Scenario, str | None]) -> tuple:
     """Worker: solve one member with its own solver settings (or the override)."""
     from smdcli.solvers.checked import solve_scenario
 
     sc, method = args
     result = solve_scenario(sc, build(sc), time_grid(sc.time), method)
-    message = "ok" if result.success else f"{result.stats.message} (t = {result.t_failed:g} s)"
-    return (result.time, result.displacement, result.velocity, result.acceleration, result.force,
-            result.success, message, result.stats.method, result.stats.stated_accuracy)
+    return _outcome(result)
 
 
 def _solve_model(args: tuple[Family, int, np.ndarray, str | None]) -> tuple:
@@ -64,9 +69,7 @@ def _solve_model(args: tuple[Family, int, np.ndarray, str | None]) -> tuple:
 
     family, s, grid, method = args
     result = solve_scenario(family.scenario, family.model(s), grid, method)
-    message = "ok" if result.success else f"{result.stats.message} (t = {result.t_failed:g} s)"
-    return (result.time, result.displacement, result.velocity, result.acceleration, result.force,
-            result.success, message, result.stats.method, result.stats.stated_accuracy)
+    return _outcome(result)
 
 
 def _run_threads(function: Callable, tasks: list, workers: int, progress: Callable[[int], None] | None) -> list:
