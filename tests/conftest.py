@@ -90,6 +90,6 @@ def cli():
 
 def pytest_sessionstart(session):
     """Compile the kernels (or load them from numba's cache) once, before any test's clock or captured output."""
-    from smdcli.solvers.compiled import warm
+    from smdcli.solvers.compiled import KERNEL_FAMILIES, warm
 
-    warm()
+    warm(*KERNEL_FAMILIES)

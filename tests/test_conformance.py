@@ -12,7 +12,7 @@ from scipy.linalg import expm
 from smdcli.errors import ScenarioError
 from smdcli.solvers import solve
 from smdcli.solvers.base import Tolerances
-from smdcli.solvers.compiled import CompiledRK, run_kernel
+from smdcli.solvers.compiled import CompiledRK, CompiledStiff, run_kernel
 from smdcli.solvers.ivp import ScipyMethod
 from smdcli.solvers.registry import _solvers
 
@@ -51,7 +51,8 @@ omega = 2.0
 ALL = sorted(name for name in _solvers() if name != "auto")
 FIXED_STEP = ["newmark", "hht", "generalized_alpha", "central_difference", "euler", "rk4"]
 ADAPTIVE_FIXED_ORDER = {"RK45": 5, "RK23": 3, "DOP853": 8, "Radau": 5, "ode45": 5, "ode23": 3,
-                        "ode23s": 2, "ode23t": 2, "ode23tb": 2, "scipy:RK45": 5, "scipy:RK23": 3, "scipy:DOP853": 8}
+                        "ode23s": 2, "ode23t": 2, "ode23tb": 2, "scipy:RK45": 5, "scipy:RK23": 3, "scipy:DOP853": 8,
+                        "scipy:ode23s": 2, "scipy:ode23t": 2, "scipy:ode23tb": 2, "scipy:Radau": 5}
 VARIABLE_ORDER = ["BDF", "ode15s", "LSODA", "ode113"]
 
 
@@ -104,12 +105,20 @@ def fixed_step_error(cls, model, h, t_end):
 
 
 def compiled_fixed_step_error(solver, model, h, t_end):
-    """Global error at t_end of a compiled pair held to step h, error control off."""
+    """Global error at t_end of a compiled pair or stiff method held to step h, error control off."""
     y0 = np.concatenate([model.x0, model.v0])
     free = dataclasses.replace(model, signals=(), force_dofs=(), force_paths=(), force_types=())
     grid = np.array([0.0, t_end])
-    status, out, _, _ = run_kernel(free, solver.kernel_method, grid, y0, 1e3, np.full(len(y0), 1e3), 10**6, 1e8,
-                                   fixed_h=h)
+    if isinstance(solver, CompiledStiff):
+        from smdcli.kernels.arrays import model_arrays
+
+        out = np.full((2, len(y0)), np.nan)
+        out[0] = y0
+        status = solver.integrate(model_arrays(free), y0, grid, grid, 1e3, np.full(len(y0), 1e3), 10**6, 1e8, out,
+                                  np.zeros(5, dtype=np.int64), np.zeros(1), np.zeros(len(y0)), h)
+    else:
+        status, out, _, _ = run_kernel(free, solver.kernel_method, grid, y0, 1e3, np.full(len(y0), 1e3), 10**6, 1e8,
+                                       fixed_h=h)
     assert status == 0
     return np.abs(out[-1] - expm(model.state_matrix * t_end) @ y0).max()
 
@@ -121,7 +130,7 @@ def test_adaptive_formulas_converge_at_their_declared_order(scene, method):
     assert solver.order == ADAPTIVE_FIXED_ORDER[method]
     # Steps where the error is far above rounding and in the asymptotic range (h * omega_max 0.17 to 0.04).
     steps = [0.05, 0.025, 0.0125] if solver.order < 8 else [0.2, 0.1]
-    if isinstance(solver, CompiledRK):
+    if isinstance(solver, (CompiledRK, CompiledStiff)):
         errors = [compiled_fixed_step_error(solver, model, h, 3.0) for h in steps]
     else:
         assert isinstance(solver, ScipyMethod)

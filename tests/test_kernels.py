@@ -156,6 +156,37 @@ def test_compiled_pairs_take_scipys_steps_on_every_force_type(forced, pair):
     assert abs(ours.stats.steps_accepted - theirs.stats.steps_accepted) <= 0.05 * theirs.stats.steps_accepted + 2
 
 
+@pytest.mark.parametrize("method", ["ode23s", "ode23t", "ode23tb", "Radau"])
+@pytest.mark.parametrize("scene", ["forced", "one_dof_nonlinear_stiff"])
+def test_compiled_stiff_methods_take_the_python_formulas_steps(forced, scene, method):
+    """The compiled Radau and ode23s/t/tb against scipy's Radau and smdcli.solvers.stiff23's classes on scipy's
+    OdeSolver: same formulas and step control, so the same steps (within a few %: a step accepted at an error
+    norm of 0.999 by one LU's rounding may be rejected by the other's) and agreement far inside the tolerance."""
+    _, model, grid = forced if scene == "forced" else load(scene)
+    tol = Tolerances(rtol=1e-5, atol=1e-9)
+    ours = solve(model, grid, method, tol)
+    theirs = solve(model, grid, f"scipy:{method}", tol)
+    assert ours.success and theirs.success
+    peak = np.abs(theirs.displacement).max()
+    assert np.abs(ours.displacement - theirs.displacement).max() <= tol.rtol * peak
+    assert abs(ours.stats.steps_accepted - theirs.stats.steps_accepted) <= 0.05 * theirs.stats.steps_accepted + 2
+    assert abs(ours.stats.nfev - theirs.stats.nfev) <= 0.05 * theirs.stats.nfev + 10
+
+
+@pytest.mark.parametrize("method, dt", [("newmark", 2e-3), ("hht", 2e-3), ("generalized_alpha", 2e-3),
+                                        ("central_difference", 2e-3), ("euler", 1e-5), ("rk4", 2e-2)])
+def test_compiled_fixed_step_methods_hold_their_stated_accuracy_under_every_force_type(forced, method, dt):
+    """Every force kind, restarts at each jump: within the accuracy each run states, against DOP853 at 1e-12."""
+    _, model, grid = forced
+    reference = solve(model, grid, "DOP853", Tolerances(rtol=1e-12, atol=1e-14))
+    r = solve(model, grid, method, Tolerances(dt=dt))
+    assert r.success, r.stats.message
+    peak = np.abs(reference.displacement).max()
+    error = np.abs(r.displacement - reference.displacement).max() / peak
+    assert error <= r.stats.stated_accuracy, (error, r.stats.stated_accuracy)
+    assert error < 1e-2  # and the statement says something
+
+
 @pytest.mark.parametrize("name", ["one_dof_nonlinear_stiff", "duffing_frequency_response"])
 @pytest.mark.parametrize("pair", ["RK45", "DOP853"])
 def test_compiled_pairs_match_scipy_on_the_bundled_nonlinear_scenes(name, pair):

@@ -14,8 +14,7 @@ from smdcli.result import Result
 from smdcli.solvers.base import Solver, Tolerances
 from smdcli.solvers.closed_form import ClosedForm
 from smdcli.solvers.exact import Exact
-from smdcli.solvers.compiled import DOP853, StiffnessDetected
-from smdcli.solvers.ivp import Radau
+from smdcli.solvers.compiled import DOP853, Radau, StiffnessDetected
 
 
 def _force_kinds(model: Model, exact: bool | None = None) -> str:

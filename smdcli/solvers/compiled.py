@@ -54,15 +54,50 @@ def run_kernel(model: Model, method: int, grid: np.ndarray, y0: np.ndarray, rtol
     return status, out, counts, floats
 
 
-def warm() -> None:
-    """Compile the kernels (or load them from numba's cache) before any clock starts, saying so if compiling."""
-    from smdcli.kernels import erk
+def _tiny_model() -> Model:
+    return Model(dofs=("m",), M=np.eye(1), C=np.zeros((1, 1)), K=np.eye(1), x0=np.ones(1), v0=np.zeros(1))
 
-    if getattr(erk.integrate, "signatures", True):  # compiled already, or plain Python (NUMBA_DISABLE_JIT=1)
+
+def _tiny_run(family: str) -> None:
+    """One small run of a kernel family, so that it is compiled or loaded."""
+    from smdcli.kernels import fixed, radau, stiff
+    from smdcli.kernels.arrays import model_arrays
+
+    tiny, grid, y0 = _tiny_model(), np.array([0.0, 1e-3]), np.array([1.0, 0.0])
+    if family == "erk":
+        run_kernel(tiny, tableaus.RK45, grid, y0, 1e-3, np.full(2, 1e-6), 10, 1e8)
         return
-    announce_compile(erk.integrate)
-    tiny = Model(dofs=("m",), M=np.eye(1), C=np.zeros((1, 1)), K=np.eye(1), x0=np.ones(1), v0=np.zeros(1))
-    run_kernel(tiny, tableaus.RK45, np.array([0.0, 1e-3]), np.array([1.0, 0.0]), 1e-3, np.full(2, 1e-6), 10, 1e8)
+    arrays, out = model_arrays(tiny), np.zeros((2, 2))
+    if family == "fixed":
+        fixed.march(arrays, fixed.GENERALIZED_ALPHA, np.zeros(4), y0, grid, grid, 1e-3, 10, 1e8, out,
+                    np.zeros(4, dtype=np.int64), np.zeros(2), np.zeros(2))
+    elif family == "stiff":
+        stiff.integrate(arrays, stiff.TRBDF2, y0, grid, grid, 1e-3, np.full(2, 1e-6), 10, 1e8, out,
+                        np.zeros(5, dtype=np.int64), np.zeros(1), np.zeros(2), 0.0)
+    else:
+        radau.integrate(arrays, y0, grid, grid, 1e-3, np.full(2, 1e-6), 10, 1e8, out, np.zeros(5, dtype=np.int64),
+                        np.zeros(1), np.zeros(2), 0.0)
+
+
+def _entry(family: str):
+    """The dispatcher whose compiled code stands for a kernel family's."""
+    from smdcli.kernels import erk, fixed, radau, stiff
+
+    return {"erk": erk.integrate, "fixed": fixed.march, "stiff": stiff.integrate, "radau": radau.integrate}[family]
+
+
+KERNEL_FAMILIES = ("erk", "fixed", "stiff", "radau")
+
+
+def warm(*families: str) -> None:
+    """Compile kernel families (erk, fixed, stiff, radau; default erk) or load them from numba's cache before any clock
+    starts, saying so once if compiling."""
+    for family in families or ("erk",):
+        entry = _entry(family)
+        if getattr(entry, "signatures", True):  # compiled already, or plain Python (NUMBA_DISABLE_JIT=1)
+            continue
+        announce_compile(entry)
+        _tiny_run(family)
 
 
 @dataclass(frozen=True)
@@ -157,3 +192,61 @@ RK23 = _compiled("RK23", tableaus.RK23, 3, 2.5, "explicit Bogacki-Shampine 3(2),
 DOP853 = _compiled("DOP853", tableaus.DOP853, 8, 6.0, "explicit Dormand-Prince 8(5,3), compiled")
 ode45 = _compiled("ode45", tableaus.RK45, 5, 3.3, "MATLAB ode45's formula: Dormand-Prince 5(4), compiled")
 ode23 = _compiled("ode23", tableaus.RK23, 3, 2.5, "MATLAB ode23's formula: Bogacki-Shampine 3(2), compiled")
+
+
+class CompiledStiff(Solver):
+    """Radau IIA 5 (smdcli.kernels.radau), ode23s, ode23t or ode23tb (smdcli.kernels.stiff) run compiled with the
+    analytic Jacobian, restarted at every force discontinuity."""
+
+    family = "compiled stiff"
+    implicit = True
+    order = 2
+    kernel_method: ClassVar[str]  # RADAU5, or the name of a method id in smdcli.kernels.stiff
+
+    def integrate(self, arrays, *args):
+        """Run the kernel: (y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floats, work, fixed_h)."""
+        from smdcli.kernels import radau, stiff
+
+        if self.kernel_method == "RADAU5":
+            return radau.integrate(arrays, *args)
+        return stiff.integrate(arrays, getattr(stiff, self.kernel_method), *args)
+
+    def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
+        from smdcli.kernels import stiff
+        from smdcli.kernels.arrays import model_arrays
+        from smdcli.kernels.rhs import work_size
+
+        warm("radau" if self.kernel_method == "RADAU5" else "stiff")
+        start = time.perf_counter()
+        y0 = np.concatenate([model.x0, model.v0]).astype(float)
+        bound = divergence_bound(model, grid)
+        max_steps = tol.max_steps or MAX_STEPS
+        arrays = model_arrays(model)
+        out = np.full((len(grid), len(y0)), np.nan)
+        out[0] = y0
+        counts, floats = np.zeros(5, dtype=np.int64), np.zeros(1)
+        status = self.integrate(arrays, y0, np.asarray(grid, dtype=float), cuts(model, grid, tol.breakpoints),
+                                float(tol.rtol), np.full(len(y0), tol.atol), int(max_steps), float(bound), out, counts,
+                                floats, np.zeros(work_size(arrays)), 0.0)
+        failure = None if status == stiff.OK else failure_text(status, max_steps, bound)
+        t_reached = float(floats[stiff.T_REACHED])
+        stats = SolverStats(
+            method=self.name, requested_method=self.name, reason="", rtol=tol.rtol, atol=tol.atol,
+            wall_time_s=time.perf_counter() - start, success=failure is None,
+            message="ok" if failure is None else f"failed at t = {t_reached:.6g} s: {failure}",
+            nfev=int(counts[stiff.NFEV]), njev=int(counts[stiff.NJEV]), nlu=int(counts[stiff.NLU]),
+            steps_accepted=int(counts[stiff.ACCEPTED]), steps_rejected=int(counts[stiff.REJECTED]),
+        )
+        n = model.n
+        return make_result(model, grid, out[:, :n], out[:, n:], stats, t_failed=None if failure is None else t_reached)
+
+
+def _stiff(name: str, method: str, text: str, order: int = 2):
+    return type(name, (CompiledStiff,), {"name": name, "kernel_method": method, "description": text, "order": order})
+
+
+Radau = _stiff("Radau", "RADAU5", "implicit Radau IIA, order 5, compiled (scipy's steps)", order=5)
+
+ode23s = _stiff("ode23s", "ROSENBROCK23", "MATLAB ode23s's formula: Rosenbrock 2(3) of Shampine and Reichelt, compiled")
+ode23t = _stiff("ode23t", "TRAPEZOID", "MATLAB ode23t's formula: trapezoidal rule, no numerical damping, compiled")
+ode23tb = _stiff("ode23tb", "TRBDF2", "MATLAB ode23tb's formula: TR-BDF2 of Hosea and Shampine, compiled")

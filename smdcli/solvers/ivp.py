@@ -177,17 +177,17 @@ def _scipy(name: str, scipy_name: str, implicit: bool, order: int, boundary: flo
 ScipyRK45 = _scipy("scipy:RK45", "RK45", False, 5, 3.3, "scipy's RK45, Dormand-Prince 5(4), driven from Python")
 ScipyRK23 = _scipy("scipy:RK23", "RK23", False, 3, 2.5, "scipy's RK23, Bogacki-Shampine 3(2), driven from Python")
 ScipyDOP853 = _scipy("scipy:DOP853", "DOP853", False, 8, 6.0, "scipy's DOP853, Dormand-Prince 8(5,3), driven from Python")
-Radau = _scipy("Radau", "Radau", True, 5, 0.0, "implicit Radau IIA, order 5")
+ScipyRadau = _scipy("scipy:Radau", "Radau", True, 5, 0.0, "scipy's Radau IIA, order 5, driven from Python")
 BDF = _scipy("BDF", "BDF", True, 5, 0.0, "implicit variable-order BDF/NDF, orders 1-5")
 LSODA = _scipy("LSODA", "LSODA", True, 12, 0.0, "ODEPACK LSODA: Adams, switching to BDF when stiff")
 ode15s = _scipy("ode15s", "BDF", True, 5, 0.0,
                 "MATLAB ode15s's family: variable-order NDF (scipy BDF implements the NDF formulas)")
-ode23s = _scipy("ode23s", "Rosenbrock23", True, 2, 0.0,
-                "MATLAB ode23s's formula: Rosenbrock 2(3) of Shampine and Reichelt (smd's own)")
-ode23t = _scipy("ode23t", "Trapezoid", True, 2, 0.0,
-                "MATLAB ode23t's formula: trapezoidal rule, no numerical damping (smd's own)")
-ode23tb = _scipy("ode23tb", "TRBDF2", True, 2, 0.0,
-                 "MATLAB ode23tb's formula: TR-BDF2 of Hosea and Shampine (smd's own)")
+ScipyOde23s = _scipy("scipy:ode23s", "Rosenbrock23", True, 2, 0.0,
+                     "ode23s's formula in Python on scipy's OdeSolver (smdcli.solvers.stiff23), driven from Python")
+ScipyOde23t = _scipy("scipy:ode23t", "Trapezoid", True, 2, 0.0,
+                     "ode23t's formula in Python on scipy's OdeSolver (smdcli.solvers.stiff23), driven from Python")
+ScipyOde23tb = _scipy("scipy:ode23tb", "TRBDF2", True, 2, 0.0,
+                      "ode23tb's formula in Python on scipy's OdeSolver (smdcli.solvers.stiff23), driven from Python")
 
 
 class Ode113(Solver):

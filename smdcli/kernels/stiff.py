@@ -1,0 +1,319 @@
+"""MATLAB's low-order stiff solvers compiled: ode23s, ode23t and ode23tb, with the model's analytic Jacobian.
+
+The formulas, error estimates, simplified Newton iteration and step control are smdcli.solvers.stiff23's
+(whose scipy-driven classes stay as the reference these kernels are tested against):
+
+- ode23s: the Rosenbrock 2(3) pair of Shampine and Reichelt with its free second-order interpolant;
+- ode23t: the trapezoidal rule, local error -h^3/12 y''' from y'' = J f + f_t at both ends of the step;
+- ode23tb: TR-BDF2 (Hosea and Shampine 1996), a trapezoidal stage to t + gamma h and BDF2 to t + h sharing
+  one iteration matrix.
+
+The implicit ones filter their error estimate through the iteration matrix, as Shampine's codes do. The
+integration restarts at every cut (force discontinuity).
+
+Must not import: solvers, sweep, io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from smdcli.kernels.compiler import kernel, no_alloc
+from smdcli.kernels.erk import NOT_FINITE, OK, PAST_BOUND, STEP_BUDGET, TOO_SMALL_STEP, scaled_rms
+from smdcli.kernels.linalg import lu_factor, lu_solve
+from smdcli.kernels.rhs import jacobian, state_rhs
+
+ROSENBROCK23, TRAPEZOID, TRBDF2 = range(3)
+# Counters (ints): right-hand sides, accepted, rejected, Jacobians, factorizations.
+NFEV, ACCEPTED, REJECTED, NJEV, NLU = range(5)
+# Floats: time reached.
+T_REACHED = 0
+
+EPS = np.finfo(np.float64).eps
+SAFETY, MIN_FACTOR, MAX_FACTOR = 0.8, 0.2, 5.0
+NEWTON_MAXITER = 5
+ERROR_ORDER = 3  # every estimate here is O(h^3)
+
+ROS_D = 1 / (2 + math.sqrt(2))
+ROS_E32 = 6 + math.sqrt(2)
+TR_GAMMA = 2 - math.sqrt(2)
+TR_D = TR_GAMMA / 2
+TR_C = (-3 * TR_GAMMA**2 + 4 * TR_GAMMA - 2) / (12 * (2 - TR_GAMMA))
+
+
+@no_alloc
+def _f(m, t, y, mid, dy, work, J, counts):
+    """dy = f(t, y), counted, with the left limit of forces in the stretch's second half."""
+    state_rhs(m, t, y, t >= mid, dy, work, J)
+    counts[NFEV] += 1
+
+
+@no_alloc
+def _time_derivative(m, t, y, f, mid, T, trial_f, work, J, counts):
+    """T = df/dt at fixed y by a forward difference; zero for an unforced model."""
+    if len(m.f_kind) == 0:
+        T[:] = 0.0
+        return
+    delta = math.sqrt(EPS) * max(abs(t), 1.0)
+    _f(m, t + delta, y, mid, trial_f, work, J, counts)
+    for i in range(len(y)):
+        T[i] = (trial_f[i] - f[i]) / delta
+
+
+@no_alloc
+def _factor(J, c, W, piv, counts):
+    """W = I - c J, factored in place; False when singular."""
+    size = len(piv)
+    for r in range(size):
+        for q in range(size):
+            W[r, q] = -c * J[r, q]
+        W[r, r] += 1.0
+    counts[NLU] += 1
+    return lu_factor(W, piv)
+
+
+@no_alloc
+def _newton(m, method, t_eval, h, base, z, W, piv, scale, newton_tol, mid, dz, fz, work, J, counts):
+    """Simplified Newton on z - base - c h f(t_eval, z) = 0 (c = d of the method), from the guess in z.
+    base holds everything but the implicit term. True when it converged."""
+    c = 0.5 if method == TRAPEZOID else TR_D
+    linear = len(m.el_law) == 0
+    old = -1.0
+    for _ in range(NEWTON_MAXITER):
+        _f(m, t_eval, z, mid, fz, work, J, counts)
+        for i in range(len(z)):
+            dz[i] = -(z[i] - base[i] - c * h * fz[i])
+        lu_solve(W, piv, dz)
+        for i in range(len(z)):
+            z[i] += dz[i]
+        if linear:  # the Jacobian is exact, so one iteration solves the linear system
+            return True
+        norm = scaled_rms(dz, scale)
+        rate = -1.0
+        if old >= 0:
+            rate = norm / old if old > 0 else 0.0
+            if rate >= 1:
+                return False
+        if norm == 0 or (rate >= 0 and rate / (1 - rate) * norm < newton_tol) or norm < 1e-3 * newton_tol:
+            return True
+        old = norm
+    return False
+
+
+@no_alloc
+def _first_step(m, t, y, f, t_bound, rtol, atol, mid, scale, y1, f1, work, J, counts):
+    """Hairer, Norsett and Wanner's starting step (Solving ODEs I, II.4) for an O(h^3) estimate."""
+    span = t_bound - t
+    if span == 0:
+        return 0.0
+    for i in range(len(y)):
+        scale[i] = atol[i] + rtol * abs(y[i])
+    d0, d1 = scaled_rms(y, scale), scaled_rms(f, scale)
+    h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+    h0 = min(h0, span)
+    for i in range(len(y)):
+        y1[i] = y[i] + h0 * f[i]
+    _f(m, t + h0, y1, mid, f1, work, J, counts)
+    for i in range(len(y)):
+        y1[i] = f1[i] - f[i]
+    d2 = scaled_rms(y1, scale) / h0
+    if d1 <= 1e-15 and d2 <= 1e-15:
+        h1 = max(1e-6, h0 * 1e-3)
+    else:
+        h1 = (0.01 / max(d1, d2)) ** (1.0 / ERROR_ORDER)
+    return min(100 * h0, h1, span)
+
+
+@kernel
+def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floats, work, fixed_h):
+    """Integrate from y0 = out[0] over the grid with ode23s, ode23t or ode23tb, restarting at each cut; a status.
+    counts and floats receive the statistics named above; work is the right-hand side's scratch. fixed_h > 0
+    takes steps of that size with no error control (for measuring a formula's order)."""
+    size = len(y0)
+    rtol = max(rtol, 100 * EPS)
+    newton_tol = max(10 * EPS / rtol, min(0.03, math.sqrt(rtol)))
+    linear = len(m.el_law) == 0
+    J, J_new, W = np.zeros((size, size)), np.zeros((size, size)), np.zeros((size, size))
+    piv = np.zeros(size, dtype=np.int64)
+    y, f, y_new, f_new = y0.copy(), np.zeros(size), np.zeros(size), np.zeros(size)
+    k1, k2, k3, T = np.zeros(size), np.zeros(size), np.zeros(size), np.zeros(size)
+    z1, f1, base, dz, fz = np.zeros(size), np.zeros(size), np.zeros(size), np.zeros(size), np.zeros(size)
+    scale, err = np.zeros(size), np.zeros(size)
+    second, second_new = np.zeros(size), np.zeros(size)
+    k = 1
+    floats[T_REACHED] = grid[0]
+    for seg in range(len(cuts) - 1):
+        ta, t_bound = cuts[seg], cuts[seg + 1]
+        mid = 0.5 * (ta + t_bound)
+        t = ta
+        _f(m, t, y, mid, f, work, J, counts)
+        jacobian(m, y, J)
+        counts[NJEV] += 1
+        jacobian_current = True  # J belongs to (t, y)
+        second_t = math.nan  # the time at which `second` (y'') holds, for ode23t
+        h = fixed_h if fixed_h > 0 else _first_step(m, t, y, f, t_bound, rtol, atol, mid, scale, y_new, f_new, work,
+                                                    J, counts)
+        while t < t_bound:
+            span = t_bound - t
+            min_step = 10 * abs(np.nextafter(t, np.inf) - t)
+            h = min(h, span)
+            if span - h < min_step:  # do not leave a sliver before the bound
+                h = span
+            if not jacobian_current and not linear:
+                jacobian(m, y, J)
+                counts[NJEV] += 1
+            jacobian_current = True
+            rejected = False
+            while True:
+                if h < min_step:
+                    floats[T_REACHED] = t
+                    out[k:] = np.nan
+                    return TOO_SMALL_STEP
+                for i in range(size):
+                    scale[i] = atol[i] + rtol * abs(y[i])
+                converged = True
+                if method == ROSENBROCK23:
+                    _time_derivative(m, t, y, f, mid, T, fz, work, J_new, counts)
+                    if not _factor(J, h * ROS_D, W, piv, counts):
+                        converged = False
+                    else:
+                        for i in range(size):
+                            k1[i] = f[i] + h * ROS_D * T[i]
+                        lu_solve(W, piv, k1)
+                        for i in range(size):
+                            base[i] = y[i] + 0.5 * h * k1[i]
+                        _f(m, t + 0.5 * h, base, mid, f1, work, J_new, counts)
+                        for i in range(size):
+                            k2[i] = f1[i] - k1[i]
+                        lu_solve(W, piv, k2)
+                        for i in range(size):
+                            k2[i] += k1[i]
+                            y_new[i] = y[i] + h * k2[i]
+                        _f(m, t + h, y_new, mid, f_new, work, J_new, counts)
+                        for i in range(size):
+                            k3[i] = f_new[i] - ROS_E32 * (k2[i] - f1[i]) - 2 * (k1[i] - f[i]) + h * ROS_D * T[i]
+                        lu_solve(W, piv, k3)
+                        for i in range(size):
+                            err[i] = h / 6 * (k1[i] - 2 * k2[i] + k3[i])
+                elif method == TRAPEZOID:
+                    if not _factor(J, 0.5 * h, W, piv, counts):
+                        converged = False
+                    else:
+                        for i in range(size):
+                            base[i] = y[i] + 0.5 * h * f[i]
+                            y_new[i] = y[i] + h * f[i]
+                        converged = _newton(m, method, t + h, h, base, y_new, W, piv, scale, newton_tol, mid, dz,
+                                            fz, work, J_new, counts)
+                    if converged:
+                        _f(m, t + h, y_new, mid, f_new, work, J_new, counts)
+                        if second_t != t:  # y'' = J f + f_t at the step's start
+                            _time_derivative(m, t, y, f, mid, T, fz, work, J_new, counts)
+                            for r in range(size):
+                                s = T[r]
+                                for q in range(size):
+                                    s += J[r, q] * f[q]
+                                second[r] = s
+                            second_t = t
+                        if linear:
+                            J_new[:, :] = J
+                        else:
+                            jacobian(m, y_new, J_new)
+                            counts[NJEV] += 1
+                        _time_derivative(m, t + h, y_new, f_new, mid, T, fz, work, J, counts)
+                        for r in range(size):
+                            s = T[r]
+                            for q in range(size):
+                                s += J_new[r, q] * f_new[q]
+                            second_new[r] = s
+                            err[r] = -(h * h / 12) * (second_new[r] - second[r])
+                        lu_solve(W, piv, err)
+                else:  # TRBDF2
+                    if not _factor(J, TR_D * h, W, piv, counts):
+                        converged = False
+                    else:
+                        for i in range(size):
+                            base[i] = y[i] + TR_D * h * f[i]
+                            z1[i] = y[i] + TR_GAMMA * h * f[i]
+                        converged = _newton(m, method, t + TR_GAMMA * h, h, base, z1, W, piv, scale, newton_tol,
+                                            mid, dz, fz, work, J_new, counts)
+                    if converged:
+                        _f(m, t + TR_GAMMA * h, z1, mid, f1, work, J_new, counts)
+                        a1 = 1 / (TR_GAMMA * (2 - TR_GAMMA))
+                        a0 = (1 - TR_GAMMA) ** 2 / (TR_GAMMA * (2 - TR_GAMMA))
+                        for i in range(size):
+                            base[i] = a1 * z1[i] - a0 * y[i]
+                            y_new[i] = z1[i] + (1 - TR_GAMMA) * h * f1[i]
+                        converged = _newton(m, method, t + h, h, base, y_new, W, piv, scale, newton_tol, mid, dz,
+                                            fz, work, J_new, counts)
+                    if converged:
+                        _f(m, t + h, y_new, mid, f_new, work, J_new, counts)
+                        g = TR_GAMMA
+                        for i in range(size):
+                            err[i] = TR_C * 2 * h * (f[i] / g - f1[i] / (g * (1 - g)) + f_new[i] / (1 - g))
+                        lu_solve(W, piv, err)
+                if not converged:
+                    h *= 0.5
+                    rejected = True
+                    counts[REJECTED] += 1
+                    continue
+                for i in range(size):
+                    scale[i] = atol[i] + rtol * max(abs(y[i]), abs(y_new[i]))
+                error = scaled_rms(err, scale)
+                if error <= 1 or fixed_h > 0:
+                    break
+                h *= min(1.0, max(MIN_FACTOR, SAFETY * error ** (-1.0 / ERROR_ORDER)))
+                rejected = True
+                counts[REJECTED] += 1
+            if error == 0:
+                factor = 1.0 if rejected else MAX_FACTOR
+            else:
+                factor = min(1.0 if rejected else MAX_FACTOR, max(MIN_FACTOR, SAFETY * error ** (-1.0 / ERROR_ORDER)))
+            if fixed_h > 0:
+                factor = 1.0
+            t_new = t + h
+            counts[ACCEPTED] += 1
+            if counts[ACCEPTED] > max_steps:
+                out[k:] = np.nan
+                return STEP_BUDGET
+            j = k
+            while j < len(grid) and grid[j] <= t_new:
+                j += 1
+            for row in range(k, j):
+                s = (grid[row] - t) / h
+                if method == ROSENBROCK23:
+                    a = s * (1 - s) / (1 - 2 * ROS_D)
+                    b = s * (s - 2 * ROS_D) / (1 - 2 * ROS_D)
+                    for i in range(size):
+                        out[row, i] = y[i] + h * (a * k1[i] + b * k2[i])
+                else:
+                    h00 = (1 + 2 * s) * (1 - s) ** 2
+                    h10 = s * (1 - s) ** 2 * h
+                    h01 = s * s * (3 - 2 * s)
+                    h11 = s * s * (s - 1) * h
+                    for i in range(size):
+                        out[row, i] = h00 * y[i] + h10 * f[i] + h01 * y_new[i] + h11 * f_new[i]
+            k = j
+            floats[T_REACHED] = t_new
+            status = OK
+            for i in range(size):
+                if not math.isfinite(y_new[i]):
+                    status = NOT_FINITE
+                    break
+                if abs(y_new[i]) > bound:
+                    status = PAST_BOUND
+            if status != OK:
+                out[k:] = np.nan
+                return status
+            if method == TRAPEZOID:  # the new end's Jacobian and y'' start the next step
+                J[:, :] = J_new
+                second[:] = second_new
+                second_t = t_new
+            else:
+                jacobian_current = linear
+            t = t_new
+            y[:] = y_new
+            f[:] = f_new
+            h *= factor
+    return OK
