@@ -65,7 +65,8 @@ def main() -> None:
     for label, sc in scenes:
         model, grid = build(sc), time_grid(sc.time)
         solve_scenario(sc, model, grid)  # kernels loaded before timing
-        reference = solve(model, grid, "scipy:DOP853" if model.n > 10 else "Radau", Tolerances(rtol=1e-13, atol=1e-16))
+        reference = solve(model, grid, "scipy:DOP853" if model.n > 10 else "scipy:Radau",
+                          Tolerances(rtol=1e-13, atol=1e-16))
         peak = np.abs(reference.displacement).max()
         t_smd, ours = median_time(lambda: solve_scenario(sc, model, grid), 7)
         rows = [(f"smd {ours.stats.method} rtol {sc.solver.rtol:g}", t_smd,

@@ -7,7 +7,7 @@ import sys
 import h5py
 import numpy as np
 import pytest
-from conftest import SCENARIOS, model_of, one_dof
+from conftest import SCENARIOS, bundled, model_of, one_dof
 
 ALL = sorted(SCENARIOS.glob("*.toml"))
 BOOK = ["one_dof_nonlinear_stiff", "one_dof_undamped", "one_dof_underdamped", "one_dof_overdamped",
@@ -140,6 +140,22 @@ def test_compare_solvers_writes_table_json_hdf5_and_charts(cli, tmp_path):
         assert f.attrs["kind"] == "compare"
         assert list(f["runs/method"].asstr()[:]) == [run["method"] for run in data["runs"]]
         assert f["runs/error"].attrs["units"] == "1" and f["reference/displacement"].shape == (1001, 1)
+        assert f["reference"].attrs["stated_accuracy"] == pytest.approx(data["exact"]["stated_accuracy"])
+    # The exact solution is a point of its own: its time and the accuracy it states (rounding level here).
+    assert 0 < data["exact"]["wall_time_s"] < 1 and 0 < data["exact"]["stated_accuracy"] < 1e-10
+
+
+def test_compare_solvers_gives_compiled_methods_the_steps_tight_tolerances_need(tmp_path):
+    """ode23s at rtol 1e-6 on the book's forced three-DOF chain takes ~500,000 steps: past the 200,000 that a
+    Python-driven method is allowed, well inside a compiled method's budget; the chart's table says so."""
+    from smdcli.commands.compare import STEP_BUDGET, compare, format_table
+
+    sc, model, grid = bundled("three_dof_forced")
+    c = compare(sc, model, grid, ["ode23s"], [(1e-6, 1e-9)], [], repeats=1)
+    run = c.runs[0]
+    assert run.success and run.steps_accepted > STEP_BUDGET
+    assert run.error < 1e-5  # second order, local error control at rtol 1e-6: measured 4.8e-6
+    assert "the reference; error column: its stated accuracy" in format_table(c)
 
 
 def test_compare_solvers_bad_method_is_exit_2_and_writes_nothing(cli, tmp_path):

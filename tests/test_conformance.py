@@ -53,7 +53,7 @@ FIXED_STEP = ["newmark", "hht", "generalized_alpha", "central_difference", "eule
 ADAPTIVE_FIXED_ORDER = {"RK45": 5, "RK23": 3, "DOP853": 8, "Radau": 5, "ode45": 5, "ode23": 3,
                         "ode23s": 2, "ode23t": 2, "ode23tb": 2, "scipy:RK45": 5, "scipy:RK23": 3, "scipy:DOP853": 8,
                         "scipy:ode23s": 2, "scipy:ode23t": 2, "scipy:ode23tb": 2, "scipy:Radau": 5}
-VARIABLE_ORDER = ["BDF", "ode15s", "LSODA", "ode113"]
+VARIABLE_ORDER = ["BDF", "ode15s", "LSODA", "ode113", "scipy:BDF"]
 
 
 @pytest.fixture(scope="module")

@@ -10,6 +10,7 @@ Must not import: cli.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import statistics
 from dataclasses import asdict, dataclass, field
@@ -31,8 +32,9 @@ DEFAULT_RTOLS = tuple(10.0 ** -k for k in range(3, 11))
 # Steps as h * omega_max: either side of RK4's limit (2.83) and central difference's (2), then finer.
 DEFAULT_H_OMEGA = (3.0, 2.6, 2.1, 1.9, 1.0, 0.5, 0.2, 0.1, 0.05, 0.02)
 ATOL_PER_RTOL = 1e-3
-STEP_BUDGET = 200_000
-TIME_ONCE_S = 2.0  # runs longer than this are timed once, not repeated
+STEP_BUDGET = 200_000  # for methods driven from Python (scipy's): about 200 us a step
+COMPILED_STEP_BUDGET = 50_000_000  # for compiled methods, about 1 us a step: ode23s at rtol 1e-10 takes ~15 million
+TIME_ONCE_S = 0.5  # runs longer than this are timed once, not repeated: their noise is a small share of them
 
 
 @dataclass
@@ -70,6 +72,14 @@ class Comparison:
     omega_max: float
     breakpoints: bool
     runs: list[Run] = field(default_factory=list)
+
+    @property
+    def exact_point(self) -> tuple[float, float] | None:
+        """(wall time, stated accuracy) of the exact solution, a point of its own on the chart; None if nonlinear."""
+        s = self.reference.stats
+        if s.method != "exact":
+            return None
+        return s.wall_time_s, s.stated_accuracy
 
 
 def parse_methods(text: str | None) -> list[str]:
@@ -157,12 +167,19 @@ def plan(methods: list[str], tolerances, steps) -> list[tuple[str, Tolerances]]:
 
 
 def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], tolerances, steps,
-            repeats: int = 3, breakpoints: bool = True, budget: int = STEP_BUDGET,
+            repeats: int = 3, breakpoints: bool = True, budget: int | None = None,
             progress: Callable[..., None] = silent) -> Comparison:
-    """Run the plan; failures are recorded, never raised. A method that ran out of budget skips its tighter rungs."""
+    """Run the plan; failures are recorded, never raised. A method that ran out of budget skips its tighter rungs.
+    The step budget is STEP_BUDGET for Python-driven methods and COMPILED_STEP_BUDGET for compiled ones, unless
+    `budget` says otherwise."""
     from smdcli.solvers.registry import get_solver, solve
 
     reference, ref_name, ref_error = reference_solution(model, grid)
+    if reference.stats.method == "exact":  # a point on the chart too: timed as the runs are, median of repeats
+        times = [reference.stats.wall_time_s] + [solve(model, grid, "exact", Tolerances()).stats.wall_time_s
+                                                 for _ in range(max(1, repeats))]
+        reference = dataclasses.replace(reference, stats=dataclasses.replace(
+            reference.stats, wall_time_s=statistics.median(times[1:])))
     omega_max = model.omega_max
     out = Comparison(sc, model, grid, reference, ref_name, ref_error, omega_max, breakpoints)
     peak = float(np.abs(reference.displacement).max()) or 1.0
@@ -170,11 +187,13 @@ def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], to
     span = float(grid[-1] - grid[0])
     for method, tol in plan(methods, tolerances, steps):
         progress(0, f"{method} {'dt ' + format(tol.dt, '.3g') if tol.dt else 'rtol ' + format(tol.rtol, '.0e')}")
-        adaptive = get_solver(method).adaptive
-        tol = Tolerances(rtol=tol.rtol, atol=tol.atol, dt=tol.dt, max_steps=budget, breakpoints=breakpoints)
-        if method in exhausted or (tol.dt and span / tol.dt > budget):
+        solver = get_solver(method)
+        adaptive = solver.adaptive
+        allowed = budget or (COMPILED_STEP_BUDGET if solver.compiled else STEP_BUDGET)
+        tol = Tolerances(rtol=tol.rtol, atol=tol.atol, dt=tol.dt, max_steps=allowed, breakpoints=breakpoints)
+        if method in exhausted or (tol.dt and span / tol.dt > allowed):
             needed = f"{math.ceil(span / tol.dt)} steps" if tol.dt else "more steps than a looser tolerance"
-            out.runs.append(_skipped(method, adaptive, tol, omega_max, f"skipped: needs {needed}, budget {budget}"))
+            out.runs.append(_skipped(method, adaptive, tol, omega_max, f"skipped: needs {needed}, budget {allowed}"))
             progress(1)
             continue
         times, result = [], None
@@ -210,8 +229,10 @@ def _skipped(method, adaptive, tol, omega_max, message) -> Run:
 # ----------------------------------------------------------------- reports
 def as_dict(c: Comparison) -> dict:
     """Plain data for --json."""
+    exact = c.exact_point
     return {
         "scenario": c.scenario.path, "reference": c.reference_method, "reference_error": c.reference_error,
+        "exact": None if exact is None else {"wall_time_s": exact[0], "stated_accuracy": exact[1]},
         "omega_max_rad_s": c.omega_max, "breakpoints": c.breakpoints,
         "runs": [{k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in asdict(r).items()}
                  for r in c.runs],
@@ -234,6 +255,10 @@ def format_table(c: Comparison) -> str:
         status = "ok" if r.success else f"FAILED: {r.message}"
         lines.append(f"{r.method:<19}{setting:>17}{error:>10}{ms:>11}{r.nfev:>9}{r.njev:>7}{r.nlu:>8}"
                      f"{r.steps_accepted:>9}{r.steps_rejected:>9}  {status}")
+    exact = c.exact_point
+    if exact is not None:
+        lines.append(f"{'exact':<19}{'-':>17}{exact[1]:>10.2e}{1e3 * exact[0]:>11.1f}{'-':>9}{'-':>7}{'-':>8}{'-':>9}"
+                     f"{'-':>9}  the reference; error column: its stated accuracy")
     return "\n".join(lines)
 
 
@@ -271,6 +296,8 @@ def write_hdf5(path: Path, c: Comparison) -> None:
                 ds.dims[0].attach_scale(index)
         ref = f.create_group("reference")
         ref.attrs["method"] = c.reference_method
+        ref.attrs["wall_time_s"] = c.reference.stats.wall_time_s
+        ref.attrs["stated_accuracy"] = c.reference.stats.stated_accuracy
         t = ref.create_dataset("time", data=c.grid)
         t.attrs["units"] = "s"
         x = ref.create_dataset("displacement", data=c.reference.displacement)

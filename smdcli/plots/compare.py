@@ -40,6 +40,10 @@ def work_precision_figure(comparison, title: str):
             bad = [r for r in mine if (not r.success or r.error >= 1.0) and getattr(r, cost) > 0]
             if bad:
                 ax.plot([getattr(r, cost) for r in bad], [FAILED_LEVEL] * len(bad), "x", color=style["color"], ms=8)
+        exact = comparison.exact_point
+        if exact is not None and cost == "wall_time_s":
+            ax.plot([exact[0]], [max(exact[1], 1e-17)], "*", color="black", ms=14, zorder=5,
+                    label="exact (matrix exponential):\nits stated accuracy")
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.axhspan(1.0, 10.0, color="0.9", zorder=0)
@@ -49,7 +53,8 @@ def work_precision_figure(comparison, title: str):
         ax.grid(True, which="major", alpha=0.4)
     axes[0].set_ylabel("Error: max |x - x_ref| / peak |x_ref|")
     axes[0].set_ylim(top=10.0)
-    axes[1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, frameon=False)
+    handles, labels = axes[0].get_legend_handles_labels()
+    axes[1].legend(handles, labels, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, frameon=False)
     ref = f"reference: {comparison.reference_method}"
     if comparison.reference_error:
         ref += f" (own error {comparison.reference_error:.1e})"

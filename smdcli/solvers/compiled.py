@@ -60,10 +60,15 @@ def _tiny_model() -> Model:
 
 def _tiny_run(family: str) -> None:
     """One small run of a kernel family, so that it is compiled or loaded."""
-    from smdcli.kernels import fixed, radau, stiff
+    from smdcli.kernels import bdf, fixed, radau, stiff
     from smdcli.kernels.arrays import model_arrays
 
     tiny, grid, y0 = _tiny_model(), np.array([0.0, 1e-3]), np.array([1.0, 0.0])
+    if family == "rhs":  # called from Python by the Fortran integrators
+        from smdcli.kernels.rhs import state_rhs
+
+        state_rhs(model_arrays(tiny), 0.0, y0, False, np.zeros(2), np.zeros(2), np.zeros((1, 1)))
+        return
     if family == "erk":
         run_kernel(tiny, tableaus.RK45, grid, y0, 1e-3, np.full(2, 1e-6), 10, 1e8)
         return
@@ -75,22 +80,24 @@ def _tiny_run(family: str) -> None:
         stiff.integrate(arrays, stiff.TRBDF2, y0, grid, grid, 1e-3, np.full(2, 1e-6), 10, 1e8, out,
                         np.zeros(5, dtype=np.int64), np.zeros(1), np.zeros(2), 0.0)
     else:
-        radau.integrate(arrays, y0, grid, grid, 1e-3, np.full(2, 1e-6), 10, 1e8, out, np.zeros(5, dtype=np.int64),
-                        np.zeros(1), np.zeros(2), 0.0)
+        kernel = radau.integrate if family == "radau" else bdf.integrate
+        kernel(arrays, y0, grid, grid, 1e-3, np.full(2, 1e-6), 10, 1e8, out, np.zeros(5, dtype=np.int64), np.zeros(1),
+               np.zeros(2), 0.0)
 
 
 def _entry(family: str):
     """The dispatcher whose compiled code stands for a kernel family's."""
-    from smdcli.kernels import erk, fixed, radau, stiff
+    from smdcli.kernels import bdf, erk, fixed, radau, rhs, stiff
 
-    return {"erk": erk.integrate, "fixed": fixed.march, "stiff": stiff.integrate, "radau": radau.integrate}[family]
+    return {"erk": erk.integrate, "fixed": fixed.march, "stiff": stiff.integrate, "radau": radau.integrate,
+            "bdf": bdf.integrate, "rhs": rhs.state_rhs}[family]
 
 
-KERNEL_FAMILIES = ("erk", "fixed", "stiff", "radau")
+KERNEL_FAMILIES = ("erk", "fixed", "stiff", "radau", "bdf", "rhs")
 
 
 def warm(*families: str) -> None:
-    """Compile kernel families (erk, fixed, stiff, radau; default erk) or load them from numba's cache before any clock
+    """Compile kernel families (erk, fixed, stiff, radau, bdf, rhs; default erk) or load them from numba's cache before any clock
     starts, saying so once if compiling."""
     for family in families or ("erk",):
         entry = _entry(family)
@@ -142,6 +149,7 @@ class CompiledRK(Solver):
     """An explicit Runge-Kutta pair run by the compiled kernel, restarted at every force discontinuity."""
 
     family = "compiled explicit Runge-Kutta"
+    compiled = True
     kernel_method: ClassVar[int]
     stability_boundary: ClassVar[float]
     watch: Watch | None = None
@@ -199,16 +207,24 @@ class CompiledStiff(Solver):
     analytic Jacobian, restarted at every force discontinuity."""
 
     family = "compiled stiff"
+    compiled = True
     implicit = True
     order = 2
-    kernel_method: ClassVar[str]  # RADAU5, or the name of a method id in smdcli.kernels.stiff
+    kernel_method: ClassVar[str]  # RADAU5, NDF, or the name of a method id in smdcli.kernels.stiff
+
+    @property
+    def kernel_family(self) -> str:
+        """The kernel family (see warm) that runs this method."""
+        return {"RADAU5": "radau", "NDF": "bdf"}.get(self.kernel_method, "stiff")
 
     def integrate(self, arrays, *args):
         """Run the kernel: (y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floats, work, fixed_h)."""
-        from smdcli.kernels import radau, stiff
+        from smdcli.kernels import bdf, radau, stiff
 
         if self.kernel_method == "RADAU5":
             return radau.integrate(arrays, *args)
+        if self.kernel_method == "NDF":
+            return bdf.integrate(arrays, *args)
         return stiff.integrate(arrays, getattr(stiff, self.kernel_method), *args)
 
     def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
@@ -216,7 +232,7 @@ class CompiledStiff(Solver):
         from smdcli.kernels.arrays import model_arrays
         from smdcli.kernels.rhs import work_size
 
-        warm("radau" if self.kernel_method == "RADAU5" else "stiff")
+        warm(self.kernel_family)
         start = time.perf_counter()
         y0 = np.concatenate([model.x0, model.v0]).astype(float)
         bound = divergence_bound(model, grid)
@@ -246,6 +262,9 @@ def _stiff(name: str, method: str, text: str, order: int = 2):
 
 
 Radau = _stiff("Radau", "RADAU5", "implicit Radau IIA, order 5, compiled (scipy's steps)", order=5)
+BDF = _stiff("BDF", "NDF", "implicit variable-order BDF/NDF, orders 1-5, compiled (scipy's steps)", order=5)
+ode15s = _stiff("ode15s", "NDF", "MATLAB ode15s's family: variable-order NDF, orders 1-5, compiled (scipy BDF's steps)",
+                order=5)
 
 ode23s = _stiff("ode23s", "ROSENBROCK23", "MATLAB ode23s's formula: Rosenbrock 2(3) of Shampine and Reichelt, compiled")
 ode23t = _stiff("ode23t", "TRAPEZOID", "MATLAB ode23t's formula: trapezoidal rule, no numerical damping, compiled")

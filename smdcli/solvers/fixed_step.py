@@ -32,6 +32,7 @@ class FixedStep(Solver):
     """Shared driver: the compiled march, its statistics and failure messages."""
 
     family = "fixed step"
+    compiled = True
     adaptive = False
     kernel_method: ClassVar[str] = "GENERALIZED_ALPHA"  # the name of a method id in smdcli.kernels.fixed
 

@@ -22,13 +22,14 @@ def _solvers() -> dict[str, type[Solver]]:
     from smdcli.solvers.closed_form import ClosedForm
     from smdcli.solvers.exact import Exact
     from smdcli.solvers.fixed_step import HHT, RK4, CentralDifference, Euler, GeneralizedAlpha, Newmark
-    from smdcli.solvers.compiled import DOP853, RK23, RK45, Radau, ode23, ode23s, ode23t, ode23tb, ode45
-    from smdcli.solvers.ivp import (BDF, LSODA, Ode113, ScipyDOP853, ScipyRadau, ScipyOde23s, ScipyOde23t, ScipyOde23tb,
-                                    ScipyRK23, ScipyRK45, ode15s)
+    from smdcli.solvers.compiled import BDF, DOP853, RK23, RK45, Radau, ode15s, ode23, ode23s, ode23t, ode23tb, ode45
+    from smdcli.solvers.ivp import (LSODA, Ode113, ScipyBDF, ScipyDOP853, ScipyOde23s, ScipyOde23t, ScipyOde23tb,
+                                    ScipyRadau, ScipyRK23, ScipyRK45)
 
     classes = (Auto, ClosedForm, Exact, RK45, RK23, DOP853, Radau, BDF, LSODA, ode45, ode23, Ode113, ode15s,
                ode23s, ode23t, ode23tb, Newmark, HHT, GeneralizedAlpha, CentralDifference, Euler, RK4,
-               ScipyRK45, ScipyRK23, ScipyDOP853, ScipyOde23s, ScipyOde23t, ScipyOde23tb, ScipyRadau)
+               ScipyRK45, ScipyRK23, ScipyDOP853, ScipyOde23s, ScipyOde23t, ScipyOde23tb, ScipyRadau,
+               ScipyBDF)
     return {cls.name: cls for cls in classes}
 
 
