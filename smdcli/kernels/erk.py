@@ -22,8 +22,8 @@ import math
 import numpy as np
 
 from smdcli.kernels import tableaus as tb
-from smdcli.kernels.compiler import kernel, no_alloc
-from smdcli.kernels.rhs import spectral_bound, state_rhs
+from smdcli.kernels.compiler import inlined, kernel, no_alloc
+from smdcli.kernels.rhs import spectral_bound, state_rhs, state_rhs_inlined
 
 RK23, RK45, DOP853 = tb.RK23, tb.RK45, tb.DOP853
 # How a run ended (index 0 of the status array).
@@ -52,14 +52,14 @@ def rms(x):
     return math.sqrt(total / len(x)) if len(x) else 0.0
 
 
-@no_alloc
+@inlined
 def axpy(a, x, y):
     """y += a x, in place, without a temporary."""
     for i in range(len(y)):
         y[i] += a * x[i]
 
 
-@no_alloc
+@inlined
 def assign(dst, src):
     """dst[:] = src, element by element (a slice assignment would need the allocator)."""
     for i in range(len(dst)):
@@ -111,7 +111,7 @@ def _stages(m, method, t, y, h, K, count, mid, work, jwork, arg):
             if A[s, j] != 0.0:
                 axpy(h * A[s, j], K[j], arg)
         ts = t + C[s] * h
-        state_rhs(m, ts, arg, ts >= mid, K[s], work, jwork)
+        state_rhs_inlined(m, ts, arg, ts >= mid, K[s], work, jwork)
 
 
 @no_alloc

@@ -94,17 +94,20 @@ def _entry(family: str):
 
 
 KERNEL_FAMILIES = ("erk", "fixed", "stiff", "radau", "bdf", "rhs")
+_warmed: set[str] = set()
 
 
 def warm(*families: str) -> None:
-    """Compile kernel families (erk, fixed, stiff, radau, bdf, rhs; default erk) or load them from numba's cache before any clock
-    starts, saying so once if compiling."""
+    """Compile kernel families (erk, fixed, stiff, radau, bdf, rhs; default erk) or load them from numba's cache
+    before any clock starts, saying so once if compiling."""
     for family in families or ("erk",):
-        entry = _entry(family)
-        if getattr(entry, "signatures", True):  # compiled already, or plain Python (NUMBA_DISABLE_JIT=1)
+        if family in _warmed:
             continue
-        announce_compile(entry)
-        _tiny_run(family)
+        entry = _entry(family)
+        if not getattr(entry, "signatures", True):  # not compiled yet (plain Python under NUMBA_DISABLE_JIT=1 has none)
+            announce_compile(entry)
+            _tiny_run(family)
+        _warmed.add(family)
 
 
 @dataclass(frozen=True)
