@@ -60,37 +60,35 @@ def _tiny_model() -> Model:
 
 def _tiny_run(family: str) -> None:
     """One small run of a kernel family, so that it is compiled or loaded."""
-    from smdcli.kernels import bdf, fixed, radau, stiff
     from smdcli.kernels.arrays import model_arrays
 
     tiny, grid, y0 = _tiny_model(), np.array([0.0, 1e-3]), np.array([1.0, 0.0])
+    entry = _entry(family)
     if family == "rhs":  # called from Python by the Fortran integrators
-        from smdcli.kernels.rhs import state_rhs
-
-        state_rhs(model_arrays(tiny), 0.0, y0, False, np.zeros(2), np.zeros(2), np.zeros((1, 1)))
+        entry(model_arrays(tiny), 0.0, y0, False, np.zeros(2), np.zeros(2), np.zeros((1, 1)))
         return
     if family == "erk":
         run_kernel(tiny, tableaus.RK45, grid, y0, 1e-3, np.full(2, 1e-6), 10, 1e8)
         return
     arrays, out = model_arrays(tiny), np.zeros((2, 2))
     if family == "fixed":
-        fixed.march(arrays, fixed.GENERALIZED_ALPHA, np.zeros(4), y0, grid, grid, 1e-3, 10, 1e8, out,
-                    np.zeros(4, dtype=np.int64), np.zeros(2), np.zeros(2))
+        entry(arrays, 0, np.zeros(4), y0, grid, grid, 1e-3, 10, 1e8, out, np.zeros(4, dtype=np.int64), np.zeros(2),
+              np.zeros(2))
     elif family == "stiff":
-        stiff.integrate(arrays, stiff.TRBDF2, y0, grid, grid, 1e-3, np.full(2, 1e-6), 10, 1e8, out,
-                        np.zeros(5, dtype=np.int64), np.zeros(1), np.zeros(2), 0.0)
+        entry(arrays, 0, y0, grid, grid, 1e-3, np.full(2, 1e-6), 10, 1e8, out, np.zeros(5, dtype=np.int64),
+              np.zeros(1), np.zeros(2), 0.0)
     else:
-        kernel = radau.integrate if family == "radau" else bdf.integrate
-        kernel(arrays, y0, grid, grid, 1e-3, np.full(2, 1e-6), 10, 1e8, out, np.zeros(5, dtype=np.int64), np.zeros(1),
-               np.zeros(2), 0.0)
+        entry(arrays, y0, grid, grid, 1e-3, np.full(2, 1e-6), 10, 1e8, out, np.zeros(5, dtype=np.int64), np.zeros(1),
+              np.zeros(2), 0.0)
 
 
 def _entry(family: str):
-    """The dispatcher whose compiled code stands for a kernel family's."""
-    from smdcli.kernels import bdf, erk, fixed, radau, rhs, stiff
+    """The dispatcher whose compiled code stands for a kernel family's (only its module is imported)."""
+    import importlib
 
-    return {"erk": erk.integrate, "fixed": fixed.march, "stiff": stiff.integrate, "radau": radau.integrate,
-            "bdf": bdf.integrate, "rhs": rhs.state_rhs}[family]
+    module, name = {"erk": ("erk", "integrate"), "fixed": ("fixed", "march"), "stiff": ("stiff", "integrate"),
+                    "radau": ("radau", "integrate"), "bdf": ("bdf", "integrate"), "rhs": ("rhs", "state_rhs")}[family]
+    return getattr(importlib.import_module(f"smdcli.kernels.{module}"), name)
 
 
 KERNEL_FAMILIES = ("erk", "fixed", "stiff", "radau", "bdf", "rhs")
