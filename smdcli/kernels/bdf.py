@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 from smdcli.kernels.compiler import kernel, no_alloc
-from smdcli.kernels.erk import NOT_FINITE, OK, PAST_BOUND, STEP_BUDGET, TOO_SMALL_STEP, initial_step, scaled_rms
+from smdcli.kernels.erk import OK, STEP_BUDGET, TOO_SMALL_STEP, initial_step, rows_through, scaled_rms, state_status
 from smdcli.kernels.linalg import lu_factor, lu_solve
 from smdcli.kernels.radau import ACCEPTED, NFEV, NJEV, NLU, REJECTED, T_REACHED  # the same statistics
 from smdcli.kernels.rhs import jacobian, state_rhs
@@ -263,9 +263,7 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
                 n_equal_steps = 0
                 factored = False
             # Dense output: the difference polynomial at the step's end, in units of the next step (scipy's).
-            j = k
-            while j < len(grid) and grid[j] <= t:
-                j += 1
+            j = rows_through(grid, k, t)
             for row in range(k, j):
                 for i in range(size):
                     value = D[0, i]
@@ -276,13 +274,7 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
                     out[row, i] = value
             k = j
             floats[T_REACHED] = t
-            status = OK
-            for i in range(size):
-                if not math.isfinite(y[i]):
-                    status = NOT_FINITE
-                    break
-                if abs(y[i]) > bound:
-                    status = PAST_BOUND
+            status = state_status(y, bound)
             if status != OK:
                 out[k:] = np.nan
                 return status

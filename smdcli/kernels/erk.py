@@ -77,6 +77,27 @@ def scaled_rms(x, scale):
 
 
 @no_alloc
+def state_status(y, bound):
+    """OK, or why the state y counts as diverged: NOT_FINITE (NaN or inf) or PAST_BOUND (|y| > bound)."""
+    status = OK
+    for i in range(len(y)):
+        if not math.isfinite(y[i]):
+            return NOT_FINITE
+        if abs(y[i]) > bound:
+            status = PAST_BOUND
+    return status
+
+
+@no_alloc
+def rows_through(grid, k, t):
+    """The first row index at or after k whose grid time is past t: rows k..that-1 are due for output."""
+    j = k
+    while j < len(grid) and grid[j] <= t:
+        j += 1
+    return j
+
+
+@no_alloc
 def initial_step(m, t0, y0, f0, t_bound, order, rtol, atol, mid, work, jwork, f1, y1, scale):
     """scipy's select_initial_step (Hairer, Norsett and Wanner, II.4); f1, y1 and scale are scratch."""
     length = t_bound - t0
@@ -248,19 +269,14 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, boundary,
             if counts[ACCEPTED] > max_steps:
                 out[k:] = np.nan
                 return STEP_BUDGET
-            j = np.searchsorted(grid, t_new, side="right")
+            j = rows_through(grid, k, t_new)
             if j > k:
                 _dense(m, method, t, h, y, y_new, K, grid, k, j, out, mid, work, jwork, arg, F)
                 if method == DOP853:
                     counts[NFEV] += 3
                 k = j
             floats[T_REACHED] = t_new
-            status = OK
-            for i in range(size):
-                if not math.isfinite(y_new[i]):
-                    status = NOT_FINITE
-                elif abs(y_new[i]) > bound and status == OK:
-                    status = PAST_BOUND
+            status = state_status(y_new, bound)
             if status != OK:
                 out[k:] = np.nan
                 return status

@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from smdcli.kernels.compiler import kernel, no_alloc
-from smdcli.kernels.erk import NOT_FINITE, OK, PAST_BOUND, STEP_BUDGET
+from smdcli.kernels.erk import OK, STEP_BUDGET, rows_through, state_status
 from smdcli.kernels.linalg import lu_factor, lu_solve
 from smdcli.kernels.rhs import jacobian, state_rhs
 
@@ -208,19 +208,11 @@ def march(m, method, coef, y0, grid, cuts, dt, max_steps, bound, out, counts, fl
                 _explicit_step(m, method, t, h, mid, y, f, y_new, f_new, counts, work, J, K, arg)
             total += 1
             counts[STEPS] = total
-            status = OK
-            for q in range(size):
-                if not math.isfinite(y_new[q]):
-                    status = NOT_FINITE
-                    break
-                if abs(y_new[q]) > bound:
-                    status = PAST_BOUND
+            status = state_status(y_new, bound)
             if status != OK:
                 out[k:] = np.nan
                 return status
-            j = k
-            while j < len(grid) and grid[j] <= t_new:
-                j += 1
+            j = rows_through(grid, k, t_new)
             if j > k:
                 _hermite(t, t_new - t, y, f, y_new, f_new, grid, k, j, out)
                 k = j

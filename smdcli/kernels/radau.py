@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 from smdcli.kernels.compiler import kernel, no_alloc
-from smdcli.kernels.erk import NOT_FINITE, OK, PAST_BOUND, STEP_BUDGET, TOO_SMALL_STEP, initial_step
+from smdcli.kernels.erk import OK, STEP_BUDGET, TOO_SMALL_STEP, initial_step, rows_through, state_status
 from smdcli.kernels.linalg import lu_factor, lu_solve
 from smdcli.kernels.rhs import jacobian, state_rhs
 
@@ -282,22 +282,14 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
             y_old[:] = y
             t_old, h_dense = t, h
             have_dense = True
-            j = k
-            while j < len(grid) and grid[j] <= t_new:
-                j += 1
+            j = rows_through(grid, k, t_new)
             for row in range(k, j):
                 x = (grid[row] - t_old) / h_dense
                 for i in range(size):
                     out[row, i] = y_old[i] + Q[i, 0] * x + Q[i, 1] * x * x + Q[i, 2] * x * x * x
             k = j
             floats[T_REACHED] = t_new
-            status = OK
-            for i in range(size):
-                if not math.isfinite(y_new[i]):
-                    status = NOT_FINITE
-                    break
-                if abs(y_new[i]) > bound:
-                    status = PAST_BOUND
+            status = state_status(y_new, bound)
             if status != OK:
                 out[k:] = np.nan
                 return status

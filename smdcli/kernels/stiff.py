@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from smdcli.kernels.compiler import kernel, no_alloc
-from smdcli.kernels.erk import NOT_FINITE, OK, PAST_BOUND, STEP_BUDGET, TOO_SMALL_STEP, scaled_rms
+from smdcli.kernels.erk import OK, STEP_BUDGET, TOO_SMALL_STEP, initial_step, rows_through, scaled_rms, state_status
 from smdcli.kernels.linalg import lu_factor, lu_solve
 from smdcli.kernels.rhs import jacobian, state_rhs
 
@@ -102,30 +102,6 @@ def _newton(m, method, t_eval, h, base, z, W, piv, scale, newton_tol, mid, dz, f
     return False
 
 
-@no_alloc
-def _first_step(m, t, y, f, t_bound, rtol, atol, mid, scale, y1, f1, work, J, counts):
-    """Hairer, Norsett and Wanner's starting step (Solving ODEs I, II.4) for an O(h^3) estimate."""
-    span = t_bound - t
-    if span == 0:
-        return 0.0
-    for i in range(len(y)):
-        scale[i] = atol[i] + rtol * abs(y[i])
-    d0, d1 = scaled_rms(y, scale), scaled_rms(f, scale)
-    h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
-    h0 = min(h0, span)
-    for i in range(len(y)):
-        y1[i] = y[i] + h0 * f[i]
-    _f(m, t + h0, y1, mid, f1, work, J, counts)
-    for i in range(len(y)):
-        y1[i] = f1[i] - f[i]
-    d2 = scaled_rms(y1, scale) / h0
-    if d1 <= 1e-15 and d2 <= 1e-15:
-        h1 = max(1e-6, h0 * 1e-3)
-    else:
-        h1 = (0.01 / max(d1, d2)) ** (1.0 / ERROR_ORDER)
-    return min(100 * h0, h1, span)
-
-
 @kernel
 def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floats, work, fixed_h):
     """Integrate from y0 = out[0] over the grid with ode23s, ode23t or ode23tb, restarting at each cut; a status.
@@ -153,8 +129,11 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, out, coun
         counts[NJEV] += 1
         jacobian_current = True  # J belongs to (t, y)
         second_t = math.nan  # the time at which `second` (y'') holds, for ode23t
-        h = fixed_h if fixed_h > 0 else _first_step(m, t, y, f, t_bound, rtol, atol, mid, scale, y_new, f_new, work,
-                                                    J, counts)
+        if fixed_h > 0:
+            h = fixed_h
+        else:  # scipy's starting step for an O(h^3) error estimate (order 2)
+            h = initial_step(m, t, y, f, t_bound, 2, rtol, atol, mid, work, J_new, f_new, y_new, scale)
+            counts[NFEV] += 1
         while t < t_bound:
             span = t_bound - t
             min_step = 10 * abs(np.nextafter(t, np.inf) - t)
@@ -277,9 +256,7 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, out, coun
             if counts[ACCEPTED] > max_steps:
                 out[k:] = np.nan
                 return STEP_BUDGET
-            j = k
-            while j < len(grid) and grid[j] <= t_new:
-                j += 1
+            j = rows_through(grid, k, t_new)
             for row in range(k, j):
                 s = (grid[row] - t) / h
                 if method == ROSENBROCK23:
@@ -296,13 +273,7 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, out, coun
                         out[row, i] = h00 * y[i] + h10 * f[i] + h01 * y_new[i] + h11 * f_new[i]
             k = j
             floats[T_REACHED] = t_new
-            status = OK
-            for i in range(size):
-                if not math.isfinite(y_new[i]):
-                    status = NOT_FINITE
-                    break
-                if abs(y_new[i]) > bound:
-                    status = PAST_BOUND
+            status = state_status(y_new, bound)
             if status != OK:
                 out[k:] = np.nan
                 return status

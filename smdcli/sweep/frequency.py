@@ -165,6 +165,9 @@ def frequency_response(family: Family, workers: int | None = None,
         index = _driving_force(member)
         for d in directions:
             tasks.append((member, omega if d == "up" else omega[::-1], index))
+    # Each task (a member's sweep in one direction) is sequential along frequency, each frequency starting from the
+    # last one's state; tasks run side by side in processes: on threads the Duffing sweep took 2.3-2.6 s against
+    # 1.3-1.7 s, each frequency's Python set-up around its compiled shooting solve holding the GIL.
     outcomes = run_pool(_measure_direction, tasks, workers or default_workers(), progress, steps=True)
     for i, d in enumerate(directions):
         amp = np.stack([outcomes[s * len(directions) + i][0] for s in range(S)])

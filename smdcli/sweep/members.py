@@ -5,7 +5,6 @@ Must not import: io, plots, commands, cli."""
 
 from __future__ import annotations
 
-import sys
 import time
 from dataclasses import dataclass
 from typing import Callable
@@ -17,7 +16,7 @@ from smdcli.model import build, time_grid
 from smdcli.scenario import Scenario
 from smdcli.sweep.batched import batched_exact, shared_signal_recurrence
 from smdcli.sweep.family import Family
-from smdcli.sweep.pool import default_workers, run_pool
+from smdcli.sweep.pool import default_workers, run_pool, run_threads
 from smdcli.sweep.spec import EXACT_METHODS, MAX_STACKED, QUANTITIES, SETTLING_BAND, _trapezoid
 
 # --------------------------------------------------------------- families
@@ -77,32 +76,6 @@ def _solve_model(args: tuple[Family, int, np.ndarray, str | None, dict[str, np.n
     return (None, None, None, None, None) + outcome[5:]
 
 
-def _run_threads(function: Callable, tasks: list, workers: int, progress: Callable[[int], None] | None) -> list:
-    """Results of function over tasks, in order, on a thread pool: the compiled kernels release the GIL, and
-    members share this process's memory and kernels (no pickling, no start-up per worker)."""
-    from concurrent.futures import ThreadPoolExecutor, as_completed
-
-    from smdcli.solvers.compiled import warm
-
-    warm()  # once, here: threads must not race to compile
-    results: list = [None] * len(tasks)
-    pool = ThreadPoolExecutor(max_workers=max(1, min(workers, len(tasks))))
-    # A thread back from a kernel (GIL released) waits for the GIL at most this long, not the default 5 ms: with
-    # ~1 ms kernels between short Python stretches, 2,000 members on 2 threads took 3.5 s at 5 ms, 2.5 s at 0.5 ms.
-    interval = sys.getswitchinterval()
-    sys.setswitchinterval(5e-4)
-    try:
-        futures = {pool.submit(function, task): i for i, task in enumerate(tasks)}
-        for future in as_completed(futures):
-            results[futures[future]] = future.result()
-            if progress:
-                progress(1)
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
-        sys.setswitchinterval(interval)
-    return results
-
-
 def solve_family(family: Family, method: str | None = None, workers: int | None = None,
                  progress: Callable[[int], None] | None = None) -> FamilyResult:
     """Every member's time response: one batched exact recurrence when linear, else a process pool."""
@@ -149,7 +122,7 @@ def solve_family(family: Family, method: str | None = None, workers: int | None 
     if threaded:  # members are one model with other numbers: solved in this process, on threads, into the stacks
         stacks = {name: np.empty(shape) for name in QUANTITIES}  # every row is written whole by its member
         tasks = [(family, s, grid, method, stacks) for s in range(S)]
-        outcomes = _run_threads(_solve_model, tasks, workers, progress)
+        outcomes = run_threads(_solve_model, tasks, workers, progress)
         times[:] = grid
     else:
         tasks = [(family.member_scenario(s), method) for s in range(S)]
