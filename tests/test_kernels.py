@@ -13,6 +13,7 @@ import pytest
 from conftest import bundled as load
 from conftest import model_of
 
+from smdcli.expression import FUNCTIONS, Expression
 from smdcli.kernels.arrays import model_arrays
 from smdcli.kernels.rhs import force_value, jacobian, rhs, work_size
 from smdcli.solvers import solve
@@ -125,6 +126,20 @@ def test_every_force_type_matches_the_numpy_signal_on_both_sides_of_its_edges(fo
         scale = max(1.0, np.abs(signal.value(times)).max())
         assert np.abs(right - signal.value(times)).max() <= 1e-13 * scale, model.force_types[j]
         assert np.abs(left - signal.value_left(times)).max() <= 1e-13 * scale, model.force_types[j]
+
+
+@pytest.mark.parametrize("name", sorted(FUNCTIONS))
+def test_every_expression_function_runs_compiled_as_numpy_evaluates_it(name):
+    """The compiled interpreter reads smdcli.expression's opcodes: each function, and every operator around it."""
+    from smdcli.kernels.rhs import _expression
+
+    text = f"-{name}(0.3 * t + 0.1) ** 2 / (1.5 + t) - 2 * t + 0.25"
+    expression = Expression(text)
+    codes, constants, depth = expression.program()
+    times = np.linspace(0.05, 3.0, 41)
+    stack = np.zeros(depth + 1)
+    ours = np.array([_expression(np.array(codes, dtype=np.int64), np.array(constants), t, stack) for t in times])
+    assert np.allclose(ours, expression(times), rtol=1e-14, atol=1e-14), name
 
 
 def test_right_hand_side_and_jacobian_match_the_model(forced):

@@ -17,14 +17,14 @@ import numpy as np
 
 from smdcli.kernels.compiler import kernel, no_alloc
 from smdcli.kernels.erk import OK, STEP_BUDGET, TOO_SMALL_STEP, initial_step, rows_through, scaled_rms, state_status
-from smdcli.kernels.linalg import lu_factor, lu_solve
-from smdcli.kernels.radau import ACCEPTED, NFEV, NJEV, NLU, REJECTED, T_REACHED  # the same statistics
+from smdcli.kernels.linalg import factor_shifted, lu_solve
+from smdcli.kernels.radau import (ACCEPTED, EPS, NFEV, NJEV, NLU, REJECTED, T_REACHED,  # the same statistics
+                                  newton_hopeless, newton_settled, newton_tolerance)
 from smdcli.kernels.rhs import jacobian, state_rhs
 
 MAX_ORDER = 5
 NEWTON_MAXITER = 4
 MIN_FACTOR, MAX_FACTOR = 0.2, 10.0
-EPS = np.finfo(np.float64).eps
 KAPPA = np.array([0, -0.1850, -1 / 9, -0.0823, -0.0415, 0])
 GAMMA = np.concatenate((np.zeros(1), np.cumsum(1 / np.arange(1, MAX_ORDER + 1))))
 ALPHA = (1 - KAPPA) * GAMMA
@@ -90,30 +90,18 @@ def _newton(m, t_new, y_predict, c, psi, LU, piv, scale, tol, mid, y, d, dy, f, 
         lu_solve(LU, piv, dy)
         norm = scaled_rms(dy, scale)
         rate = norm / old if old >= 0 else -1.0
-        if rate >= 0 and (rate >= 1 or rate ** (NEWTON_MAXITER - k) / (1 - rate) * norm > tol):
+        if newton_hopeless(rate, norm, NEWTON_MAXITER - k, tol):
             break
         for i in range(size):
             y[i] += dy[i]
             d[i] += dy[i]
-        if norm == 0 or (rate >= 0 and rate / (1 - rate) * norm < tol):
+        if newton_settled(rate, norm, tol):
             converged = True
             break
         old = norm
     out[0] = k + 1
     out[1] = rate
     return converged
-
-
-@no_alloc
-def _factor(J, c, LU, piv, counts):
-    """LU of I - c J in place; False when singular."""
-    size = J.shape[0]
-    for r in range(size):
-        for q in range(size):
-            LU[r, q] = -c * J[r, q]
-        LU[r, r] += 1.0
-    counts[NLU] += 1
-    return lu_factor(LU, piv)
 
 
 @kernel
@@ -123,7 +111,7 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
     supported (the order varies) and must be 0."""
     size = len(y0)
     rtol = max(rtol, 100 * EPS)
-    newton_tol = max(10 * EPS / rtol, min(0.03, rtol**0.5))
+    newton_tol = newton_tolerance(rtol)
     J, Jscratch, LU = np.zeros((size, size)), np.zeros((1, 1)), np.zeros((size, size))
     piv = np.zeros(size, dtype=np.int64)
     D, scratch = np.zeros((MAX_ORDER + 3, size)), np.zeros((MAX_ORDER + 3, size))
@@ -190,7 +178,8 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
                 converged = False
                 while True:
                     if not factored:
-                        if not _factor(J, c, LU, piv, counts):
+                        counts[NLU] += 1
+                        if not factor_shifted(J, 1.0, c, LU, piv):
                             break
                         factored = True
                     converged = _newton(m, t_new, y_predict, c, psi, LU, piv, scale, newton_tol, mid, y_new, d, dy,

@@ -54,3 +54,15 @@ def lu_solve(LU, piv, b):
         for q in range(r + 1, n):
             s -= LU[r, q] * b[q]
         b[r] = s / LU[r, r]
+
+
+@no_alloc
+def factor_shifted(J, diagonal, scale, LU, piv):
+    """LU = diagonal I - scale J, factored in place (real or complex diagonal): the implicit methods' iteration
+    matrices. False when it is singular."""
+    size = J.shape[0]
+    for r in range(size):
+        for q in range(size):
+            LU[r, q] = -scale * J[r, q]
+        LU[r, r] += diagonal
+    return lu_factor(LU, piv)

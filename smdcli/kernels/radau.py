@@ -17,7 +17,7 @@ import numpy as np
 
 from smdcli.kernels.compiler import kernel, no_alloc
 from smdcli.kernels.erk import OK, STEP_BUDGET, TOO_SMALL_STEP, initial_step, rows_through, state_status
-from smdcli.kernels.linalg import lu_factor, lu_solve
+from smdcli.kernels.linalg import factor_shifted, lu_solve
 from smdcli.kernels.rhs import jacobian, state_rhs
 
 # Counters (ints): right-hand sides, accepted, rejected, Jacobians, factorizations.
@@ -56,19 +56,6 @@ def _rms_scaled(x, scale):
             q = x[r, i] / scale[i]
             total += q * q
     return math.sqrt(total / (rows * n))
-
-
-@no_alloc
-def _factor(J, h, LU_real, LU_complex, piv_real, piv_complex):
-    """LU of MU_REAL / h I - J and MU_COMPLEX / h I - J; False when either is singular."""
-    size = J.shape[0]
-    for r in range(size):
-        for q in range(size):
-            LU_real[r, q] = -J[r, q]
-            LU_complex[r, q] = -J[r, q]
-        LU_real[r, r] += MU_REAL / h
-        LU_complex[r, r] += MU_COMPLEX / h
-    return lu_factor(LU_real, piv_real) and lu_factor(LU_complex, piv_complex)
 
 
 @no_alloc
@@ -112,7 +99,7 @@ def _collocation(m, t, y, h, Z0, scale, tol, LU_real, LU_complex, piv_real, piv_
         norm = _rms_scaled(dW, scale)
         if old >= 0:
             rate = norm / old
-        if rate >= 0 and (rate >= 1 or rate ** (NEWTON_MAXITER - k) / (1 - rate) * norm > tol):
+        if newton_hopeless(rate, norm, NEWTON_MAXITER - k, tol):
             break
         for r in range(3):
             for i in range(size):
@@ -120,13 +107,32 @@ def _collocation(m, t, y, h, Z0, scale, tol, LU_real, LU_complex, piv_real, piv_
         for r in range(3):
             for i in range(size):
                 Z[r, i] = T[r, 0] * W[0, i] + T[r, 1] * W[1, i] + T[r, 2] * W[2, i]
-        if norm == 0 or (rate >= 0 and rate / (1 - rate) * norm < tol):
+        if newton_settled(rate, norm, tol):
             converged = True
             break
         old = norm
     out[0] = k + 1
     out[1] = rate
     return converged
+
+
+@no_alloc
+def newton_tolerance(rtol):
+    """scipy's stopping tolerance of the Newton iteration, relative to the error scale."""
+    return max(10 * EPS / rtol, min(0.03, rtol**0.5))
+
+
+@no_alloc
+def newton_hopeless(rate, norm, left, tol):
+    """scipy's verdict on a simplified Newton iteration with `left` iterations to go: diverging (rate >= 1), or
+    too slow to reach tol in time; rate < 0 means none measured yet."""
+    return rate >= 0 and (rate >= 1 or rate**left / (1 - rate) * norm > tol)
+
+
+@no_alloc
+def newton_settled(rate, norm, tol):
+    """scipy's convergence test: the increment vanished, or the remaining error rate / (1 - rate) * norm < tol."""
+    return norm == 0 or (rate >= 0 and rate / (1 - rate) * norm < tol)
 
 
 @no_alloc
@@ -148,7 +154,7 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
     takes steps of that size with no error control (for measuring the formula's order)."""
     size = len(y0)
     rtol = max(rtol, 100 * EPS)
-    newton_tol = max(10 * EPS / rtol, min(0.03, rtol**0.5))
+    newton_tol = newton_tolerance(rtol)
     J, Jscratch = np.zeros((size, size)), np.zeros((1, 1))
     LU_real = np.zeros((size, size))
     LU_complex = np.zeros((size, size), dtype=np.complex128)
@@ -212,7 +218,8 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
                 while True:
                     if not factored:
                         counts[NLU] += 2
-                        if not _factor(J, h, LU_real, LU_complex, piv_real, piv_complex):
+                        if not (factor_shifted(J, MU_REAL / h, 1.0, LU_real, piv_real)
+                                and factor_shifted(J, MU_COMPLEX / h, 1.0, LU_complex, piv_complex)):
                             break
                         factored = True
                     converged = _collocation(m, t, y, h, Z0, scale, newton_tol, LU_real, LU_complex, piv_real,

@@ -13,9 +13,15 @@ import math
 
 import numpy as np
 
+from smdcli.expression import OP_ADD, OP_CONST, OP_DIV, OP_FUNCTION, OP_MUL, OP_NEG, OP_POW, OP_SUB, OP_T
 from smdcli.kernels.arrays import (CHIRP, CONSTANT, COSINE, CUBIC_SPRING, EXPRESSION, FOURIER_SQUARE, PULSE, SINE,
                                    SQUARE, STEP, TABLE_LINEAR, TABLE_PREVIOUS)
 from smdcli.kernels.compiler import inlined, kernel, no_alloc
+
+# The function opcodes as plain ints, which the compiled interpreter needs (it cannot read the dict).
+(OP_SIN, OP_COS, OP_TAN, OP_EXP, OP_LOG, OP_SQRT, OP_ABS, OP_SIGN, OP_TANH,
+ OP_HEAVISIDE) = (OP_FUNCTION[name] for name in ("sin", "cos", "tan", "exp", "log", "sqrt", "abs", "sign", "tanh",
+                                                 "heaviside"))
 
 EDGE_SNAP = 1e-9  # as smdcli.model.forcing._EDGE_SNAP: a phase within this of a square wave's edge is on it
 
@@ -55,50 +61,50 @@ def _expression(codes, constants, t, stack):
     top = -1
     c = 0
     for op in codes:
-        if op == 0:
+        if op == OP_CONST:
             top += 1
             stack[top] = constants[c]
             c += 1
-        elif op == 1:
+        elif op == OP_T:
             top += 1
             stack[top] = t
-        elif op <= 6:
+        elif op <= OP_POW:
             b = stack[top]
             top -= 1
             a = stack[top]
-            if op == 2:
+            if op == OP_ADD:
                 stack[top] = a + b
-            elif op == 3:
+            elif op == OP_SUB:
                 stack[top] = a - b
-            elif op == 4:
+            elif op == OP_MUL:
                 stack[top] = a * b
-            elif op == 5:
+            elif op == OP_DIV:
                 stack[top] = a / b
             else:
                 stack[top] = np.power(a, b)
-        elif op == 7:
+        elif op == OP_NEG:
             stack[top] = -stack[top]
         else:
             x = stack[top]
-            if op == 8:
+            if op == OP_SIN:
                 x = np.sin(x)
-            elif op == 9:
+            elif op == OP_COS:
                 x = np.cos(x)
-            elif op == 10:
+            elif op == OP_TAN:
                 x = np.tan(x)
-            elif op == 11:
+            elif op == OP_EXP:
                 x = np.exp(x)
-            elif op == 12:
+            elif op == OP_LOG:
                 x = np.log(x)
-            elif op == 13:
+            elif op == OP_SQRT:
                 x = np.sqrt(x)
-            elif op == 14:
+            elif op == OP_ABS:
                 x = abs(x)
-            elif op == 15:
+            elif op == OP_SIGN:
                 x = np.sign(x)
-            elif op == 16:
+            elif op == OP_TANH:
                 x = np.tanh(x)
-            else:
+            else:  # heaviside
                 x = 1.0 if x >= 0 else 0.0
             stack[top] = x
     return stack[0]

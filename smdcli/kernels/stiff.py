@@ -22,7 +22,8 @@ import numpy as np
 
 from smdcli.kernels.compiler import kernel, no_alloc
 from smdcli.kernels.erk import OK, STEP_BUDGET, TOO_SMALL_STEP, initial_step, rows_through, scaled_rms, state_status
-from smdcli.kernels.linalg import lu_factor, lu_solve
+from smdcli.kernels.linalg import factor_shifted, lu_solve
+from smdcli.kernels.radau import EPS, newton_settled, newton_tolerance
 from smdcli.kernels.rhs import jacobian, state_rhs
 
 ROSENBROCK23, TRAPEZOID, TRBDF2 = range(3)
@@ -31,7 +32,6 @@ NFEV, ACCEPTED, REJECTED, NJEV, NLU = range(5)
 # Floats: time reached.
 T_REACHED = 0
 
-EPS = np.finfo(np.float64).eps
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.8, 0.2, 5.0
 NEWTON_MAXITER = 5
 ERROR_ORDER = 3  # every estimate here is O(h^3)
@@ -63,18 +63,6 @@ def _time_derivative(m, t, y, f, mid, T, trial_f, work, J, counts):
 
 
 @no_alloc
-def _factor(J, c, W, piv, counts):
-    """W = I - c J, factored in place; False when singular."""
-    size = len(piv)
-    for r in range(size):
-        for q in range(size):
-            W[r, q] = -c * J[r, q]
-        W[r, r] += 1.0
-    counts[NLU] += 1
-    return lu_factor(W, piv)
-
-
-@no_alloc
 def _newton(m, method, t_eval, h, base, z, W, piv, scale, newton_tol, mid, dz, fz, work, J, counts):
     """Simplified Newton on z - base - c h f(t_eval, z) = 0 (c = d of the method), from the guess in z.
     base holds everything but the implicit term. True when it converged."""
@@ -96,7 +84,7 @@ def _newton(m, method, t_eval, h, base, z, W, piv, scale, newton_tol, mid, dz, f
             rate = norm / old if old > 0 else 0.0
             if rate >= 1:
                 return False
-        if norm == 0 or (rate >= 0 and rate / (1 - rate) * norm < newton_tol) or norm < 1e-3 * newton_tol:
+        if newton_settled(rate, norm, newton_tol) or norm < 1e-3 * newton_tol:
             return True
         old = norm
     return False
@@ -109,7 +97,7 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, out, coun
     takes steps of that size with no error control (for measuring a formula's order)."""
     size = len(y0)
     rtol = max(rtol, 100 * EPS)
-    newton_tol = max(10 * EPS / rtol, min(0.03, math.sqrt(rtol)))
+    newton_tol = newton_tolerance(rtol)
     linear = len(m.el_law) == 0
     J, J_new, W = np.zeros((size, size)), np.zeros((size, size)), np.zeros((size, size))
     piv = np.zeros(size, dtype=np.int64)
@@ -155,7 +143,8 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, out, coun
                 converged = True
                 if method == ROSENBROCK23:
                     _time_derivative(m, t, y, f, mid, T, fz, work, J_new, counts)
-                    if not _factor(J, h * ROS_D, W, piv, counts):
+                    counts[NLU] += 1
+                    if not factor_shifted(J, 1.0, h * ROS_D, W, piv):
                         converged = False
                     else:
                         for i in range(size):
@@ -177,7 +166,8 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, out, coun
                         for i in range(size):
                             err[i] = h / 6 * (k1[i] - 2 * k2[i] + k3[i])
                 elif method == TRAPEZOID:
-                    if not _factor(J, 0.5 * h, W, piv, counts):
+                    counts[NLU] += 1
+                    if not factor_shifted(J, 1.0, 0.5 * h, W, piv):
                         converged = False
                     else:
                         for i in range(size):
@@ -209,7 +199,8 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, out, coun
                             err[r] = -(h * h / 12) * (second_new[r] - second[r])
                         lu_solve(W, piv, err)
                 else:  # TRBDF2
-                    if not _factor(J, TR_D * h, W, piv, counts):
+                    counts[NLU] += 1
+                    if not factor_shifted(J, 1.0, TR_D * h, W, piv):
                         converged = False
                     else:
                         for i in range(size):

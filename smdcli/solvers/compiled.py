@@ -72,10 +72,10 @@ def _tiny_run(family: str) -> None:
         return
     arrays, out = model_arrays(tiny), np.zeros((2, 2))
     if family == "fixed":
-        entry(arrays, 0, np.zeros(4), y0, grid, grid, 1e-3, 10, 1e8, out, np.zeros(4, dtype=np.int64), np.zeros(2),
+        entry(arrays, sys.modules[entry.__module__].GENERALIZED_ALPHA, np.zeros(4), y0, grid, grid, 1e-3, 10, 1e8, out, np.zeros(4, dtype=np.int64), np.zeros(2),
               np.zeros(2))
     elif family == "stiff":
-        entry(arrays, 0, y0, grid, grid, 1e-3, np.full(2, 1e-6), 10, 1e8, out, np.zeros(5, dtype=np.int64),
+        entry(arrays, sys.modules[entry.__module__].TRBDF2, y0, grid, grid, 1e-3, np.full(2, 1e-6), 10, 1e8, out, np.zeros(5, dtype=np.int64),
               np.zeros(1), np.zeros(2), 0.0)
     else:
         entry(arrays, y0, grid, grid, 1e-3, np.full(2, 1e-6), 10, 1e8, out, np.zeros(5, dtype=np.int64), np.zeros(1),

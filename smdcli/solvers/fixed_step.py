@@ -25,8 +25,6 @@ from smdcli.solvers.base import MAX_STEPS, Solver, Tolerances, cuts, divergence_
 from smdcli.solvers.catalog import NEWMARK_SCHEMES
 from smdcli.solvers.compiled import failure_text, warm
 
-NEWTON_MAXITER = 25  # as smdcli.kernels.fixed.NEWTON_MAXITER, for the failure message
-
 
 class FixedStep(Solver):
     """Shared driver: the compiled march, its statistics and failure messages."""
@@ -75,7 +73,7 @@ class FixedStep(Solver):
         if status == fixed.OK:
             failure = None
         elif status == fixed.NEWTON_FAILED:
-            failure = f"Newton did not converge in {NEWTON_MAXITER} iterations"
+            failure = f"Newton did not converge in {fixed.NEWTON_MAXITER} iterations"
         else:
             failure = failure_text(status, max_steps, bound)
         stats = SolverStats(
