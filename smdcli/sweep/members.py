@@ -47,33 +47,36 @@ class FamilyResult:
         return self.derived_acceleration
 
 
-def _outcome(result) -> tuple:
-    """What a member's solve hands back: arrays, success, a message with the failure time, method, accuracy."""
+def _histories(result) -> tuple:
+    """A member's time and its histories in QUANTITIES order."""
+    return result.time, (result.displacement, result.velocity, result.acceleration, result.force)
+
+
+def _status(result) -> tuple:
+    """A member's success, message (with the failure time), method and stated accuracy."""
     message = "ok" if result.success else f"{result.stats.message} (t = {result.t_failed:g} s)"
-    return (result.time, result.displacement, result.velocity, result.acceleration, result.force,
-            result.success, message, result.stats.method, result.stats.stated_accuracy)
+    return result.success, message, result.stats.method, result.stats.stated_accuracy
 
 
 def _solve_member(args: tuple[Scenario, str | None]) -> tuple:
-    """Worker: solve one member with its own solver settings (or the override)."""
+    """Worker: solve one member with its own solver settings (or the override): (histories, status)."""
     from smdcli.solvers.checked import solve_scenario
 
     sc, method = args
     result = solve_scenario(sc, build(sc), time_grid(sc.time), method)
-    return _outcome(result)
+    return _histories(result), _status(result)
 
 
 def _solve_model(args: tuple[Family, int, np.ndarray, str | None, dict[str, np.ndarray]]) -> tuple:
     """Thread task: solve member s of a family that holds matrices and coefficients, not scenarios, writing its
-    histories straight into row s of the family's stacks; returns the rest of its outcome."""
+    histories straight into row s of the family's stacks; returns its status."""
     from smdcli.solvers.checked import solve_scenario
 
     family, s, grid, method, stacks = args
     result = solve_scenario(family.scenario, family.model(s), grid, method)
-    outcome = _outcome(result)
-    for name, data in zip(QUANTITIES, outcome[1:5]):
+    for name, data in zip(QUANTITIES, _histories(result)[1]):
         stacks[name][s] = data
-    return (None, None, None, None, None) + outcome[5:]
+    return _status(result)
 
 
 def solve_family(family: Family, method: str | None = None, workers: int | None = None,
@@ -122,22 +125,24 @@ def solve_family(family: Family, method: str | None = None, workers: int | None 
     if threaded:  # members are one model with other numbers: solved in this process, on threads, into the stacks
         stacks = {name: np.empty(shape) for name in QUANTITIES}  # every row is written whole by its member
         tasks = [(family, s, grid, method, stacks) for s in range(S)]
-        outcomes = run_threads(_solve_model, tasks, workers, progress)
+        statuses = run_threads(_solve_model, tasks, workers, progress)
         times[:] = grid
     else:
         tasks = [(family.member_scenario(s), method) for s in range(S)]
         outcomes = run_pool(_solve_member, tasks, workers, progress)
         stacks = {name: np.full(shape, np.nan) for name in QUANTITIES}
-        for s, (t, x, v, a, f, *_rest) in enumerate(outcomes):
+        for s, ((t, histories), _) in enumerate(outcomes):
             times[s, :len(t)] = t
-            for name, data in zip(QUANTITIES, (x, v, a, f)):
+            for name, data in zip(QUANTITIES, histories):
                 stacks[name][s, :len(t)] = data
+        statuses = [status for _, status in outcomes]
+    success, messages, methods, stated = zip(*statuses)
     pool = "threads" if threaded else "process pool"
     how = f"{pool} of {min(workers, S)} workers" if workers > 1 and S > 1 else "one process"
     return FamilyResult(grid if same_grid else times, family.base.dofs, stacks["displacement"],
                         stacks["velocity"], stacks["acceleration"], stacks["force"],
-                        np.array([o[5] for o in outcomes]), [o[6] for o in outcomes], [o[7] for o in outcomes],
-                        how, time.perf_counter() - start, np.array([o[8] for o in outcomes]))
+                        np.array(success), list(messages), list(methods), how, time.perf_counter() - start,
+                        np.array(stated))
 
 
 def _batched_stated(family: Family, grid: np.ndarray) -> np.ndarray:
