@@ -38,9 +38,14 @@ def overlay_figure(family, result, quantity: str, title: str):
     S, N, n = data.shape
     colors, cmap = _member_colors(S)
     height = 2.2 + 2.6 * n
-    fig = _figure(figsize=(9, height))
+    # Right of the panels (6.3 in wide): the colour bar in 1.26 in, or the legend as wide as its longest label
+    # (8 pt text, ~0.6 em a character, at least 1.8 in), so that no label is cut at the figure's edge.
+    longest = max((len(label) for label in family.labels), default=0)
+    legend = 1.26 if cmap is not None else max(1.8, 0.45 + 0.6 * 8 / 72 * longest)
+    width = 0.9 + 6.3 + legend
+    fig = _figure(figsize=(width, height))
     axes = np.atleast_1d(fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0])
-    fig.subplots_adjust(left=0.1, right=0.8 if cmap is None else 0.86, top=1 - 0.75 / height, bottom=0.55 / height,
+    fig.subplots_adjust(left=0.9 / width, right=1 - legend / width, top=1 - 0.75 / height, bottom=0.55 / height,
                         hspace=0.12)
     drawn = np.unique(np.linspace(0, S - 1, min(S, MAX_LINES)).round().astype(int))
     for j, ax in enumerate(axes):
