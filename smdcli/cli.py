@@ -423,16 +423,11 @@ def run(args: list[str]) -> int:
 
 def main() -> None:
     """Console-script entry point."""
-    import signal
-
     interrupts.install()
     code = run(sys.argv[1:])
     # A signal that came at any point decides, even one whose exception was swallowed or that typer turned into
-    # a silent exit 130; one last look with signals held, then a later signal changes nothing.
-    with interrupts.held():
-        signum = interrupts.received()
-        for each in interrupts.SIGNALS:
-            signal.signal(each, signal.SIG_IGN)
+    # a silent exit 130; from here on signals are only recorded, so a later one changes nothing.
+    signum = interrupts.settle()
     if signum is not None:
         import os
 

@@ -27,6 +27,29 @@ def _handler(signum, frame):
     raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 
 
+def _record(signum, frame):
+    global _received
+    _received = _received or signum
+
+
+def settle() -> int | None:
+    """Stop raising on SIGINT and SIGTERM, then ignore them; the first signal received at any point, or None.
+
+    They are ignored, not left to a Python handler, because Python resets its own handlers to the default (die
+    with the signal) while the interpreter shuts down. A signal that lands while the handlers are being switched
+    still raises once (Python runs a pending handler between any two bytecodes, even inside the switching call):
+    it is recorded all the same and the switch is retried, so no interrupt escapes as a traceback at the end."""
+    while True:
+        try:
+            for signum in SIGNALS:
+                signal.signal(signum, _record)
+            for signum in SIGNALS:
+                signal.signal(signum, signal.SIG_IGN)
+            return received()
+        except KeyboardInterrupt:
+            continue
+
+
 def install() -> None:
     """Record and raise SIGINT and SIGTERM (call once, from the main thread)."""
     import sys

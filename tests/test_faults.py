@@ -100,6 +100,26 @@ def _busy(seconds: float) -> None:
         pass
 
 
+def test_settling_keeps_the_first_signal_and_no_later_one_kills_the_process():
+    """At the end of a run: a signal that came earlier decides the exit code, and one that comes while the
+    interpreter shuts down is ignored (Python would otherwise reset its handlers and die with the signal)."""
+    code = ("import os, signal, time\n"
+            "from smdcli import interrupts\n"
+            "interrupts.install()\n"
+            "try:\n"
+            "    os.kill(os.getpid(), signal.SIGINT)\n"
+            "    time.sleep(1)\n"
+            "except KeyboardInterrupt:\n"
+            "    pass\n"
+            "print(interrupts.settle())\n"
+            "os.kill(os.getpid(), signal.SIGTERM)\n"
+            "time.sleep(0.1)\n"
+            "print('alive')\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == [str(int(signal.SIGINT)), "alive"]
+
+
 def test_no_interrupt_is_lost_at_any_point_of_a_run_under_load(tmp_path):
     """SIGINT or SIGTERM at many points of a whole run (start-up, imports, solve, HDF5, plots), with every core
     busy: a signal that lands before the run's files are committed always gives exit 130 or 143, no temporary
