@@ -36,8 +36,9 @@ def _interrupted(exc: KeyboardInterrupt) -> typer.Exit:
     global _announced
     signum = interrupts.received() or (signal.SIGTERM if isinstance(exc, interrupts.Terminated) else signal.SIGINT)
     if not _announced:
+        notes = "".join(f"; {note}" for note in getattr(exc, "__notes__", ()))
         _fail(f"{'terminated' if signum == signal.SIGTERM else 'interrupted'}; no partial file was left under a "
-              "final name")
+              f"final name{notes}")
         _announced = True
     return typer.Exit(interrupts.exit_code(signum))
 
@@ -225,6 +226,10 @@ def sweep(
     metric: Optional[str] = typer.Option(None, "--metric", help="peak_displacement, rms_displacement, settling_time "
                                          "or peak_ground_force."),
     method: Optional[str] = typer.Option(None, "--method", help="Solver for every member (default: the scenario's)."),
+    keep: Optional[str] = typer.Option(None, "--keep", help="What the file stores per member: full (time histories "
+                                       "and metrics, the default) or metrics."),
+    resume: bool = typer.Option(False, "--resume", help="Finish the sweep an interrupted run left in "
+                                "<stem>_sweep.partial.h5 (same command line)."),
     workers: Optional[int] = typer.Option(None, "--workers", min=1, help="Processes for nonlinear members "
                                           "(default: the number of cores)."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
@@ -235,6 +240,7 @@ def sweep(
     """Run a family: parameters over grids, initial conditions, or a frequency response; one HDF5 and plots."""
     from smdcli.commands.sweep import format_summary, run_and_write, summary
     from smdcli.errors import SmdError
+    from smdcli.sweep.stream import KEEPS
 
     if method is not None:
         from smdcli.solvers.catalog import check_method_name
@@ -248,8 +254,10 @@ def sweep(
                "input": input_dof, "direction": direction, "measure": measure or None, "quantity": quantity,
                "metric": metric, "method": method}
     try:
+        if keep is not None and keep not in KEEPS:
+            raise typer.BadParameter(f"expected one of {', '.join(KEEPS)}, found {keep!r}", param_hint="--keep")
         run = run_and_write(scenario, out, options, workers, plots=not no_plots,
-                            progress=progress_wanted(quiet, as_json))
+                            progress=progress_wanted(quiet, as_json), keep=keep, resume=resume)
     except (SmdError, OSError) as exc:
         raise typer.Exit(_report_json(exc, {"scenario": str(scenario)}, as_json))
     except KeyboardInterrupt as exc:
@@ -259,8 +267,7 @@ def sweep(
         _print_json(data)
     elif not quiet:
         typer.echo(format_summary(data))
-    failed = run.result is not None and not run.result.success.all()
-    raise typer.Exit(1 if failed else 0)
+    raise typer.Exit(1 if run.failed_count else 0)
 
 
 @app.command()

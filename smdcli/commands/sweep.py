@@ -15,7 +15,6 @@ from smdcli.errors import UsageError
 from smdcli.progress import bar
 from smdcli.sweep.family import Family, build_family
 from smdcli.sweep.frequency import FrequencyResponse, _driving_force, frequency_response, input_index
-from smdcli.sweep.members import FamilyResult, metrics, solve_family
 from smdcli.sweep.shooting import MAX_PERIODS
 from smdcli.sweep.spec import METRIC_UNITS, read_spec
 from smdcli.text import plural
@@ -23,28 +22,38 @@ from smdcli.text import plural
 # ------------------------------------------------------------------- command
 
 
+LISTED = 50  # members a summary names (metrics, failures); the HDF5 file holds them all
+
+
 @dataclass
 class SweepRun:
-    """What one `smd sweep` did: the family, its results and the files written."""
+    """What one `smd sweep` did: the family, what its members gave (a summary's worth) and the files written."""
 
     family: Family
-    result: FamilyResult | None = None
-    metrics: dict[str, np.ndarray] | None = None
+    keep: str = "full"
+    how: str = ""
+    wall_time_s: float = 0.0
+    failed: list[str] = field(default_factory=list)  # "label: message" of the first LISTED failed members
+    failed_count: int = 0
+    metric: np.ndarray | None = None  # (S, n): the spec's metric of every member
+    traces: dict = field(default_factory=dict)  # member -> (time, quantity, success): the overlay's lines
     response: FrequencyResponse | None = None
+    resumed_from: int = 0  # members a partial file already held
     outputs: list = field(default_factory=list)
 
 
 def run_and_write(path, out, cli: dict[str, Any], workers: int | None = None, plots: bool = True,
-                  progress: bool = False) -> SweepRun:
+                  progress: bool = False, keep: str | None = None, resume: bool = False) -> SweepRun:
     """Load, build the family, solve it, write `<stem>_sweep.h5` and the plots; input errors before any work."""
     from smdcli.io.atomic import together
     from smdcli.io.folders import output_folder
-    from smdcli.io.sweep_hdf5 import write_sweep
 
     sc = scenario_mod.load(path)
     spec = read_spec(sc, cli)
     family = build_family(sc, spec)
     if spec.frequency is not None:
+        if keep is not None or resume:
+            raise UsageError(f"{sc.path}: --keep and --resume are for time-domain sweeps, not a frequency response")
         input_index(family.base, spec.input, sc.path)
         if spec.normalized and family.base.n != 1:
             raise UsageError(f"{sc.path}: --normalized needs a 1-DOF scene (X K / F0 against omega / omega_n); "
@@ -54,70 +63,231 @@ def run_and_write(path, out, cli: dict[str, Any], workers: int | None = None, pl
                 _driving_force(family.member_scenario(s))
     out_dir = output_folder(out)
     run = SweepRun(family)
-    measured = spec.frequency is not None and (not family.base.is_linear or spec.measure)
-    total = len(family) * ((2 if spec.direction == "both" else 1) * len(spec.frequency) if measured else 1)
-    label = "frequency response" if spec.frequency is not None else "sweeping"
-    shown = progress and total > 1
-    with bar(label, total, shown) as advance:
-        tick = advance if shown else None  # None: workers need not report over a queue
-        if spec.frequency is not None:
-            run.response = frequency_response(family, workers, tick)
-        else:
-            run.result = solve_family(family, spec.method, workers, tick)
-            run.metrics = metrics(family, run.result)
-    took = run.response.wall_time_s if run.response else run.result.wall_time_s
-    if run.result is not None:
-        how = run.result.how
-    elif run.response.measured:
-        how = "simulated to steady state (shooting), one task per sweep direction"
-    else:
-        how = "exact receptance, all members at once"
     with together():  # the files appear together, or none of them
-        h5 = out_dir / f"{sc.stem}_sweep.h5"
-        write_sweep(h5, family, run.result, run.metrics, run.response, {"how": how, "wall_time_s": took})
-        run.outputs.append(h5)
+        if spec.frequency is not None:
+            _frequency_response(run, out_dir, workers, progress)
+        else:
+            _time_family(run, out_dir, spec.method, keep, resume, workers, progress)
         if plots:
-            from smdcli.plots.common import save_figure
-            from smdcli.plots.sweep import frequency_figure, metric_figure, overlay_figure
-
-            title = sc.title or sc.stem
-            figures = []
-            if run.response is not None:
-                figures.append(("frequency", frequency_figure(family, run.response, title, spec.frequency_unit,
-                                                                       spec.normalized)))
-            else:
-                figures.append((spec.quantity, overlay_figure(family, run.result, spec.quantity, title)))
-                if len(family) > 1 and spec.kind == "parameter":
-                    name = "heatmap" if len(spec.parameters) == 2 else "metric"
-                    figures.append((name, metric_figure(family, run.metrics[spec.metric], spec.metric,
-                                                                 family.base.dofs, title)))
-            for name, figure in figures:
-                png = out_dir / f"{sc.stem}_sweep_{name}.png"
-                save_figure(figure, png)
-                run.outputs.append(png)
+            _plots(run, out_dir, spec)
     return run
+
+
+def _frequency_response(run: SweepRun, out_dir, workers, progress: bool) -> None:
+    from smdcli.io.sweep_hdf5 import write_sweep
+
+    family, spec = run.family, run.family.spec
+    measured = not family.base.is_linear or spec.measure
+    total = len(family) * ((2 if spec.direction == "both" else 1) * len(spec.frequency) if measured else 1)
+    shown = progress and total > 1
+    with bar("frequency response", total, shown) as advance:
+        run.response = frequency_response(family, workers, advance if shown else None)
+    if run.response.measured:
+        run.how = "simulated to steady state (shooting), one task per sweep direction"
+    else:
+        run.how = "exact receptance, all members at once"
+    run.wall_time_s = run.response.wall_time_s
+    h5 = out_dir / f"{family.scenario.stem}_sweep.h5"
+    write_sweep(h5, family, run.response, {"how": run.how, "wall_time_s": run.wall_time_s})
+    run.outputs.append(h5)
+
+
+def _time_family(run: SweepRun, out_dir, method: str | None, keep: str | None, resume: bool, workers,
+                 progress: bool) -> None:
+    """Solve the family chunk by chunk, each chunk's rows written as it finishes to `<stem>_sweep.partial.h5`,
+    renamed `<stem>_sweep.h5` when complete; an interrupted run leaves the partial file for --resume."""
+    import time
+
+    from smdcli.io.atomic import resumable_path
+    from smdcli.io.sweep_hdf5 import IncompatiblePartial, SweepFile
+    from concurrent.futures import ThreadPoolExecutor
+
+    from smdcli.sweep.members import solve_family
+    from smdcli.sweep.stream import chunk_buffers, chunk_plan, family_grid, identity
+
+    family = run.family
+    S = len(family)
+    grid, length = family_grid(family)
+    keep = keep or "full"
+    _check_disk(out_dir, family, keep, length)
+    plan = chunk_plan(family, length)
+    final = out_dir / f"{family.scenario.stem}_sweep.h5"
+    partial = final.with_name(f"{family.scenario.stem}_sweep.partial.h5")
+    digest = identity(family, method, keep)
+    if resume:
+        if not partial.exists():
+            raise UsageError(f"--resume: no {partial} to finish (it is left by an interrupted sweep into {out_dir})")
+        try:
+            stream = SweepFile.resume(partial, family, keep, digest)
+        except IncompatiblePartial as exc:
+            raise UsageError(str(exc)) from None
+    else:
+        stream = SweepFile.create(partial, family, keep, grid, length, digest)
+    run.keep, run.resumed_from = keep, stream.done
+    run.metric = np.full((S, family.base.n), np.nan)
+    if stream.done:
+        _recall(run, stream)
+    started = time.perf_counter()
+    # One thread writes chunk k (h5py releases the GIL while writing) while chunk k + 1 is solved into the other
+    # set of buffers; a set is reused only once its chunk is on disk.
+    writer = ThreadPoolExecutor(max_workers=1)
+    buffers = [chunk_buffers(family, plan, length) for _ in range(2)]
+    writing: list = []
+    try:
+        with resumable_path(partial, final):
+            shown = progress and S > 1
+            with bar("sweeping", S, shown) as advance:
+                if stream.done:
+                    advance(stream.done)
+                for k, members in enumerate(plan):
+                    if members.stop <= stream.done:
+                        continue
+                    if members.start < stream.done:  # a plan is a function of the family: chunks line up
+                        raise UsageError(f"{partial}: members_done {stream.done} is inside a chunk; run without "
+                                         "--resume to start over")
+                    if len(writing) == 2:
+                        writing.pop(0).result()
+                    result = solve_family(family.take(members), method, workers, advance if shown else None,
+                                          buffers[k % 2])
+                    writing.append(writer.submit(_measure_and_write, run, stream, members, result, grid, length))
+                for pending in writing:
+                    pending.result()
+            run.wall_time_s = time.perf_counter() - started
+            chunks = f", in {plural(len(plan), 'chunk')} of up to {len(plan[0])}" if len(plan) > 1 else ""
+            run.how = f"{run.how} over {plural(S, 'member')}{chunks}"
+            stream.finish({"how": run.how, "wall_time_s": run.wall_time_s})
+            stream.close()
+    except KeyboardInterrupt as exc:
+        _settle(writing)  # the chunks being written finish: members_done counts whole chunks
+        done = stream.done
+        stream.close()
+        exc.add_note(f"{done} of {S} members are in {partial}; the same command with --resume finishes it")
+        raise
+    except BaseException:
+        _settle(writing)
+        stream.close()
+        raise
+    finally:
+        writer.shutdown()
+    run.outputs.append(final)
+
+
+def _settle(writing: list) -> None:
+    """Wait for chunks still being written, whatever interrupts the wait."""
+    for pending in writing:
+        while True:
+            try:
+                pending.exception()
+                break
+            except KeyboardInterrupt:
+                continue
+
+
+def _measure_and_write(run: SweepRun, stream, members: range, result, grid, length: int) -> None:
+    """A solved chunk measured, appended to the file and noted for the summary (on the writer thread)."""
+    from smdcli.sweep.stream import measure_chunk
+
+    chunk = measure_chunk(run.family, members, result, run.keep, grid, length, run.family.spec.quantity)
+    stream.append(chunk)
+    _note(run, chunk)
+
+
+def _note(run: SweepRun, chunk) -> None:
+    """Keep what the summary and the plots need from a chunk."""
+    family = run.family
+    run.how = chunk.how
+    failed = np.flatnonzero(~chunk.success)
+    run.failed_count += len(failed)
+    for row in failed[:max(0, LISTED - len(run.failed))]:
+        s = chunk.start + int(row)
+        run.failed.append(f"{family.labels[s]}: {chunk.messages[row]}")
+    run.metric[chunk.start:chunk.start + len(chunk)] = chunk.metrics[family.spec.metric]
+    run.traces.update(chunk.traces)
+
+
+def _recall(run: SweepRun, stream) -> None:
+    """What the summary and plots need from the members a resumed partial file already holds."""
+    from smdcli.sweep.stream import drawn_members
+
+    f, done, family = stream.f, stream.done, run.family
+    run.metric[:done] = f[f"metrics/{family.spec.metric}"][:done]
+    success = f["success"][:done]
+    failed = np.flatnonzero(~success)
+    run.failed_count = len(failed)
+    messages = f["message"]
+    run.failed = [f"{family.labels[s]}: {messages[s].decode()}" for s in failed[:LISTED]]
+    if family.spec.quantity in f:
+        time = f["time"]
+        for s in drawn_members(len(family)):
+            if s < done:
+                t = time[()] if time.ndim == 1 else time[s]
+                run.traces[int(s)] = (t, f[family.spec.quantity][s], bool(success[s]))
+
+
+def _check_disk(out_dir, family, keep: str, length: int) -> None:
+    """Refuse, before any work, histories the output folder's disk cannot hold; say what --keep metrics needs."""
+    import shutil
+
+    if keep != "full":
+        return
+    histories = 4 * len(family) * length * family.base.n * 8
+    metrics_only = len(family) * (len(METRIC_UNITS) * family.base.n * 8 + 64)
+    free = shutil.disk_usage(out_dir).free
+    if histories > 0.9 * free:
+        raise UsageError(f"{len(family)} members x {length} time points x {family.base.n} DOFs of histories need "
+                         f"{_size(histories)}, more than the {_size(free)} free in {out_dir}; --keep metrics stores "
+                         f"the metrics alone in about {_size(metrics_only)}")
+
+
+def _size(count: float) -> str:
+    for unit in ("B", "kB", "MB", "GB", "TB"):
+        if count < 1000 or unit == "TB":
+            return f"{count:.3g} {unit}"
+        count /= 1000
+
+
+def _plots(run: SweepRun, out_dir, spec) -> None:
+    from smdcli.plots.common import save_figure
+    from smdcli.plots.sweep import frequency_figure, metric_figure, overlay_figure
+
+    family = run.family
+    title = family.scenario.title or family.scenario.stem
+    figures = []
+    if run.response is not None:
+        figures.append(("frequency", frequency_figure(family, run.response, title, spec.frequency_unit,
+                                                               spec.normalized)))
+    else:
+        figures.append((spec.quantity, overlay_figure(family, run.traces, family.base.dofs, spec.quantity, title,
+                                                      run.how)))
+        if len(family) > 1 and spec.kind == "parameter":
+            name = "heatmap" if len(spec.parameters) == 2 else "metric"
+            figures.append((name, metric_figure(family, run.metric, spec.metric, family.base.dofs, title)))
+    for name, figure in figures:
+        png = out_dir / f"{family.scenario.stem}_sweep_{name}.png"
+        save_figure(figure, png)
+        run.outputs.append(png)
 
 
 def summary(run: SweepRun) -> dict:
     """What a user wants to read after a sweep, as plain data."""
     family = run.family
     data: dict[str, Any] = {"scenario": family.scenario.path, "kind": family.spec.kind, "members": len(family),
-                            "parameters": list(family.spec.parameters), "outputs": [str(p) for p in run.outputs]}
-    if run.result is not None:
-        data["how"] = run.result.how
-        data["wall_time_s"] = run.result.wall_time_s
-        data["failed"] = [family.labels[s] + ": " + run.result.messages[s]
-                          for s in np.flatnonzero(~run.result.success)]
-        metric = run.metrics[family.spec.metric]
+                            "parameters": list(family.spec.parameters), "outputs": [str(p) for p in run.outputs],
+                            "how": run.how, "wall_time_s": run.wall_time_s}
+    if run.response is None:
+        data["keep"] = run.keep
+        if run.resumed_from:
+            data["resumed_from"] = run.resumed_from
+        data["failed"] = run.failed
+        data["failed_count"] = run.failed_count
         data["metric"] = {"name": family.spec.metric, "units": METRIC_UNITS[family.spec.metric],
-                          "per_member": {family.labels[s]: dict(zip(family.base.dofs, map(float, metric[s])))
-                                         for s in range(min(len(family), 50))}}
+                          "per_member": {family.labels[s]: dict(zip(family.base.dofs, map(float, run.metric[s])))
+                                         for s in range(min(len(family), LISTED))}}
         if family.spec.metric == "settling_time":
             data["metric"]["null_means"] = "not settled within the run"
-    if run.response is not None:
+    else:
         r = run.response
         data["how"] = "exact receptance" if r.exact else "measured by simulation to steady state"
-        data["wall_time_s"] = r.wall_time_s
         data["input_dof"] = r.input_dof
         data["peaks"] = r.peaks
         if r.difference is not None:
@@ -131,8 +301,15 @@ def format_summary(data: dict) -> str:
     """The summary as a few lines for the terminal."""
     lines = [f"{data['scenario']}: {plural(data['members'], 'member')} "
              f"({data['kind']} sweep) in {data['wall_time_s'] * 1e3:.1f} ms, {data['how']}"]
+    if data.get("keep") == "metrics":
+        lines.append("  kept: the metrics and status of each member (--keep metrics), no time histories")
+    if data.get("resumed_from"):
+        lines.append(f"  resumed: {data['resumed_from']} members were already done")
     for failed in data.get("failed", []):
         lines.append(f"  failed: {failed}")
+    if data.get("failed_count", 0) > len(data.get("failed", [])):
+        lines.append(f"  ... {data['failed_count'] - len(data['failed'])} more failed (see success and message in "
+                     "the HDF5 file)")
     if "metric" in data:
         name = data["metric"]["name"]
         for label, values in list(data["metric"]["per_member"].items())[:12]:

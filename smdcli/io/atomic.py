@@ -14,6 +14,7 @@ from pathlib import Path
 from smdcli import interrupts
 
 _pending: list[tuple[str, Path]] | None = None  # inside together(): renames waiting for the block's end
+_kept: set[str] = set()  # temporary files that record progress (a streamed sweep's partial file): never discarded
 
 
 def _commit(renames: list[tuple[str, Path]]) -> None:
@@ -26,7 +27,7 @@ def _commit(renames: list[tuple[str, Path]]) -> None:
 
 def _discard(paths) -> None:
     with interrupts.held():
-        for tmp in paths:
+        for tmp in set(map(str, paths)) - _kept:
             with suppress(OSError):
                 os.unlink(tmp)
 
@@ -69,3 +70,16 @@ def atomic_path(final: Path):
     except BaseException:
         _discard([tmp])
         raise
+
+
+@contextmanager
+def resumable_path(partial: Path, final: Path):
+    """Yield `partial`, a file that records its own progress (a streamed sweep): renamed onto `final` when the block
+    succeeds (inside together(): when that block ends), and left where it is if anything fails, to be resumed."""
+    partial, final = Path(partial), Path(final)
+    _kept.add(str(partial))
+    yield partial
+    if _pending is not None:
+        _pending.append((str(partial), final))
+    else:
+        _commit([(str(partial), final)])

@@ -9,96 +9,217 @@ from pathlib import Path
 import numpy as np
 
 from smdcli.io.atomic import atomic_path
-from smdcli.io.hdf5 import _strings, write_header, write_matrices
-from smdcli.solvers.base import acceleration_accuracy
+from smdcli.io.hdf5 import _strings, _with_scales, write_header, write_matrices
 from smdcli.sweep.spec import METRIC_UNITS, SETTLING_BAND, parameter_units
 
 
-def write_sweep(path: Path, family, result=None, metrics=None, response=None, run: dict | None = None) -> None:
-    """Write a sweep: members on a leading axis (a dimension scale), the swept values, stacked results or a frequency response."""
+def write_sweep(path: Path, family, response, run: dict | None = None) -> None:
+    """Write a frequency response sweep: members on a leading axis (a dimension scale), the swept values, the
+    response. Time-domain sweeps stream through SweepFile."""
     import h5py
 
-
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
-        write_header(f, family.scenario, "sweep")
-        spec = family.spec
-        f.attrs["sweep_kind"] = spec.kind
-        f.attrs["parameters"] = list(spec.parameters)
-        f.attrs["grid_shape"] = list(family.shape)
-        S = len(family)
-        member = f.create_dataset("member", data=np.arange(S))
-        member.make_scale("member")
-        _strings(f, "label", family.labels).dims[0].attach_scale(member)
-        params = f.create_group("parameters")
-        grid = f.create_group("grid") if spec.parameters else None
-        if grid is not None:
-            grid.attrs["grid_shape"] = list(family.shape)
-            grid.attrs["order"] = "C: the last parameter varies fastest along member"
-        for i, name in enumerate(spec.parameters):
-            ds = params.create_dataset(name, data=family.values[:, i])
-            ds.attrs["units"] = parameter_units(name)
-            ds.dims[0].attach_scale(member)
-            # The grid's own axis: member reshapes to grid_shape, and these are its coordinates.
-            axis = grid.create_dataset(name, data=np.asarray(spec.values[i], dtype=float))
-            axis.attrs["units"] = parameter_units(name)
-            axis.attrs["axis"] = i
-            axis.make_scale(name)
-        dof = _strings(f, "dof", family.base.dofs)
-        dof.make_scale("dof")
-        initial = f.create_group("initial_conditions")
-        for name in ("x0", "v0"):
-            ds = initial.create_dataset(name, data=getattr(family, name))
-            ds.dims[0].attach_scale(member)
-            ds.dims[1].attach_scale(dof)
-        model = f.create_group("model")
-        write_matrices(model, family, dof, member)
-        if run:
-            group = f.create_group("run")
-            for key, value in run.items():
-                group.attrs[key] = value
-        if result is not None:
-            _write_time_family(f, family, result, metrics, member, dof)
-        if response is not None:
-            _write_response(f, response, member, dof, family, spec.normalized)
+        member, dof = _write_family(f, family)
+        _write_run(f, run)
+        _write_response(f, response, member, dof, family, family.spec.normalized)
 
 
-def _write_time_family(f, family, result, metrics, member, dof) -> None:
-    time = f.create_dataset("time", data=result.time)
-    time.attrs["units"] = "s"
-    if result.time.ndim == 1:
-        time.make_scale("time")
-    for name, units in (("displacement", "m"), ("velocity", "m/s"), ("acceleration", "m/s^2"), ("force", "N")):
-        ds = f.create_dataset(name, data=np.ascontiguousarray(getattr(result, name)))
-        ds.attrs["units"] = units
-        if result.stated_accuracy is not None and name != "force":  # the worst member's, relative to the peak
-            stated = float(np.nanmax(result.stated_accuracy, initial=0.0))
-            if name == "acceleration":
-                stated = float(np.nanmax(acceleration_accuracy(
-                    family.M, family.C, family.K, result.stated_accuracy, result.displacement, result.velocity,
-                    result.acceleration, result.force), initial=0.0))
-            ds.attrs["stated_accuracy"] = stated
+def _write_family(f, family):
+    """What every sweep file holds before any result: header, members and labels, the swept values and grid, DOFs,
+    initial conditions and matrices. Returns the member and DOF scales."""
+    write_header(f, family.scenario, "sweep")
+    spec = family.spec
+    f.attrs["sweep_kind"] = spec.kind
+    f.attrs["parameters"] = list(spec.parameters)
+    f.attrs["grid_shape"] = list(family.shape)
+    S = len(family)
+    member = f.create_dataset("member", data=np.arange(S))
+    member.make_scale("member")
+    _strings(f, "label", family.labels).dims[0].attach_scale(member)
+    params = f.create_group("parameters")
+    grid = f.create_group("grid") if spec.parameters else None
+    if grid is not None:
+        grid.attrs["grid_shape"] = list(family.shape)
+        grid.attrs["order"] = "C: the last parameter varies fastest along member"
+    for i, name in enumerate(spec.parameters):
+        ds = params.create_dataset(name, data=family.values[:, i])
+        ds.attrs["units"] = parameter_units(name)
         ds.dims[0].attach_scale(member)
-        if result.time.ndim == 1:
-            ds.dims[1].attach_scale(time)
-        ds.dims[2].attach_scale(dof)
-    f.create_dataset("success", data=result.success).dims[0].attach_scale(member)
-    _strings(f, "message", result.messages).dims[0].attach_scale(member)
-    _strings(f, "method", result.methods).dims[0].attach_scale(member)
-
-    if result.stated_accuracy is not None:
-        ds = f.create_dataset("stated_accuracy", data=result.stated_accuracy)
-        ds.attrs["units"] = "1"
-        ds.attrs["meaning"] = "each member's vouched error, relative to its peak"
-        ds.dims[0].attach_scale(member)
-    group = f.create_group("metrics")
-    group.attrs["settling_band"] = SETTLING_BAND
-    for name, values in metrics.items():
-        ds = group.create_dataset(name, data=values)
-        ds.attrs["units"] = METRIC_UNITS[name]
-        if name != "settling_time" and result.stated_accuracy is not None:  # peaks and RMS carry the runs' error
-            ds.attrs["stated_accuracy"] = float(np.nanmax(result.stated_accuracy, initial=0.0))
+        # The grid's own axis: member reshapes to grid_shape, and these are its coordinates.
+        axis = grid.create_dataset(name, data=np.asarray(spec.values[i], dtype=float))
+        axis.attrs["units"] = parameter_units(name)
+        axis.attrs["axis"] = i
+        axis.make_scale(name)
+    dof = _strings(f, "dof", family.base.dofs)
+    dof.make_scale("dof")
+    initial = f.create_group("initial_conditions")
+    for name in ("x0", "v0"):
+        ds = initial.create_dataset(name, data=getattr(family, name))
         ds.dims[0].attach_scale(member)
         ds.dims[1].attach_scale(dof)
+    model = f.create_group("model")
+    write_matrices(model, family, dof, member)
+    return member, dof
+
+
+def _write_run(f, run: dict | None) -> None:
+    group = f.require_group("run")
+    for key, value in (run or {}).items():
+        group.attrs[key] = value
+
+
+HISTORY_UNITS = {"displacement": "m", "velocity": "m/s", "acceleration": "m/s^2", "force": "N"}
+CHUNK_BYTES = 1 << 20  # an HDF5 chunk of a growing data set: about 1 MB
+
+
+class IncompatiblePartial(ValueError):
+    """A partial file that is not the sweep asked for (another scenario, grid, method or --keep), or unreadable."""
+
+
+class SweepFile:
+    """A time-domain sweep written as its members finish: the family first, then each chunk's rows appended to
+    resizable, chunked data sets, flushed, and counted in the root attribute members_done; the root attribute
+    complete turns true with the last member. Histories are stored uncompressed (float64 histories shrink ~20 % under
+    gzip at 20x the write time); the per-member sets (metrics, status) are compressed."""
+
+    def __init__(self, f, members: int):
+        self.f = f
+        self.members = members
+
+    @classmethod
+    def create(cls, path: Path, family, keep: str, grid, length: int, identity: str) -> SweepFile:
+        """A new file at path holding the family and empty growing data sets."""
+        import h5py
+
+        f = None
+        try:
+            f = h5py.File(path, "w")
+            member, dof = _write_family(f, family)
+            f.attrs["keep"] = keep
+            f.attrs["sweep_identity"] = identity
+            f.attrs["members_done"] = 0
+            f.attrs["complete"] = False
+            n = family.base.n
+            if grid is not None:
+                time = f.create_dataset("time", data=grid)
+                time.make_scale("time")
+            else:
+                time = _growing(f, "time", (length,), float)
+            time.attrs["units"] = "s"
+            if keep == "full":
+                for name, units in HISTORY_UNITS.items():
+                    ds = _growing(f, name, (length, n), float)
+                    ds.attrs["units"] = units
+                    _with_scales(ds, member, time if grid is not None else None, dof)
+            _growing(f, "success", (), bool, compressed=True).dims[0].attach_scale(member)
+            for name in ("message", "method"):
+                _growing(f, name, (), h5py.string_dtype("utf-8"), compressed=True).dims[0].attach_scale(member)
+            ds = _growing(f, "stated_accuracy", (), float, compressed=True)
+            ds.attrs["units"] = "1"
+            ds.attrs["meaning"] = "each member's vouched error, relative to its peak"
+            ds.dims[0].attach_scale(member)
+            group = f.create_group("metrics")
+            group.attrs["settling_band"] = SETTLING_BAND
+            for name, units in METRIC_UNITS.items():
+                ds = _growing(group, name, (n,), float, compressed=True)
+                ds.attrs["units"] = units
+                _with_scales(ds, member, dof)
+            f.flush()
+        except BaseException:  # cut before it could record any member: nothing to resume
+            if f is not None:
+                f.close()
+            path.unlink(missing_ok=True)
+            raise
+        return cls(f, len(family))
+
+    @classmethod
+    def resume(cls, path: Path, family, keep: str, identity: str) -> SweepFile:
+        """An interrupted sweep's file, ready to take the members after its members_done (rows past it, written
+        when the run was cut, are dropped)."""
+        import h5py
+
+        try:
+            f = h5py.File(path, "r+")
+        except OSError as exc:
+            raise IncompatiblePartial(f"{path}: cannot be read ({exc}); run without --resume to start over") from None
+        if f.attrs.get("sweep_identity") != identity:
+            kept = f.attrs.get("keep")
+            f.close()
+            why = f" (it keeps {kept}, not {keep})" if kept and kept != keep else ""
+            raise IncompatiblePartial(f"{path}: is from a different sweep (scenario, members, grid, method or --keep "
+                                      f"differ){why}; run without --resume to start over")
+        sweep = cls(f, len(family))
+        done = sweep.done
+        for ds in sweep._growing_sets():
+            if ds.shape[0] < done:
+                f.close()
+                raise IncompatiblePartial(f"{path}: {ds.name} holds {ds.shape[0]} members, fewer than the "
+                                          f"{done} it says are done; run without --resume to start over")
+            ds.resize(done, axis=0)
+        return sweep
+
+    @property
+    def done(self) -> int:
+        """Members written so far."""
+        return int(self.f.attrs["members_done"])
+
+    def _growing_sets(self):
+        f = self.f
+        names = [q for q in HISTORY_UNITS if q in f] + ["success", "message", "method", "stated_accuracy"]
+        names += [f"metrics/{m}" for m in METRIC_UNITS]
+        if f["time"].maxshape[0] is None:
+            names.append("time")
+        return [f[name] for name in names]
+
+    def append(self, chunk) -> None:
+        """Rows of the next chunk of members, flushed, and members_done moved past them."""
+        f, start, stop = self.f, chunk.start, chunk.start + len(chunk)
+        if start != self.done:
+            raise ValueError(f"chunk starts at member {start}, the file is at {self.done}")
+        rows = {"success": chunk.success, "message": np.array(chunk.messages, dtype=object),
+                "method": np.array(chunk.methods, dtype=object), "stated_accuracy": chunk.stated}
+        rows.update({f"metrics/{name}": values for name, values in chunk.metrics.items()})
+        if chunk.histories is not None:
+            rows.update(chunk.histories)
+        if chunk.time is not None:
+            rows["time"] = chunk.time
+        for name, data in rows.items():
+            ds = f[name]
+            ds.resize(stop, axis=0)
+            ds[start:stop] = data
+        stated = float(np.nanmax(chunk.stated, initial=0.0))
+        worst = {name: stated for name in ("displacement", "velocity")}
+        worst["acceleration"] = chunk.acceleration_stated
+        worst.update({f"metrics/{m}": stated for m in METRIC_UNITS if m != "settling_time"})
+        for name, value in worst.items():  # the worst member's so far, relative to the peak
+            if name in f:
+                f[name].attrs["stated_accuracy"] = max(float(f[name].attrs.get("stated_accuracy", 0.0)), value)
+        f.attrs["members_done"] = stop
+        f.flush()
+
+    def finish(self, run: dict) -> None:
+        """Mark the file complete, with the run's description."""
+        if self.done != self.members:
+            raise ValueError(f"{self.done} of {self.members} members written")
+        _write_run(self.f, run)
+        self.f.attrs["complete"] = True
+        self.f.flush()
+
+    def close(self) -> None:
+        """Close the file (complete or not: an incomplete one is what --resume finishes)."""
+        self.f.close()
+
+
+def _growing(group, name: str, row: tuple, dtype, compressed: bool = False):
+    """A data set growing along its first axis (members), chunked to about CHUNK_BYTES."""
+    import h5py
+
+    itemsize = 16 if h5py.check_string_dtype(np.dtype(dtype)) else np.dtype(dtype).itemsize
+    per_member = itemsize * int(np.prod(row, dtype=np.int64))
+    rows = max(1, CHUNK_BYTES // per_member)
+    options = {"compression": "gzip", "compression_opts": 1, "shuffle": True} if compressed else {}
+    return group.create_dataset(name, shape=(0,) + row, maxshape=(None,) + row, chunks=(rows,) + row, dtype=dtype,
+                                **options)
 
 
 def _write_response(f, response, member, dof, family, normalized: bool) -> None:

@@ -14,7 +14,6 @@ from smdcli.sweep.spec import parameter_label
 # ------------------------------------------------------------------ sweeps
 
 MAX_LEGEND = 12  # beyond this many members, a colour bar replaces the legend
-MAX_LINES = 300  # members drawn in an overlay; more would be slow and look the same
 QUANTITY_LABELS = {"displacement": "Displacement x [m]", "velocity": "Velocity v [m/s]",
                    "acceleration": "Acceleration a [m/s²]", "force": "Applied force F [N]"}
 METRIC_LABELS = {"peak_displacement": "peak |x| [m]", "rms_displacement": "RMS x [m]",
@@ -32,32 +31,32 @@ def _member_colors(count: int):
     return [cmap(i / max(count - 1, 1)) for i in range(count)], cmap
 
 
-def overlay_figure(family, result, quantity: str, title: str):
-    """One panel per DOF, one line per member of the family, with a legend (or a colour bar for many)."""
-    data = getattr(result, quantity)
-    S, N, n = data.shape
+def overlay_figure(family, traces: dict, dofs, quantity: str, title: str, how: str):
+    """One panel per DOF, one line per member drawn (traces: member -> (time, quantity (N, n), success)), with a
+    legend (or a colour bar for many)."""
+    S, n = len(family), len(dofs)
     colors, cmap = _member_colors(S)
     height = 2.2 + 2.6 * n
     # Right of the panels (6.3 in wide): the colour bar in 1.26 in, or the legend as wide as its longest label
     # (8 pt text, ~0.6 em a character, at least 1.8 in), so that no label is cut at the figure's edge.
-    longest = max((len(label) for label in family.labels), default=0)
+    longest = max((len(family.labels[s]) for s in traces), default=0)
     legend = 1.26 if cmap is not None else max(1.8, 0.45 + 0.6 * 8 / 72 * longest)
     width = 0.9 + 6.3 + legend
     fig = _figure(figsize=(width, height))
     axes = np.atleast_1d(fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0])
     fig.subplots_adjust(left=0.9 / width, right=1 - legend / width, top=1 - 0.75 / height, bottom=0.55 / height,
                         hspace=0.12)
-    drawn = np.unique(np.linspace(0, S - 1, min(S, MAX_LINES)).round().astype(int))
+    drawn = sorted(traces)
     for j, ax in enumerate(axes):
         for s in drawn:
-            t = result.time if result.time.ndim == 1 else result.time[s]
+            t, data, success = traces[s]
             ok = np.isfinite(t)
             style = _STYLES[s % len(_STYLES)] if cmap is None else "-"
-            ax.plot(*envelope(t[ok], data[s, ok, j]), style, lw=1.4 if cmap is None else 0.8, color=colors[s],
+            ax.plot(*envelope(t[ok], data[ok, j]), style, lw=1.4 if cmap is None else 0.8, color=colors[s],
                     label=family.labels[s])
-            if not result.success[s]:
-                ax.plot(t[ok][-1], data[s, ok, j][-1], "x", color=colors[s], ms=8)
-        ax.set_ylabel(f"{result.dofs[j]}: {QUANTITY_LABELS[quantity]}", fontsize=9)
+            if not success:
+                ax.plot(t[ok][-1], data[ok, j][-1], "x", color=colors[s], ms=8)
+        ax.set_ylabel(f"{dofs[j]}: {QUANTITY_LABELS[quantity]}", fontsize=9)
         ax.grid(True, alpha=0.4)
     axes[-1].set_xlabel("Time t [s]")
     if cmap is None:
@@ -65,7 +64,7 @@ def overlay_figure(family, result, quantity: str, title: str):
     else:
         _colorbar(fig, axes, cmap, family)
     shown = f" ({len(drawn)} of them drawn, evenly spaced)" if len(drawn) < S else ""
-    fig.suptitle(_wrap(f"{title}\n{S} runs{shown}: {result.how}", 100), fontsize=10)
+    fig.suptitle(_wrap(f"{title}\n{S} runs{shown}: {how}", 100), fontsize=10)
     return fig
 
 

@@ -162,6 +162,18 @@ class Family:
         return replace(self.base, M=self.M[s], C=self.C[s], K=self.K[s], x0=self.x0[s], v0=self.v0[s],
                        cubic=cubic, quadratic=quadratic)
 
+    def take(self, members: range) -> Family:
+        """Members start..stop as a family of their own (a chunk of a streamed sweep), not a grid."""
+        part = slice(members.start, members.stop)
+
+        def cut(a):
+            return None if a is None else a[part]
+
+        return replace(self, given_labels=self.given_labels[part], values=self.values[part], shape=(len(members),),
+                       M=self.M[part], C=self.C[part], K=self.K[part], x0=self.x0[part], v0=self.v0[part],
+                       scenarios=cut(self.scenarios), cubic_coef=cut(self.cubic_coef),
+                       quadratic_coef=cut(self.quadratic_coef))
+
     def member_scenario(self, s: int) -> Scenario:
         """Member s as a Scenario (made on demand where the family holds only matrices)."""
         if self.scenarios is not None:
