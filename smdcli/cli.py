@@ -230,6 +230,9 @@ def sweep(
                                        "and metrics, the default) or metrics."),
     resume: bool = typer.Option(False, "--resume", help="Finish the sweep an interrupted run left in "
                                 "<stem>_sweep.partial.h5 (same command line)."),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Run the member chunks on the Dask "
+                                            "scheduler at ADDRESS (tcp://host:8786), or 'local' for a LocalCluster "
+                                            "of --workers processes (needs the [dask] extra)."),
     workers: Optional[int] = typer.Option(None, "--workers", min=1, help="Processes for nonlinear members "
                                           "(default: the number of cores)."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
@@ -257,7 +260,8 @@ def sweep(
         if keep is not None and keep not in KEEPS:
             raise typer.BadParameter(f"expected one of {', '.join(KEEPS)}, found {keep!r}", param_hint="--keep")
         run = run_and_write(scenario, out, options, workers, plots=not no_plots,
-                            progress=progress_wanted(quiet, as_json), keep=keep, resume=resume)
+                            progress=progress_wanted(quiet, as_json), keep=keep, resume=resume,
+                            scheduler=scheduler)
     except (SmdError, OSError) as exc:
         raise typer.Exit(_report_json(exc, {"scenario": str(scenario)}, as_json))
     except KeyboardInterrupt as exc:

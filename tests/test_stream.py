@@ -175,3 +175,32 @@ def test_a_sweep_killed_with_sigkill_is_finished_by_resume_with_the_same_data(cl
     assert finished.returncode == 0, finished.stderr
     same = cli("diff", tmp_path / "whole" / "scene_sweep.h5", out / "scene_sweep.h5", "--rtol", "0")
     assert same.exit_code == 0, same.output
+
+
+def test_a_local_dask_cluster_gives_the_same_data_sets_as_this_process(cli, tmp_path, small_chunks):
+    """--scheduler local: 2 worker processes solve the chunks; identical to the default run, bit for bit."""
+    pytest.importorskip("distributed")
+    path = write(tmp_path, NONLINEAR)
+    args = ("sweep", path, "--param", "spring[0].k3", "--values", "linspace(0, 400, 30)", "--no-plots", "--json")
+    here = cli(*args, "-o", tmp_path / "here")
+    assert here.exit_code == 0, here.output
+    there = cli(*args, "-o", tmp_path / "dask", "--scheduler", "local", "--workers", "2")
+    assert there.exit_code == 0, there.output
+    assert "Dask tasks on a LocalCluster" in there.stdout
+    same = cli("diff", tmp_path / "here" / "scene_sweep.h5", tmp_path / "dask" / "scene_sweep.h5", "--rtol", "0")
+    assert same.exit_code == 0, same.output
+
+
+def test_without_dask_the_scheduler_option_says_what_to_install(cli, tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed raises ImportError
+    result = cli("sweep", ROOT / "scenarios" / "one_dof_regimes_sweep.toml", "--scheduler", "local", "-o", tmp_path)
+    assert result.exit_code == 2 and "pip install -e '.[dask]'" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and not list(tmp_path.glob("*.h5"))
+
+
+def test_an_unreachable_scheduler_is_a_usage_error(cli, tmp_path):
+    pytest.importorskip("distributed")
+    result = cli("sweep", ROOT / "scenarios" / "one_dof_regimes_sweep.toml", "--scheduler", "tcp://127.0.0.1:9",
+                 "-o", tmp_path)
+    assert result.exit_code == 2 and "cannot reach a Dask scheduler" in result.stderr
+    assert not list(tmp_path.glob("*.h5"))

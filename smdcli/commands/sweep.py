@@ -5,6 +5,7 @@ Must not import: cli."""
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -43,7 +44,8 @@ class SweepRun:
 
 
 def run_and_write(path, out, cli: dict[str, Any], workers: int | None = None, plots: bool = True,
-                  progress: bool = False, keep: str | None = None, resume: bool = False) -> SweepRun:
+                  progress: bool = False, keep: str | None = None, resume: bool = False,
+                  scheduler: str | None = None) -> SweepRun:
     """Load, build the family, solve it, write `<stem>_sweep.h5` and the plots; input errors before any work."""
     from smdcli.io.atomic import together
     from smdcli.io.folders import output_folder
@@ -52,8 +54,9 @@ def run_and_write(path, out, cli: dict[str, Any], workers: int | None = None, pl
     spec = read_spec(sc, cli)
     family = build_family(sc, spec)
     if spec.frequency is not None:
-        if keep is not None or resume:
-            raise UsageError(f"{sc.path}: --keep and --resume are for time-domain sweeps, not a frequency response")
+        if keep is not None or resume or scheduler is not None:
+            raise UsageError(f"{sc.path}: --keep, --resume and --scheduler are for time-domain sweeps, not a "
+                             "frequency response")
         input_index(family.base, spec.input, sc.path)
         if spec.normalized and family.base.n != 1:
             raise UsageError(f"{sc.path}: --normalized needs a 1-DOF scene (X K / F0 against omega / omega_n); "
@@ -67,7 +70,7 @@ def run_and_write(path, out, cli: dict[str, Any], workers: int | None = None, pl
         if spec.frequency is not None:
             _frequency_response(run, out_dir, workers, progress)
         else:
-            _time_family(run, out_dir, spec.method, keep, resume, workers, progress)
+            _time_family(run, out_dir, spec.method, keep, resume, workers, progress, scheduler)
         if plots:
             _plots(run, out_dir, spec)
     return run
@@ -93,20 +96,14 @@ def _frequency_response(run: SweepRun, out_dir, workers, progress: bool) -> None
 
 
 def _time_family(run: SweepRun, out_dir, method: str | None, keep: str | None, resume: bool, workers,
-                 progress: bool) -> None:
+                 progress: bool, scheduler: str | None = None) -> None:
     """Solve the family chunk by chunk, each chunk's rows written as it finishes to `<stem>_sweep.partial.h5`,
-    renamed `<stem>_sweep.h5` when complete; an interrupted run leaves the partial file for --resume."""
-    import time
-
-    from smdcli.io.atomic import resumable_path
+    renamed `<stem>_sweep.h5` when complete; an interrupted run leaves the partial file for --resume. Chunks are
+    solved here, or on a Dask cluster with a scheduler."""
     from smdcli.io.sweep_hdf5 import IncompatiblePartial, SweepFile
-    from concurrent.futures import ThreadPoolExecutor
-
-    from smdcli.sweep.members import solve_family
-    from smdcli.sweep.stream import chunk_buffers, chunk_plan, family_grid, identity
+    from smdcli.sweep.stream import chunk_plan, family_grid, identity
 
     family = run.family
-    S = len(family)
     grid, length = family_grid(family)
     keep = keep or "full"
     _check_disk(out_dir, family, keep, length)
@@ -114,62 +111,104 @@ def _time_family(run: SweepRun, out_dir, method: str | None, keep: str | None, r
     final = out_dir / f"{family.scenario.stem}_sweep.h5"
     partial = final.with_name(f"{family.scenario.stem}_sweep.partial.h5")
     digest = identity(family, method, keep)
-    if resume:
-        if not partial.exists():
-            raise UsageError(f"--resume: no {partial} to finish (it is left by an interrupted sweep into {out_dir})")
+    if resume and not partial.exists():
+        raise UsageError(f"--resume: no {partial} to finish (it is left by an interrupted sweep into {out_dir})")
+    with _cluster(scheduler, workers) as cluster:  # reached before any file is written: unreachable is exit 2
+        if resume:
+            try:
+                stream = SweepFile.resume(partial, family, keep, digest)
+            except IncompatiblePartial as exc:
+                raise UsageError(str(exc)) from None
+        else:
+            stream = SweepFile.create(partial, family, keep, grid, length, digest)
         try:
-            stream = SweepFile.resume(partial, family, keep, digest)
-        except IncompatiblePartial as exc:
-            raise UsageError(str(exc)) from None
-    else:
-        stream = SweepFile.create(partial, family, keep, grid, length, digest)
-    run.keep, run.resumed_from = keep, stream.done
-    run.metric = np.full((S, family.base.n), np.nan)
-    if stream.done:
-        _recall(run, stream)
+            for members in plan:
+                if members.start < stream.done < members.stop:  # a plan is a function of the family: chunks line up
+                    raise UsageError(f"{partial}: members_done {stream.done} is inside a chunk; run without "
+                                     "--resume to start over")
+            run.keep, run.resumed_from = keep, stream.done
+            run.metric = np.full((len(family), family.base.n), np.nan)
+            if stream.done:
+                _recall(run, stream)
+            _solve_chunks(run, stream, plan, method, workers, grid, length, progress, cluster, partial, final)
+        finally:
+            stream.close()
+    run.outputs.append(final)
+
+
+@contextmanager
+def _cluster(scheduler: str | None, workers: int | None):
+    """The Dask cluster a scheduler names (closed at the end), or None: chunks are solved in this process."""
+    if scheduler is None:
+        yield None
+        return
+    from smdcli.sweep.cluster import Cluster
+
+    cluster = Cluster(scheduler, workers)
+    try:
+        yield cluster
+    finally:
+        cluster.close()
+
+
+def _solve_chunks(run: SweepRun, stream, plan: list[range], method, workers, grid, length: int, progress: bool,
+                  cluster, partial, final) -> None:
+    """The chunks after the stream's members_done, solved and handed to one writer thread, which writes chunk k
+    (h5py releases the GIL) while chunk k + 1 is solved: at most two chunks are held, so memory is bounded by
+    the chunk, not the sweep. The file is complete and renamed at the end; an interrupt leaves whole chunks."""
+    import time
+    from concurrent.futures import ThreadPoolExecutor
+
+    from smdcli.io.atomic import resumable_path
+    from smdcli.sweep.members import solve_family
+    from smdcli.sweep.stream import chunk_buffers
+
+    family, S = run.family, len(run.family)
+    todo = [(k, members) for k, members in enumerate(plan) if members.start >= stream.done]
     started = time.perf_counter()
-    # One thread writes chunk k (h5py releases the GIL while writing) while chunk k + 1 is solved into the other
-    # set of buffers; a set is reused only once its chunk is on disk.
     writer = ThreadPoolExecutor(max_workers=1)
-    buffers = [chunk_buffers(family, plan, length) for _ in range(2)]
     writing: list = []
+
+    def hand_on(task, *args) -> None:
+        if len(writing) == 2:
+            writing.pop(0).result()
+        writing.append(writer.submit(task, run, stream, *args))
+
     try:
         with resumable_path(partial, final):
             shown = progress and S > 1
             with bar("sweeping", S, shown) as advance:
                 if stream.done:
                     advance(stream.done)
-                for k, members in enumerate(plan):
-                    if members.stop <= stream.done:
-                        continue
-                    if members.start < stream.done:  # a plan is a function of the family: chunks line up
-                        raise UsageError(f"{partial}: members_done {stream.done} is inside a chunk; run without "
-                                         "--resume to start over")
-                    if len(writing) == 2:
-                        writing.pop(0).result()
-                    result = solve_family(family.take(members), method, workers, advance if shown else None,
-                                          buffers[k % 2])
-                    writing.append(writer.submit(_measure_and_write, run, stream, members, result, grid, length))
+                if cluster is None:
+                    buffers = [chunk_buffers(family, plan, length) for _ in range(2)]  # reused: see solve_family
+                    for k, members in todo:
+                        if len(writing) == 2:  # the buffers about to be reused are on disk
+                            writing.pop(0).result()
+                        result = solve_family(family.take(members), method, workers, advance if shown else None,
+                                              buffers[k % 2])
+                        hand_on(_measure_and_write, members, result, grid, length)
+                else:
+                    for chunk in cluster.chunks(family, [m for _, m in todo], method, run.keep, grid, length,
+                                                family.spec.quantity, advance if shown else None):
+                        hand_on(_write_chunk, chunk)
                 for pending in writing:
                     pending.result()
             run.wall_time_s = time.perf_counter() - started
+            if cluster is not None:
+                run.how = f"Dask tasks on {cluster.where}, each chunk in {run.how}"
             chunks = f", in {plural(len(plan), 'chunk')} of up to {len(plan[0])}" if len(plan) > 1 else ""
             run.how = f"{run.how} over {plural(S, 'member')}{chunks}"
             stream.finish({"how": run.how, "wall_time_s": run.wall_time_s})
-            stream.close()
     except KeyboardInterrupt as exc:
         _settle(writing)  # the chunks being written finish: members_done counts whole chunks
-        done = stream.done
-        stream.close()
-        exc.add_note(f"{done} of {S} members are in {partial}; the same command with --resume finishes it")
+        exc.add_note(f"{stream.done} of {S} members are in {partial}; the same command with --resume finishes it")
         raise
     except BaseException:
         _settle(writing)
-        stream.close()
         raise
     finally:
         writer.shutdown()
-    run.outputs.append(final)
 
 
 def _settle(writing: list) -> None:
@@ -187,7 +226,12 @@ def _measure_and_write(run: SweepRun, stream, members: range, result, grid, leng
     """A solved chunk measured, appended to the file and noted for the summary (on the writer thread)."""
     from smdcli.sweep.stream import measure_chunk
 
-    chunk = measure_chunk(run.family, members, result, run.keep, grid, length, run.family.spec.quantity)
+    _write_chunk(run, stream, measure_chunk(run.family, members, result, run.keep, grid, length,
+                                            run.family.spec.quantity))
+
+
+def _write_chunk(run: SweepRun, stream, chunk) -> None:
+    """A measured chunk appended to the file and noted for the summary (on the writer thread)."""
     stream.append(chunk)
     _note(run, chunk)
 

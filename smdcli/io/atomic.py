@@ -43,8 +43,11 @@ def together():
     try:
         yield
         _commit(_pending)
-    except BaseException:
+    except BaseException as exc:
         _discard(tmp for tmp, _ in _pending)
+        for tmp, _ in _pending:
+            if tmp in _kept and isinstance(exc, KeyboardInterrupt):
+                exc.add_note(f"{tmp} is kept; the same command with --resume finishes it")
         raise
     finally:
         _pending = None

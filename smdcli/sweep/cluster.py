@@ -1,0 +1,83 @@
+"""A sweep's chunks on a Dask cluster: an existing scheduler by address, or a LocalCluster of worker processes
+(`--scheduler local`). Each chunk is one task running the same solve_chunk as this process would, so the
+numbers are the same whichever runs them; results come back in any order and are handed on in plan order.
+dask.distributed is an optional extra, imported only here.
+
+Must not import: io, plots, commands, cli."""
+
+from __future__ import annotations
+
+from typing import Callable, Iterator
+
+import numpy as np
+
+from smdcli.errors import UsageError
+from smdcli.sweep.family import Family
+from smdcli.sweep.pool import default_workers
+from smdcli.sweep.stream import Chunk, solve_chunk
+
+INSTALL = "pip install -e '.[dask]'"  # what a user without dask.distributed is told
+
+
+class Cluster:
+    """A Client on the scheduler at an address, or on a new LocalCluster of `workers` processes; close() ends both."""
+
+    def __init__(self, scheduler: str, workers: int | None = None):
+        try:
+            from distributed import Client, LocalCluster
+        except ImportError:
+            raise UsageError(f"--scheduler needs dask.distributed, which is not installed: {INSTALL}") from None
+        self.local = None
+        self.where = "a LocalCluster" if scheduler == "local" else f"the cluster at {scheduler}"
+        if scheduler == "local":
+            self.local = LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
+                                      dashboard_address=None)
+            self.client = Client(self.local)
+        else:
+            try:
+                self.client = Client(scheduler, timeout="10s")
+            except (OSError, TimeoutError, ValueError) as exc:
+                raise UsageError(f"--scheduler {scheduler}: cannot reach a Dask scheduler there ({exc})") from None
+
+    def close(self) -> None:
+        """Disconnect, and stop the LocalCluster if this started one."""
+        self.client.close()
+        if self.local is not None:
+            self.local.close()
+
+    def chunks(self, family: Family, plan: list[range], method: str | None, keep: str, grid: np.ndarray | None,
+               length: int, quantity: str, progress: Callable[[int], None] | None = None) -> Iterator[Chunk]:
+        """Solve the plan's chunks as tasks; yield them in plan order. At most a few chunks per worker thread are in
+        flight or waiting to be yielded, so the client's memory stays bounded whatever the sweep's size."""
+        from distributed import as_completed
+
+        client = self.client
+        window = 2 * max(1, sum(client.nthreads().values())) + 2
+        shared = client.scatter(family, broadcast=True)  # sent once to every worker, not once per task
+        todo = iter(enumerate(plan))
+        waiting = as_completed()
+        done: dict[int, Chunk] = {}
+        ahead = 0  # the next chunk to yield
+
+        def submit() -> None:
+            for k, members in todo:
+                waiting.add(client.submit(_task, k, shared, members, method, keep, grid, length, quantity, pure=False))
+                return
+
+        for _ in range(window):
+            submit()
+        for future in waiting:
+            k, chunk = future.result()
+            done[k] = chunk
+            future.release()
+            if progress:
+                progress(len(chunk))
+            while ahead in done:
+                yield done.pop(ahead)
+                ahead += 1
+                submit()
+
+
+def _task(k: int, family: Family, members: range, method, keep, grid, length, quantity) -> tuple[int, Chunk]:
+    """On a worker: one chunk, on one thread (the cluster's workers are the parallelism)."""
+    return k, solve_chunk(family, members, method, keep, grid, length, quantity, workers=1)
