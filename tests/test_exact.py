@@ -190,3 +190,70 @@ def test_accurate_exponential_is_correctly_rounded_on_random_matrices():
         with mp.workdps(40):
             exact = np.array(mp.expm(mp.matrix(A.tolist()) * mp.mpf(0.01)).tolist(), dtype=float)
         assert np.abs(expm_times(A, 0.01) - exact).max() <= 2.3e-16 * np.abs(exact).max()
+
+
+def _matrix_scene(M, C, K) -> str:
+    rows = lambda A: "[" + ", ".join("[" + ", ".join(repr(float(a)) for a in row) + "]" for row in A) + "]"  # noqa: E731
+    n = len(M)
+    dofs = ", ".join(f'"x{i}"' for i in range(n))
+    return (f"[time]\nend = 1.0\nstep = 0.1\n[system]\ndofs = [{dofs}]\nM = {rows(M)}\nC = {rows(C)}\nK = {rows(K)}\n"
+            f"x0 = {[0.0] * n}\nv0 = {[1.0] + [0.0] * (n - 1)}\n")
+
+
+def test_proportional_damping_modes_from_the_symmetric_solver_match_the_state_matrix_eigenvalues():
+    """Rayleigh damping C = a M + b K (an underdamped, a critically damped region and overdamped high modes):
+    the 1-DOF roots of each undamped mode against numpy's eigenvalues of the 2n x 2n state matrix."""
+    from smdcli.model.system import _pair_modes
+
+    n = 7
+    K = 1000.0 * (2 * np.eye(n) - np.eye(n, k=1) - np.eye(n, k=-1))
+    M = np.diag(np.linspace(1.0, 2.5, n))
+    C = 0.3 * M + 0.04 * K
+    _, model, _ = model_of(_matrix_scene(M, C, K))
+    assert model.proportional_damping
+    modes = model.modes
+    eig = np.linalg.eigvals(model.state_matrix)
+    assert np.allclose(np.sort_complex(modes.eigenvalues), np.sort_complex(eig), rtol=1e-10, atol=1e-10)
+    wn, zeta = _pair_modes(eig)
+    order = np.argsort(wn)
+    assert np.allclose(modes.natural_frequencies, wn[order], rtol=1e-10)
+    assert np.allclose(modes.damping_ratios, zeta[order], rtol=1e-9)
+    assert zeta.max() > 1 > zeta.min()  # both regimes present
+    C[0, 1] = C[1, 0] = C[0, 1] + 0.5  # no longer proportional: the general eigenvalues
+    _, other, _ = model_of(_matrix_scene(M, C, K))
+    assert not other.proportional_damping
+
+
+def _chain(n: int, ground_damper: float, chain_damper: float, force: str) -> str:
+    lines = ["[time]", "end = 4.0", "step = 0.01"]
+    for i in range(n):
+        lines += ["[[mass]]", f'name = "m{i}"', f"m = {1.0 + 0.01 * i!r}", f"x0 = {0.001 * (i % 3)!r}"]
+    lines += ["[[spring]]", 'connects = ["ground", "m0"]', "k = 1000.0",
+              "[[damper]]", 'connects = ["ground", "m0"]', f"c = {ground_damper!r}"]
+    for i in range(n - 1):
+        lines += ["[[spring]]", f'connects = ["m{i}", "m{i + 1}"]', "k = 1000.0",
+                  "[[damper]]", f'connects = ["m{i}", "m{i + 1}"]', f"c = {chain_damper!r}"]
+    return "\n".join(lines) + "\n" + force
+
+
+def test_modal_path_matches_the_dense_exponential_on_a_100_mass_chain(monkeypatch):
+    """Classically damped (C = 0.002 K), a sine and a square force: modal coordinates against the dense 200-state
+    exponential, to 1e-10 of the peak; a chain damped at one end only is not classical and stays dense."""
+    import smdcli.solvers.modal as modal
+
+    forces = force_block("sine", on="m0", amplitude=10.0, omega=5.0) + \
+        force_block("square", on="m50", amplitude=3.0, period=0.37, t0=0.05)
+    _, model, grid = model_of(_chain(100, 2.0, 2.0, forces))
+    assert modal.modal_applies(model)
+    fast = solve(model, grid, "exact", Tolerances())
+    assert "modal coordinates" in fast.stats.message
+    monkeypatch.setattr(modal, "MODAL_DOFS", 10**9)
+    dense = solve(model, grid, "exact", Tolerances())
+    assert "modal" not in dense.stats.message
+    for name in ("displacement", "velocity"):
+        a, b = getattr(fast, name), getattr(dense, name)
+        assert np.abs(a - b).max() <= 1e-10 * np.abs(b).max(), name
+    assert fast.stats.stated_accuracy <= 1e-9
+    monkeypatch.undo()
+    _, one_end, _ = model_of(_chain(100, 2.0, 0.0, forces))
+    assert not one_end.proportional_damping and not modal.modal_applies(one_end)

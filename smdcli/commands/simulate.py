@@ -172,20 +172,33 @@ def info(path: str | Path) -> dict:
     return data
 
 
+SHOWN = 12  # DOFs, matrix rows and modes `smd info` writes out on a terminal; beyond, a summary
+
+
 def format_info(d: dict) -> str:
     """Terminal text for `smd info`."""
     def matrix(name, rows):
+        if len(rows) > SHOWN:  # a large model's matrices are for --json or the HDF5 file, not a terminal
+            values = np.asarray(rows)
+            kind = "diagonal" if np.count_nonzero(values) == np.count_nonzero(np.diag(values)) else "sparse" \
+                if np.count_nonzero(values) < 0.1 * values.size else "dense"
+            return f"  {name} =  {len(rows)} x {len(rows)}, {np.count_nonzero(values)} nonzero ({kind}; --json has it)"
         body = "\n".join("      [" + ", ".join(f"{v:10.4g}" for v in row) + "]" for row in rows)
         return f"  {name} =\n{body}"
 
+    dofs = d["dofs"] if len(d["dofs"]) <= SHOWN else d["dofs"][:SHOWN // 2] + ["..."] + d["dofs"][-2:]
     lines = [f"{d['scenario']}: {d['title']}" if d["title"] else d["scenario"],
-             f"  DOFs     {', '.join(d['dofs'])} ({d['form']} form, "
+             f"  DOFs     {', '.join(dofs)} ({len(d['dofs'])} DOFs, {d['form']} form, "
              f"{'linear' if d['linear'] else 'nonlinear: ' + ', '.join(d['nonlinear_elements'])})",
              f"  time     {d['time']['start']:g} .. {d['time']['end']:g} s, {d['time']['points']} points"]
     lines += [f"  force    {f}" for f in d["forces"]] or ["  force    none (free response)"]
     lines += [matrix("M", d["M"]), matrix("C", d["C"]), matrix("K", d["K"])]
     lines.append("  modes    omega_n [rad/s]   f_n [Hz]   zeta        regime")
     for i, mode in enumerate(d["modes"], 1):
+        if SHOWN // 2 < i <= len(d["modes"]) - SHOWN // 2:
+            if i == SHOWN // 2 + 1:
+                lines.append(f"    ... {len(d['modes']) - 2 * (SHOWN // 2)} more modes (--json lists them all)")
+            continue
         lines.append(f"    {i:<5}  {mode['natural_frequency_rad_s']:14.6g} {mode['natural_frequency_hz']:10.4g}"
                      f"   {mode['damping_ratio']:<10.5g}  {mode['regime']}")
     lines.append(f"  stiffness ratio {d['stiffness_ratio']:.4g} ({'stiff' if d['stiff'] else 'not stiff'}"

@@ -113,7 +113,7 @@ class Model:
     @cached_property
     def Minv(self) -> np.ndarray:
         """Inverse mass matrix, by a solve rather than inv()."""
-        return np.linalg.solve(self.M, np.eye(self.n))
+        return mass_solve(self.M, np.eye(self.n))
 
     @cached_property
     def B(self) -> np.ndarray:
@@ -226,20 +226,36 @@ class Model:
             zeta = c / (2 * math.sqrt(k * m)) if k > 0 else math.inf
             eig = np.roots([m, c, k]).astype(complex)
             return Modes(eig, np.array([wn]), np.array([zeta]), (regime(zeta),), np.array([[1 / math.sqrt(m)]]))
-        eig = np.linalg.eigvals(self.state_matrix)
-        eig = eig[np.lexsort((eig.real, eig.imag))]  # one order whatever LAPACK returns
-        wn, zeta = _pair_modes(eig)
-        order = np.argsort(wn)
-        wn, zeta = wn[order], zeta[order]
         from scipy.linalg import eigh
 
-        _, shapes = eigh(self.K, self.M)
+        squared, shapes = eigh(self.K, self.M)
+        classical = self.proportional_damping and squared.min() > 0
+        if classical:  # C = Phi^-T diag(c) Phi^-1: each mode a 1-DOF oscillator (symmetric solver, 5-10x faster)
+            wn = np.sqrt(squared)
+            c = (shapes * (self.C @ shapes)).sum(axis=0)  # the diagonal of Phi^T C Phi
+            zeta = c / (2 * wn)
+            root = np.sqrt((c * c - 4 * squared).astype(complex))
+            eig = np.concatenate([(-c + root) / 2, (-c - root) / 2])
+        else:
+            eig = np.linalg.eigvals(self.state_matrix)
+        eig = eig[np.lexsort((eig.real, eig.imag))]  # one order whatever LAPACK returns
+        if not classical:
+            wn, zeta = _pair_modes(eig)
+        order = np.argsort(wn, kind="stable")
+        wn, zeta = wn[order], zeta[order]
         # The sign LAPACK leaves free, fixed: the first entry within 1e-6 of the column's largest is positive
         # (a tie broken by position, not by which rounding came out larger).
         size = np.abs(shapes)
         lead = np.argmax(size >= (1 - 1e-6) * size.max(axis=0), axis=0)
         shapes = shapes * np.where(shapes[lead, np.arange(n)] < 0, -1.0, 1.0)
         return Modes(eig, wn, zeta, tuple(regime(z) for z in zeta), shapes)
+
+    @cached_property
+    def proportional_damping(self) -> bool:
+        """C M^-1 K = K M^-1 C (Caughey's condition): the undamped modes decouple the damped system too."""
+        CK = self.C @ self.Minv @ self.K
+        scale = np.abs(self.C).max(initial=0.0) * np.abs(self.Minv).max(initial=0.0) * np.abs(self.K).max(initial=0.0)
+        return bool(np.abs(CK - CK.T).max(initial=0.0) <= 1e-12 * self.n * scale)
 
     @cached_property
     def stiffness_ratio(self) -> float:
@@ -279,6 +295,15 @@ def _pair_modes(eig: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return wn, zeta
 
 
+def mass_solve(M: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """M^-1 A for mass matrices (n, n) or stacks of them: a division where M is diagonal (every element-form
+    scene; an O(n^3) solve of a 3,000-DOF diagonal M took 1.6 s), else a solve."""
+    diagonal = np.diagonal(M, axis1=-2, axis2=-1)
+    if np.count_nonzero(M) == np.count_nonzero(diagonal):
+        return A / diagonal[..., :, None]
+    return np.linalg.solve(M, A)
+
+
 def build(scenario: Scenario) -> Model:
     """Assemble the Model of a validated scenario."""
     dofs = scenario.dof_names
@@ -302,7 +327,8 @@ def build(scenario: Scenario) -> Model:
             if element.kind == "damper" and element.law == "quadratic":
                 quad_rows.append((row, element.coef, element.path))
                 continue
-            target += element.coef * np.outer(row, row)
+            nodes = np.flatnonzero(row)  # one or two: the element's stamp, not an n x n outer product per element
+            target[np.ix_(nodes, nodes)] += element.coef * np.outer(row[nodes], row[nodes])
             if element.law == "cubic":
                 cubic_rows.append((row, element.k3, element.path))
         cubic = _incidence(cubic_rows)

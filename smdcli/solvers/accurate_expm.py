@@ -62,10 +62,10 @@ def _matmul(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]):
     """(ah + al) @ (bh + bl) in double-double: ah @ bh error-free, the cross terms in double."""
     ah, al = a
     bh, bl = b
-    s = np.zeros((ah.shape[0], bh.shape[1]))
+    s = np.zeros(np.broadcast_shapes(ah.shape[:-2], bh.shape[:-2]) + (ah.shape[-2], bh.shape[-1]))
     c = np.zeros_like(s)
-    for k in range(ah.shape[1]):
-        p, e = _two_prod(ah[:, k:k + 1], bh[k:k + 1, :])
+    for k in range(ah.shape[-1]):
+        p, e = _two_prod(ah[..., :, k:k + 1], bh[..., k:k + 1, :])
         s, t = _two_sum(s, p)
         c += t + e
     c += ah @ bl + al @ bh
@@ -74,9 +74,9 @@ def _matmul(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]):
 
 def _add_identity_times(p, coefficient: tuple[float, float]):
     hi, lo = p[0].copy(), p[1].copy()
-    d = np.arange(hi.shape[0])
-    s, e = _two_sum(hi[d, d], coefficient[0])
-    hi[d, d], lo[d, d] = _normalize(s, lo[d, d] + e + coefficient[1])
+    d = np.arange(hi.shape[-1])
+    s, e = _two_sum(hi[..., d, d], coefficient[0])
+    hi[..., d, d], lo[..., d, d] = _normalize(s, lo[..., d, d] + e + coefficient[1])
     return hi, lo
 
 
@@ -87,16 +87,19 @@ def _inverse_factorial(k: int) -> tuple[float, float]:
 
 
 def expm_times(A: np.ndarray, h: float) -> np.ndarray:
-    """expm(A h), computed in double-double and rounded to double: Taylor after scaling, then squaring."""
+    """expm(A h), computed in double-double and rounded to double: Taylor after scaling, then squaring.
+    A may be a stack (..., size, size): each is scaled by the largest one's power of two (more squarings than
+    a small one needs cost time, not accuracy)."""
     A = np.asarray(A, dtype=float)
     bh, bl = _two_prod(A, np.full_like(A, float(h)))
-    norm = np.abs(bh).sum(axis=0).max(initial=0.0)
+    norm = np.abs(bh).sum(axis=-2).max(initial=0.0)
     squarings = max(0, math.ceil(math.log2(norm / SCALED_NORM))) if norm > 0 else 0
     scale = 2.0**-squarings  # a power of two: exact
     b = (bh * scale, bl * scale)
-    n = A.shape[0]
+    n = A.shape[-1]
     coefficient = _inverse_factorial(TAYLOR_TERMS)
-    p = (np.eye(n) * coefficient[0], np.eye(n) * coefficient[1])
+    eye = np.broadcast_to(np.eye(n), A.shape)
+    p = (eye * coefficient[0], eye * coefficient[1])
     for k in range(TAYLOR_TERMS - 1, -1, -1):  # Horner: p = b p + I / k!
         p = _add_identity_times(_matmul(b, p), _inverse_factorial(k))
     for _ in range(squarings):

@@ -14,6 +14,7 @@ from smdcli.result import Result
 from smdcli.solvers.base import Solver, Tolerances
 from smdcli.solvers.closed_form import ClosedForm
 from smdcli.solvers.exact import Exact
+from smdcli.solvers.modal import modal_applies
 from smdcli.solvers.compiled import DOP853, Radau, StiffnessDetected
 
 
@@ -29,6 +30,9 @@ def _unheld(model: Model) -> str:
     held = [f"{path} ({kind})" for path, kind, s in zip(model.force_paths, model.force_types, model.signals)
             if s.exo() is None]
     return ", ".join(held)
+
+
+STIFFNESS_NOTE_DOFS = 200  # beyond, the reason names stiffness only where the symmetric solver gives it
 
 
 class Auto(Solver):
@@ -64,15 +68,20 @@ class Auto(Solver):
     def choose(self, model: Model) -> tuple[Solver | None, str]:
         """The solver for a model and the reason, or (None, '') where the trajectory must decide."""
         if model.is_linear:
-            # Stiffness does not matter to exact methods, but the user should know an integrator would feel it.
+            # Stiffness does not matter to exact methods, but the user should know an integrator would feel it;
+            # not at the price of a general eigenvalue problem larger than the exact solve (smd info computes it).
+            told = model.n <= STIFFNESS_NOTE_DOFS or model.proportional_damping
             stiff = (f"; stiff (stiffness ratio {model.stiffness_ratio:.3g}), which an exact method does not feel"
-                     if model.is_stiff else "")
+                     if told and model.is_stiff else "")
             if model.n == 1 and not model.is_forced:
                 regime = model.modes.regimes[0]
                 return ClosedForm(), f"linear 1-DOF free response ({regime}): closed form, exact to rounding{stiff}"
             if all(s.exo() is not None for s in model.signals):
                 forced = f"with {_force_kinds(model)} forces integrated exactly between their discontinuities" \
                     if model.is_forced else "free response"
+                if modal_applies(model):
+                    return Exact(), (f"linear time-invariant, classically damped, {forced}: in modal coordinates "
+                                     f"({model.n} exact 1-DOF recurrences), exact to rounding{stiff}")
                 return Exact(), f"linear time-invariant, {forced}: matrix exponential, exact to rounding{stiff}"
             if model.is_stiff:
                 return Radau(), (f"linear, but {_unheld(model)} has no exact integral, and stiff "

@@ -10,7 +10,7 @@ from typing import Callable, ClassVar
 
 import numpy as np
 
-from smdcli.model import Model
+from smdcli.model import Model, mass_solve
 from smdcli.result import Result, SolverStats
 
 
@@ -93,9 +93,9 @@ def acceleration_accuracy(M: np.ndarray, C: np.ndarray, K: np.ndarray, stated, x
         return np.maximum(top, 0.0)
 
     peak_x, peak_v, peak_a, peak_f = (peak(q) for q in (x, v, a, f))
-    norm = lambda A: np.abs(np.linalg.solve(M, A)).sum(axis=2).max(axis=1)  # noqa: E731 (inf-norm of M^-1 A)
+    norm = lambda A: np.abs(mass_solve(M, A)).sum(axis=2).max(axis=1)  # noqa: E731 (inf-norm of M^-1 A)
     k, c = norm(K), norm(C)
-    forcing = np.abs(np.linalg.inv(M)).sum(axis=2).max(axis=1) * peak_f
+    forcing = norm(np.broadcast_to(np.eye(M.shape[-1]), M.shape)) * peak_f
     with np.errstate(over="ignore", divide="ignore", invalid="ignore"):  # overflowing terms: an inf bound, not a warning
         carried = stated * (k * peak_x + c * peak_v)
         rounding = 8 * UNIT_ROUNDOFF * (k * peak_x + c * peak_v + forcing)

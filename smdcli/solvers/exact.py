@@ -29,6 +29,7 @@ from smdcli.model.forcing import Table
 from smdcli.result import Result, SolverStats
 from smdcli.solvers.accurate_expm import expm_times, needed
 from smdcli.solvers.base import Solver, Tolerances, make_result, segments, stated_rounding
+from smdcli.solvers.modal import modal_applies, solve_modal
 from smdcli.text import plural
 
 BLOCK = 64  # output steps per stacked propagation
@@ -87,6 +88,12 @@ class Exact(Solver):
         from scipy.linalg import expm  # imported before the clock: wall time is the solve's own
 
         start = time.perf_counter()
+        if modal_applies(model):
+            x, v, stated, message = solve_modal(model, grid)
+            stats = SolverStats(method=self.name, requested_method=self.name, reason="", nlu=0,
+                                steps_accepted=max(len(grid) - 1, 0), wall_time_s=time.perf_counter() - start,
+                                message=message, stated_accuracy=stated)
+            return make_result(model, grid, x, v, stats)
         original = model
         model, held = first_order_hold(model, grid)
         Aaug, blocks = augmented(model)

@@ -12,7 +12,7 @@ from typing import Callable
 import numpy as np
 
 from smdcli.errors import UsageError
-from smdcli.model import build, time_grid
+from smdcli.model import build, mass_solve, time_grid
 from smdcli.scenario import Scenario
 from smdcli.sweep.batched import batched_exact, shared_signal_recurrence
 from smdcli.sweep.family import Family
@@ -156,8 +156,8 @@ def _batched_stated(family: Family, grid: np.ndarray) -> np.ndarray:
     from smdcli.solvers.base import stated_rounding
 
     h = float(grid[1] - grid[0]) if len(grid) > 1 else 0.0
-    stiffness = np.abs(np.linalg.solve(family.M, family.K)).sum(axis=1).max(axis=-1)
-    damping = 1 + np.abs(np.linalg.solve(family.M, family.C)).sum(axis=1).max(axis=-1)
+    stiffness = np.abs(mass_solve(family.M, family.K)).sum(axis=1).max(axis=-1)
+    damping = 1 + np.abs(mass_solve(family.M, family.C)).sum(axis=1).max(axis=-1)
     norm = np.maximum(stiffness, damping) * h
     return np.array([stated_rounding(len(grid), g) for g in norm])
 

@@ -1,0 +1,114 @@
+"""Exact solution of large classically damped linear scenes in modal coordinates.
+
+Where C M^-1 K = K M^-1 C (proportional damping, Caughey's condition) and every undamped mode has a positive
+frequency, the undamped mode shapes Phi (K Phi = M Phi Omega^2, Phi^T M Phi = I, from a symmetric solver)
+decouple the scene into n 1-DOF oscillators q_i'' + c_i q_i' + w_i^2 q_i = (Phi^T B u(t))_i. Each is advanced
+exactly like the dense path (exact.py) advances the whole scene: its state augmented with the force generators'
+state w, propagated by expm of a (2 + m)-square matrix, w reseeded from its closed form at every output point
+and split at force discontinuities. Cost O(n) per output step and O(n^3) once (the eigenvectors), against
+O(n^2) per step and a dense 2n-square exponential: a 1,000-mass chain in 0.5 s instead of 3 s, a 3,000-mass one
+in the memory of a few n x n matrices. x = Phi q at the end, one matrix product.
+
+Must not import: sweep, io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from smdcli.model import Model
+from smdcli.solvers.accurate_expm import NEEDED_NORM, expm_times
+from smdcli.solvers.base import segments, stated_rounding
+
+MODAL_DOFS = 64  # from this many DOFs a classically damped scene is solved in modal coordinates
+
+
+def modal_applies(model: Model) -> bool:
+    """Large, classically damped, every force with an exact generator: the modal path serves it."""
+    return (model.n >= MODAL_DOFS and model.is_linear and all(s.exo() is not None for s in model.signals)
+            and model.proportional_damping and float(model.modes.natural_frequencies.min()) > 0)
+
+
+def solve_modal(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:
+    """Displacement and velocity (N, n) on the grid, the stated accuracy and a description."""
+    from scipy.linalg import expm
+
+    n, N = model.n, len(grid)
+    shapes = model.modes.shapes  # mass-normalized: Phi^T M Phi = I
+    squared = (shapes * (model.K @ shapes)).sum(axis=0)  # Rayleigh quotients: w_i^2
+    damping = (shapes * (model.C @ shapes)).sum(axis=0)  # the diagonal of Phi^T C Phi, all there is of it
+    exos = [s.exo() for s in model.signals]
+    m = sum(e.S.shape[0] for e in exos)
+    size = 2 + m
+    A = np.zeros((n, size, size))
+    A[:, 0, 1] = 1.0
+    A[:, 1, 0] = -squared
+    A[:, 1, 1] = -damping
+    participation = shapes.T @ model.B  # (n, F): how much of force j reaches mode i
+    blocks = []  # per signal: its slice of w
+    col = 0
+    for j, (signal, exo) in enumerate(zip(model.signals, exos)):
+        k = exo.S.shape[0]
+        A[:, 2 + col:2 + col + k, 2 + col:2 + col + k] = exo.S
+        A[:, 1, 2 + col:2 + col + k] = participation[:, j, None] * exo.g[None, :]
+        blocks.append((col, col + k, signal))
+        col += k
+    norms = np.abs(A).sum(axis=1).max(axis=1)  # ||A_i||_1 per mode
+    h = (grid[-1] - grid[0]) / (N - 1) if N > 1 else 0.0
+    cache: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+    def phi(dt: float):
+        """(E_yy (n, 2, 2), E_yw (n, 2, m), E_ww (m, m)) over dt."""
+        if N > 1 and abs(dt - h) <= 1e-9 * h:
+            dt = h
+        if dt not in cache:
+            E = expm(A * dt)
+            stiff = norms * dt > NEEDED_NORM  # as in the dense path: these modes' propagators in double-double
+            if stiff.any():
+                E[stiff] = expm_times(A[stiff], dt)
+            cache[dt] = (E[:, :2, :2], E[:, :2, 2:], E[0, 2:, 2:])
+        return cache[dt]
+
+    def w_at(t: float) -> np.ndarray:
+        w = np.zeros(m)
+        for lo, hi, signal in blocks:
+            w[lo:hi] = signal.exo_state(t)
+        return w
+
+    def step(y: np.ndarray, w: np.ndarray, dt: float) -> np.ndarray:
+        Eyy, Eyw, _ = phi(dt)
+        return np.einsum("nij,nj->ni", Eyy, y) + Eyw @ w
+
+    q = np.empty((N, n))
+    qdot = np.empty((N, n))
+    y = np.stack([shapes.T @ (model.M @ model.x0), shapes.T @ (model.M @ model.v0)], axis=1)  # (n, 2)
+    k = 0
+    partial = 0  # steps to a force discontinuity between output points
+    for seg_index, (ta, tb) in enumerate(segs := segments(model, grid)):
+        last = seg_index == len(segs) - 1
+        stop = N if last else int(np.searchsorted(grid, tb, side="left"))
+        t_cur = ta
+        if k < stop:
+            if grid[k] > t_cur:
+                y = step(y, w_at(t_cur), grid[k] - t_cur)
+                partial += 1
+            q[k], qdot[k] = y[:, 0], y[:, 1]
+            t_cur = grid[k]
+            k += 1
+            while k < stop:  # w reseeded from its closed form at every point: no drift in the forcing
+                y = step(y, w_at(t_cur), grid[k] - t_cur)
+                q[k], qdot[k] = y[:, 0], y[:, 1]
+                t_cur = grid[k]
+                k += 1
+        if not last and tb > t_cur:
+            y = step(y, w_at(t_cur), tb - t_cur)
+            partial += 1
+    x, v = q @ shapes.T, qdot @ shapes.T
+    growth = float(norms.max(initial=0.0)) * h
+    accurate = growth > NEEDED_NORM
+    stated = stated_rounding(N + len(segs) + partial + n, 1.0 if accurate else growth)
+    message = (f"ok: modal coordinates ({n} classically damped modes from a symmetric eigensolver), "
+               f"{len(segs)} force segment{'s' if len(segs) != 1 else ''}, {len(cache)} batch"
+               f"{'es' if len(cache) != 1 else ''} of {n} exponentials of size {size}"
+               + (" (the stiff modes' in double-double)" if accurate else ""))
+    return x, v, stated, message
