@@ -51,11 +51,13 @@ def settle() -> int | None:
 
 
 def install() -> None:
-    """Record and raise SIGINT and SIGTERM (call once, from the main thread)."""
+    """Record and raise SIGINT and SIGTERM (call once, from the main thread). A signal ignored when smd started
+    stays ignored, as Unix programs do (a shell script's background job `smd ... &` ignores Ctrl-C)."""
     import sys
 
     for signum in SIGNALS:
-        signal.signal(signum, _handler)
+        if signal.getsignal(signum) is not signal.SIG_IGN:
+            signal.signal(signum, _handler)
     default = sys.unraisablehook
 
     def unraisable(info) -> None:

@@ -89,7 +89,13 @@ def cli():
 
 
 def pytest_sessionstart(session):
-    """Compile the kernels (or load them from numba's cache) once, before any test's clock or captured output."""
+    """Compile the kernels (or load them from numba's cache) once, before any test's clock or captured output.
+    Tests run in a background job (`pytest &` in a script) inherit SIGINT ignored, and so would every `smd` they
+    start; the tests that interrupt a child need it as a terminal's foreground job has it."""
+    import signal
+
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     from smdcli.solvers.compiled import KERNEL_FAMILIES, warm
 
     warm(*KERNEL_FAMILIES)

@@ -174,3 +174,18 @@ def test_no_interrupt_is_lost_at_any_point_of_a_run_under_load(tmp_path):
     finally:
         for worker in load:
             worker.terminate()
+
+
+def test_a_signal_ignored_at_start_stays_ignored():
+    """A background job of a non-interactive shell starts with SIGINT ignored: smd leaves it so, and the run
+    completes (the Unix convention; SIGTERM still stops it)."""
+    code = ("import os, signal, time\n"
+            "signal.signal(signal.SIGINT, signal.SIG_IGN)\n"
+            "from smdcli import interrupts\n"
+            "interrupts.install()\n"
+            "os.kill(os.getpid(), signal.SIGINT)\n"
+            "time.sleep(0.2)\n"
+            "print(interrupts.received(), signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL)\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["None", "True"]
