@@ -333,6 +333,8 @@ def build(scenario: Scenario) -> Model:
                 cubic_rows.append((row, element.k3, element.path))
         cubic = _incidence(cubic_rows)
         quadratic = _incidence(quad_rows)
+    if scenario.damping is not None:
+        C = C + _added_damping(scenario, M, K)
     signals = tuple(build_signal(f) for f in scenario.forces)
     model = Model(
         dofs=dofs, M=M, C=C, K=K, x0=x0, v0=v0, signals=signals,
@@ -344,7 +346,34 @@ def build(scenario: Scenario) -> Model:
     )
     _check_forces(model, scenario)
     _check_matrices_finite(model, scenario)
+    _check_damping(model, scenario)
     return model
+
+
+def _added_damping(scenario: Scenario, M: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """[damping]'s C: alpha M + beta K (K the linear stiffness), or M Phi diag(2 zeta_i w_i) Phi^T M from the
+    undamped modes (Phi mass-normalized); refused where the total C would let a mode gain energy."""
+    spec = scenario.damping
+    if spec.modal:
+        from scipy.linalg import eigh
+
+        squared, shapes = eigh(K, M)
+        ratios = np.broadcast_to(np.asarray(spec.modal, dtype=float), squared.shape)
+        left = M @ shapes
+        return (left * (2 * ratios * np.sqrt(np.maximum(squared, 0.0)))) @ left.T
+    added = spec.alpha * M + spec.beta * K
+    return added
+
+
+def _check_damping(model: Model, scenario: Scenario) -> None:
+    """With [damping], the total C must be positive semidefinite: otherwise some motion gains energy."""
+    if scenario.damping is None:
+        return
+    lowest = float(np.linalg.eigvalsh(model.C).min(initial=0.0))
+    if lowest < -1e-12 * max(float(np.abs(model.C).max(initial=0.0)), 1e-300):
+        key = "damping.modal" if scenario.damping.modal else "damping"
+        raise ScenarioError(scenario.path, key, f"makes the damping matrix indefinite (eigenvalue {lowest:.4g} N s/m): "
+                                                "some mode would be negatively damped; expected damping >= 0")
 
 
 def _check_matrices_finite(model: Model, scenario: Scenario) -> None:

@@ -15,7 +15,7 @@ from smdcli.scenario.options import SOLVER_KEYS, SWEEP_KEYS, _read_solver, _read
 from smdcli.scenario.reader import (_SYSTEM_KEYS, _TIME_KEYS, _TOP_KEYS, MAX_SCENARIO_BYTES, _NotRegular, _Table,
                                     read_regular_file)
 from smdcli.scenario.spec import MAX_SAMPLES, ForceSpec, Scenario, SolverSpec, TimeSpec
-from smdcli.scenario.structure import _read_elements, _read_masses, _read_system, _read_time
+from smdcli.scenario.structure import DAMPING_KEYS, _read_damping, _read_elements, _read_masses, _read_system, _read_time
 
 
 def load(path: str | Path) -> Scenario:
@@ -86,6 +86,8 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
     )
     solver = _read_solver(_Table(file, "solver", top.raw("solver"), SOLVER_KEYS)) if top.has("solver") else SolverSpec()
     sweep = _read_sweep(_Table(file, "sweep", top.raw("sweep"), SWEEP_KEYS)) if top.has("sweep") else ()
+    damping = _read_damping(_Table(file, "damping", top.raw("damping"), DAMPING_KEYS), len(dofs)) \
+        if top.has("damping") else None
     top.finish(_TOP_KEYS)
 
     if not math.isfinite(time.end - time.start):
@@ -105,7 +107,7 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
     return Scenario(
         path=file, text=text, time=time, masses=masses, springs=springs, dampers=dampers,
         system=system, forces=forces, solver=solver, title=title, description=description,
-        sweep=sweep,
+        sweep=sweep, damping=damping,
     )
 
 

@@ -99,6 +99,16 @@ class ForceSpec:
 
 
 @dataclass(frozen=True)
+class DampingSpec:
+    """[damping], added to the elements' (or [system]'s) C: Rayleigh alpha M + beta K (given as coefficients or
+    through a ratio at two frequencies), or a damping ratio per mode."""
+
+    alpha: float = 0.0  # 1/s
+    beta: float = 0.0  # s
+    modal: tuple[float, ...] = ()  # one ratio for every mode, or one per mode
+
+
+@dataclass(frozen=True)
 class SolverSpec:
     """Requested method and tolerances; dt only for fixed-step methods."""
 
@@ -125,6 +135,7 @@ class Scenario:
     title: str = ""
     description: str = ""
     sweep: tuple[tuple[str, Any], ...] = ()
+    damping: DampingSpec | None = None
 
     @property
     def stem(self) -> str:

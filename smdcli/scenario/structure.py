@@ -9,7 +9,7 @@ import math
 
 from smdcli.errors import ScenarioError
 from smdcli.scenario.reader import _MASS_KEYS, _SYSTEM_KEYS, _TIME_KEYS, _kind, _Table
-from smdcli.scenario.spec import DEFAULT_POINTS, GROUND, ElementSpec, MassSpec, MatrixSystem, TimeSpec
+from smdcli.scenario.spec import DEFAULT_POINTS, GROUND, DampingSpec, ElementSpec, MassSpec, MatrixSystem, TimeSpec
 
 
 def _read_time(table: _Table | None, file: str) -> TimeSpec:
@@ -149,3 +149,42 @@ def _read_system(t: _Table) -> MatrixSystem:
     v0 = t.numbers("v0", (0.0,) * n, length=n)
     t.finish(_SYSTEM_KEYS)
     return MatrixSystem(dofs=tuple(dofs), M=M, C=C, K=K, x0=x0, v0=v0)
+
+
+DAMPING_KEYS = ("alpha", "beta", "zeta", "omega", "modal")
+
+
+def _read_damping(t: _Table, n: int) -> DampingSpec:
+    """[damping]: alpha and/or beta, or zeta with omega = [w1, w2] (rad/s), or modal (one ratio or one per mode)."""
+    given = [key for key in DAMPING_KEYS if t.has(key)]
+    ways = {"alpha": "coefficients", "beta": "coefficients", "zeta": "two frequencies", "omega": "two frequencies",
+            "modal": "modal"}
+    if len({ways[key] for key in given}) > 1:
+        raise t.fail(given[-1], "expected one way of giving damping: alpha and beta, zeta with omega, or modal; "
+                                f"found {', '.join(given)}")
+    if not given:
+        raise t.fail(None, "expected alpha and beta, zeta with omega, or modal; found an empty table")
+    if "modal" in given:
+        raw = t.raw("modal")
+        if isinstance(raw, list):
+            ratios = t.numbers("modal", length=n, minimum=0.0)
+        else:
+            ratios = (t.number("modal", minimum=0.0),)
+        t.finish(DAMPING_KEYS)
+        return DampingSpec(modal=tuple(ratios))
+    if "zeta" in given or "omega" in given:
+        for key in ("zeta", "omega"):
+            if not t.has(key):
+                raise t.fail(key, "required with " + ("omega" if key == "zeta" else "zeta") + " (Rayleigh damping "
+                                  "through a damping ratio at two frequencies)")
+        zeta = t.number("zeta", minimum=0.0)
+        w1, w2 = t.numbers("omega", length=2)
+        if not (w1 > 0 and w2 > 0 and w1 != w2):
+            raise t.fail("omega", f"expected two distinct positive frequencies in rad/s, found [{w1!r}, {w2!r}]")
+        # zeta = alpha / (2 w) + beta w / 2 at w1 and at w2
+        t.finish(DAMPING_KEYS)
+        return DampingSpec(alpha=2 * zeta * w1 * w2 / (w1 + w2), beta=2 * zeta / (w1 + w2))
+    alpha = t.number("alpha", 0.0)
+    beta = t.number("beta", 0.0)
+    t.finish(DAMPING_KEYS)
+    return DampingSpec(alpha=alpha, beta=beta)
