@@ -204,3 +204,30 @@ def test_an_unreachable_scheduler_is_a_usage_error(cli, tmp_path):
                  "-o", tmp_path)
     assert result.exit_code == 2 and "cannot reach a Dask scheduler" in result.stderr
     assert not list(tmp_path.glob("*.h5"))
+
+
+def test_a_cluster_sweep_stopped_by_sigterm_says_one_line_and_resumes_on_the_cluster(cli, tmp_path):
+    pytest.importorskip("distributed")
+    scene = write(tmp_path, one_dof(0.5, end=10.0, step=0.001))
+    args = [sys.executable, "-m", "smdcli", "sweep", str(scene), "--param", "damper[0].c", "--values",
+            "linspace(0.1, 20, 300)", "--param", "spring[0].k", "--values", "linspace(10, 100, 8)", "--keep",
+            "metrics", "--no-plots", "--quiet", "--method", "rk4", "--scheduler", "local", "--workers", "2"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    out = tmp_path / "cut"
+    child = subprocess.Popen(args + ["-o", str(out)], env=env, stderr=subprocess.PIPE, text=True)
+    partial = out / "scene_sweep.partial.h5"
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and child.poll() is None and _members_done(partial) == 0:
+        time.sleep(0.05)
+    child.send_signal(signal.SIGTERM)
+    _, stderr = child.communicate(timeout=120)
+    assert child.returncode == 143, stderr
+    assert stderr.count("\n") == 1 and "--resume finishes it" in stderr and "Traceback" not in stderr, stderr
+    finished = subprocess.run(args + ["-o", str(out), "--resume"], env=env, timeout=600, capture_output=True,
+                              text=True)
+    assert finished.returncode == 0, finished.stderr
+    whole = subprocess.run([a for a in args if a not in ("--scheduler", "local")][:-2] + ["-o", str(tmp_path / "whole")],
+                           env=env, timeout=600)
+    assert whole.returncode == 0
+    same = cli("diff", tmp_path / "whole" / "scene_sweep.h5", out / "scene_sweep.h5", "--rtol", "0")
+    assert same.exit_code == 0, same.output

@@ -7,6 +7,7 @@ Must not import: io, plots, commands, cli."""
 
 from __future__ import annotations
 
+import logging
 from typing import Callable, Iterator
 
 import numpy as np
@@ -31,7 +32,7 @@ class Cluster:
         self.where = "a LocalCluster" if scheduler == "local" else f"the cluster at {scheduler}"
         if scheduler == "local":
             self.local = LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
-                                      dashboard_address=None)
+                                      dashboard_address=None, silence_logs=logging.CRITICAL)
             self.client = Client(self.local)
         else:
             try:
@@ -40,7 +41,9 @@ class Cluster:
                 raise UsageError(f"--scheduler {scheduler}: cannot reach a Dask scheduler there ({exc})") from None
 
     def close(self) -> None:
-        """Disconnect, and stop the LocalCluster if this started one."""
+        """Disconnect, and stop the LocalCluster if this started one. Tasks cut short by an interrupt are expected
+        then: distributed's log lines and tracebacks about them would only bury smd's one-line message."""
+        logging.getLogger("distributed").setLevel(logging.CRITICAL)
         self.client.close()
         if self.local is not None:
             self.local.close()

@@ -221,10 +221,14 @@ def _measures(t: np.ndarray, x: np.ndarray, ground: np.ndarray, N: int) -> dict[
         span = np.nanmax(t, axis=1) - t[:, 0]
         if N > 1:  # trapezoid rule as weights on the samples: RMS^2 = sum_k w_k x_k^2 / span
             dt = np.nan_to_num(np.diff(t, axis=1))
-            weights = np.zeros((S, N, 1))
-            weights[:, 1:, 0] += dt / 2
-            weights[:, :-1, 0] += dt / 2
-            rms = np.sqrt((np.nan_to_num(np.square(x), copy=False) @ weights)[:, :, 0] / span[:, None])
+            weights = np.zeros((S, 1, N))
+            weights[:, 0, 1:] += dt / 2
+            weights[:, 0, :-1] += dt / 2
+            # numpy's own sum, not a BLAS product: its order does not depend on how many threads BLAS has (a Dask
+            # worker has one), so a member's RMS is the same bits wherever it is measured
+            squares = np.nan_to_num(np.square(x), copy=False)
+            squares *= weights
+            rms = np.sqrt(squares.sum(axis=2) / span[:, None])
         else:
             rms = np.abs(x[:, :, 0])
         final = x[np.arange(S), :, count - 1]  # (S, n)
