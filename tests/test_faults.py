@@ -107,6 +107,13 @@ def _busy(seconds: float) -> None:
         pass
 
 
+def _python_prints(code: str) -> list[str]:
+    """What a fresh interpreter running code prints, split in words; it must exit 0."""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    return done.stdout.split()
+
+
 def test_settling_keeps_the_first_signal_and_no_later_one_kills_the_process():
     """At the end of a run: a signal that came earlier decides the exit code, and one that comes while the
     interpreter shuts down is ignored (Python would otherwise reset its handlers and die with the signal)."""
@@ -122,9 +129,7 @@ def test_settling_keeps_the_first_signal_and_no_later_one_kills_the_process():
             "os.kill(os.getpid(), signal.SIGTERM)\n"
             "time.sleep(0.1)\n"
             "print('alive')\n")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT)
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.split() == [str(int(signal.SIGINT)), "alive"]
+    assert _python_prints(code) == [str(int(signal.SIGINT)), "alive"]
 
 
 def test_no_interrupt_is_lost_at_any_point_of_a_run_under_load(tmp_path):
@@ -186,6 +191,4 @@ def test_a_signal_ignored_at_start_stays_ignored():
             "os.kill(os.getpid(), signal.SIGINT)\n"
             "time.sleep(0.2)\n"
             "print(interrupts.received(), signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL)\n")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT)
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.split() == ["None", "True"]
+    assert _python_prints(code) == ["None", "True"]

@@ -151,30 +151,45 @@ def _members_done(path) -> int:
         return 0
 
 
-def test_a_sweep_killed_with_sigkill_is_finished_by_resume_with_the_same_data(cli, tmp_path):
-    """SIGKILL halfway (no handler runs): the partial file on disk is what --resume finishes."""
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+
+
+def _big_sweep(tmp_path, *extra: str) -> list[str]:
+    """`smd sweep` of 2,400 fixed-step members (12 chunks, a few seconds) as a command line, -o still to add."""
     scene = write(tmp_path, one_dof(0.5, end=10.0, step=0.001))
-    args = [sys.executable, "-m", "smdcli", "sweep", str(scene), "--param", "damper[0].c", "--values",
+    return [sys.executable, "-m", "smdcli", "sweep", str(scene), "--param", "damper[0].c", "--values",
             "linspace(0.1, 20, 300)", "--param", "spring[0].k", "--values", "linspace(10, 100, 8)", "--keep",
-            "metrics", "--no-plots", "--quiet", "--method", "rk4"]
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    reference = subprocess.run(args + ["-o", str(tmp_path / "whole")], env=env, timeout=600)
-    assert reference.returncode == 0
-    out = tmp_path / "killed"
-    child = subprocess.Popen(args + ["-o", str(out)], env=env)
-    partial = out / "scene_sweep.partial.h5"
+            "metrics", "--no-plots", "--quiet", "--method", "rk4", *extra]
+
+
+def _signal_once_members_are_done(command: list[str], out, signum: int) -> tuple[int, str]:
+    """Start the sweep, send signum as soon as its partial file records a finished chunk: its exit code, stderr."""
+    child = subprocess.Popen(command + ["-o", str(out)], env=ENV, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 300
-    while time.monotonic() < deadline and child.poll() is None and _members_done(partial) == 0:
+    while time.monotonic() < deadline and child.poll() is None and _members_done(out / "scene_sweep.partial.h5") == 0:
         time.sleep(0.05)
-    child.send_signal(signal.SIGKILL)
-    child.wait()
-    done = _members_done(partial)
-    assert 0 < done < 2400 and not (out / "scene_sweep.h5").exists()
-    finished = subprocess.run(args + ["-o", str(out), "--resume"], env=env, timeout=600, capture_output=True,
+    child.send_signal(signum)
+    stderr = child.communicate(timeout=120)[1]
+    return child.returncode, stderr
+
+
+def _resume_matches_a_whole_run(cli, command: list[str], out, whole) -> None:
+    finished = subprocess.run(command + ["-o", str(out), "--resume"], env=ENV, timeout=600, capture_output=True,
                               text=True)
     assert finished.returncode == 0, finished.stderr
-    same = cli("diff", tmp_path / "whole" / "scene_sweep.h5", out / "scene_sweep.h5", "--rtol", "0")
+    same = cli("diff", whole / "scene_sweep.h5", out / "scene_sweep.h5", "--rtol", "0")
     assert same.exit_code == 0, same.output
+
+
+def test_a_sweep_killed_with_sigkill_is_finished_by_resume_with_the_same_data(cli, tmp_path):
+    """SIGKILL halfway (no handler runs): the partial file on disk is what --resume finishes."""
+    command = _big_sweep(tmp_path)
+    assert subprocess.run(command + ["-o", str(tmp_path / "whole")], env=ENV, timeout=600).returncode == 0
+    out = tmp_path / "killed"
+    _signal_once_members_are_done(command, out, signal.SIGKILL)
+    done = _members_done(out / "scene_sweep.partial.h5")
+    assert 0 < done < 2400 and not (out / "scene_sweep.h5").exists()
+    _resume_matches_a_whole_run(cli, command, out, tmp_path / "whole")
 
 
 def test_a_local_dask_cluster_gives_the_same_data_sets_as_this_process(cli, tmp_path, small_chunks):
@@ -208,26 +223,10 @@ def test_an_unreachable_scheduler_is_a_usage_error(cli, tmp_path):
 
 def test_a_cluster_sweep_stopped_by_sigterm_says_one_line_and_resumes_on_the_cluster(cli, tmp_path):
     pytest.importorskip("distributed")
-    scene = write(tmp_path, one_dof(0.5, end=10.0, step=0.001))
-    args = [sys.executable, "-m", "smdcli", "sweep", str(scene), "--param", "damper[0].c", "--values",
-            "linspace(0.1, 20, 300)", "--param", "spring[0].k", "--values", "linspace(10, 100, 8)", "--keep",
-            "metrics", "--no-plots", "--quiet", "--method", "rk4", "--scheduler", "local", "--workers", "2"]
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    command = _big_sweep(tmp_path, "--scheduler", "local", "--workers", "2")
     out = tmp_path / "cut"
-    child = subprocess.Popen(args + ["-o", str(out)], env=env, stderr=subprocess.PIPE, text=True)
-    partial = out / "scene_sweep.partial.h5"
-    deadline = time.monotonic() + 300
-    while time.monotonic() < deadline and child.poll() is None and _members_done(partial) == 0:
-        time.sleep(0.05)
-    child.send_signal(signal.SIGTERM)
-    _, stderr = child.communicate(timeout=120)
-    assert child.returncode == 143, stderr
+    code, stderr = _signal_once_members_are_done(command, out, signal.SIGTERM)
+    assert code == 143, stderr
     assert stderr.count("\n") == 1 and "--resume finishes it" in stderr and "Traceback" not in stderr, stderr
-    finished = subprocess.run(args + ["-o", str(out), "--resume"], env=env, timeout=600, capture_output=True,
-                              text=True)
-    assert finished.returncode == 0, finished.stderr
-    whole = subprocess.run([a for a in args if a not in ("--scheduler", "local")][:-2] + ["-o", str(tmp_path / "whole")],
-                           env=env, timeout=600)
-    assert whole.returncode == 0
-    same = cli("diff", tmp_path / "whole" / "scene_sweep.h5", out / "scene_sweep.h5", "--rtol", "0")
-    assert same.exit_code == 0, same.output
+    assert subprocess.run(_big_sweep(tmp_path) + ["-o", str(tmp_path / "whole")], env=ENV, timeout=600).returncode == 0
+    _resume_matches_a_whole_run(cli, command, out, tmp_path / "whole")

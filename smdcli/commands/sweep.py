@@ -17,7 +17,7 @@ from smdcli.progress import bar
 from smdcli.sweep.family import Family, build_family
 from smdcli.sweep.frequency import FrequencyResponse, _driving_force, frequency_response, input_index
 from smdcli.sweep.shooting import MAX_PERIODS
-from smdcli.sweep.spec import METRIC_UNITS, read_spec
+from smdcli.sweep.spec import METRIC_UNITS, QUANTITIES, read_spec
 from smdcli.text import plural
 
 # ------------------------------------------------------------------- command
@@ -101,10 +101,10 @@ def _time_family(run: SweepRun, out_dir, method: str | None, keep: str | None, r
     renamed `<stem>_sweep.h5` when complete; an interrupted run leaves the partial file for --resume. Chunks are
     solved here, or on a Dask cluster with a scheduler."""
     from smdcli.io.sweep_hdf5 import IncompatiblePartial, SweepFile
-    from smdcli.sweep.stream import chunk_plan, family_grid, identity
+    from smdcli.sweep.stream import chunk_plan, identity
 
     family = run.family
-    grid, length = family_grid(family)
+    grid, length = family.output_grid()
     keep = keep or "full"
     _check_disk(out_dir, family, keep, length)
     plan = chunk_plan(family, length)
@@ -169,10 +169,9 @@ def _solve_chunks(run: SweepRun, stream, plan: list[range], method, workers, gri
     writer = ThreadPoolExecutor(max_workers=1)
     writing: list = []
 
-    def hand_on(task, *args) -> None:
+    def make_room() -> None:  # at most two chunks held: the one being written and the one being solved
         if len(writing) == 2:
             writing.pop(0).result()
-        writing.append(writer.submit(task, run, stream, *args))
 
     try:
         with resumable_path(partial, final):
@@ -183,15 +182,15 @@ def _solve_chunks(run: SweepRun, stream, plan: list[range], method, workers, gri
                 if cluster is None:
                     buffers = [chunk_buffers(family, plan, length) for _ in range(2)]  # reused: see solve_family
                     for k, members in todo:
-                        if len(writing) == 2:  # the buffers about to be reused are on disk
-                            writing.pop(0).result()
+                        make_room()  # and so the buffers about to be reused are on disk
                         result = solve_family(family.take(members), method, workers, advance if shown else None,
                                               buffers[k % 2])
-                        hand_on(_measure_and_write, members, result, grid, length)
+                        writing.append(writer.submit(_measure_and_write, run, stream, members, result, grid, length))
                 else:
                     for chunk in cluster.chunks(family, [m for _, m in todo], method, run.keep, grid, length,
                                                 family.spec.quantity, advance if shown else None):
-                        hand_on(_write_chunk, chunk)
+                        make_room()
+                        writing.append(writer.submit(_write_chunk, run, stream, chunk))
                 for pending in writing:
                     pending.result()
             run.wall_time_s = time.perf_counter() - started
@@ -274,7 +273,7 @@ def _check_disk(out_dir, family, keep: str, length: int) -> None:
 
     if keep != "full":
         return
-    histories = 4 * len(family) * length * family.base.n * 8
+    histories = len(QUANTITIES) * len(family) * length * family.base.n * 8
     metrics_only = len(family) * (len(METRIC_UNITS) * family.base.n * 8 + 64)
     free = shutil.disk_usage(out_dir).free
     if histories > 0.9 * free:
@@ -284,6 +283,7 @@ def _check_disk(out_dir, family, keep: str, length: int) -> None:
 
 
 def _size(count: float) -> str:
+    """A byte count for people: 3 significant digits and a decimal unit."""
     for unit in ("B", "kB", "MB", "GB", "TB"):
         if count < 1000 or unit == "TB":
             return f"{count:.3g} {unit}"

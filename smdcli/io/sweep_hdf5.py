@@ -163,13 +163,14 @@ class SweepFile:
         """Members written so far."""
         return int(self.f.attrs["members_done"])
 
-    def _growing_sets(self):
-        f = self.f
-        names = [q for q in HISTORY_UNITS if q in f] + ["success", "message", "method", "stated_accuracy"]
-        names += [f"metrics/{m}" for m in METRIC_UNITS]
-        if f["time"].maxshape[0] is None:
-            names.append("time")
-        return [f[name] for name in names]
+    def _growing_sets(self) -> list:
+        """The per-member data sets: those whose first axis is unlimited."""
+        import h5py
+
+        found = []
+        self.f.visititems(lambda _, obj: found.append(obj) if isinstance(obj, h5py.Dataset) and obj.maxshape
+                          and obj.maxshape[0] is None else None)
+        return found
 
     def append(self, chunk) -> None:
         """Rows of the next chunk of members, flushed, and members_done moved past them."""

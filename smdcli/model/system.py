@@ -361,8 +361,7 @@ def _added_damping(scenario: Scenario, M: np.ndarray, K: np.ndarray) -> np.ndarr
         ratios = np.broadcast_to(np.asarray(spec.modal, dtype=float), squared.shape)
         left = M @ shapes
         return (left * (2 * ratios * np.sqrt(np.maximum(squared, 0.0)))) @ left.T
-    added = spec.alpha * M + spec.beta * K
-    return added
+    return spec.alpha * M + spec.beta * K
 
 
 def _check_damping(model: Model, scenario: Scenario) -> None:

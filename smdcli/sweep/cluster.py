@@ -63,9 +63,9 @@ class Cluster:
         ahead = 0  # the next chunk to yield
 
         def submit() -> None:
-            for k, members in todo:
-                waiting.add(client.submit(_task, k, shared, members, method, keep, grid, length, quantity, pure=False))
-                return
+            task = next(todo, None)
+            if task is not None:
+                waiting.add(client.submit(_task, *task, shared, method, keep, grid, length, quantity, pure=False))
 
         for _ in range(window):
             submit()
@@ -81,6 +81,6 @@ class Cluster:
                 submit()
 
 
-def _task(k: int, family: Family, members: range, method, keep, grid, length, quantity) -> tuple[int, Chunk]:
+def _task(k: int, members: range, family: Family, method, keep, grid, length, quantity) -> tuple[int, Chunk]:
     """On a worker: one chunk, on one thread (the cluster's workers are the parallelism)."""
     return k, solve_chunk(family, members, method, keep, grid, length, quantity, workers=1)

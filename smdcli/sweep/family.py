@@ -18,7 +18,7 @@ import numpy as np
 
 from smdcli import scenario as scenario_mod
 from smdcli.errors import ScenarioError, UsageError
-from smdcli.model import Model, build
+from smdcli.model import Model, build, time_grid
 from smdcli.scenario import GROUND, Scenario
 from smdcli.sweep.spec import SweepSpec, parameter_units, parse_ic
 
@@ -161,6 +161,16 @@ class Family:
             quadratic = replace(quadratic, coef=self.quadratic_coef[s])
         return replace(self.base, M=self.M[s], C=self.C[s], K=self.K[s], x0=self.x0[s], v0=self.v0[s],
                        cubic=cubic, quadratic=quadratic)
+
+    def output_grid(self) -> tuple[np.ndarray | None, int]:
+        """The members' shared output grid (None where their grids differ, a swept time.end) and the longest
+        grid's length."""
+        if self.scenarios is None:
+            grid = time_grid(self.scenario.time)
+            return grid, len(grid)
+        grids = [time_grid(sc.time) for sc in self.scenarios]
+        same = all(len(g) == len(grids[0]) and np.array_equal(g, grids[0]) for g in grids)
+        return (grids[0] if same else None), max(len(g) for g in grids)
 
     def take(self, members: range) -> Family:
         """Members start..stop as a family of their own (a chunk of a streamed sweep), not a grid."""

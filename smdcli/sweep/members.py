@@ -88,10 +88,8 @@ def solve_family(family: Family, method: str | None = None, workers: int | None 
     start = time.perf_counter()
     S, n = len(family), family.base.n
     scenarios = family.scenarios
-    grids = [time_grid(sc.time) for sc in scenarios] if scenarios else [time_grid(family.scenario.time)]
-    grid = grids[0]
-    same_grid = all(len(g) == len(grid) and np.array_equal(g, grid) for g in grids)
-    longest = max(len(g) for g in grids)
+    grid, longest = family.output_grid()
+    same_grid = grid is not None
     if S * longest * n > MAX_STACKED:
         raise UsageError(f"{S} members x {longest} time points x {n} DOFs is more than {MAX_STACKED:.0e} samples "
                          "per data set; use fewer members or a coarser time grid")

@@ -12,7 +12,6 @@ from typing import Callable
 
 import numpy as np
 
-from smdcli.model import time_grid
 from smdcli.sweep.family import Family
 from smdcli.sweep.members import FamilyResult, metrics, solve_family
 from smdcli.sweep.spec import QUANTITIES
@@ -25,16 +24,6 @@ MAX_LINES = 300  # members kept for an overlay plot; more would be slow and look
 def drawn_members(count: int) -> np.ndarray:
     """The members an overlay draws: all of a few, else MAX_LINES evenly spaced."""
     return np.unique(np.linspace(0, count - 1, min(count, MAX_LINES)).round().astype(int))
-
-
-def family_grid(family: Family) -> tuple[np.ndarray | None, int]:
-    """The members' shared time grid (None where they differ) and the longest grid's length."""
-    if family.scenarios is None:
-        grid = time_grid(family.scenario.time)
-        return grid, len(grid)
-    grids = [time_grid(sc.time) for sc in family.scenarios]
-    same = all(len(g) == len(grids[0]) and np.array_equal(g, grids[0]) for g in grids)
-    return (grids[0] if same else None), max(len(g) for g in grids)
 
 
 def chunk_plan(family: Family, length: int) -> list[range]:
@@ -74,7 +63,7 @@ class Chunk:
     messages: list[str]
     methods: list[str]
     stated: np.ndarray  # (k,) each member's vouched error relative to its peak
-    acceleration_stated: float  # the worst member's, for the acceleration (derived from x and v)
+    acceleration_stated: float  # the worst member's, for the acceleration (derived from x and v); 0 if not kept
     how: str
     traces: dict[int, tuple[np.ndarray, np.ndarray, bool]]  # member -> (time, plotted quantity (N, n), success)
 
@@ -85,7 +74,7 @@ class Chunk:
 def solve_chunk(family: Family, members: range, method: str | None, keep: str, grid: np.ndarray | None,
                 length: int, quantity: str, workers: int | None = None,
                 progress: Callable[[int], None] | None = None, buffers: dict[str, np.ndarray] | None = None) -> Chunk:
-    """Solve and measure members start..stop of the family (grid and length: family_grid's)."""
+    """Solve and measure members start..stop of the family (grid and length: family.output_grid()'s)."""
     result = solve_family(family.take(members), method, workers, progress, buffers)
     return measure_chunk(family, members, result, keep, grid, length, quantity)
 
@@ -107,9 +96,12 @@ def measure_chunk(family: Family, members: range, result: FamilyResult, keep: st
         return wide
 
     histories = {name: padded(getattr(result, name)) for name in QUANTITIES}
-    with np.errstate(all="ignore"):
-        accuracy = acceleration_accuracy(part.M, part.C, part.K, result.stated_accuracy, result.displacement,
-                                         result.velocity, result.acceleration, result.force)
+    accuracy = 0.0  # the acceleration's, where the file keeps it
+    if keep == "full":
+        with np.errstate(all="ignore"):
+            accuracy = float(np.nanmax(acceleration_accuracy(part.M, part.C, part.K, result.stated_accuracy,
+                                                             result.displacement, result.velocity,
+                                                             result.acceleration, result.force), initial=0.0))
     time = None if grid is not None else padded(np.broadcast_to(result.time, (len(part), result.time.shape[-1])))
     drawn = drawn_members(len(family))
     traces = {}
@@ -118,5 +110,4 @@ def measure_chunk(family: Family, members: range, result: FamilyResult, keep: st
         t = result.time if time is None else time[row]
         traces[int(s)] = (t, np.array(histories[quantity][row]), bool(result.success[row]))
     return Chunk(members.start, time, histories if keep == "full" else None, measured, result.success,
-                 result.messages, result.methods, result.stated_accuracy,
-                 float(np.nanmax(accuracy, initial=0.0)), result.how, traces)
+                 result.messages, result.methods, result.stated_accuracy, accuracy, result.how, traces)
