@@ -103,6 +103,31 @@ def test_info_reports_modes_regimes_and_auto(cli):
     assert "stiffness ratio" in text and "auto     exact" in text
 
 
+def test_a_large_model_is_summarized_on_the_terminal(cli, tmp_path):
+    """100 masses: `smd info` and `smd simulate` list a few DOFs, modes and peaks and say where the rest are;
+    --json keeps every one."""
+    lines = ["[time]", "end = 1.0", "step = 0.01"]
+    for i in range(100):
+        lines += ["[[mass]]", f'name = "m{i}"', "m = 1.0", "[[spring]]",
+                  f'connects = ["{"ground" if i == 0 else f"m{i - 1}"}", "m{i}"]', "k = 100.0"]
+    lines += ["[[damper]]", 'connects = ["m99", "ground"]', "c = 5.0", "[[force]]", 'on = "m0"', 'type = "sine"',
+              "amplitude = 10.0", "omega = 5.0"]
+    path = tmp_path / "chain.toml"
+    path.write_text("\n".join(lines) + "\n")
+    text = cli("info", path).stdout
+    assert "more modes (--json lists them all)" in text and "100 x 100, 100 nonzero (diagonal" in text
+    assert "m50" not in text and "m0, m1" in text and "m98, m99" in text
+    result = cli("simulate", path, "-o", tmp_path, "--no-plots")
+    assert result.exit_code == 0, result.output
+    peak = next(line for line in result.stdout.splitlines() if "peak |x|" in line)
+    assert "(100 DOFs; the largest" in peak and "m50 " not in peak
+    data = json.loads(cli("simulate", path, "-o", tmp_path, "--no-plots", "--json").stdout)
+    assert len(data[0]["peak_displacement_m"]) == 100
+    with h5py.File(tmp_path / "chain.h5") as f:
+        assert max(data[0]["peak_displacement_m"].values()) == pytest.approx(np.abs(f["displacement"][:]).max(),
+                                                                             rel=1e-15)
+
+
 def test_help_does_not_import_heavy_modules():
     code = ("import sys, runpy; sys.argv = ['smd', '--help']\n"
             "try:\n    runpy.run_module('smdcli', run_name='__main__')\nexcept SystemExit:\n    pass\n"

@@ -257,3 +257,60 @@ def test_modal_path_matches_the_dense_exponential_on_a_100_mass_chain(monkeypatc
     monkeypatch.undo()
     _, one_end, _ = model_of(_chain(100, 2.0, 0.0, forces))
     assert not one_end.proportional_damping and not modal.modal_applies(one_end)
+
+
+def test_action_path_matches_the_dense_exponential_on_non_classical_chains(monkeypatch):
+    """Damped at one end only (not classical): the exponential's sparse action against the dense 200-state
+    exponential, to 1e-10 of the peak, with a sine, a square wave (force segments that fall between output
+    points), a delayed step, a table and initial displacements; its stated accuracy covers the difference."""
+    import smdcli.solvers.exact as exact
+
+    forces = force_block("sine", on="m0", amplitude=10.0, omega=5.0) + \
+        force_block("square", on="m50", amplitude=3.0, period=0.37, t0=0.05) + \
+        force_block("step", on="m99", amplitude=-2.0, t0=1.234) + \
+        force_block("table", on="m20", t=[0.0, 1.0, 2.5, 4.0], values=[0.0, 5.0, -1.0, 0.0])
+    _, model, grid = model_of(_chain(100, 2.0, 0.0, forces))
+    assert not model.proportional_damping
+    monkeypatch.setattr(exact, "dense_cost", lambda model, grid: math.inf)
+    fast = solve(model, grid, "exact", Tolerances())
+    assert "exponential's action" in fast.stats.message
+    monkeypatch.setattr(exact, "ACTION_DOFS", 10**9)
+    dense = solve(model, grid, "exact", Tolerances())
+    assert "action" not in dense.stats.message
+    for name in ("displacement", "velocity", "acceleration"):
+        a, b = getattr(fast, name), getattr(dense, name)
+        assert np.abs(a - b).max() <= 1e-10 * np.abs(b).max(), name
+    gap = np.abs(fast.displacement - dense.displacement).max() / np.abs(dense.displacement).max()
+    assert gap <= fast.stats.stated_accuracy + dense.stats.stated_accuracy
+    assert fast.stats.stated_accuracy <= 1e-9
+
+
+def test_auto_takes_the_action_where_it_is_cheaper_and_says_so():
+    """A 300-mass chain damped at one end: auto's exact path is the sparse action, named in its reason; a
+    classically damped chain of the same size stays modal, and a 20-mass one dense."""
+    forces = force_block("sine", on="m0", amplitude=10.0, omega=5.0)
+    _, model, grid = model_of(_chain(300, 2.0, 0.0, forces))
+    result = solve(model, grid, "auto", Tolerances())
+    assert result.stats.method == "exact"
+    assert "damping not proportional" in result.stats.reason and "sparse state matrix" in result.stats.reason
+    assert "exponential's action" in result.stats.message
+    _, classical, grid = model_of(_chain(300, 2.0, 2.0, forces))
+    assert "modal coordinates" in solve(classical, grid, "auto", Tolerances()).stats.reason
+    _, small, grid = model_of(_chain(20, 2.0, 0.0, forces))
+    assert "matrix exponential" in solve(small, grid, "auto", Tolerances()).stats.reason
+
+
+def test_large_non_classical_modes_come_from_modal_coordinates_and_equal_the_state_matrix_eigenvalues():
+    """From 64 DOFs the damped eigenvalues are computed from [[0, I], [-Omega^2, -Phi^T C Phi]], a similarity
+    transform of the state matrix: they equal the state matrix's own to 1e-12 of the largest, pair by pair."""
+    from smdcli.model.system import MODAL_FORM_DOFS
+
+    _, model, _ = model_of(_chain(MODAL_FORM_DOFS + 6, 2.0, 0.0, ""))
+    assert not model.proportional_damping
+    direct = np.linalg.eigvals(model.state_matrix)
+    direct = direct[np.lexsort((direct.real, direct.imag))]
+    eig = model.modes.eigenvalues
+    assert len(eig) == len(direct)
+    assert np.abs(eig - direct).max() <= 1e-12 * np.abs(direct).max()
+    wn = np.sort(np.abs(direct[direct.imag > 0]))
+    np.testing.assert_allclose(np.sort(model.modes.natural_frequencies), wn, rtol=1e-12)

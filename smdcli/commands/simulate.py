@@ -124,8 +124,14 @@ def format_summary(data: dict) -> str:
     rejected = "not reported" if data["steps_rejected"] < 0 else data["steps_rejected"]
     lines.append(f"  cost     {data['steps_accepted']} steps ({rejected} rejected), {data['nfev']} f evals, "
                  f"{data['njev']} Jacobians, {data['nlu']} LU; {data['wall_time_s'] * 1e3:.1f} ms")
-    peaks = ", ".join(f"{k} {v:.6g}" for k, v in data["peak_displacement_m"].items())
-    lines.append(f"  peak |x| {peaks} m")
+    items = list(data["peak_displacement_m"].items())
+    peaks = ", ".join(f"{k} {v:.6g}" for k, v in (items if len(items) <= SHOWN else items[:SHOWN // 2]))
+    if len(items) > SHOWN:  # a large model's peaks are for --json or the HDF5 file, not a terminal
+        name, top = max(items, key=lambda kv: kv[1])
+        peaks += f" m, ... ({len(items)} DOFs; the largest, {top:.6g} m, at {name}; --json lists every one)"
+    else:
+        peaks += " m"
+    lines.append(f"  peak |x| {peaks}")
     lines += [f"  {note}" for note in data["notes"]]
     if data["outputs"]:
         lines.append(f"  wrote    {', '.join(data['outputs'])}")
@@ -138,7 +144,7 @@ def info(path: str | Path) -> dict:
     m = model.modes
     from smdcli.solvers.auto import Auto
 
-    solver, reason = Auto().choose(model)
+    solver, reason = Auto().choose(model, grid)
     data = {
         "scenario": sc.path, "title": sc.title, "dofs": list(model.dofs),
         "form": "element" if model.element_form else "matrix",

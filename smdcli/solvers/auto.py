@@ -13,7 +13,7 @@ from smdcli.model import Model
 from smdcli.result import Result
 from smdcli.solvers.base import Solver, Tolerances
 from smdcli.solvers.closed_form import ClosedForm
-from smdcli.solvers.exact import Exact
+from smdcli.solvers.exact import Exact, sparse_action
 from smdcli.solvers.modal import modal_applies
 from smdcli.solvers.compiled import DOP853, Radau, StiffnessDetected
 
@@ -43,7 +43,7 @@ class Auto(Solver):
     description = "picks the cheapest method that is exact or accurate enough, and says why"
 
     def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
-        solver, reason = self.choose(model)
+        solver, reason = self.choose(model, grid)
         abandoned_s = 0.0  # an explicit attempt given up as stiff still cost its time
         if solver is None:  # nonlinear: try explicit with a stiffness watch
             explicit = DOP853(watch=True)
@@ -65,8 +65,8 @@ class Auto(Solver):
                                     wall_time_s=result.stats.wall_time_s + abandoned_s)
         return dataclasses.replace(result, stats=stats)
 
-    def choose(self, model: Model) -> tuple[Solver | None, str]:
-        """The solver for a model and the reason, or (None, '') where the trajectory must decide."""
+    def choose(self, model: Model, grid: np.ndarray) -> tuple[Solver | None, str]:
+        """The solver for a model on a grid and the reason, or (None, '') where the trajectory must decide."""
         if model.is_linear:
             # Stiffness does not matter to exact methods, but the user should know an integrator would feel it;
             # not at the price of a general eigenvalue problem larger than the exact solve (smd info computes it).
@@ -82,6 +82,10 @@ class Auto(Solver):
                 if modal_applies(model):
                     return Exact(), (f"linear time-invariant, classically damped, {forced}: in modal coordinates "
                                      f"({model.n} exact 1-DOF recurrences), exact to rounding{stiff}")
+                if sparse_action(model, grid) is not None:
+                    return Exact(), (f"linear time-invariant, damping not proportional, {forced}: the exponential's "
+                                     f"action on the sparse state matrix (cheaper than the dense {2 * model.n}-square "
+                                     f"exponential), exact to rounding{stiff}")
                 return Exact(), f"linear time-invariant, {forced}: matrix exponential, exact to rounding{stiff}"
             if model.is_stiff:
                 return Radau(), (f"linear, but {_unheld(model)} has no exact integral, and stiff "

@@ -6,6 +6,7 @@ Must not import: sweep, io, plots, commands, cli.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from collections.abc import Iterator
 from typing import Callable, ClassVar
 
 import numpy as np
@@ -124,6 +125,27 @@ def segments(model: Model, grid: np.ndarray) -> list[tuple[float, float]]:
     """The intervals between force discontinuities that cover the grid."""
     edges = cuts(model, grid).tolist()
     return list(zip(edges[:-1], edges[1:]))
+
+
+def walk(model: Model, grid: np.ndarray) -> Iterator[tuple[float, float, int | None]]:
+    """The exact recurrences' way over the grid and the force discontinuities: (t, dt, k), a propagation from t
+    over dt that lands on grid point k, or on the next discontinuity where k is None. dt is 0 for a point the walk
+    is already on, and exactly the grid's step h where a difference of grid times is h up to their rounding."""
+    N = len(grid)
+    h = (grid[-1] - grid[0]) / (N - 1) if N > 1 else 0.0
+    segs = segments(model, grid)
+    k = 0
+    for index, (ta, tb) in enumerate(segs):
+        last = index == len(segs) - 1
+        stop = N if last else int(np.searchsorted(grid, tb, side="left"))
+        t = ta
+        while k < stop:
+            dt = float(grid[k] - t)
+            yield t, (h if abs(dt - h) <= 1e-9 * h else dt), k
+            t = float(grid[k])
+            k += 1
+        if not last and tb > t:
+            yield t, tb - t, None
 
 
 def force_function(model: Model, ta: float, tb: float) -> Callable[[float], np.ndarray]:

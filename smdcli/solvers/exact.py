@@ -29,11 +29,15 @@ from smdcli.model.forcing import Table
 from smdcli.result import Result, SolverStats
 from smdcli.solvers.accurate_expm import expm_times, needed
 from smdcli.solvers.base import Solver, Tolerances, make_result, segments, stated_rounding
+from smdcli.solvers.action import ACTION_DOFS, Action, action_cost, solve_action
 from smdcli.solvers.modal import modal_applies, solve_modal
 from smdcli.text import plural
 
 BLOCK = 64  # output steps per stacked propagation
 _POWERS_BYTES = 64 * 2**20
+# Seconds per flop of a dense matrix product and per entry of a matrix-vector product (memory-bound), on a 2-core
+# machine: they only decide between this path and the sparse action (action.py), whose cost is on the same scale.
+_DENSE_FLOP_S, _DENSE_ENTRY_S = 2e-11, 3e-10
 
 
 def augmented(model: Model) -> tuple[np.ndarray, list[tuple[int, int, object]]]:
@@ -52,6 +56,28 @@ def augmented(model: Model) -> tuple[np.ndarray, list[tuple[int, int, object]]]:
         blocks.append((col, col + m, signal))
         col += m
     return Aaug, blocks
+
+
+def sparse_action(model: Model, grid: np.ndarray) -> Action | None:
+    """The exponential's sparse action for a large linear scene whose forces all have exact generators, where it
+    is cheaper than the dense exponential; else None."""
+    if model.n < ACTION_DOFS or not model.is_linear or any(s.exo() is None for s in model.signals):
+        return None
+    action = Action(model)
+    return action if action_cost(action, model, grid) < dense_cost(model, grid) else None
+
+
+def dense_cost(model: Model, grid: np.ndarray) -> float:
+    """Estimated seconds of the dense path: expm (about 16 size^3 flops), the J stacked powers of the propagator,
+    and a pass over the propagator per output step."""
+    size = 2 * model.n + sum(s.exo().S.shape[0] for s in model.signals)
+    J = _stacked_powers(size, len(grid))
+    return (16 + 2 * J) * size**3 * _DENSE_FLOP_S + len(grid) * size**2 * _DENSE_ENTRY_S
+
+
+def _stacked_powers(size: int, N: int) -> int:
+    """How many powers of the step's propagator are stacked: BLOCK, less where they would pass 64 MB."""
+    return max(1, min(BLOCK, N - 1, _POWERS_BYTES // (8 * size * size)))
 
 
 def first_order_hold(model: Model, grid: np.ndarray) -> tuple[Model, tuple[str, ...]]:
@@ -85,80 +111,91 @@ class Exact(Solver):
     adaptive = False
 
     def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
-        from scipy.linalg import expm  # imported before the clock: wall time is the solve's own
+        import scipy.linalg  # before the clock: the wall time is the solve's own, not the import's
+        import scipy.sparse
+
+        del scipy
 
         start = time.perf_counter()
+        original = model
+        held: tuple[str, ...] = ()
         if modal_applies(model):
             x, v, stated, message = solve_modal(model, grid)
-            stats = SolverStats(method=self.name, requested_method=self.name, reason="", nlu=0,
-                                steps_accepted=max(len(grid) - 1, 0), wall_time_s=time.perf_counter() - start,
-                                message=message, stated_accuracy=stated)
-            return make_result(model, grid, x, v, stats)
-        original = model
-        model, held = first_order_hold(model, grid)
-        Aaug, blocks = augmented(model)
-        size = Aaug.shape[0]
-        n, N = model.n, len(grid)
-        h = (grid[-1] - grid[0]) / (N - 1) if N > 1 else 0.0
-        cache: dict[float, np.ndarray] = {}
-        norm_A = float(np.abs(Aaug).sum(axis=0).max(initial=0.0))
-        accurate = needed(norm_A * h, size)  # a stiff scene: double scaling and squaring would lose digits
-
-        def phi(dt: float) -> np.ndarray:
-            if N > 1 and abs(dt - h) <= 1e-9 * h:
-                dt = h  # a grid difference that is h up to the rounding of the grid times
-            if dt not in cache:
-                cache[dt] = expm_times(Aaug, dt) if needed(norm_A * dt, size) else expm(Aaug * dt)
-            return cache[dt]
-
-        J = max(1, min(BLOCK, N - 1, _POWERS_BYTES // (8 * size * size)))
-        powers = np.empty((J, size, size))
-        if N > 1:
-            powers[0] = phi(h)
-            for j in range(1, J):
-                powers[j] = powers[j - 1] @ powers[0]
-
-        def reseed(z: np.ndarray, t: float) -> None:
-            for lo, hi, signal in blocks:
-                z[lo:hi] = signal.exo_state(t)
-
-        out = np.empty((N, size))
-        z = np.zeros(size)
-        z[:n], z[n:2 * n] = model.x0, model.v0
-        k = 0  # next grid index to fill
-        n_expm = 1
-        for seg_index, (ta, tb) in enumerate(segs := segments(model, grid)):
-            last = seg_index == len(segs) - 1
-            reseed(z, ta)
-            t_cur = ta
-            stop = N if last else int(np.searchsorted(grid, tb, side="left"))
-            if k < stop:
-                if grid[k] > t_cur:
-                    z = phi(grid[k] - t_cur) @ z
-                    n_expm += 1
-                out[k] = z
-                t_cur = grid[k]
-                k += 1
-                while k < stop:
-                    reseed(z, t_cur)
-                    j = min(J, stop - k)
-                    out[k:k + j] = powers[:j] @ z
-                    k += j
-                    z = out[k - 1].copy()
-                    t_cur = grid[k - 1]
-            if not last and tb > t_cur:
-                z = phi(tb - t_cur) @ z
-                n_expm += 1
-        x, v = out[:, :n], out[:, n:2 * n]
-        stated = stated_rounding(N + len(segs) + n_expm, 1.0 if accurate else norm_A * h)
+        else:
+            model, held = first_order_hold(model, grid)
+            action = sparse_action(model, grid)
+            x, v, stated, message = solve_action(model, grid, action) if action is not None \
+                else solve_dense(model, grid)
         if held:
             stated = max(stated, hold_error(original, grid, held))
+            message += f"; first-order hold on the output grid for {', '.join(held)} (error O(step^2))"
         stats = SolverStats(
             method=self.name, requested_method=self.name, reason="",
-            nlu=0, steps_accepted=max(N - 1, 0), wall_time_s=time.perf_counter() - start,
-            message=(f"ok: {plural(len(segs), 'force segment')}, {plural(len(cache), 'matrix exponential')} "
-                     f"of size {size}" + (" in double-double (a stiff scene)" if accurate else "")
-                     + (f"; first-order hold on the output grid for {', '.join(held)} (error O(step^2))" if held else "")),
-            stated_accuracy=stated,
+            nlu=0, steps_accepted=max(len(grid) - 1, 0), wall_time_s=time.perf_counter() - start,
+            message=message, stated_accuracy=stated,
         )
-        return make_result(model, grid, x.copy(), v.copy(), stats)
+        return make_result(model, grid, x, v, stats)
+
+
+def solve_dense(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:
+    """Displacement and velocity (N, n) by the dense exponential of the augmented system, the stated accuracy and
+    a description."""
+    from scipy.linalg import expm
+
+    Aaug, blocks = augmented(model)
+    size = Aaug.shape[0]
+    n, N = model.n, len(grid)
+    h = (grid[-1] - grid[0]) / (N - 1) if N > 1 else 0.0
+    cache: dict[float, np.ndarray] = {}
+    norm_A = float(np.abs(Aaug).sum(axis=0).max(initial=0.0))
+    accurate = needed(norm_A * h, size)  # a stiff scene: double scaling and squaring would lose digits
+
+    def phi(dt: float) -> np.ndarray:
+        if N > 1 and abs(dt - h) <= 1e-9 * h:
+            dt = h  # a grid difference that is h up to the rounding of the grid times
+        if dt not in cache:
+            cache[dt] = expm_times(Aaug, dt) if needed(norm_A * dt, size) else expm(Aaug * dt)
+        return cache[dt]
+
+    J = _stacked_powers(size, N)
+    powers = np.empty((J, size, size))
+    if N > 1:
+        powers[0] = phi(h)
+        for j in range(1, J):
+            powers[j] = powers[j - 1] @ powers[0]
+
+    def reseed(z: np.ndarray, t: float) -> None:
+        for lo, hi, signal in blocks:
+            z[lo:hi] = signal.exo_state(t)
+
+    out = np.empty((N, size))
+    z = np.zeros(size)
+    z[:n], z[n:2 * n] = model.x0, model.v0
+    k = 0  # next grid index to fill
+    n_expm = 1
+    for seg_index, (ta, tb) in enumerate(segs := segments(model, grid)):
+        last = seg_index == len(segs) - 1
+        reseed(z, ta)
+        t_cur = ta
+        stop = N if last else int(np.searchsorted(grid, tb, side="left"))
+        if k < stop:
+            if grid[k] > t_cur:
+                z = phi(grid[k] - t_cur) @ z
+                n_expm += 1
+            out[k] = z
+            t_cur = grid[k]
+            k += 1
+            while k < stop:
+                reseed(z, t_cur)
+                j = min(J, stop - k)
+                out[k:k + j] = powers[:j] @ z
+                k += j
+                z = out[k - 1].copy()
+                t_cur = grid[k - 1]
+        if not last and tb > t_cur:
+            z = phi(tb - t_cur) @ z
+            n_expm += 1
+    stated = stated_rounding(N + len(segs) + n_expm, 1.0 if accurate else norm_A * h)
+    message = (f"ok: {plural(len(segs), 'force segment')}, {plural(len(cache), 'matrix exponential')} "
+               f"of size {size}" + (" in double-double (a stiff scene)" if accurate else ""))
+    return out[:, :n].copy(), out[:, n:2 * n].copy(), stated, message

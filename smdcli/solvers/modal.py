@@ -18,7 +18,8 @@ import numpy as np
 
 from smdcli.model import Model
 from smdcli.solvers.accurate_expm import NEEDED_NORM, expm_times
-from smdcli.solvers.base import segments, stated_rounding
+from smdcli.solvers.base import segments, stated_rounding, walk
+from smdcli.text import plural
 
 MODAL_DOFS = 64  # from this many DOFs a classically damped scene is solved in modal coordinates
 
@@ -59,8 +60,6 @@ def solve_modal(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray,
 
     def phi(dt: float):
         """(E_yy (n, 2, 2), E_yw (n, 2, m), E_ww (m, m)) over dt."""
-        if N > 1 and abs(dt - h) <= 1e-9 * h:
-            dt = h
         if dt not in cache:
             E = expm(A * dt)
             stiff = norms * dt > NEEDED_NORM  # as in the dense path: these modes' propagators in double-double
@@ -82,33 +81,20 @@ def solve_modal(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     q = np.empty((N, n))
     qdot = np.empty((N, n))
     y = np.stack([shapes.T @ (model.M @ model.x0), shapes.T @ (model.M @ model.v0)], axis=1)  # (n, 2)
-    k = 0
-    partial = 0  # steps to a force discontinuity between output points
-    for seg_index, (ta, tb) in enumerate(segs := segments(model, grid)):
-        last = seg_index == len(segs) - 1
-        stop = N if last else int(np.searchsorted(grid, tb, side="left"))
-        t_cur = ta
-        if k < stop:
-            if grid[k] > t_cur:
-                y = step(y, w_at(t_cur), grid[k] - t_cur)
-                partial += 1
+    steps = 0
+    for t, dt, k in walk(model, grid):  # w reseeded from its closed form at every step: no drift in the forcing
+        if dt > 0:
+            y = step(y, w_at(t), dt)
+            steps += 1
+        if k is not None:
             q[k], qdot[k] = y[:, 0], y[:, 1]
-            t_cur = grid[k]
-            k += 1
-            while k < stop:  # w reseeded from its closed form at every point: no drift in the forcing
-                y = step(y, w_at(t_cur), grid[k] - t_cur)
-                q[k], qdot[k] = y[:, 0], y[:, 1]
-                t_cur = grid[k]
-                k += 1
-        if not last and tb > t_cur:
-            y = step(y, w_at(t_cur), tb - t_cur)
-            partial += 1
     x, v = q @ shapes.T, qdot @ shapes.T
     growth = float(norms.max(initial=0.0)) * h
     accurate = growth > NEEDED_NORM
-    stated = stated_rounding(N + len(segs) + partial + n, 1.0 if accurate else growth)
+    segs = len(segments(model, grid))
+    stated = stated_rounding(steps + segs + n, 1.0 if accurate else growth)
     message = (f"ok: modal coordinates ({n} classically damped modes from a symmetric eigensolver), "
-               f"{len(segs)} force segment{'s' if len(segs) != 1 else ''}, {len(cache)} batch"
+               f"{plural(segs, 'force segment')}, {len(cache)} batch"
                f"{'es' if len(cache) != 1 else ''} of {n} exponentials of size {size}"
                + (" (the stiff modes' in double-double)" if accurate else ""))
     return x, v, stated, message
