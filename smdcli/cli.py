@@ -16,12 +16,8 @@ from smdcli import __version__, interrupts, strict_json
 from smdcli.progress import wanted as progress_wanted
 from smdcli.text import plural
 
-app = typer.Typer(
-    add_completion=False,
-    no_args_is_help=True,
-    help="Simulate spring-mass-damper systems from TOML scenarios: exact where linear, measured where not.",
-    pretty_exceptions_enable=False,
-)
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  help="Simulate spring-mass-damper systems from TOML scenarios: exact where linear, measured where not.")
 
 
 def _fail(message: str) -> None:
@@ -85,6 +81,25 @@ def _report_json(exc: Exception, about: dict, as_json: bool, doing: str = "write
         _print_json({**about, "success": False, "status": status or strict_json.status(code), "exit_code": code,
                      "message": _message(exc, doing)})
     return code
+
+
+def _carried_out(work, about: dict, as_json: bool, quiet: bool, summarize, describe):
+    """Run a command's work: a failure is its one line and exit code (JSON too with --json), an interrupt smd's
+    own line; else summarize(run) printed as JSON, or describe(run, that summary) as text. Returns the run."""
+    from smdcli.errors import SmdError
+
+    try:
+        run = work()
+    except (SmdError, OSError) as exc:
+        raise typer.Exit(_report_json(exc, about, as_json))
+    except KeyboardInterrupt as exc:
+        raise _interrupted(exc)
+    data = summarize(run)
+    if as_json:
+        _print_json(data)
+    elif not quiet:
+        typer.echo(describe(run, data))
+    return run
 
 
 def _version(value: bool):
@@ -160,16 +175,9 @@ def info(
     """DOFs, M C K, natural frequencies, damping ratios and regimes, stiffness, what auto would pick."""
     from smdcli.commands.simulate import format_info
     from smdcli.commands.simulate import info as describe
-    from smdcli.errors import SmdError
 
-    try:
-        data = describe(scenario)
-    except (SmdError, OSError) as exc:
-        raise typer.Exit(_report_json(exc, {"scenario": str(scenario)}, as_json))
-    if as_json:
-        _print_json(data)
-    else:
-        typer.echo(format_info(data))
+    _carried_out(lambda: describe(scenario), {"scenario": str(scenario)}, as_json, False, lambda data: data,
+                 lambda _, data: format_info(data))
 
 
 @app.command("compare-solvers")
@@ -189,21 +197,12 @@ def compare_solvers(
 ):
     """Run methods over ladders of tolerances and steps against a reference; chart error against cost."""
     from smdcli.commands.compare import as_dict, format_table, run_and_write
-    from smdcli.errors import SmdError
 
-    try:
-        comparison, written = run_and_write(scenario, out, methods, tolerances, steps, repeats,
-                                            breakpoints=not no_breakpoints, plots=not no_plots,
-                                            progress=progress_wanted(quiet, as_json))
-    except (SmdError, OSError) as exc:
-        raise typer.Exit(_report_json(exc, {"scenario": str(scenario)}, as_json))
-    except KeyboardInterrupt as exc:
-        raise _interrupted(exc)
-    if as_json:
-        _print_json(as_dict(comparison))
-    elif not quiet:
-        typer.echo(format_table(comparison))
-        typer.echo("wrote " + ", ".join(str(p) for p in written))
+    _carried_out(lambda: run_and_write(scenario, out, methods, tolerances, steps, repeats,
+                                       breakpoints=not no_breakpoints, plots=not no_plots,
+                                       progress=progress_wanted(quiet, as_json)),
+                 {"scenario": str(scenario)}, as_json, quiet, lambda done: as_dict(done[0]),
+                 lambda done, _: format_table(done[0]) + "\nwrote " + ", ".join(str(p) for p in done[1]))
 
 
 @app.command()
@@ -242,7 +241,6 @@ def sweep(
 ):
     """Run a family: parameters over grids, initial conditions, or a frequency response; one HDF5 and plots."""
     from smdcli.commands.sweep import format_summary, run_and_write, summary
-    from smdcli.errors import SmdError
     from smdcli.sweep.stream import KEEPS
 
     if method is not None:
@@ -256,22 +254,38 @@ def sweep(
                "ic": tuple(ic or ()), "frequency": frequency, "normalized": normalized or None,
                "input": input_dof, "direction": direction, "measure": measure or None, "quantity": quantity,
                "metric": metric, "method": method}
-    try:
-        if keep is not None and keep not in KEEPS:
-            raise typer.BadParameter(f"expected one of {', '.join(KEEPS)}, found {keep!r}", param_hint="--keep")
-        run = run_and_write(scenario, out, options, workers, plots=not no_plots,
-                            progress=progress_wanted(quiet, as_json), keep=keep, resume=resume,
-                            scheduler=scheduler)
-    except (SmdError, OSError) as exc:
-        raise typer.Exit(_report_json(exc, {"scenario": str(scenario)}, as_json))
-    except KeyboardInterrupt as exc:
-        raise _interrupted(exc)
-    data = summary(run)
-    if as_json:
-        _print_json(data)
-    elif not quiet:
-        typer.echo(format_summary(data))
+    if keep is not None and keep not in KEEPS:
+        raise typer.BadParameter(f"expected one of {', '.join(KEEPS)}, found {keep!r}", param_hint="--keep")
+    run = _carried_out(lambda: run_and_write(scenario, out, options, workers, plots=not no_plots,
+                                             progress=progress_wanted(quiet, as_json), keep=keep, resume=resume,
+                                             scheduler=scheduler),
+                       {"scenario": str(scenario)}, as_json, quiet, summary, lambda _, data: format_summary(data))
     raise typer.Exit(1 if run.failed_count else 0)
+
+
+@app.command()
+def spectrum(
+    record: Path = typer.Argument(..., help="Ground acceleration record: two columns (time s, acceleration), "
+                                  "CSV or whitespace, header optional."),
+    periods: str = typer.Option("logspace(-2,1,200)", "--periods", help="Periods in s: a, b, c | start:stop:step "
+                                "| linspace(a,b,n) | logspace(a,b,n)."),
+    damping: str = typer.Option("0.05", "--damping", help="Damping ratios, a comma list (e.g. 0.02,0.05,0.1) or "
+                                "linspace(a,b,n)."),
+    units: str = typer.Option("g", "--units", help="The record's units: g or m/s^2."),
+    scale: float = typer.Option(1.0, "--scale", help="Multiply the record's values by this."),
+    shift: float = typer.Option(0.0, "--shift", help="Then add this (in the record's units)."),
+    out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
+    no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
+    as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+):
+    """Response spectra of a record: peak relative displacement Sd of 1-DOF oscillators, exact between samples,
+    and Sv, Sa; writes OUT/<stem>_spectrum.h5 and a tripartite OUT/<stem>_spectrum.png."""
+    from smdcli.commands.spectrum import format_spectrum, spectrum_summary
+    from smdcli.commands.spectrum import spectrum as run_spectrum
+
+    _carried_out(lambda: run_spectrum(record, out, periods, damping, units, scale, shift, plots=not no_plots),
+                 {"record": str(record)}, as_json, quiet, spectrum_summary, lambda _, data: format_spectrum(data))
 
 
 @app.command()
@@ -291,20 +305,16 @@ def phase(
 ):
     """Phase portraits (x against v) of DOFs, scenarios or a family, start and direction marked; --poincare."""
     from smdcli.commands.phase import portraits
-    from smdcli.errors import SmdError
 
-    try:
-        run = portraits(scenarios, out, dof, tuple(ic or ()), poincare, periods, skip_periods, method,
-                        progress=progress_wanted(quiet), name=name)
-    except (SmdError, OSError) as exc:
-        raise typer.Exit(_report(exc))
-    except KeyboardInterrupt as exc:
-        raise _interrupted(exc)
-    if not quiet:
+    def describe(run, _) -> str:
         points = sum(len(c.x) for c in run.poincare or ())
-        typer.echo(plural(len(run.curves), "trajectory", "trajectories")
-                   + (f", {plural(points, 'Poincare point')} (T = {run.period:.4g} s)" if run.poincare else ""))
-        typer.echo("wrote " + ", ".join(str(p) for p in run.outputs))
+        return (plural(len(run.curves), "trajectory", "trajectories")
+                + (f", {plural(points, 'Poincare point')} (T = {run.period:.4g} s)" if run.poincare else "")
+                + "\nwrote " + ", ".join(str(p) for p in run.outputs))
+
+    _carried_out(lambda: portraits(scenarios, out, dof, tuple(ic or ()), poincare, periods, skip_periods, method,
+                                   progress=progress_wanted(quiet), name=name),
+                 {}, False, quiet, lambda run: None, describe)
 
 
 @app.command()
@@ -315,14 +325,9 @@ def draw(
 ):
     """A schematic of the system from its elements: masses, springs, dampers (nonlinear in red), walls, forces."""
     from smdcli.commands.draw import write_schematic
-    from smdcli.errors import SmdError
 
-    try:
-        png = write_schematic(scenario, out)
-    except (SmdError, OSError) as exc:
-        raise typer.Exit(_report(exc))
-    if not quiet:
-        typer.echo(f"wrote {png}")
+    _carried_out(lambda: write_schematic(scenario, out), {}, False, quiet, lambda png: None,
+                 lambda png, _: f"wrote {png}")
 
 
 @app.command()
@@ -340,18 +345,14 @@ def animate(
 ):
     """A GIF of the masses moving, springs and dampers drawn, with a time stamp on each frame."""
     from smdcli.commands.draw import animate as make_gif
-    from smdcli.errors import SmdError
 
-    try:
-        gif, facts = make_gif(scenario, out, fps, seconds, scale, start, end, method, progress=progress_wanted(quiet))
-    except (SmdError, OSError) as exc:
-        raise typer.Exit(_report(exc))
-    except KeyboardInterrupt as exc:
-        raise _interrupted(exc)
-    if not quiet:
-        typer.echo(f"{plural(facts['frames'], 'frame')} at {facts['fps']} fps, "
-                   f"t = {facts['start']:g} .. {facts['end']:g} s, displacements x {facts['scale']:.3g}, {facts['bytes'] / 2**20:.2f} MB")
-        typer.echo(f"wrote {gif}")
+    def describe(made, _) -> str:
+        gif, facts = made
+        return (f"{plural(facts['frames'], 'frame')} at {facts['fps']} fps, t = {facts['start']:g} .. "
+                f"{facts['end']:g} s, displacements x {facts['scale']:.3g}, {facts['bytes'] / 2**20:.2f} MB\nwrote {gif}")
+
+    _carried_out(lambda: make_gif(scenario, out, fps, seconds, scale, start, end, method, progress=progress_wanted(quiet)),
+                 {}, False, quiet, lambda made: None, describe)
 
 
 @app.command("diff")

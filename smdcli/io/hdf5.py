@@ -22,6 +22,21 @@ SCHEMA_VERSION = 1
 
 def write_header(f, scenario: Scenario, kind: str) -> None:
     """The root attributes every smd file carries, and the provenance to run it again from the file alone."""
+    write_provenance(f, kind)
+    f.attrs["title"] = scenario.title
+    f.attrs["scenario"] = scenario.text
+    f.attrs["scenario_path"] = str(scenario.path)
+    tables = [force for force in scenario.forces if force.file]
+    if tables:  # the files a table force read, copied: the scenario text alone no longer says what they held
+        group = f.create_group("provenance/table_files")
+        for force in tables:
+            ds = group.create_dataset(force.path, data=force.file_text)
+            ds.attrs["file"] = force.file
+            ds.attrs["sha256"] = hashlib.sha256(force.file_text.encode()).hexdigest()
+
+
+def write_provenance(f, kind: str) -> None:
+    """The root attributes of every smd file, scenario or not: versions, kind, time, command line, machine."""
     import platform
     from importlib.metadata import version
 
@@ -31,22 +46,46 @@ def write_header(f, scenario: Scenario, kind: str) -> None:
     f.attrs["schema_version"] = SCHEMA_VERSION
     f.attrs["kind"] = kind
     f.attrs["created"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
-    f.attrs["title"] = scenario.title
-    f.attrs["scenario"] = scenario.text
-    f.attrs["scenario_path"] = str(scenario.path)
     f.attrs["command_line"] = provenance.command_line()
     f.attrs["python_version"] = platform.python_version()
     f.attrs["numpy_version"] = np.__version__
     f.attrs["scipy_version"] = version("scipy")  # without importing scipy for it
     f.attrs["h5py_version"] = h5py.__version__
     f.attrs["machine"] = f"{platform.system()} {platform.machine()}"
-    tables = [force for force in scenario.forces if force.file]
-    if tables:  # the files a table force read, copied: the scenario text alone no longer says what they held
-        group = f.create_group("provenance/table_files")
-        for force in tables:
-            ds = group.create_dataset(force.path, data=force.file_text)
-            ds.attrs["file"] = force.file
-            ds.attrs["sha256"] = hashlib.sha256(force.file_text.encode()).hexdigest()
+
+
+def write_spectrum(path: Path, record, spectrum) -> None:
+    """A response spectrum file: period (P) and damping (Z) scales, Sd, Sv, Sa (Z, P), the record it came from."""
+    import h5py
+
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        write_provenance(f, "spectrum")
+        f.attrs["title"] = f"Response spectrum of {Path(record.path).name}"
+        f.attrs["record_path"] = record.path
+        f.attrs["method"] = ("exact: each sample interval one matrix exponential of the oscillator augmented with "
+                             "the linearly interpolated record; peaks of the continuous response")
+        period = f.create_dataset("period", data=spectrum.period)
+        period.make_scale("period")
+        period.attrs["units"] = "s"
+        damping = f.create_dataset("damping", data=spectrum.damping)
+        damping.make_scale("damping")
+        damping.attrs["units"] = "1"
+        for name, data, units, meaning in (
+                ("Sd", spectrum.Sd, "m", "peak relative displacement"),
+                ("Sv", spectrum.Sv, "m/s", "pseudo-spectral velocity, (2 pi / T) Sd"),
+                ("Sa", spectrum.Sa, "m/s^2", "pseudo-spectral acceleration, (2 pi / T)^2 Sd")):
+            ds = _with_scales(f.create_dataset(name, data=data), damping, period)
+            ds.attrs["units"] = units
+            ds.attrs["description"] = meaning
+        group = f.create_group("record")
+        time = group.create_dataset("time", data=record.time)
+        time.make_scale("time")
+        time.attrs["units"] = "s"
+        acc = _with_scales(group.create_dataset("acceleration", data=record.acceleration), time)
+        acc.attrs["units"] = "m/s^2"
+        group.attrs["units_in_file"] = record.units
+        group.attrs["file_text"] = record.text
+        group.attrs["sha256"] = hashlib.sha256(record.text.encode()).hexdigest()
 
 
 def _with_scales(ds, *scales):

@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import difflib
 import math
-import re
 from pathlib import Path
 from typing import Any
 
-from smdcli.scenario.reader import MAX_TABLE_BYTES, _NotRegular, _Table, read_regular_file
+from smdcli.scenario.reader import _Table
+from smdcli.scenario.records import ColumnsError, read_text, two_columns
 from smdcli.scenario.spec import FORCE_TYPES, ForceSpec
 
 _FORCE_FIELDS = {
@@ -120,29 +120,8 @@ def _read_csv(t: _Table, name: str) -> tuple[tuple[float, ...], tuple[float, ...
     if not csv_path.is_absolute():
         csv_path = Path(t.file).parent / csv_path
     try:
-        text = read_regular_file(csv_path, MAX_TABLE_BYTES).decode("utf-8")
-    except _NotRegular as exc:
-        raise t.fail("file", f"{csv_path}: {exc}, expected a CSV file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        reason = "no such file" if isinstance(exc, FileNotFoundError) else (
-            "is a directory" if isinstance(exc, IsADirectoryError) else "cannot be read as UTF-8 text")
-        raise t.fail("file", f"{csv_path}: {reason}") from None
-    times, values = [], []
-    for number, line in enumerate(text.splitlines(), start=1):
-        stripped = line.strip()
-        if not stripped or stripped.startswith("#"):
-            continue
-        cells = [c.strip() for c in re.split(r"[,;\t]", stripped)]
-        try:
-            a, b = (float(c) for c in cells)
-        except ValueError:
-            if not times and number == 1 and len(cells) == 2:
-                continue  # a header row
-            raise t.fail("file", f"{csv_path} line {number}: expected two numbers (t, value), found {stripped[:40]!r}") from None
-        if not (math.isfinite(a) and math.isfinite(b)):
-            raise t.fail("file", f"{csv_path} line {number}: expected finite numbers")
-        times.append(a)
-        values.append(b)
-    if not times:
-        raise t.fail("file", f"{csv_path}: no data rows")
-    return tuple(times), tuple(values), str(csv_path), text
+        text = read_text(csv_path)
+        times, values = two_columns(text)
+    except ColumnsError as exc:
+        raise t.fail("file", f"{csv_path}: {exc}") from None
+    return times, values, str(csv_path), text

@@ -1,0 +1,115 @@
+"""`smd spectrum`: the response spectra of a ground-motion record, written as HDF5 and a tripartite PNG.
+
+Must not import: cli.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from smdcli.errors import UsageError
+from smdcli.io.folders import output_folder
+from smdcli.scenario.records import Record, read_record
+from smdcli.solvers.spectrum import Spectrum, response_spectrum
+
+DEFAULT_PERIODS = "logspace(-2,1,200)"
+DEFAULT_DAMPING = "0.05"
+MAX_OSCILLATORS = 100_000  # periods x damping ratios in one run
+
+
+@dataclass
+class SpectrumRun:
+    """A record's spectra and the files written."""
+
+    record: Record
+    spectrum: Spectrum
+    wall_time_s: float
+    warnings: list[str] = field(default_factory=list)
+    outputs: list[Path] = field(default_factory=list)
+
+
+def _numbers(option: str, spec: str) -> np.ndarray:
+    from smdcli.sweep.spec import parse_values
+
+    try:
+        return np.asarray(parse_values(spec), dtype=float)
+    except ValueError as exc:
+        raise UsageError(f"{option}: {exc}") from None
+
+
+def spectrum(path: str | Path, out: str | Path, periods: str = DEFAULT_PERIODS, damping: str = DEFAULT_DAMPING,
+             units: str = "g", scale: float = 1.0, shift: float = 0.0, plots: bool = True) -> SpectrumRun:
+    """Read the record, compute Sd, Sv, Sa for every damping ratio and period, write OUT/<stem>_spectrum.*."""
+    import time
+
+    path = Path(path)
+    if path.suffix.lower() == ".toml":
+        raise UsageError(f"{path}: expected a two-column record file (time, acceleration); reading a scenario's "
+                         "[ground_motion] record is not available yet")
+    T = _numbers("--periods", periods)
+    zeta = _numbers("--damping", damping)
+    if not (np.isfinite(T).all() and (T > 0).all()):
+        raise UsageError(f"--periods: expected positive periods in seconds, found {T[~(np.isfinite(T) & (T > 0))][0]:g}")
+    if not (np.isfinite(zeta).all() and (zeta >= 0).all()):
+        raise UsageError(f"--damping: expected damping ratios >= 0, found {zeta[~(np.isfinite(zeta) & (zeta >= 0))][0]:g}")
+    if len(T) * len(zeta) > MAX_OSCILLATORS:
+        raise UsageError(f"--periods x --damping: expected at most {MAX_OSCILLATORS} oscillators, found "
+                         f"{len(T)} x {len(zeta)}")
+    record = read_record(path, units, scale, shift)
+    out_dir = output_folder(out)
+    start = time.perf_counter()
+    result = response_spectrum(record.time, record.acceleration, T, zeta)
+    run = SpectrumRun(record, result, time.perf_counter() - start)
+    warning = record.drift_warning()
+    if warning:
+        run.warnings.append(warning)
+    from smdcli.io.atomic import together
+    from smdcli.io.hdf5 import write_spectrum
+
+    with together():
+        h5 = out_dir / f"{path.stem}_spectrum.h5"
+        write_spectrum(h5, record, result)
+        run.outputs.append(h5)
+        if plots:
+            from smdcli.plots.common import save_figure
+            from smdcli.plots.spectrum import spectrum_figure
+
+            png = out_dir / f"{path.stem}_spectrum.png"
+            save_figure(spectrum_figure(result, record, f"Response spectrum of {path.name}"), png)
+            run.outputs.append(png)
+    return run
+
+
+def spectrum_summary(run: SpectrumRun) -> dict:
+    """The facts of a spectrum run as plain data: the record, each damping ratio's peak Sa and where."""
+    r, s = run.record, run.spectrum
+    peaks = []
+    for i, zeta in enumerate(s.damping):
+        j = int(np.argmax(s.Sa[i]))
+        peaks.append({"damping": float(zeta), "peak_Sa_m_s2": float(s.Sa[i, j]), "peak_Sa_g": float(s.Sa[i, j] / 9.80665),
+                      "at_period_s": float(s.period[j]), "peak_Sd_m": float(s.Sd[i].max())})
+    return {"record": r.path, "status": "ok", "exit_code": 0, "samples": len(r.time), "step_s": r.step,
+            "duration_s": float(r.time[-1] - r.time[0]), "units_in_file": r.units,
+            "pga_m_s2": float(np.abs(r.acceleration).max()), "periods": len(s.period),
+            "period_range_s": [float(s.period.min()), float(s.period.max())],
+            "damping": [float(z) for z in s.damping], "peaks": peaks, "wall_time_s": run.wall_time_s,
+            "warnings": run.warnings, "outputs": [str(p) for p in run.outputs]}
+
+
+def format_spectrum(data: dict) -> str:
+    """Terminal text for a spectrum run."""
+    g = 9.80665
+    lines = [f"{data['record']}: {data['samples']} samples every {data['step_s']:g} s ({data['duration_s']:g} s), "
+             f"PGA {data['pga_m_s2'] / g:.4g} g",
+             f"  spectra  {data['periods']} periods {data['period_range_s'][0]:g}..{data['period_range_s'][1]:g} s x "
+             f"{len(data['damping'])} damping ratios, exact between samples; {data['wall_time_s'] * 1e3:.0f} ms"]
+    for p in data["peaks"]:
+        lines.append(f"  zeta {p['damping']:<6g} peak Sa {p['peak_Sa_g']:.4g} g at T = {p['at_period_s']:.4g} s, "
+                     f"peak Sd {p['peak_Sd_m']:.4g} m")
+    lines += [f"  {w}" for w in data["warnings"]]
+    if data["outputs"]:
+        lines.append(f"  wrote    {', '.join(data['outputs'])}")
+    return "\n".join(lines)
