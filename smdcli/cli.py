@@ -269,8 +269,7 @@ def spectrum(
                                   "CSV or whitespace, header optional."),
     periods: str = typer.Option("logspace(-2,1,200)", "--periods", help="Periods in s: a, b, c | start:stop:step "
                                 "| linspace(a,b,n) | logspace(a,b,n)."),
-    damping: str = typer.Option("0.05", "--damping", help="Damping ratios, a comma list (e.g. 0.02,0.05,0.1) or "
-                                "linspace(a,b,n)."),
+    damping: str = typer.Option("0.05", "--damping", help="Damping ratios: 0.02,0.05,0.1 or linspace(a,b,n)."),
     units: str = typer.Option("g", "--units", help="The record's units: g or m/s^2."),
     scale: float = typer.Option(1.0, "--scale", help="Multiply the record's values by this."),
     shift: float = typer.Option(0.0, "--shift", help="Then add this (in the record's units)."),
@@ -284,7 +283,8 @@ def spectrum(
     from smdcli.commands.spectrum import format_spectrum, spectrum_summary
     from smdcli.commands.spectrum import spectrum as run_spectrum
 
-    _carried_out(lambda: run_spectrum(record, out, periods, damping, units, scale, shift, plots=not no_plots),
+    _carried_out(lambda: run_spectrum(record, out, periods, damping, units, scale, shift, plots=not no_plots,
+                                      progress=progress_wanted(quiet, as_json)),
                  {"record": str(record)}, as_json, quiet, spectrum_summary, lambda _, data: format_spectrum(data))
 
 

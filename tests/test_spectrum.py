@@ -128,3 +128,19 @@ def test_bad_records_and_options_exit_2_with_one_line_and_write_nothing(cli, tmp
     assert expected in result.stderr and len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert "Traceback" not in result.output
     assert not out.exists() or not list(out.iterdir())
+
+
+def test_a_long_record_is_measured_in_bounded_pieces_with_the_same_result(monkeypatch):
+    """Oscillators in groups and time in blocks (here a few hundred values each, as an hour-long record would be):
+    the same spectrum, bit for bit, as in one piece; the progress callback hears of every oscillator."""
+    import smdcli.solvers.spectrum as spectrum_mod
+
+    record = read_record(SYNTHETIC)
+    periods, dampings = np.logspace(-2, 1, 23), np.array([0.0, 0.05])
+    whole = response_spectrum(record.time, record.acceleration, periods, dampings)
+    monkeypatch.setattr(spectrum_mod, "STATE_VALUES", 5 * len(record.time))
+    monkeypatch.setattr(spectrum_mod, "BLOCK_VALUES", 700)
+    heard = []
+    pieces = response_spectrum(record.time, record.acceleration, periods, dampings, heard.append)
+    np.testing.assert_array_equal(pieces.Sd, whole.Sd)
+    assert heard == [5] * 9 + [1]

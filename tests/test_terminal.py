@@ -58,6 +58,7 @@ def plain(screen: str) -> str:
     (["animate", "scenarios/one_dof_underdamped.toml", "--end", "1", "--fps", "10"], "drawing frames"),
     (["phase", "scenarios/one_dof_regimes_sweep.toml"], "phase portraits"),
     (["simulate", "scenarios/one_dof_underdamped.toml", "scenarios/one_dof_harmonic.toml", "--no-plots"], "simulating"),
+    (["spectrum", str(SCENARIOS.parent / "records" / "synthetic_20s_100hz.csv"), "--no-plots"], "spectra"),
 ])
 def test_long_commands_show_progress_on_a_terminal(tmp_path, args, label):
     """The crash the issue reported lived only at a terminal (click's progress bar API moved): each long command

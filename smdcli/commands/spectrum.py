@@ -41,7 +41,8 @@ def _numbers(option: str, spec: str) -> np.ndarray:
 
 
 def spectrum(path: str | Path, out: str | Path, periods: str = DEFAULT_PERIODS, damping: str = DEFAULT_DAMPING,
-             units: str = "g", scale: float = 1.0, shift: float = 0.0, plots: bool = True) -> SpectrumRun:
+             units: str = "g", scale: float = 1.0, shift: float = 0.0, plots: bool = True,
+             progress: bool = False) -> SpectrumRun:
     """Read the record, compute Sd, Sv, Sa for every damping ratio and period, write OUT/<stem>_spectrum.*."""
     import time
 
@@ -60,8 +61,11 @@ def spectrum(path: str | Path, out: str | Path, periods: str = DEFAULT_PERIODS, 
                          f"{len(T)} x {len(zeta)}")
     record = read_record(path, units, scale, shift)
     out_dir = output_folder(out)
+    from smdcli.progress import bar
+
     start = time.perf_counter()
-    result = response_spectrum(record.time, record.acceleration, T, zeta)
+    with bar("spectra", len(T) * len(zeta), progress) as advance:
+        result = response_spectrum(record.time, record.acceleration, T, zeta, advance)
     run = SpectrumRun(record, result, time.perf_counter() - start)
     warning = record.drift_warning()
     if warning:

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 POINTS_PER_PERIOD = 64  # sub-points per oscillator period: 3.5e-6 from a 400x finer sampling, measured
+STATE_VALUES = 2**23  # sample states held at once (64 MB each of u and u'): oscillators taken in groups
+BLOCK_VALUES = 2**21  # sub-point values held at once (16 MB): a long record is measured in blocks of time
 LOBE_MARGIN = 0.02  # lobes sampled within 2 % of the largest are refined: one sampled low may hold the peak
 
 
@@ -64,8 +66,9 @@ def _propagators(omega: np.ndarray, zeta: np.ndarray, dt) -> np.ndarray:
 
 
 def response_spectrum(time: np.ndarray, acceleration: np.ndarray, periods: np.ndarray,
-                      dampings: np.ndarray) -> Spectrum:
-    """Peak relative displacement of every (damping, period) oscillator over the record, from rest."""
+                      dampings: np.ndarray, advance=None) -> Spectrum:
+    """Peak relative displacement of every (damping, period) oscillator over the record, from rest; advance(k),
+    if given, is told of every k oscillators done."""
     periods = np.asarray(periods, dtype=float)
     dampings = np.asarray(dampings, dtype=float)
     Z, P = len(dampings), len(periods)
@@ -76,36 +79,62 @@ def response_spectrum(time: np.ndarray, acceleration: np.ndarray, periods: np.nd
     slope = np.diff(a) / dt  # (N - 1,)
     E = _propagators(omega, zeta, dt)
     N, O = len(a), len(omega)
-    u = np.zeros((N, O))  # u = w^2 y at the samples
-    w = np.zeros((N, O))  # u' / w
+    sub = np.maximum(1, np.ceil(POINTS_PER_PERIOD * dt * omega / (2 * math.pi))).astype(int)
+    peak = np.empty(O)
+    group = max(1, STATE_VALUES // N)  # oscillators at a time: memory bounded whatever the record's length
+    for lo in range(0, O, group):
+        part = slice(lo, min(O, lo + group))
+        u, w = _sample_states(E[part], a, slope, omega[part])
+        for q in np.unique(sub[part]):
+            same = np.flatnonzero(sub[part] == q)
+            peak[lo + same] = _continuous_peak(u[:, same], w[:, same], a, slope, omega[part][same],
+                                               zeta[part][same], dt, int(q))
+        if advance is not None:
+            advance(part.stop - part.start)
+    return Spectrum(periods, dampings, (peak / omega**2).reshape(Z, P))
+
+
+def _sample_states(E: np.ndarray, a: np.ndarray, slope: np.ndarray, omega: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """u = w^2 y and u' / w at every record sample, (N, O) each: one exact step per record interval."""
+    N, O = len(a), len(omega)
+    u = np.zeros((N, O))
+    w = np.zeros((N, O))
     for k in range(N - 1):
         s = slope[k] / omega
         u[k + 1] = E[:, 0, 0] * u[k] + E[:, 0, 1] * w[k] + E[:, 0, 2] * a[k] + E[:, 0, 3] * s
         w[k + 1] = E[:, 1, 0] * u[k] + E[:, 1, 1] * w[k] + E[:, 1, 2] * a[k] + E[:, 1, 3] * s
-    peak = np.empty(O)
-    sub = np.maximum(1, np.ceil(POINTS_PER_PERIOD * dt * omega / (2 * math.pi))).astype(int)
-    for q in np.unique(sub):
-        group = np.flatnonzero(sub == q)
-        peak[group] = _continuous_peak(u[:, group], w[:, group], a, slope, omega[group], zeta[group], dt, int(q))
-    return Spectrum(periods, dampings, (peak / omega**2).reshape(Z, P))
+    return u, w
 
 
 def _continuous_peak(u: np.ndarray, w: np.ndarray, a: np.ndarray, slope: np.ndarray, omega: np.ndarray,
                      zeta: np.ndarray, dt: float, q: int) -> np.ndarray:
-    """max |u(t)| over the record for oscillators sampled q times per record interval."""
+    """max |u(t)| over the record for oscillators sampled q times per record interval, in blocks of time that
+    overlap by one interval (so every sample is inside some block, where its neighbours are)."""
     N, O = u.shape
-    dense = np.empty((O, (N - 1) * q + 1))  # oscillator by time: every reduction runs along contiguous memory
-    dense[:, ::q] = u.T
-    s = (slope[:, None] / omega).T
+    E = None
     if q > 1:
         fractions = np.repeat(np.arange(1, q) * dt / q, O)  # every sub-point's propagator in one stack
         E = _propagators(np.tile(omega, q - 1), np.tile(zeta, q - 1), fractions)[:, 0, :].reshape(q - 1, O, 4)
-        for j in range(1, q):
-            e = E[j - 1][:, :, None]
-            dense[:, j::q] = e[:, 0] * u[:-1].T + e[:, 1] * w[:-1].T + e[:, 2] * a[None, :-1] + e[:, 3] * s
-    size = np.abs(dense, out=dense)
-    # Every local maximum of |u| that could hold the peak (its samples miss a lobe's top by at most
-    # 1 - cos(pi / POINTS_PER_PERIOD), 0.12 %) is refined by the parabola through it and its neighbours.
+    best = np.abs(u[0])
+    step = max(1, BLOCK_VALUES // (q * O))  # record intervals per block
+    for start in range(0, N - 1, step):
+        lo, hi = max(0, start - 1), min(N - 1, start + step)
+        dense = np.empty((O, (hi - lo) * q + 1))  # oscillator by time: reductions run along contiguous memory
+        dense[:, ::q] = u[lo:hi + 1].T
+        if E is not None:
+            s = (slope[lo:hi, None] / omega).T
+            for j in range(1, q):
+                e = E[j - 1][:, :, None]
+                dense[:, j::q] = e[:, 0] * u[lo:hi].T + e[:, 1] * w[lo:hi].T + e[:, 2] * a[None, lo:hi] + e[:, 3] * s
+        best = np.maximum(best, _refined_peak(np.abs(dense, out=dense)))
+    return best
+
+
+def _refined_peak(size: np.ndarray) -> np.ndarray:
+    """The largest of each row of |u| samples, every lobe that could hold it refined by a parabola."""
+    # A lobe's samples miss its top by at most 1 - cos(pi / POINTS_PER_PERIOD), 0.12 %: every local maximum
+    # within LOBE_MARGIN of the row's largest is refined by the parabola through it and its neighbours.
     best = size.max(axis=1)
     middle = size[:, 1:-1]
     candidate = (middle >= size[:, :-2]) & (middle >= size[:, 2:]) & (middle >= (1 - LOBE_MARGIN) * best[:, None])
