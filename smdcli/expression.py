@@ -176,9 +176,96 @@ class Expression:
             value = _interpret(self._body, t_arr)
         return np.broadcast_to(np.asarray(value, dtype=float), t_arr.shape).copy()
 
+    def derivative(self) -> "Expression":
+        """d/dt of the expression, as an expression (functions that jump, sign and heaviside, count as flat)."""
+        derived = Expression.__new__(Expression)
+        derived._body = _derive(self._body)
+        derived.text = ast.unparse(derived._body)
+        return derived
+
     def program(self) -> tuple[list[int], list[float], int]:
         """The checked tree as a postfix program: opcodes, the constants OP_CONST pushes in order, stack depth."""
         codes: list[int] = []
         constants: list[float] = []
         depth = _postfix(self._body, codes, constants)
         return codes, constants, depth
+
+
+# ----------------------------------------------------------- differentiation
+
+
+def _number(node: ast.AST) -> float | None:
+    return float(node.value) if isinstance(node, ast.Constant) else None
+
+
+def _const(value: float) -> ast.AST:
+    return ast.Constant(value) if value >= 0 else ast.UnaryOp(ast.USub(), ast.Constant(-value))
+
+
+def _add(a: ast.AST, b: ast.AST, op=ast.Add) -> ast.AST:
+    if _number(b) == 0.0:
+        return a
+    if _number(a) == 0.0:
+        return b if op is ast.Add else ast.UnaryOp(ast.USub(), b)
+    return ast.BinOp(a, op(), b)
+
+
+def _mul(a: ast.AST, b: ast.AST) -> ast.AST:
+    if _number(a) == 0.0 or _number(b) == 0.0:
+        return ast.Constant(0.0)
+    if _number(a) == 1.0:
+        return b
+    if _number(b) == 1.0:
+        return a
+    return ast.BinOp(a, ast.Mult(), b)
+
+
+def _call(name: str, arg: ast.AST) -> ast.AST:
+    return ast.Call(ast.Name(name, ast.Load()), [arg], [])
+
+
+def _has_t(node: ast.AST) -> bool:
+    return any(isinstance(n, ast.Name) and n.id == "t" for n in ast.walk(node))
+
+
+def _derive(node: ast.AST) -> ast.AST:
+    """The derivative in t of a checked tree, by the chain rule."""
+    if not _has_t(node):
+        return ast.Constant(0.0)
+    if isinstance(node, ast.Name):
+        return ast.Constant(1.0)
+    if isinstance(node, ast.UnaryOp):
+        inner = _derive(node.operand)
+        return ast.UnaryOp(ast.USub(), inner) if isinstance(node.op, ast.USub) and _number(inner) != 0.0 else inner
+    if isinstance(node, ast.BinOp):
+        u, v = node.left, node.right
+        du, dv = _derive(u), _derive(v)
+        if isinstance(node.op, (ast.Add, ast.Sub)):
+            return _add(du, dv, type(node.op))
+        if isinstance(node.op, ast.Mult):
+            return _add(_mul(du, v), _mul(u, dv))
+        if isinstance(node.op, ast.Div):  # (du v - u dv) / v^2
+            top = _add(_mul(du, v), _mul(u, dv), ast.Sub)
+            return ast.BinOp(top, ast.Div(), ast.BinOp(v, ast.Pow(), ast.Constant(2.0)))
+        if not _has_t(v):  # u^c: c u^(c-1) du
+            return _mul(_mul(v, ast.BinOp(u, ast.Pow(), ast.BinOp(v, ast.Sub(), ast.Constant(1.0)))), du)
+        # u^v = exp(v log u): u^v (dv log u + v du / u)
+        inner = _add(_mul(dv, _call("log", u)), ast.BinOp(_mul(v, du), ast.Div(), u))
+        return _mul(node, inner)
+    if isinstance(node, ast.Call):
+        name, u = node.func.id, node.args[0]
+        du = _derive(u)
+        outer = {
+            "sin": lambda: _call("cos", u),
+            "cos": lambda: ast.UnaryOp(ast.USub(), _call("sin", u)),
+            "tan": lambda: ast.BinOp(ast.Constant(1.0), ast.Div(), ast.BinOp(_call("cos", u), ast.Pow(), ast.Constant(2.0))),
+            "exp": lambda: node,
+            "log": lambda: ast.BinOp(ast.Constant(1.0), ast.Div(), u),
+            "sqrt": lambda: ast.BinOp(ast.Constant(0.5), ast.Div(), node),
+            "abs": lambda: _call("sign", u),
+            "sign": lambda: ast.Constant(0.0),
+            "heaviside": lambda: ast.Constant(0.0),
+            "tanh": lambda: ast.BinOp(ast.Constant(1.0), ast.Sub(), ast.BinOp(node, ast.Pow(), ast.Constant(2.0))),
+        }[name]()
+        return _mul(outer, du)
+    raise AssertionError("unchecked node")

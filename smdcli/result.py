@@ -43,6 +43,16 @@ class SolverStats:
 
 
 @dataclass(frozen=True)
+class GroundHistory:
+    """The support's displacement, velocity and acceleration on the output grid, (N,) each (impulses left out)."""
+
+    displacement: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    given: str = "acceleration"  # the quantity the scenario gave
+
+
+@dataclass(frozen=True)
 class Result:
     """Trajectories on the output grid, (N, n) each, SI units, with the cost of getting them."""
 
@@ -55,6 +65,12 @@ class Result:
     stats: SolverStats
     t_failed: float | None = None  # where a failed run stopped
     notes: tuple[str, ...] = field(default=())
+    ground: GroundHistory | None = None  # with support motion: displacement, velocity, acceleration are relative
+
+    def absolute(self, quantity: str) -> np.ndarray:
+        """displacement, velocity or acceleration measured from the fixed frame: relative plus the ground's."""
+        relative = getattr(self, quantity)
+        return relative if self.ground is None else relative + getattr(self.ground, quantity)[:, None]
 
     @property
     def success(self) -> bool:

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from scipy.signal import lsim
 
-from smdcli.scenario.records import STANDARD_GRAVITY, read_record
+from smdcli.scenario.records import read_record
+from smdcli.scenario.spec import STANDARD_GRAVITY
 from smdcli.solvers.spectrum import response_spectrum
 
 RECORDS = Path(__file__).resolve().parent.parent / "records"

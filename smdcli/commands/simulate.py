@@ -15,7 +15,7 @@ import numpy as np
 from smdcli import scenario as scenario_mod
 from smdcli.errors import SolverFailed
 from smdcli.io.folders import output_folder
-from smdcli.model import Model, build, time_grid
+from smdcli.model import GROUND_DOF, Model, build, time_grid
 from smdcli.result import Result
 from smdcli.scenario import Scenario
 from smdcli.solvers.checked import failure_message, solve_scenario
@@ -105,7 +105,8 @@ def summary(run: Run) -> dict:
         "peak_displacement_m": dict(zip(run.result.dofs, map(float, run.result.peak_displacement()))),
         "notes": list(run.result.notes),
         "outputs": [str(p) for p in run.outputs],
-    }
+    } | ({} if run.result.ground is None else {"peak_absolute_displacement_m": dict(zip(
+        run.result.dofs, map(float, np.nanmax(np.abs(run.result.absolute("displacement")), axis=0))))})
 
 
 def failed_summary(path: str | Path, message: str | None, exit_code: int | None) -> dict:
@@ -131,7 +132,13 @@ def format_summary(data: dict) -> str:
         peaks += f" m, ... ({len(items)} DOFs; the largest, {top:.6g} m, at {name}; --json lists every one)"
     else:
         peaks += " m"
-    lines.append(f"  peak |x| {peaks}")
+    if "peak_absolute_displacement_m" in data:
+        lines.append(f"  peak |x| {peaks} relative to the ground")
+        top = data["peak_absolute_displacement_m"]
+        lines.append(f"  absolute {', '.join(f'{k} {v:.6g}' for k, v in list(top.items())[:SHOWN])} m"
+                     + (" ..." if len(top) > SHOWN else ""))
+    else:
+        lines.append(f"  peak |x| {peaks}")
     lines += [f"  {note}" for note in data["notes"]]
     if data["outputs"]:
         lines.append(f"  wrote    {', '.join(data['outputs'])}")
@@ -151,7 +158,7 @@ def info(path: str | Path) -> dict:
         "M": model.M.tolist(), "C": model.C.tolist(), "K": model.K.tolist(),
         "linear": model.is_linear, "nonlinear_elements": list(model.nonlinear_paths),
         "forces": [f"{p} on {model.dofs[d]}: {kind}"
-                   for p, kind, d in zip(model.force_paths, model.force_types, model.force_dofs)],
+                   for p, kind, d in zip(model.force_paths, model.force_types, model.force_dofs) if d != GROUND_DOF],
         "modes": [
             {"natural_frequency_rad_s": float(w), "natural_frequency_hz": float(w / (2 * math.pi)),
              "damping_ratio": float(z), "regime": r}
@@ -162,6 +169,10 @@ def info(path: str | Path) -> dict:
         "stiff": model.is_stiff,
         "time": {"start": float(grid[0]), "end": float(grid[-1]), "points": len(grid)},
     }
+    if model.ground is not None:
+        data["ground_motion"] = {"quantity": model.ground.quantity, "type": model.ground.kind,
+                                 "jumps": len(model.ground.jumps),
+                                 "coordinates": "relative to the ground (absolute_* in the result file)"}
     if solver is not None:
         data["auto"] = {"method": solver.name, "reason": reason}
     else:
@@ -197,7 +208,12 @@ def format_info(d: dict) -> str:
              f"  DOFs     {', '.join(dofs)} ({len(d['dofs'])} DOFs, {d['form']} form, "
              f"{'linear' if d['linear'] else 'nonlinear: ' + ', '.join(d['nonlinear_elements'])})",
              f"  time     {d['time']['start']:g} .. {d['time']['end']:g} s, {d['time']['points']} points"]
-    lines += [f"  force    {f}" for f in d["forces"]] or ["  force    none (free response)"]
+    ground = d.get("ground_motion")
+    lines += [f"  force    {f}" for f in d["forces"]] or ([] if ground else ["  force    none (free response)"])
+    if ground:
+        lines.append(f"  ground   {ground['type']} {ground['quantity']}"
+                     + (f", {ground['jumps']} jump(s)" if ground["jumps"] else "")
+                     + "; x, v, a relative to the ground")
     lines += [matrix("M", d["M"]), matrix("C", d["C"]), matrix("K", d["K"])]
     lines.append("  modes    omega_n [rad/s]   f_n [Hz]   zeta        regime")
     for i, mode in enumerate(d["modes"], 1):

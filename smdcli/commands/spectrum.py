@@ -13,6 +13,7 @@ import numpy as np
 from smdcli.errors import UsageError
 from smdcli.io.folders import output_folder
 from smdcli.scenario.records import Record, read_record
+from smdcli.scenario.spec import STANDARD_GRAVITY
 from smdcli.solvers.spectrum import Spectrum, response_spectrum
 
 DEFAULT_PERIODS = "logspace(-2,1,200)"
@@ -47,9 +48,6 @@ def spectrum(path: str | Path, out: str | Path, periods: str = DEFAULT_PERIODS, 
     import time
 
     path = Path(path)
-    if path.suffix.lower() == ".toml":
-        raise UsageError(f"{path}: expected a two-column record file (time, acceleration); reading a scenario's "
-                         "[ground_motion] record is not available yet")
     T = _numbers("--periods", periods)
     zeta = _numbers("--damping", damping)
     if not (np.isfinite(T).all() and (T > 0).all()):
@@ -59,7 +57,13 @@ def spectrum(path: str | Path, out: str | Path, periods: str = DEFAULT_PERIODS, 
     if len(T) * len(zeta) > MAX_OSCILLATORS:
         raise UsageError(f"--periods x --damping: expected at most {MAX_OSCILLATORS} oscillators, found "
                          f"{len(T)} x {len(zeta)}")
-    record = read_record(path, units, scale, shift)
+    if path.suffix.lower() == ".toml":
+        if (units, scale, shift) != ("g", 1.0, 0.0):
+            raise UsageError(f"{path}: --units, --scale and --shift apply to a record file; a scenario's record "
+                             "takes them from its [ground_motion] table")
+        record = scenario_record(path)
+    else:
+        record = read_record(path, units, scale, shift)
     out_dir = output_folder(out)
     from smdcli.progress import bar
 
@@ -87,13 +91,30 @@ def spectrum(path: str | Path, out: str | Path, periods: str = DEFAULT_PERIODS, 
     return run
 
 
+def scenario_record(path: Path) -> Record:
+    """The ground acceleration record of a scenario's [ground_motion] (a table of acceleration), in m/s^2."""
+    from smdcli.scenario import load
+    from smdcli.scenario.records import sampled_record
+
+    sc = load(path)
+    ground = sc.ground_motion
+    if ground is None or ground.quantity != "acceleration" or ground.shape.type != "table":
+        found = "no [ground_motion]" if ground is None else f"a {ground.shape.type} ground {ground.quantity}"
+        raise UsageError(f"{path}: expected a scenario whose [ground_motion] is an acceleration record "
+                         f'(quantity = "acceleration", type = "table"), found {found}')
+    shape = ground.shape
+    text = shape.file_text if shape.file else "\n".join(f"{t!r}, {v!r}" for t, v in zip(shape.t, shape.values))
+    return sampled_record(sc.path, "ground_motion.t" if not shape.file else "ground_motion.file",
+                          shape.file or sc.path, shape.t, shape.values, ground.units, text)
+
+
 def spectrum_summary(run: SpectrumRun) -> dict:
     """The facts of a spectrum run as plain data: the record, each damping ratio's peak Sa and where."""
     r, s = run.record, run.spectrum
     peaks = []
     for i, zeta in enumerate(s.damping):
         j = int(np.argmax(s.Sa[i]))
-        peaks.append({"damping": float(zeta), "peak_Sa_m_s2": float(s.Sa[i, j]), "peak_Sa_g": float(s.Sa[i, j] / 9.80665),
+        peaks.append({"damping": float(zeta), "peak_Sa_m_s2": float(s.Sa[i, j]), "peak_Sa_g": float(s.Sa[i, j] / STANDARD_GRAVITY),
                       "at_period_s": float(s.period[j]), "peak_Sd_m": float(s.Sd[i].max())})
     return {"record": r.path, "status": "ok", "exit_code": 0, "samples": len(r.time), "step_s": r.step,
             "duration_s": float(r.time[-1] - r.time[0]), "units_in_file": r.units,
@@ -105,7 +126,7 @@ def spectrum_summary(run: SpectrumRun) -> dict:
 
 def format_spectrum(data: dict) -> str:
     """Terminal text for a spectrum run."""
-    g = 9.80665
+    g = STANDARD_GRAVITY
     lines = [f"{data['record']}: {data['samples']} samples every {data['step_s']:g} s ({data['duration_s']:g} s), "
              f"PGA {data['pga_m_s2'] / g:.4g} g",
              f"  spectra  {data['periods']} periods {data['period_range_s'][0]:g}..{data['period_range_s'][1]:g} s x "

@@ -331,7 +331,8 @@ def summary(run: SweepRun) -> dict:
             data["metric"]["null_means"] = "not settled within the run"
     else:
         r = run.response
-        data["how"] = "exact receptance" if r.exact else "measured by simulation to steady state"
+        data["how"] = ("exact transmissibility (ground displacement)" if r.ground else "exact receptance"
+                       if r.exact else "measured by simulation to steady state")
         data["input_dof"] = r.input_dof
         data["peaks"] = r.peaks
         if r.difference is not None:
@@ -365,10 +366,12 @@ def format_summary(data: dict) -> str:
         if data["members"] > 12:
             lines.append(f"  ... {data['members'] - 12} more in the HDF5 file")
     if "peaks" in data:
-        lines.append(f"  resonance peaks (unit force on {data['input_dof']}): "
+        ground = data["input_dof"] == "ground"
+        lines.append(f"  resonance peaks ({'transmissibility |X / U|' if ground else 'unit force on ' + data['input_dof']}): "
                      + ("none inside the frequency range" if not data["peaks"] else ""))
         for p in data["peaks"][:24]:
-            amp = f"{p['amplitude']:.5g} m/N" if math.isfinite(p["amplitude"]) else "unbounded (undamped)"
+            amp = f"{p['amplitude']:.5g}{'' if ground else ' m/N'}" if math.isfinite(p["amplitude"]) \
+                else "unbounded (undamped)"
             how = f" (largest measured, sweep {p['direction']}, on the grid)" if "direction" in p else ""
             who = f"{p['label']}: " if data["members"] > 1 else ""
             lines.append(f"    {who}{p['dof']} at {p['omega']:.6g} rad/s ({p['omega'] / (2 * math.pi):.5g} Hz), "

@@ -125,6 +125,9 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
                     model.M, model.C, model.K, result.stats.stated_accuracy, result.displacement, result.velocity,
                     result.acceleration, result.force)[0])
 
+        if result.ground is not None:
+            _write_ground(f, scenario, model, result, time, dof)
+
         solver = f.create_group("solver")
         for key, value in result.stats.as_attrs().items():
             solver.attrs[key] = value
@@ -152,6 +155,33 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
         eigen.attrs["columns"] = ["real", "imag"]
         if model.nonlinear_paths:
             group.attrs["nonlinear_elements"] = list(model.nonlinear_paths)
+
+
+def _write_ground(f, scenario: Scenario, model: Model, result: Result, time, dof) -> None:
+    """Absolute displacement, velocity and acceleration beside the relative ones, and the support's own motion."""
+    f.attrs["relative_to_ground"] = 1
+    spec = scenario.ground_motion
+    for name, units in (("displacement", "m"), ("velocity", "m/s"), ("acceleration", "m/s^2")):
+        ds = _with_scales(f.create_dataset(f"absolute_{name}", data=result.absolute(name)), time, dof)
+        ds.attrs["units"] = units
+        ds.attrs["description"] = f"{name} in the fixed frame: the relative {name} plus the ground's"
+        f[name].attrs["description"] = f"{name} relative to the moving ground"
+    group = f.create_group("ground")
+    group.attrs["quantity"] = spec.quantity
+    group.attrs["type"] = spec.shape.type
+    group.attrs["units_given"] = spec.units
+    group.attrs["jumps"] = len(model.ground.jumps)
+    for name, units in (("displacement", "m"), ("velocity", "m/s"), ("acceleration", "m/s^2")):
+        ds = _with_scales(group.create_dataset(name, data=getattr(result.ground, name)), time)
+        ds.attrs["units"] = units
+        ds.attrs["description"] = ("as given" if name == spec.quantity else
+                                   "derived exactly" if spec.quantity == "displacement" or
+                                   (spec.quantity == "velocity" and name == "acceleration") else
+                                   "integrated from rest at the start")
+    if spec.shape.file:
+        file = group.create_dataset("file_text", data=spec.shape.file_text)
+        file.attrs["file"] = spec.shape.file
+        file.attrs["sha256"] = hashlib.sha256(spec.shape.file_text.encode()).hexdigest()
 
 
 def write_matrices(group, model_or_family, dof, member=None) -> None:

@@ -238,7 +238,17 @@ def _write_response(f, response, member, dof, family, normalized: bool) -> None:
         ds.dims[2].attach_scale(dof)
         return ds
 
-    if response.exact:
+    if response.ground:
+        f.attrs["response"] = "exact transmissibility under harmonic ground displacement"
+        ds = stacked(f, "amplitude", response.amplitude, "1")
+        ds.attrs["description"] = "displacement transmissibility |X / U|: absolute amplitude over the ground's"
+        stacked(f, "phase", response.phase, "rad").attrs["description"] = "lag of X behind the ground displacement"
+        ds = f.create_dataset("force_transmissibility", data=response.force_transmissibility)
+        ds.attrs["units"] = "1"
+        ds.attrs["description"] = "|force through the elements to ground| / (k_g |U|), k_g = 1^T K 1"
+        ds.dims[0].attach_scale(member)
+        ds.dims[1].attach_scale(freq)
+    elif response.exact:
         stacked(f, "amplitude", response.amplitude, "m/N")
         stacked(f, "phase", response.phase, "rad")
     if normalized:  # the book's Equation (9-34) axes, 1 DOF: X K / F0 against r = omega / omega_n
@@ -246,7 +256,7 @@ def _write_response(f, response, member, dof, family, normalized: bool) -> None:
         ratio = f.create_dataset("frequency_ratio", data=response.omega[None, :] / np.sqrt(k / family.M[:, 0, 0])[:, None])
         ratio.dims[0].attach_scale(member)
         ratio.dims[1].attach_scale(freq)
-        if response.exact:
+        if response.exact and not response.ground:
             stacked(f, "normalized_amplitude", response.amplitude * k[:, None, None], "1")
     for direction, (amp, lag) in response.measured.items():
         group = f.create_group(f"measured/{direction}")

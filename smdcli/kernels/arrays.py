@@ -42,7 +42,7 @@ class ModelArrays(NamedTuple):
     el_b: np.ndarray  # (E,) int: second node, -1 for ground
     el_coef: np.ndarray  # (E,) k3 or the quadratic damping coefficient
     f_kind: np.ndarray  # (F,) int force kind
-    f_dof: np.ndarray  # (F,) int DOF the force acts on
+    f_dof: np.ndarray  # (F,) int DOF the force acts on; -1: the ground's acceleration, -a_g on every DOF's acceleration
     f_par: np.ndarray  # (F, FORCE_PARAMETERS) float parameters, by kind
     f_ptr: np.ndarray  # (F + 1,) int: each force's slice of f_data
     f_data: np.ndarray  # tables (times then values), Fourier terms (harmonics then coefficients), constants
@@ -87,7 +87,7 @@ def _force_row(signal: Signal) -> tuple[int, list[float], list[float], list[int]
     if isinstance(signal, Square):
         return SQUARE, [signal.amplitude, signal.period, signal.duty, signal.t0], [], []
     if isinstance(signal, FourierSquare):
-        return FOURIER_SQUARE, [signal.omega, signal.t0], [*signal.harmonics, *signal.coefs], []
+        return FOURIER_SQUARE, [signal.omega, signal.t0, signal.phase], [*signal.harmonics, *signal.coefs], []
     if isinstance(signal, Chirp):
         return CHIRP, [signal.amplitude, signal.f0, signal.rate, signal.phase], [], []
     if isinstance(signal, Table):

@@ -141,7 +141,7 @@ def force_value(m, j, t, left, stack):
         terms = len(data) // 2
         total = 0.0
         for i in range(terms):
-            total += data[terms + i] * math.sin(data[i] * p[0] * (t - p[1]))
+            total += data[terms + i] * math.sin(data[i] * p[0] * (t - p[1]) + p[2])
         return total
     if kind == CHIRP:
         return p[0] * math.sin(2 * math.pi * (p[1] * t + 0.5 * p[2] * t * t) + p[3])
@@ -172,8 +172,12 @@ def rhs(m, t, y, left, dy, work):
     for i in range(n):
         dy[i] = y[n + i]
         work[i] = 0.0
+    ground = 0.0  # relative coordinates: M^-1 (-M 1 a_g) is -a_g on every DOF
     for j in range(len(m.f_kind)):
-        work[m.f_dof[j]] += force_value(m, j, t, left, work[n:])
+        if m.f_dof[j] >= 0:
+            work[m.f_dof[j]] += force_value(m, j, t, left, work[n:])
+        else:
+            ground += force_value(m, j, t, left, work[n:])
     for e in range(len(m.el_law)):
         g = element_force(m, e, y)
         if m.el_a[e] >= 0:
@@ -186,7 +190,7 @@ def rhs(m, t, y, left, dy, work):
             s += m.a_val[k] * y[m.a_idx[k]]
         for k in range(m.mi_ptr[i], m.mi_ptr[i + 1]):
             s += m.mi_val[k] * work[m.mi_idx[k]]
-        dy[n + i] = s
+        dy[n + i] = s - ground
 
 
 @kernel

@@ -182,19 +182,29 @@ class Square(Signal):
 
 
 class FourierSquare(Signal):
-    """The book's func_pulse: sum over n = 1..terms of (2A/(n pi))(1 - cos n pi) sin(n omega (t - t0))."""
+    """The book's func_pulse: sum over n = 1..terms of (2A/(n pi))(1 - cos n pi) sin(n omega (t - t0)); its
+    derivatives (a ground displacement's velocity and acceleration) are the same series with other coefficients
+    and every phase advanced by `phase`."""
 
     def __init__(self, amplitude: float, omega: float, terms: int, t0: float):
-        self.omega, self.t0 = omega, t0
+        self.omega, self.t0, self.phase = omega, t0, 0.0
         n = np.arange(1, terms + 1)
         coef = 2 * amplitude / (n * math.pi) * (1 - np.cos(n * math.pi))
         keep = np.abs(coef) > 1e-14 * abs(amplitude)  # even harmonics vanish
         self.harmonics = n[keep].astype(float)
         self.coefs = coef[keep]
 
+    def derivative(self) -> FourierSquare:
+        """d/dt of the series, term by term."""
+        derived = FourierSquare.__new__(FourierSquare)
+        derived.omega, derived.t0, derived.harmonics = self.omega, self.t0, self.harmonics
+        derived.coefs = self.coefs * self.harmonics * self.omega
+        derived.phase = self.phase + math.pi / 2
+        return derived
+
     def value(self, t):
         t = np.asarray(t, dtype=float)
-        arg = np.multiply.outer(t - self.t0, self.harmonics * self.omega)
+        arg = np.multiply.outer(t - self.t0, self.harmonics * self.omega) + self.phase
         return np.sin(arg) @ self.coefs
 
     def exo(self):
@@ -208,7 +218,7 @@ class FourierSquare(Signal):
         return Exo(S, g)
 
     def exo_state(self, t):
-        arg = self.harmonics * self.omega * (t - self.t0)
+        arg = self.harmonics * self.omega * (t - self.t0) + self.phase
         out = np.empty(2 * len(arg))
         out[0::2], out[1::2] = np.sin(arg), np.cos(arg)
         return out

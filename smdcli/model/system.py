@@ -11,6 +11,7 @@ Must not import: solvers, sweep, io, plots, commands, cli.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from functools import cached_property
@@ -18,7 +19,10 @@ from functools import cached_property
 import numpy as np
 
 from smdcli.errors import ScenarioError
+from smdcli.model.damping import added_damping, check_damping
 from smdcli.model.forcing import Signal, build_signal
+from smdcli.model.ground import MAX_JUMPS, GroundMotion, ground_motion, state_jumps
+from smdcli.model.mass import mass_solve
 from smdcli.scenario import GROUND, Scenario, TimeSpec
 
 # Relative width around zeta = 1 inside which a mode is called critically damped.
@@ -29,6 +33,8 @@ STIFF_RATIO = 1e3
 # conquer), and the damped eigenvalues of a non-classical model from its undamped modal coordinates (T^-1 A T with
 # T = diag(Phi, Phi), Phi^T M Phi = I), where LAPACK's QR iteration needs 20 % less time on chains.
 MODAL_FORM_DOFS = 64
+# The DOF index of a signal that is the ground's acceleration: its column of B is -M 1, on every DOF.
+GROUND_DOF = -1
 
 
 def time_grid(spec: TimeSpec) -> np.ndarray:
@@ -92,6 +98,15 @@ class Model:
     quadratic: Incidence | None = None  # force c |d'| d'
     source: str = "<model>"
     element_form: bool = True
+    ground: GroundMotion | None = None  # support motion: x is measured from the moving ground
+    jumps: tuple[tuple[float, np.ndarray, np.ndarray], ...] = ()  # (t, dx, dv): the state jumps there
+
+    def with_matrices(self, **changes) -> Model:
+        """This model with other matrices (M, C, K, x0, v0...), its ground jumps made from the new M and C."""
+        model = dataclasses.replace(self, **changes)
+        if model.ground is not None and ("M" in changes or "C" in changes):
+            model = dataclasses.replace(model, jumps=state_jumps(model.ground, model.M, model.C))
+        return model
 
     # ------------------------------------------------------------ structure
     @property
@@ -121,10 +136,13 @@ class Model:
 
     @cached_property
     def B(self) -> np.ndarray:
-        """Input matrix: column j puts force j on its DOF."""
+        """Input matrix: column j puts force j on its DOF; the ground's acceleration is the effective force -M 1 a_g."""
         B = np.zeros((self.n, len(self.signals)))
         for j, dof in enumerate(self.force_dofs):
-            B[dof, j] = 1.0
+            if dof == GROUND_DOF:
+                B[:, j] = -self.M.sum(axis=1)
+            else:
+                B[dof, j] = 1.0
         return B
 
     @cached_property
@@ -312,15 +330,6 @@ def _pair_modes(eig: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return wn, zeta
 
 
-def mass_solve(M: np.ndarray, A: np.ndarray) -> np.ndarray:
-    """M^-1 A for mass matrices (n, n) or stacks of them: a division where M is diagonal (every element-form
-    scene; an O(n^3) solve of a 3,000-DOF diagonal M took 1.6 s), else a solve."""
-    diagonal = np.diagonal(M, axis1=-2, axis2=-1)
-    if np.count_nonzero(M) == np.count_nonzero(diagonal):
-        return A / diagonal[..., :, None]
-    return np.linalg.solve(M, A)
-
-
 def build(scenario: Scenario) -> Model:
     """Assemble the Model of a validated scenario."""
     dofs = scenario.dof_names
@@ -351,45 +360,32 @@ def build(scenario: Scenario) -> Model:
         cubic = _incidence(cubic_rows)
         quadratic = _incidence(quad_rows)
     if scenario.damping is not None:
-        C = C + _added_damping(scenario, M, K)
+        C = C + added_damping(scenario, M, K)
     signals = tuple(build_signal(f) for f in scenario.forces)
+    force_dofs = tuple(index[f.on] for f in scenario.forces)
+    shapes = scenario.forces
+    ground = jumps = None
+    if scenario.ground_motion is not None:
+        ground = ground_motion(scenario.ground_motion, scenario.time.start, scenario.time.end)
+        if len(ground.jumps) > MAX_JUMPS:
+            raise ScenarioError(scenario.path, "ground_motion", f"the ground's displacement or velocity jumps "
+                                f"{len(ground.jumps)} times in the run (limit {MAX_JUMPS}); each is a restart")
+        jumps = state_jumps(ground, M, C)
+        if ground.acceleration is not None:
+            signals += (ground.acceleration,)
+            force_dofs += (GROUND_DOF,)
+            shapes += (scenario.ground_motion.shape,)
     model = Model(
-        dofs=dofs, M=M, C=C, K=K, x0=x0, v0=v0, signals=signals,
-        force_dofs=tuple(index[f.on] for f in scenario.forces),
-        force_paths=tuple(f.path for f in scenario.forces),
-        force_types=tuple(f.type for f in scenario.forces),
+        dofs=dofs, M=M, C=C, K=K, x0=x0, v0=v0, signals=signals, force_dofs=force_dofs,
+        force_paths=tuple(f.path for f in shapes),
+        force_types=tuple(f.type for f in shapes),
         cubic=cubic, quadratic=quadratic, source=scenario.path,
-        element_form=scenario.system is None,
+        element_form=scenario.system is None, ground=ground, jumps=jumps or (),
     )
     _check_forces(model, scenario)
     _check_matrices_finite(model, scenario)
-    _check_damping(model, scenario)
+    check_damping(model.C, scenario)
     return model
-
-
-def _added_damping(scenario: Scenario, M: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """[damping]'s C: alpha M + beta K (K the linear stiffness), or M Phi diag(2 zeta_i w_i) Phi^T M from the
-    undamped modes (Phi mass-normalized); refused where the total C would let a mode gain energy."""
-    spec = scenario.damping
-    if spec.modal:
-        from scipy.linalg import eigh
-
-        squared, shapes = eigh(K, M)
-        ratios = np.broadcast_to(np.asarray(spec.modal, dtype=float), squared.shape)
-        left = M @ shapes
-        return (left * (2 * ratios * np.sqrt(np.maximum(squared, 0.0)))) @ left.T
-    return spec.alpha * M + spec.beta * K
-
-
-def _check_damping(model: Model, scenario: Scenario) -> None:
-    """With [damping], the total C must be positive semidefinite: otherwise some motion gains energy."""
-    if scenario.damping is None:
-        return
-    lowest = float(np.linalg.eigvalsh(model.C).min(initial=0.0))
-    if lowest < -1e-12 * max(float(np.abs(model.C).max(initial=0.0)), 1e-300):
-        key = "damping.modal" if scenario.damping.modal else "damping"
-        raise ScenarioError(scenario.path, key, f"makes the damping matrix indefinite (eigenvalue {lowest:.4g} N s/m): "
-                                                "some mode would be negatively damped; expected damping >= 0")
 
 
 def _check_matrices_finite(model: Model, scenario: Scenario) -> None:

@@ -63,10 +63,19 @@ def response_figure(result: Result, title: str):
 
     An oscillation too fast to draw over the whole run is shown as a faint band (its range) with its running
     mean, and a zoomed inset shows its last few periods."""
-    forced = np.any(result.force != 0)
+    ground = result.ground
+    forced = ground is None and np.any(result.force != 0)
     rows = (("force", "Force F [N]"),) if forced else ()
-    rows += (("displacement", "Displacement x [m]"), ("velocity", "Velocity v [m/s]"),
-             ("acceleration", "Acceleration a [m/s²]"))
+    if ground is None:
+        rows += (("displacement", "Displacement x [m]"), ("velocity", "Velocity v [m/s]"),
+                 ("acceleration", "Acceleration a [m/s²]"))
+    else:  # what an engineer reads: the support's motion, drift (relative motion), and what accelerometers feel
+        unit = {"displacement": "m", "velocity": "m/s", "acceleration": "m/s²"}[ground.given]
+        middle = ((("absolute_displacement", "Absolute x [m]"), ("displacement", "x relative to ground [m]"))
+                  if ground.given == "displacement" else  # a road or a shake table: where the masses go
+                  (("displacement", "x relative to ground [m]"), ("velocity", "v relative to ground [m/s]")))
+        rows = (("ground", f"Ground {ground.given} [{unit}]"),) + middle + (("absolute_acceleration",
+                                                                               "Absolute a [m/s²]"),)
     heights = [0.55 if name == "force" else 1.0 for name, _ in rows]
     fig = _figure(figsize=(9, 2.6 * sum(heights) + 1.2))
     axes = fig.subplots(len(rows), 1, sharex=True, gridspec_kw={"height_ratios": heights})
@@ -74,7 +83,13 @@ def response_figure(result: Result, title: str):
     window = _fast_window(result)
     shaded = {}
     for ax, (name, label) in zip(axes, rows):
-        data = getattr(result, name)
+        if name == "ground":
+            _draw(ax, result.time, getattr(ground, ground.given), "k", "ground")
+            ax.set_ylabel(label)
+            ax.grid(True, alpha=0.4)
+            shaded[name] = False
+            continue
+        data = result.absolute(name[len("absolute_"):]) if name.startswith("absolute_") else getattr(result, name)
         shaded[name] = False
         for j, dof in enumerate(result.dofs):
             if name == "force" and not np.any(data[:, j] != 0):
@@ -84,11 +99,12 @@ def response_figure(result: Result, title: str):
                                   style)
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.4)
-        if window is not None and name == "acceleration":
+        if window is not None and name.endswith("acceleration"):
             _zoom_inset(ax, result, data, window)
     if forced:
         _legend(axes[0], shaded["force"])
-    _legend(axes[1 if forced else 0], any(shaded[name] for name, _ in rows if name != "force"))  # the DOFs' once
+    _legend(axes[1 if forced or ground is not None else 0],
+            any(shaded[name] for name, _ in rows if name not in ("force", "ground")))  # the DOFs' once
     axes[-1].set_xlabel("Time t [s]")
     axes[0].set_xlim(result.time[0], result.time[-1])
     fig.suptitle(title, fontsize=11)

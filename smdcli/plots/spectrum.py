@@ -10,8 +10,7 @@ import math
 import numpy as np
 
 from smdcli.plots.common import _figure, envelope
-
-G = 9.80665  # m/s^2; guide lines of constant Sa are labelled in g, as engineers read them
+from smdcli.scenario.spec import STANDARD_GRAVITY as G  # guide lines of constant Sa are labelled in g, as engineers read them
 
 
 def _decades(low: float, high: float) -> list[float]:

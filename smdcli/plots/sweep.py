@@ -132,7 +132,7 @@ def frequency_figure(family, response, title: str, unit: str = "rad/s", normaliz
     fig = _figure(figsize=(9.5, 8))
     ax_a, ax_p = fig.subplots(2, 1, sharex=True)
     fig.subplots_adjust(left=0.1, right=0.95 if cmap is None else 0.86, top=0.88, bottom=0.08, hspace=0.08)
-    k = family.K[:, 0, 0] if normalized else np.ones(S)  # amplitude scale: X K / F0, or m/N
+    k = family.K[:, 0, 0] if normalized and not response.ground else np.ones(S)  # amplitude scale: X K / F0, or m/N
     # the x axis per member: r = omega / omega_n, or the frequency in the unit it was given in
     per = np.sqrt(family.K[:, 0, 0] / family.M[:, 0, 0]) if normalized else \
         np.full(S, 2 * math.pi if unit == "Hz" else 1.0)
@@ -159,6 +159,13 @@ def frequency_figure(family, response, title: str, unit: str = "rad/s", normaliz
                           ls="-" if not response.exact else "none", lw=0.8, label=tag)
                 ax_p.plot(x, lag[s, :, j], markers[direction], color=shade, ms=4, mfc="none",
                           ls="-" if not response.exact else "none", lw=0.8)
+    if response.ground:  # the force through the support, one dashed line per member
+        for s in range(S):
+            with np.errstate(all="ignore"):
+                ax_a.plot(response.omega / per[s], response.force_transmissibility[s], "--",
+                          color=colors[s] if S > 1 else "0.35", lw=0.9, alpha=0.75,
+                          label="force |F_T| / (k_g U)" if s == 0 else None)
+        ax_a.axhline(1.0, color="0.6", lw=0.8)
     exact_peaks = [p for p in response.peaks if "direction" not in p]  # measured maxima are listed, not marked
     for peak in exact_peaks:
         s = peak["member"]
@@ -173,11 +180,13 @@ def frequency_figure(family, response, title: str, unit: str = "rad/s", normaliz
         ax_a.plot([], [], ":", color="0.5", label="undamped: unbounded")
     ax_a.set_yscale("log")
     if normalized:
-        ax_a.set_ylabel("Normalized amplitude X K / F₀ [1]")
+        ax_a.set_ylabel("Transmissibility |X / U| [1]" if response.ground else "Normalized amplitude X K / F₀ [1]")
         ax_p.set_xlabel("Frequency ratio r = ω / ωₙ [1]")
     else:
-        ax_a.set_ylabel(f"Amplitude per unit force on {response.input_dof} [m/N]")
-        ax_p.set_xlabel(f"Forcing frequency {'f' if unit == 'Hz' else 'ω'} [{unit}]")
+        ax_a.set_ylabel("Transmissibility |X / U| [1]" if response.ground else
+                        f"Amplitude per unit force on {response.input_dof} [m/N]")
+        ax_p.set_xlabel(f"{'Ground' if response.ground else 'Forcing'} frequency {'f' if unit == 'Hz' else 'ω'} "
+                        f"[{unit}]")
     finite = response.amplitude[np.isfinite(response.amplitude) & (response.amplitude > 0)]
     measured = [a[np.isfinite(a) & (a > 0)] for a, _ in response.measured.values()]
     pool = np.concatenate([finite] + measured) * k.max()
@@ -193,7 +202,8 @@ def frequency_figure(family, response, title: str, unit: str = "rad/s", normaliz
         ax_a.legend(loc="upper right", fontsize=8, framealpha=0.85)
     else:
         _colorbar(fig, [ax_a, ax_p], cmap, family)
-    kind = "exact receptance (K - ω²M + iωC)⁻¹" if response.exact else "measured by simulation to steady state"
+    kind = ("exact transmissibility under harmonic ground displacement" if response.ground else
+            "exact receptance (K - ω²M + iωC)⁻¹" if response.exact else "measured by simulation to steady state")
     extra = f"; measured vs exact: {response.difference:.1e} of the peak" if response.difference is not None else ""
     fig.suptitle(f"{title}\nfrequency response, {kind}{extra}", fontsize=10)
     return fig

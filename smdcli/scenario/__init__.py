@@ -11,9 +11,9 @@ data), sweep, io, plots, commands, cli.
 from smdcli.scenario.load import load, parse, parse_document
 from smdcli.scenario.options import SWEEP_KEYS
 from smdcli.scenario.reader import read_regular_file
-from smdcli.scenario.spec import (DEFAULT_POINTS, FORCE_TYPES, GROUND, MAX_SAMPLES, ElementSpec, ForceSpec, MassSpec,
-                                  MatrixSystem, Scenario, SolverSpec, TimeSpec)
+from smdcli.scenario.spec import (DEFAULT_POINTS, FORCE_TYPES, GROUND, MAX_SAMPLES, ElementSpec, ForceSpec,
+                                  GroundMotionSpec, MassSpec, MatrixSystem, Scenario, SolverSpec, TimeSpec)
 
 __all__ = ["DEFAULT_POINTS", "FORCE_TYPES", "GROUND", "MAX_SAMPLES", "SWEEP_KEYS", "ElementSpec", "ForceSpec",
-           "MassSpec", "MatrixSystem", "Scenario", "SolverSpec", "TimeSpec", "load", "parse", "parse_document",
+           "GroundMotionSpec", "MassSpec", "MatrixSystem", "Scenario", "SolverSpec", "TimeSpec", "load", "parse", "parse_document",
            "read_regular_file"]

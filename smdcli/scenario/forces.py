@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import difflib
 import math
+import re
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from smdcli.scenario.reader import _Table
 from smdcli.scenario.records import ColumnsError, read_text, two_columns
-from smdcli.scenario.spec import FORCE_TYPES, ForceSpec
+from smdcli.scenario.spec import FORCE_TYPES, GROUND, GROUND_QUANTITIES, GROUND_UNITS, ForceSpec, GroundMotionSpec
 
 _FORCE_FIELDS = {
     "constant": ("amplitude",),
@@ -51,6 +53,11 @@ def _read_force(t: _Table, index: int, dofs: tuple[str, ...]) -> ForceSpec:
         hint = difflib.get_close_matches(on, dofs, n=1)
         extra = f" (did you mean {hint[0]!r}?)" if hint else f"; DOFs are {', '.join(dofs)}"
         raise t.fail("on", f"unknown DOF {on!r}{extra}")
+    return _read_shape(t, index, on, ("on",))
+
+
+def _read_shape(t: _Table, index: int, on: str, others: tuple[str, ...]) -> ForceSpec:
+    """A force shape: `type` and the keys it takes; `others` are the table's keys read elsewhere."""
     kind = t.string("type", choices=FORCE_TYPES)
     spec: dict[str, Any] = {"index": index, "on": on, "type": kind}
     if kind in ("constant", "step", "sine", "cosine", "square", "fourier_square", "pulse", "chirp"):
@@ -89,8 +96,46 @@ def _read_force(t: _Table, index: int, dofs: tuple[str, ...]) -> ForceSpec:
         except ExpressionError as exc:
             raise t.fail("expr", str(exc)) from None
         spec["expr"] = text
-    t.finish(("on", "type") + _FORCE_FIELDS[kind])
+    t.finish(others + ("type",) + _FORCE_FIELDS[kind])
     return ForceSpec(**spec)
+
+
+GROUND_KEYS = ("quantity", "units", "scale", "shift") + tuple(k for k in _ANY_FORCE_KEYS if k != "on")
+# What a shape whose derivative smd takes may not hold: functions that jump (or kink, for a displacement), at
+# times smd cannot locate; the motion's velocity or acceleration would need an impulse there.
+_JUMPING = {"displacement": ("heaviside", "sign", "abs"), "velocity": ("heaviside", "sign"), "acceleration": ()}
+
+
+def _read_ground_motion(t: _Table) -> GroundMotionSpec:
+    """[ground_motion]: quantity, a force shape, and for a table its units, scale and shift (converted to SI)."""
+    if not t.has("quantity"):
+        raise t.missing("quantity", "displacement, velocity or acceleration")
+    quantity = t.string("quantity", choices=GROUND_QUANTITIES)
+    allowed = GROUND_UNITS[quantity]
+    units = t.string("units", next(u for u in allowed if u != "g"), choices=tuple(allowed))
+    table = t.data.get("type") == "table"
+    for key in ("scale", "shift"):
+        if t.has(key) and not table:
+            raise t.fail(key, 'only a table ground motion has scale and shift (type = "table"); '
+                              "set the amplitude instead")
+    scale, shift = t.number("scale", 1.0), t.number("shift", 0.0)
+    shape = _read_shape(t, 0, GROUND, ("quantity", "units", "scale", "shift"))
+    factor = allowed[units]
+    if shape.type == "table":
+        shape = replace(shape, values=tuple((v * scale + shift) * factor for v in shape.values))
+    elif shape.type == "expression":
+        for name in _JUMPING[quantity]:
+            if re.search(rf"\b{name}\s*\(", shape.expr):
+                raise t.fail("expr", f"a ground {quantity} given by an expression may not use {name}(): its "
+                                     "derivative jumps at times smd cannot locate; give the motion as a table, a "
+                                     "step or a pulse, or give its acceleration")
+        if factor != 1.0:
+            shape = replace(shape, expr=f"({shape.expr}) * {factor!r}")
+    else:
+        shape = replace(shape, amplitude=shape.amplitude * factor)
+    if not all(math.isfinite(v) for v in shape.values + (shape.amplitude,)):
+        raise t.fail("scale", "the scaled ground motion overflows; expected finite values")
+    return GroundMotionSpec(quantity=quantity, shape=shape, units=units)
 
 
 def _read_table_force(t: _Table) -> dict[str, Any]:

@@ -10,7 +10,7 @@ import tomllib
 from pathlib import Path
 
 from smdcli.errors import ScenarioError
-from smdcli.scenario.forces import _ANY_FORCE_KEYS, _read_force
+from smdcli.scenario.forces import _ANY_FORCE_KEYS, GROUND_KEYS, _read_force, _read_ground_motion
 from smdcli.scenario.options import SOLVER_KEYS, SWEEP_KEYS, _read_solver, _read_sweep
 from smdcli.scenario.reader import (_SYSTEM_KEYS, _TIME_KEYS, _TOP_KEYS, MAX_SCENARIO_BYTES, _NotRegular, _Table,
                                     read_regular_file)
@@ -88,6 +88,8 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
     sweep = _read_sweep(_Table(file, "sweep", top.raw("sweep"), SWEEP_KEYS)) if top.has("sweep") else ()
     damping = _read_damping(_Table(file, "damping", top.raw("damping"), DAMPING_KEYS), len(dofs)) \
         if top.has("damping") else None
+    ground_motion = _read_ground_motion(_Table(file, "ground_motion", top.raw("ground_motion"), GROUND_KEYS)) \
+        if top.has("ground_motion") else None
     top.finish(_TOP_KEYS)
 
     if not math.isfinite(time.end - time.start):
@@ -101,13 +103,13 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
             f"output grid of {n_points:.3g} points x {len(dofs)} DOF is too large "
             f"(limit {MAX_SAMPLES:.0e} samples); use a larger step or fewer points",
         )
-    for force in forces:
+    for force in forces + ((ground_motion.shape,) if ground_motion else ()):
         if force.type == "chirp":
             _check_chirp_resolved(file, force, time, n_points)
     return Scenario(
         path=file, text=text, time=time, masses=masses, springs=springs, dampers=dampers,
         system=system, forces=forces, solver=solver, title=title, description=description,
-        sweep=sweep, damping=damping,
+        sweep=sweep, damping=damping, ground_motion=ground_motion,
     )
 
 

@@ -17,9 +17,9 @@ import numpy as np
 
 from smdcli.errors import ScenarioError
 from smdcli.scenario.reader import MAX_TABLE_BYTES, _NotRegular, read_regular_file
+from smdcli.scenario.spec import GROUND_UNITS
 
-STANDARD_GRAVITY = 9.80665  # m/s^2 per g
-UNITS = {"g": STANDARD_GRAVITY, "m/s^2": 1.0}
+UNITS = GROUND_UNITS["acceleration"]
 DRIFT_BOUND = 0.05  # a record's integrated velocity ending beyond this fraction of its peak gets a warning
 
 
@@ -118,13 +118,18 @@ def read_record(path: str | Path, units: str = "g", scale: float = 1.0, shift: f
         times, values = two_columns(text)
     except ColumnsError as exc:
         raise ScenarioError(where, None if field is None else "file", f"{path}: {exc}" if field else str(exc)) from None
-    t = np.asarray(times)
+    acceleration = (np.asarray(values) * scale + shift) * UNITS[units]
+    return sampled_record(where, None, str(path), times, acceleration, units, text)
+
+
+def sampled_record(file: str, field: str | None, path: str, times, acceleration, units: str, text: str) -> Record:
+    """A Record of samples in m/s^2, checked: at least 3, uniformly spaced (to the file's rounding of times)."""
+    t = np.asarray(times, dtype=float)
     if len(t) < 3:
-        raise ScenarioError(where, None, f"expected at least 3 samples, found {len(t)}")
+        raise ScenarioError(file, field, f"expected a record of at least 3 samples, found {len(t)}")
     steps = np.diff(t)
     if steps.max() - steps.min() > 1e-6 * steps.mean():
-        raise ScenarioError(where, None, f"expected uniformly sampled times, found steps from {steps.min():.6g} to "
+        raise ScenarioError(file, field, f"expected uniformly sampled times, found steps from {steps.min():.6g} to "
                                          f"{steps.max():.6g} s")
     t = t[0] + steps.mean() * np.arange(len(t))  # the sampling interval the file's rounding of times meant
-    acceleration = (np.asarray(values) * scale + shift) * UNITS[units]
-    return Record(str(path), t, acceleration, units, text)
+    return Record(path, t, np.asarray(acceleration, dtype=float), units, text)

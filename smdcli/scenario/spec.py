@@ -94,8 +94,27 @@ class ForceSpec:
 
     @property
     def path(self) -> str:
-        """Field path of this force in the scenario file."""
-        return f"force[{self.index}]"
+        """Field path of this force (or of the ground motion's shape) in the scenario file."""
+        return "ground_motion" if self.on == GROUND else f"force[{self.index}]"
+
+
+GROUND_QUANTITIES = ("displacement", "velocity", "acceleration")
+STANDARD_GRAVITY = 9.80665  # m/s^2 per g
+# The units each ground-motion quantity may be given in, and their size in SI.
+GROUND_UNITS = {"displacement": {"m": 1.0}, "velocity": {"m/s": 1.0},
+                "acceleration": {"g": STANDARD_GRAVITY, "m/s^2": 1.0}}
+
+
+@dataclass(frozen=True)
+class GroundMotionSpec:
+    """[ground_motion]: one uniform motion of the support, the wall end of every element connected to ground.
+
+    `shape` is a force shape (on = "ground") whose values are already in SI units: a table's `units`, `scale`
+    and `shift` applied, an amplitude given in g converted."""
+
+    quantity: str  # displacement | velocity | acceleration
+    shape: ForceSpec
+    units: str
 
 
 @dataclass(frozen=True)
@@ -136,6 +155,7 @@ class Scenario:
     description: str = ""
     sweep: tuple[tuple[str, Any], ...] = ()
     damping: DampingSpec | None = None
+    ground_motion: GroundMotionSpec | None = None
 
     @property
     def stem(self) -> str:

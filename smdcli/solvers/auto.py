@@ -9,7 +9,7 @@ import dataclasses
 
 import numpy as np
 
-from smdcli.model import Model
+from smdcli.model import GROUND_DOF, Model
 from smdcli.result import Result
 from smdcli.solvers.base import Solver, Tolerances
 from smdcli.solvers.closed_form import ClosedForm
@@ -20,9 +20,19 @@ from smdcli.solvers.compiled import DOP853, Radau, StiffnessDetected
 
 def _force_kinds(model: Model, exact: bool | None = None) -> str:
     """The forces' types as the scenario names them ("sine and step"); only those (not) exactly integrable if asked."""
-    kinds = sorted({kind for kind, s in zip(model.force_types, model.signals)
-                    if exact is None or (s.exo() is not None) == exact})
+    kinds = sorted({kind for kind, s, dof in zip(model.force_types, model.signals, model.force_dofs)
+                    if (exact is None or (s.exo() is not None) == exact) and dof != GROUND_DOF})
     return " and ".join(kinds) if len(kinds) < 3 else ", ".join(kinds[:-1]) + " and " + kinds[-1]
+
+
+def _loads(model: Model) -> str:
+    """What drives the scene, for auto's reason: 'free response', 'with sine forces', 'with a pulse ground
+    displacement', or both."""
+    parts = [f"{_force_kinds(model)} forces"] if any(d != GROUND_DOF for d in model.force_dofs) else []
+    if model.ground is not None:
+        parts.append(f"a {model.ground.kind} ground {model.ground.quantity}"
+                     + (f" (restarted exactly at its {len(model.ground.jumps)} jump(s))" if model.ground.jumps else ""))
+    return "with " + " and ".join(parts) if parts else "free response"
 
 
 def _unheld(model: Model) -> str:
@@ -73,12 +83,12 @@ class Auto(Solver):
             told = model.n <= STIFFNESS_NOTE_DOFS or model.proportional_damping
             stiff = (f"; stiff (stiffness ratio {model.stiffness_ratio:.3g}), which an exact method does not feel"
                      if told and model.is_stiff else "")
-            if model.n == 1 and not model.is_forced:
+            if model.n == 1 and not model.is_forced and model.ground is None:
                 regime = model.modes.regimes[0]
                 return ClosedForm(), f"linear 1-DOF free response ({regime}): closed form, exact to rounding{stiff}"
             if all(s.exo() is not None for s in model.signals):
-                forced = f"with {_force_kinds(model)} forces integrated exactly between their discontinuities" \
-                    if model.is_forced else "free response"
+                forced = f"{_loads(model)} integrated exactly between discontinuities" \
+                    if model.is_forced or model.ground is not None else "free response"
                 if modal_applies(model):
                     return Exact(), (f"linear time-invariant, classically damped, {forced}: in modal coordinates "
                                      f"({model.n} exact 1-DOF recurrences), exact to rounding{stiff}")

@@ -15,6 +15,7 @@ from smdcli.model import Model
 from smdcli.result import Result
 from smdcli.solvers.base import Solver, Tolerances, stated_rounding, stated_tolerance
 from smdcli.solvers.catalog import check_method_name
+from smdcli.solvers.ground import across_jumps, drift_note, ground_history
 
 
 def _solvers() -> dict[str, type[Solver]]:
@@ -51,9 +52,13 @@ def solve(model: Model, grid: np.ndarray, method: str, tol: Tolerances, field: s
     if problem:
         raise ScenarioError(model.source, field, problem)
     with np.errstate(all="ignore"):  # overflow is judged below, on the result, not warned about midway
-        result = solver.solve(model, grid, tol)
+        result = across_jumps(lambda piece, times: solver.solve(piece, times, tol), model, grid)
     result = _refuse_non_finite(result)
     notes = result.notes
+    if model.ground is not None:
+        history = ground_history(model, grid, solve)
+        result = dataclasses.replace(result, ground=history)
+        notes += tuple(note for note in (drift_note(model, history),) if note)
     explicit = method not in ("auto", "closed_form", "exact") and not solver.implicit
     if explicit and model.is_linear and model.is_stiff:
         notes += (f"warning: this scene is stiff (stiffness ratio {model.stiffness_ratio:.3g}); "

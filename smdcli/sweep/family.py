@@ -159,8 +159,8 @@ class Family:
             cubic = replace(cubic, coef=self.cubic_coef[s])
         if self.quadratic_coef is not None:
             quadratic = replace(quadratic, coef=self.quadratic_coef[s])
-        return replace(self.base, M=self.M[s], C=self.C[s], K=self.K[s], x0=self.x0[s], v0=self.v0[s],
-                       cubic=cubic, quadratic=quadratic)
+        return self.base.with_matrices(M=self.M[s], C=self.C[s], K=self.K[s], x0=self.x0[s], v0=self.v0[s],
+                                       cubic=cubic, quadratic=quadratic)
 
     def output_grid(self) -> tuple[np.ndarray | None, int]:
         """The members' shared output grid (None where their grids differ, a swept time.end) and the longest

@@ -38,6 +38,14 @@ class FrequencyResponse:
     exact: bool = True
     difference: float | None = None  # largest |measured - exact| / max exact amplitude, linear scenes
     wall_time_s: float = 0.0
+    # Under [ground_motion]: amplitude is the displacement transmissibility |X / U| (absolute motion over the
+    # ground's), phase its lag, and this the force transmissibility |F_T| / (k_g |U|), (S, F).
+    force_transmissibility: np.ndarray | None = None
+
+    @property
+    def ground(self) -> bool:
+        """Whether this is a transmissibility (the ground moves) rather than a receptance (a force acts)."""
+        return self.force_transmissibility is not None
 
 
 def input_index(model: Model, name: str | None, source: str) -> int:
@@ -77,6 +85,32 @@ def receptance(M: np.ndarray, C: np.ndarray, K: np.ndarray, omega: np.ndarray, d
         return H
 
 
+def transmissibility(M: np.ndarray, C: np.ndarray, K: np.ndarray, omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Under a harmonic ground displacement U e^(i w t): the absolute displacement per unit U, (S, F, n) complex,
+    and the force through the ground elements per k_g U, (S, F) complex (k_g = 1^T K 1, the stiffness to ground).
+
+    The relative motion solves Z Y = w^2 M 1 U (Z = K - w^2 M + i w C); X = U 1 + Y; the ground feels
+    1^T (K + i w C) Y. One DOF: |X / U| = sqrt((1 + (2 zeta r)^2) / ((1 - r^2)^2 + (2 zeta r)^2)), |F_T| / (k U) =
+    r^2 |X / U|."""
+    ones = np.ones(M.shape[-1])
+    w = omega[None, :, None]
+    inertia = (M @ ones)[:, None, :] * w**2  # (S, F, n)
+    Z = K[:, None] - w[..., None] ** 2 * M[:, None] + 1j * w[..., None] * C[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        try:
+            Y = np.linalg.solve(Z, inertia[..., None].astype(complex))[..., 0]
+        except np.linalg.LinAlgError:  # an undamped resonance hit exactly
+            Y = np.full(Z.shape[:-1], np.inf, complex)
+            for index in np.ndindex(Z.shape[:2]):
+                try:
+                    Y[index] = np.linalg.solve(Z[index], inertia[index])
+                except np.linalg.LinAlgError:
+                    pass
+        grounding = (K @ ones)[:, None, :] + 1j * w * (C @ ones)[:, None, :]  # 1^T (K + i w C), (S, F, n)
+        force = (grounding * Y).sum(axis=-1) / (ones @ K @ ones)[:, None]
+    return 1.0 + Y, force
+
+
 def phase_lag(family: Family, omega: np.ndarray, H: np.ndarray) -> np.ndarray:
     """Lag of displacement behind force: for one DOF atan2(w c, k - w^2 m) in [0, pi] (the book's 9-35); unwrapped along frequency for several."""
     if H.shape[-1] == 1:
@@ -88,8 +122,10 @@ def phase_lag(family: Family, omega: np.ndarray, H: np.ndarray) -> np.ndarray:
     return lag - 2 * np.pi * np.round(first / (2 * np.pi))
 
 
-def resonance_peaks(family: Family, omega: np.ndarray, amplitude: np.ndarray, dof: int) -> list[dict]:
-    """Local maxima of every member's amplitude per DOF, refined on the exact receptance between grid neighbours."""
+def resonance_peaks(family: Family, omega: np.ndarray, amplitude: np.ndarray, dof: int,
+                    ground: bool = False) -> list[dict]:
+    """Local maxima of every member's amplitude per DOF, refined on the exact receptance (or transmissibility)
+    between grid neighbours."""
     from scipy.optimize import minimize_scalar
 
     peaks = []
@@ -116,8 +152,10 @@ def resonance_peaks(family: Family, omega: np.ndarray, amplitude: np.ndarray, do
                     continue
 
                 def negative(w, s=s, j=j):
-                    return -abs(receptance(family.M[s:s + 1], family.C[s:s + 1], family.K[s:s + 1],
-                                           np.array([w]), dof)[0, 0, j])
+                    matrices = (family.M[s:s + 1], family.C[s:s + 1], family.K[s:s + 1])
+                    if ground:
+                        return -abs(transmissibility(*matrices, np.array([w]))[0][0, 0, j])
+                    return -abs(receptance(*matrices, np.array([w]), dof)[0, 0, j])
 
                 best = minimize_scalar(negative, bounds=(omega[f - 1], omega[f + 1]), method="bounded",
                                        options={"xatol": 1e-10 * max(omega[f], 1.0)})
@@ -145,14 +183,29 @@ def frequency_response(family: Family, workers: int | None = None,
     dof = input_index(base, spec.input, family.scenario.path)
     linear = base.is_linear
     S, F, n = len(family), len(omega), base.n
-    if linear:
+    ground = base.ground is not None and spec.input is None
+    if ground and (not linear or spec.measure):
+        why = f"{base.nonlinear_paths[0]} is nonlinear" if not linear else "--measure was asked for"
+        raise UsageError(f"{family.scenario.path}: the transmissibility under [ground_motion] is computed exactly for "
+                         f"linear scenes, not measured by simulation; {why} (give --input DOF and a sine [[force]] "
+                         "for a measured receptance, or simulate each frequency)")
+    forces = None
+    if linear and ground:
+        H, forces = transmissibility(family.M, family.C, family.K, omega)
+        amplitude = np.abs(H)
+        with np.errstate(invalid="ignore"):
+            lag = np.unwrap(-np.angle(H), axis=1)
+        phase = lag - 2 * np.pi * np.round(lag[:, :1] / (2 * np.pi))
+        peaks = resonance_peaks(family, omega, amplitude, dof, ground=True)
+    elif linear:
         H = receptance(family.M, family.C, family.K, omega, dof)
         amplitude, phase = np.abs(H), phase_lag(family, omega, H)
         peaks = resonance_peaks(family, omega, amplitude, dof)
     else:
         amplitude = phase = np.full((S, F, n), np.nan)
         peaks = []
-    response = FrequencyResponse(omega, base.dofs, base.dofs[dof], amplitude, phase, peaks, exact=linear)
+    response = FrequencyResponse(omega, base.dofs, "ground" if ground else base.dofs[dof], amplitude, phase, peaks,
+                                 exact=linear, force_transmissibility=None if forces is None else np.abs(forces))
     if linear and not spec.measure:
         response.wall_time_s = time.perf_counter() - start
         if progress:

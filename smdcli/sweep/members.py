@@ -94,9 +94,12 @@ def solve_family(family: Family, method: str | None = None, workers: int | None 
         raise UsageError(f"{S} members x {longest} time points x {n} DOFs is more than {MAX_STACKED:.0e} samples "
                          "per data set; use fewer members or a coarser time grid")
     requested = {method} if method else {sc.solver.method for sc in (scenarios or [family.scenario])}
-    exact_ok = requested <= set(EXACT_METHODS) and family.base.is_linear and same_grid
+    # Ground jumps restart each member's run (solved one by one); the ground's effective force -M 1 a_g is shared
+    # only by members of one mass matrix.
+    exact_ok = requested <= set(EXACT_METHODS) and family.base.is_linear and same_grid and not family.base.jumps
+    shared_force = family.base.ground is None or bool(np.all(family.M == family.M[:1]))
     batched = None
-    if exact_ok and scenarios is None and all(s.exo() is not None for s in family.base.signals):
+    if exact_ok and scenarios is None and shared_force and all(s.exo() is not None for s in family.base.signals):
         x, v, acc = shared_signal_recurrence(family, grid)
         force = family.base.applied_force(grid) if family.base.is_forced else np.zeros((len(grid), n))
         batched = np.broadcast_to(force, (S,) + force.shape)
