@@ -91,14 +91,19 @@ class Record:
         """A line when the velocity integrated from the record ends far from rest: a baseline left uncorrected."""
         from scipy.integrate import cumulative_trapezoid
 
-        velocity = cumulative_trapezoid(self.acceleration, self.time, initial=0.0)
-        peak = float(np.abs(velocity).max(initial=0.0))
-        end = float(velocity[-1])
-        if peak > 0 and abs(end) > DRIFT_BOUND * peak:
-            return (f"warning: {self.path}: the velocity integrated from the record ends at {end:.4g} m/s, "
-                    f"{abs(end) / peak:.0%} of its peak {peak:.4g} m/s (bound {DRIFT_BOUND:.0%}): "
-                    "a baseline correction may be missing")
-        return None
+        return velocity_drift(self.path, cumulative_trapezoid(self.acceleration, self.time, initial=0.0))
+
+
+def velocity_drift(where: str, velocity: np.ndarray) -> str | None:
+    """A warning line where a velocity integrated from a record ends beyond DRIFT_BOUND of its peak: a baseline
+    left uncorrected; None otherwise."""
+    peak = float(np.abs(velocity).max(initial=0.0))
+    end = float(velocity[-1])
+    if peak > 0 and abs(end) > DRIFT_BOUND * peak:
+        return (f"warning: {where}: the velocity integrated from the record ends at {end:.4g} m/s, "
+                f"{abs(end) / peak:.0%} of its peak {peak:.4g} m/s (bound {DRIFT_BOUND:.0%}): "
+                "a baseline correction may be missing")
+    return None
 
 
 def read_record(path: str | Path, units: str = "g", scale: float = 1.0, shift: float = 0.0,

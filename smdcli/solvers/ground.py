@@ -102,14 +102,8 @@ def ground_history(model: Model, grid: np.ndarray, solve: Callable[..., Result])
 
 def drift_note(model: Model, history: GroundHistory) -> str | None:
     """A warning where a record's integrated velocity ends far from rest (a baseline left uncorrected)."""
-    from smdcli.scenario.records import DRIFT_BOUND
+    from smdcli.scenario.records import velocity_drift
 
     if model.ground is None or not model.ground.record:
         return None
-    peak = float(np.abs(history.velocity).max(initial=0.0))
-    end = float(history.velocity[-1])
-    if peak > 0 and abs(end) > DRIFT_BOUND * peak:
-        return (f"warning: ground_motion: the record's integrated velocity ends at {end:.4g} m/s, {abs(end) / peak:.0%} "
-                f"of its peak {peak:.4g} m/s (bound {DRIFT_BOUND:.0%}): a baseline correction may be missing; "
-                "absolute_displacement drifts with it")
-    return None
+    return velocity_drift("ground_motion", history.velocity)
