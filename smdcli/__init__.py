@@ -1,6 +1,17 @@
 """smd: lumped spring-mass-damper systems, solved exactly where they can be.
 
-Imports nothing (the version only), so `smd --help` stays fast.
+The Python API (smdcli.api): load(path) -> Scenario, simulate(scenario_or_path, method, rtol, atol) -> Result,
+write(result, path). They are imported on first use, so `smd --help` imports nothing heavy.
 """
 
 __version__ = "0.1.0"
+__all__ = ["load", "simulate", "write", "__version__"]
+
+
+def __getattr__(name: str):
+    """load, simulate and write from smdcli.api, imported when first asked for (PEP 562)."""
+    if name in ("load", "simulate", "write"):
+        from smdcli import api
+
+        return getattr(api, name)
+    raise AttributeError(f"module 'smdcli' has no attribute {name!r}")

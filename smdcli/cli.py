@@ -12,94 +12,14 @@ from typing import List, Optional
 
 import typer
 
-from smdcli import __version__, interrupts, strict_json
+from smdcli import __version__, interrupts
+from smdcli.cli_files import diff_files, export
+from smdcli.cli_support import _carried_out, _fail, _interrupted, _message, _positive, _print_json, _report
 from smdcli.progress import wanted as progress_wanted
 from smdcli.text import plural
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Simulate spring-mass-damper systems from TOML scenarios: exact where linear, measured where not.")
-
-
-def _fail(message: str) -> None:
-    """One line on stderr."""
-    typer.echo(f"smd: {message}", err=True)
-
-
-def _interrupted(exc: KeyboardInterrupt) -> typer.Exit:
-    """Say what stopped the run; the exit code a shell expects (130 for SIGINT, 143 for SIGTERM)."""
-    import signal
-
-    global _announced
-    signum = interrupts.received() or (signal.SIGTERM if isinstance(exc, interrupts.Terminated) else signal.SIGINT)
-    if not _announced:
-        notes = "".join(f"; {note}" for note in getattr(exc, "__notes__", ()))
-        _fail(f"{'terminated' if signum == signal.SIGTERM else 'interrupted'}; no partial file was left under a "
-              f"final name{notes}")
-        _announced = True
-    return typer.Exit(interrupts.exit_code(signum))
-
-
-_announced = False  # the interrupt has been reported
-
-
-def _print_json(data) -> None:
-    """Strict JSON on stdout: no NaN or Infinity (see strict_json)."""
-    typer.echo(strict_json.dumps(data))
-
-
-def _positive(name: str):
-    """A typer callback refusing a tolerance that is not a positive number."""
-    def check(value: Optional[float]) -> Optional[float]:
-        if value is not None and not (value > 0 and value < float("inf")):
-            raise typer.BadParameter(f"expected a positive number, found {value:g}", param_hint=name)
-        return value
-    return check
-
-
-def _message(exc: Exception, doing: str = "write") -> str:
-    """The one line that says what went wrong."""
-    from smdcli.errors import SmdError
-
-    if isinstance(exc, SmdError):
-        return str(exc)
-    where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
-    return f"{where}cannot {doing}: {exc.strerror or exc}"
-
-
-def _report(exc: Exception, doing: str = "write") -> int:
-    """One line for an error smd reports (its exit code) or a file that could not be written or read (2)."""
-    from smdcli.errors import SmdError
-
-    _fail(_message(exc, doing))
-    return exc.exit_code if isinstance(exc, SmdError) else 2
-
-
-def _report_json(exc: Exception, about: dict, as_json: bool, doing: str = "write", status: str | None = None) -> int:
-    """_report, and with --json the same facts as a JSON object on stdout, so that a script always gets JSON."""
-    code = _report(exc, doing)
-    if as_json:
-        _print_json({**about, "success": False, "status": status or strict_json.status(code), "exit_code": code,
-                     "message": _message(exc, doing)})
-    return code
-
-
-def _carried_out(work, about: dict, as_json: bool, quiet: bool, summarize, describe):
-    """Run a command's work: a failure is its one line and exit code (JSON too with --json), an interrupt smd's
-    own line; else summarize(run) printed as JSON, or describe(run, that summary) as text. Returns the run."""
-    from smdcli.errors import SmdError
-
-    try:
-        run = work()
-    except (SmdError, OSError) as exc:
-        raise typer.Exit(_report_json(exc, about, as_json))
-    except KeyboardInterrupt as exc:
-        raise _interrupted(exc)
-    data = summarize(run)
-    if as_json:
-        _print_json(data)
-    elif not quiet:
-        typer.echo(describe(run, data))
-    return run
 
 
 def _version(value: bool):
@@ -130,6 +50,8 @@ def simulate(
     fail_fast: bool = typer.Option(False, "--fail-fast", help="Stop at the first scenario that fails."),
     save_partial: bool = typer.Option(False, "--save-partial", help="When a solver fails, write what it computed "
                                       "to OUT/<stem>_partial.h5, marked failed."),
+    junit: Optional[Path] = typer.Option(None, "--junit", help="Write the scenarios' [[expect]] checks as a JUnit "
+                                         "XML report, a test case per check."),
 ):
     """Solve each scenario; write OUT/<stem>.h5 and OUT/<stem>_response.png, _phase.png."""
     from smdcli.commands.simulate import Options, failed_summary, format_summary
@@ -140,7 +62,7 @@ def simulate(
 
     options = Options(method=method, rtol=rtol, atol=atol, plots=not no_plots, save_partial=save_partial)
     worst = 0
-    summaries = []
+    summaries, suites = [], []
     with bar("simulating", len(scenarios), len(scenarios) > 1 and progress_wanted(quiet, as_json)) as advance:
         for index, path in enumerate(scenarios):
             advance(0, str(path))
@@ -150,6 +72,7 @@ def simulate(
                 code = _report(exc)
                 worst = max(worst, code)
                 summaries.append(failed_summary(path, _message(exc), code))
+                suites.append((str(path), 0.0, (), _message(exc)))
                 advance(1)
                 if fail_fast:
                     summaries += [failed_summary(p, None, None) for p in scenarios[index + 1:]]
@@ -159,9 +82,18 @@ def simulate(
                 raise _interrupted(exc)
             data = summary(run)
             summaries.append(data)
+            worst = max(worst, data["exit_code"])
+            suites.append((str(path), run.result.stats.wall_time_s, run.checks, None))
             if not quiet and not as_json:
                 typer.echo(format_summary(data))
             advance(1)
+    if junit is not None:
+        from smdcli.commands.expect import write_junit
+
+        try:
+            write_junit(junit, suites)
+        except OSError as exc:
+            worst = max(worst, _report(exc))
     if as_json:
         _print_json(summaries)
     raise typer.Exit(worst)
@@ -171,13 +103,15 @@ def simulate(
 def info(
     scenario: Path = typer.Argument(..., help="Scenario TOML file."),
     as_json: bool = typer.Option(False, "--json", help="Print as JSON."),
+    state_space: Optional[Path] = typer.Option(None, "--state-space", help="Also write A, B, C, D (states x, v; "
+                                               "inputs the DOFs' forces; outputs x) to FILE.npz or FILE.mat."),
 ):
     """DOFs, M C K, natural frequencies, damping ratios and regimes, stiffness, what auto would pick."""
     from smdcli.commands.simulate import format_info
     from smdcli.commands.simulate import info as describe
 
-    _carried_out(lambda: describe(scenario), {"scenario": str(scenario)}, as_json, False, lambda data: data,
-                 lambda _, data: format_info(data))
+    _carried_out(lambda: describe(scenario, state_space), {"scenario": str(scenario)}, as_json, False,
+                 lambda data: data, lambda _, data: format_info(data))
 
 
 @app.command("compare-solvers")
@@ -355,39 +289,8 @@ def animate(
                  {}, False, quiet, lambda made: None, describe)
 
 
-@app.command("diff")
-def diff_files(
-    a: Path = typer.Argument(..., help="First smd .h5 file."),
-    b: Path = typer.Argument(..., help="Second smd .h5 file."),
-    rtol: Optional[float] = typer.Option(None, "--rtol", help="Relative tolerance per sample (default 1e-9)."),
-    atol: Optional[float] = typer.Option(None, "--atol", help="Absolute tolerance per sample (default 0)."),
-    tolerance: Optional[str] = typer.Option(None, "--tolerance", help="'stated': each data set within the accuracy "
-                                            "the two runs state (for another machine or method); not with --rtol/--atol."),
-    datasets: Optional[str] = typer.Option(None, "--datasets", help="Comma list of data sets to compare (default: all)."),
-    allow_failed: bool = typer.Option(False, "--allow-failed", help="Compare files whose run failed."),
-    as_json: bool = typer.Option(False, "--json", help="Print the report as JSON."),
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing; the exit code says it."),
-):
-    """Compare two result files: exit 0 when every data set agrees within tolerance, 1 when not, 2 if unreadable."""
-    from smdcli.commands.diff import as_dict, diff, format_report
-    from smdcli.errors import SmdError
-
-    given = {name: value for name, value in (("rtol", rtol), ("atol", atol)) if value is not None}
-    if tolerance is not None and tolerance != "stated":
-        raise typer.BadParameter(f"expected 'stated', found {tolerance!r}", param_hint="--tolerance")
-    if tolerance and given:
-        raise typer.BadParameter("give either --tolerance stated or --rtol/--atol, not both", param_hint="--tolerance")
-    try:
-        report = diff(a, b, names=datasets.split(",") if datasets else None, allow_failed=allow_failed,
-                      stated=tolerance == "stated", **given)
-    except (SmdError, OSError) as exc:
-        raise typer.Exit(_report_json(exc, {"a": str(a), "b": str(b)}, as_json, doing="read",
-                                      status="unusable"))
-    if as_json:
-        _print_json(as_dict(report))
-    elif not quiet:
-        typer.echo(format_report(report))
-    raise typer.Exit(1 if report.differs else 0)
+app.command("diff")(diff_files)
+app.command("export")(export)
 
 
 def _usage_line(exc) -> str:

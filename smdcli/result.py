@@ -53,6 +53,44 @@ class GroundHistory:
 
 
 @dataclass(frozen=True)
+class ElementForces:
+    """Force in each spring and damper, (N, elements), positive in tension (an element on [a, b] pulls a toward b),
+    and the ground's reaction on the system, (N,); a matrix scene has no elements, only the reaction."""
+
+    spring: np.ndarray
+    damper: np.ndarray
+    spring_names: tuple[str, ...]
+    damper_names: tuple[str, ...]
+    spring_connects: tuple[tuple[str, str], ...]
+    damper_connects: tuple[tuple[str, str], ...]
+    reaction: np.ndarray
+    reaction_meaning: str
+    added_damping: np.ndarray | None = None  # (N, n): the force of [damping]'s C on each DOF, not an element's
+    element_form: bool = True
+
+
+@dataclass(frozen=True)
+class Energy:
+    """The energy balance on the output grid, (N,) each, J: kinetic + strain - initial + dissipated - input = residual."""
+
+    kinetic: np.ndarray
+    strain: np.ndarray
+    dissipated: np.ndarray  # cumulative
+    input: np.ndarray  # cumulative work of the applied forces (and the ground's motion)
+    residual: np.ndarray
+    max_relative_residual: float  # largest |residual| over the largest energy reached
+    quadrature: str  # how dissipated and input were integrated
+
+    def to_dict(self) -> dict:
+        """The time series as lists and the figure of merit, for JSON."""
+        return {name: getattr(self, name).tolist() for name in ENERGY_TERMS} | {
+            "max_relative_residual": self.max_relative_residual, "quadrature": self.quadrature}
+
+
+ENERGY_TERMS = ("kinetic", "strain", "dissipated", "input", "residual")
+
+
+@dataclass(frozen=True)
 class Result:
     """Trajectories on the output grid, (N, n) each, SI units, with the cost of getting them."""
 
@@ -66,6 +104,9 @@ class Result:
     t_failed: float | None = None  # where a failed run stopped
     notes: tuple[str, ...] = field(default=())
     ground: GroundHistory | None = None  # with support motion: displacement, velocity, acceleration are relative
+    elements: ElementForces | None = None  # attached after a successful run (solvers.energy.with_physics)
+    energy: Energy | None = None
+    origin: tuple | None = field(default=None, repr=False, compare=False)  # (Scenario, Model) it was solved from
 
     def absolute(self, quantity: str) -> np.ndarray:
         """displacement, velocity or acceleration measured from the fixed frame: relative plus the ground's."""
@@ -76,6 +117,26 @@ class Result:
     def success(self) -> bool:
         """Whether the solver reached the end time."""
         return self.stats.success
+
+    def to_dict(self) -> dict:
+        """Plain data (lists, numbers, strings) for JSON or a DataFrame: grid, trajectories, statistics and the
+        elements and energy where attached."""
+        out = {"time": self.time.tolist(), "dofs": list(self.dofs)}
+        for name in ("displacement", "velocity", "acceleration", "force"):
+            out[name] = getattr(self, name).tolist()
+        out["stats"] = self.stats.as_attrs()
+        out["notes"] = list(self.notes)
+        if self.ground is not None:
+            out["ground"] = {name: getattr(self.ground, name).tolist()
+                             for name in ("displacement", "velocity", "acceleration")}
+        if self.elements is not None:
+            e = self.elements
+            out["elements"] = {"spring_force": e.spring.tolist(), "damper_force": e.damper.tolist(),
+                               "springs": list(e.spring_names), "dampers": list(e.damper_names),
+                               "reaction": e.reaction.tolist()}
+        if self.energy is not None:
+            out["energy"] = self.energy.to_dict()
+        return out
 
     def peak_displacement(self) -> np.ndarray:
         """Largest |x| per DOF over the finite part of the run."""

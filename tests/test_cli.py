@@ -160,8 +160,10 @@ def test_compare_solvers_writes_table_json_hdf5_and_charts(cli, tmp_path):
     ode23s = solve(model, grid, "ode23s", Tolerances(1e-3, 1e-6)).displacement
     assert runs[("ode23s", 1e-3)]["error"] == pytest.approx(np.abs(ode23s - exact).max() / np.abs(exact).max())
     assert runs[("ode45", 1e-5)]["atol"] == pytest.approx(1e-8)
+    # each run's own energy check is of the size of its true error
+    assert 0.1 < runs[("ode23s", 1e-3)]["energy_residual"] / runs[("ode23s", 1e-3)]["error"] < 10
     names = sorted(p.name for p in out.iterdir())
-    assert names == ["scene_compare.h5", "scene_stability.png", "scene_work_precision.png"]
+    assert names == ["scene_compare.h5", "scene_energy_precision.png", "scene_stability.png", "scene_work_precision.png"]
     with h5py.File(out / "scene_compare.h5") as f:
         assert f.attrs["kind"] == "compare"
         assert list(f["runs/method"].asstr()[:]) == [run["method"] for run in data["runs"]]

@@ -20,8 +20,11 @@ LAYERS = [
     ("sweep", ["smdcli.sweep"]),
     ("writers", ["smdcli.io", "smdcli.plots"]),
     ("commands", ["smdcli.commands"]),
-    ("cli", ["smdcli.cli", "smdcli.__main__"]),
+    ("cli", ["smdcli.cli", "smdcli.cli_support", "smdcli.cli_files", "smdcli.api", "smdcli.__main__"]),
 ]
+# The one import allowed to go up: the package root hands out the Python API (load, simulate, write) on first
+# use (PEP 562 __getattr__), so `import smdcli` stays as light as the version string.
+LAZY_API = ("smdcli", "smdcli.api")
 MAX_LINES = 450
 
 
@@ -73,7 +76,8 @@ def test_every_module_has_a_layer_and_a_docstring_saying_what_it_must_not_import
 def back_edges(graph: dict[str, set[str]]) -> list[str]:
     """Every import that goes up a layer."""
     return [f"{a} ({LAYERS[layer_of(a)][0]}) imports {b} ({LAYERS[layer_of(b)][0]})"
-            for a, targets in graph.items() for b in sorted(targets) if layer_of(b) > layer_of(a)]
+            for a, targets in graph.items() for b in sorted(targets)
+            if layer_of(b) > layer_of(a) and (a, b) != LAZY_API]
 
 
 def find_circle(graph: dict[str, set[str]]) -> list[str] | None:
@@ -111,7 +115,8 @@ def test_no_import_goes_up_a_layer():
 
 
 def test_no_import_circle():
-    circle = find_circle(GRAPH)
+    # The lazy API hook runs after the package is imported, so it closes no circle at import time.
+    circle = find_circle({a: targets - {LAZY_API[1]} if a == LAZY_API[0] else targets for a, targets in GRAPH.items()})
     assert circle is None, "import circle: " + " -> ".join(circle)
 
 

@@ -48,6 +48,7 @@ class Run:
     dt: float
     h_omega: float  # dt * omega_max (fixed step), NaN otherwise
     error: float  # max |x - x_ref| / peak |x_ref|; NaN when the run failed
+    energy_residual: float  # the run's own energy balance residual, relative (NaN when it failed)
     growth: float  # peak |x| / peak |x_ref| over what was computed
     wall_time_s: float
     nfev: int
@@ -172,6 +173,7 @@ def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], to
     """Run the plan; failures are recorded, never raised. A method that ran out of budget skips its tighter rungs.
     The step budget is STEP_BUDGET for Python-driven methods and COMPILED_STEP_BUDGET for compiled ones, unless
     `budget` says otherwise."""
+    from smdcli.solvers.energy import energy_balance
     from smdcli.solvers.registry import get_solver, solve
 
     reference, ref_name, ref_error = reference_solution(model, grid)
@@ -209,9 +211,10 @@ def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], to
             computed = np.abs(result.displacement[np.isfinite(result.displacement).all(axis=1)])
         growth = float(computed.max() / peak) if computed.size else math.nan
         error = float(np.abs(result.displacement - reference.displacement).max() / peak) if s.success else math.nan
+        energy = energy_balance(model, result).max_relative_residual if s.success else math.nan
         out.runs.append(Run(
             method=method, adaptive=adaptive, rtol=tol.rtol, atol=tol.atol, dt=tol.dt or math.nan,
-            h_omega=(tol.dt * omega_max) if tol.dt else math.nan, error=error, growth=growth,
+            h_omega=(tol.dt * omega_max) if tol.dt else math.nan, error=error, energy_residual=energy, growth=growth,
             wall_time_s=statistics.median(times), nfev=s.nfev, njev=s.njev, nlu=s.nlu,
             steps_accepted=s.steps_accepted, steps_rejected=s.steps_rejected, success=s.success,
             message=s.message))
@@ -221,7 +224,8 @@ def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], to
 
 def _skipped(method, adaptive, tol, omega_max, message) -> Run:
     return Run(method=method, adaptive=adaptive, rtol=tol.rtol, atol=tol.atol, dt=tol.dt or math.nan,
-               h_omega=(tol.dt * omega_max) if tol.dt else math.nan, error=math.nan, growth=math.nan,
+               h_omega=(tol.dt * omega_max) if tol.dt else math.nan, error=math.nan, energy_residual=math.nan,
+               growth=math.nan,
                wall_time_s=math.nan, nfev=0, njev=0, nlu=0, steps_accepted=0, steps_rejected=0, success=False,
                message=message)
 
@@ -245,20 +249,22 @@ def format_table(c: Comparison) -> str:
              + (f", its own error {c.reference_error:.1e}" if c.reference_error else "")
              + f"; omega_max {c.omega_max:.4g} rad/s; error = max |x - x_ref| / peak |x_ref|"
              + ("" if c.breakpoints else "; NOT restarted at force discontinuities (--no-breakpoints)"),
-             f"{'method':<19}{'setting':>17}{'error':>10}{'time [ms]':>11}{'nfev':>9}{'njev':>7}{'nlu':>8}"
-             f"{'steps':>9}{'rejected':>9}  status"]
+             f"{'method':<19}{'setting':>17}{'error':>10}{'energy':>10}{'time [ms]':>11}{'nfev':>9}{'njev':>7}"
+             f"{'nlu':>8}{'steps':>9}{'rejected':>9}  status"]
     for r in c.runs:
         setting = f"rtol {r.rtol:.0e}/{r.atol:.0e}" if r.adaptive else f"h*w {r.h_omega:.3g}" if c.omega_max \
             else f"dt {r.dt:.3g}"
         error = f"{r.error:.2e}" if r.success else "-"
+        energy = f"{r.energy_residual:.2e}" if r.success else "-"
         ms = f"{1e3 * r.wall_time_s:.1f}" if math.isfinite(r.wall_time_s) else "-"
         status = "ok" if r.success else f"FAILED: {r.message}"
-        lines.append(f"{r.method:<19}{setting:>17}{error:>10}{ms:>11}{r.nfev:>9}{r.njev:>7}{r.nlu:>8}"
+        lines.append(f"{r.method:<19}{setting:>17}{error:>10}{energy:>10}{ms:>11}{r.nfev:>9}{r.njev:>7}{r.nlu:>8}"
                      f"{r.steps_accepted:>9}{r.steps_rejected:>9}  {status}")
     exact = c.exact_point
     if exact is not None:
-        lines.append(f"{'exact':<19}{'-':>17}{exact[1]:>10.2e}{1e3 * exact[0]:>11.1f}{'-':>9}{'-':>7}{'-':>8}{'-':>9}"
-                     f"{'-':>9}  the reference; error column: its stated accuracy")
+        lines.append(f"{'exact':<19}{'-':>17}{exact[1]:>10.2e}{'-':>10}{1e3 * exact[0]:>11.1f}{'-':>9}{'-':>7}"
+                     f"{'-':>8}{'-':>9}{'-':>9}  the reference; error column: its stated accuracy")
+    lines.append("energy: the run's energy balance residual over the largest energy (its own accuracy check)")
     return "\n".join(lines)
 
 
@@ -282,9 +288,9 @@ def write_hdf5(path: Path, c: Comparison) -> None:
         string = h5py.string_dtype("utf-8")
         for name in ("method", "message"):
             runs.create_dataset(name, data=np.array([getattr(r, name) for r in c.runs], dtype=object), dtype=string)
-        units = {"rtol": "1", "atol": "m", "dt": "s", "h_omega": "1", "error": "1", "growth": "1",
-                 "wall_time_s": "s"}
-        for name in ("rtol", "atol", "dt", "h_omega", "error", "growth", "wall_time_s"):
+        units = {"rtol": "1", "atol": "m", "dt": "s", "h_omega": "1", "error": "1", "energy_residual": "1",
+                 "growth": "1", "wall_time_s": "s"}
+        for name in ("rtol", "atol", "dt", "h_omega", "error", "energy_residual", "growth", "wall_time_s"):
             ds = runs.create_dataset(name, data=np.array([getattr(r, name) for r in c.runs], dtype=float))
             ds.attrs["units"] = units[name]
         for name in ("nfev", "njev", "nlu", "steps_accepted", "steps_rejected"):
@@ -342,11 +348,13 @@ def run_and_write(path: str | Path, out: str | Path, methods: str | None = None,
         write_hdf5(written[0], comparison)
         if plots:
             from smdcli.plots.common import save_figure
-            from smdcli.plots.compare import stability_figure, work_precision_figure
+            from smdcli.plots.compare import energy_precision_figure, stability_figure, work_precision_figure
 
             title = sc.title or stem
             save_figure(work_precision_figure(comparison, title), out_dir / f"{stem}_work_precision.png")
             written.append(out_dir / f"{stem}_work_precision.png")
+            save_figure(energy_precision_figure(comparison, title), out_dir / f"{stem}_energy_precision.png")
+            written.append(out_dir / f"{stem}_energy_precision.png")
             limits = stability_limits(method_list)
             if limits:
                 save_figure(stability_figure(comparison, title, limits), out_dir / f"{stem}_stability.png")

@@ -64,7 +64,8 @@ class Report:
         return any(d.status != "same" for d in self.datasets)
 
 
-def _open(path: Path):
+def open_result(path: Path):
+    """An smd result file open for reading; UsageError (exit 2) for a missing, unreadable or foreign file."""
     import h5py
 
     path = Path(path)
@@ -191,7 +192,7 @@ def diff(path_a: Path, path_b: Path, rtol: float | None = DEFAULT_RTOL, atol: fl
         rtol = atol = None
     elif rtol < 0 or atol < 0:
         raise UsageError("--rtol and --atol must be >= 0")
-    with _open(path_a) as fa, _open(path_b) as fb:
+    with open_result(path_a) as fa, open_result(path_b) as fb:
         notes = []
         for path, f in ((path_a, fa), (path_b, fb)):
             why = _failed(f)

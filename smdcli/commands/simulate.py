@@ -41,6 +41,7 @@ class Run:
     model: Model
     result: Result
     outputs: list[Path] = field(default_factory=list)
+    checks: tuple = ()  # the [[expect]] verdicts (commands.expect.Check)
 
 
 def prepare(path: str | Path) -> tuple[Scenario, Model, np.ndarray]:
@@ -49,17 +50,32 @@ def prepare(path: str | Path) -> tuple[Scenario, Model, np.ndarray]:
     return sc, build(sc), time_grid(sc.time)
 
 
+def solve_run(sc: Scenario, model: Model, grid: np.ndarray, options: Options = Options()) -> Result:
+    """Solve a scenario as `smd simulate` does: with its element forces and energy balance where it succeeded."""
+    result = solve_scenario(sc, model, grid, options.method, options.rtol, options.atol)
+    if result.success:
+        from smdcli.solvers.energy import with_physics
+
+        result = with_physics(model, result)
+    return dataclasses.replace(result, origin=(sc, model))
+
+
 def simulate(path: str | Path, out: str | Path, options: Options = Options()) -> Run:
     """Validate, solve and write one scenario; a solver failure raises SolverFailed and writes nothing."""
     sc, model, grid = prepare(path)
     out_dir = output_folder(out)
-    result = solve_scenario(sc, model, grid, options.method, options.rtol, options.atol)
+    result = solve_run(sc, model, grid, options)
     if sc.sweep:
         note = ("this file's [sweep] table was not run: simulate solved the scene as written "
                 f"(its base member); `smd sweep {sc.path}` runs the family")
         result = dataclasses.replace(result, notes=(note, *result.notes))
     run = Run(sc, model, result)
     from smdcli.io.hdf5 import write_simulation
+
+    if result.success and sc.expect:
+        from smdcli.commands.expect import evaluate
+
+        run.checks = evaluate(sc.expect, model, result)
 
     if not result.success:
         message = failure_message(sc, model, result)
@@ -73,14 +89,16 @@ def simulate(path: str | Path, out: str | Path, options: Options = Options()) ->
 
     with together():  # the run's files appear together, or none of them
         h5 = out_dir / f"{sc.stem}.h5"
-        write_simulation(h5, sc, model, result)
+        write_simulation(h5, sc, model, result, [check.as_dict() for check in run.checks])
         run.outputs.append(h5)
         if options.plots:
             from smdcli.plots.common import save_figure
             from smdcli.plots.response import phase_figure, response_figure
 
             title = sc.title or sc.stem
-            for name, figure in (("response", response_figure), ("phase", phase_figure)):
+            from smdcli.plots.energy import energy_figure
+
+            for name, figure in (("response", response_figure), ("phase", phase_figure), ("energy", energy_figure)):
                 png = out_dir / f"{sc.stem}_{name}.png"
                 save_figure(figure(result, title), png)
                 run.outputs.append(png)
@@ -90,9 +108,10 @@ def simulate(path: str | Path, out: str | Path, options: Options = Options()) ->
 def summary(run: Run) -> dict:
     """The facts a user wants after a run, as plain data (printed, or as JSON)."""
     s = run.result.stats
+    failed = sum(not check.passed for check in run.checks)
     return {
         "scenario": run.scenario.path,
-        "status": "ok", "exit_code": 0,
+        "status": "expect failed" if failed else "ok", "exit_code": 1 if failed else 0,
         "title": run.scenario.title,
         "method": s.method,
         "requested_method": s.requested_method,
@@ -103,7 +122,9 @@ def summary(run: Run) -> dict:
         "wall_time_s": s.wall_time_s,
         "success": s.success, "message": s.message,
         "peak_displacement_m": dict(zip(run.result.dofs, map(float, run.result.peak_displacement()))),
+        "energy_residual": None if run.result.energy is None else run.result.energy.max_relative_residual,
         "notes": list(run.result.notes),
+        "expect": [check.as_dict() for check in run.checks],
         "outputs": [str(p) for p in run.outputs],
     } | ({} if run.result.ground is None else {"peak_absolute_displacement_m": dict(zip(
         run.result.dofs, map(float, np.nanmax(np.abs(run.result.absolute("displacement")), axis=0))))})
@@ -139,15 +160,26 @@ def format_summary(data: dict) -> str:
                      + (" ..." if len(top) > SHOWN else ""))
     else:
         lines.append(f"  peak |x| {peaks}")
+    if data.get("energy_residual") is not None:
+        lines.append(f"  energy   balance residual {data['energy_residual']:.2g} of the largest energy "
+                     "(the run's physical accuracy check)")
     lines += [f"  {note}" for note in data["notes"]]
+    for check in data.get("expect", ()):
+        lines.append(f"  expect   {'PASS' if check['passed'] else 'FAIL'} {check['name']} = {check['value']:.6g} "
+                     f"({check['detail']})")
     if data["outputs"]:
         lines.append(f"  wrote    {', '.join(data['outputs'])}")
     return "\n".join(lines)
 
 
-def info(path: str | Path) -> dict:
-    """DOFs, matrices, modes, regimes, stiffness and auto's choice, as plain data."""
+def info(path: str | Path, state_space: Path | None = None) -> dict:
+    """DOFs, matrices, modes, regimes, stiffness and auto's choice, as plain data; with state_space, A B C D
+    written there too."""
     sc, model, grid = prepare(path)
+    if state_space is not None:
+        from smdcli.io.state_space import write_state_space
+
+        write_state_space(state_space, model)
     m = model.modes
     from smdcli.solvers.auto import Auto
 
@@ -173,6 +205,8 @@ def info(path: str | Path) -> dict:
         data["ground_motion"] = {"quantity": model.ground.quantity, "type": model.ground.kind,
                                  "jumps": len(model.ground.jumps),
                                  "coordinates": "relative to the ground (absolute_* in the result file)"}
+    if state_space is not None:
+        data["state_space"] = str(state_space)
     if solver is not None:
         data["auto"] = {"method": solver.name, "reason": reason}
     else:
@@ -228,4 +262,6 @@ def format_info(d: dict) -> str:
     if "linearized_at_start" in d:
         lines.append(f"  linearized at t0: stiffness ratio {d['linearized_at_start']['stiffness_ratio']:.4g}")
     lines.append(f"  auto     {d['auto']['method']}: {d['auto']['reason']}")
+    if "state_space" in d:
+        lines.append(f"  wrote    {d['state_space']} (A, B, C, D with state, input and output names)")
     return "\n".join(lines)

@@ -96,8 +96,8 @@ def _with_scales(ds, *scales):
     return ds
 
 
-def write_simulation(path: Path, scenario: Scenario, model: Model, result: Result) -> None:
-    """Write one simulate run in the layout of DESIGN.md."""
+def write_simulation(path: Path, scenario: Scenario, model: Model, result: Result, checks: list | None = None) -> None:
+    """Write one simulate run in the layout of DESIGN.md; checks are the [[expect]] verdicts as plain data."""
     import h5py
 
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
@@ -127,6 +127,19 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
 
         if result.ground is not None:
             _write_ground(f, scenario, model, result, time, dof)
+        if result.elements is not None or result.energy is not None:
+            from smdcli.solvers.energy import derived_accuracy
+
+            accuracy = derived_accuracy(model, result)
+            if result.elements is not None:
+                _write_elements(f, result.elements, time, dof)
+            if result.energy is not None:
+                _write_energy(f, result.energy, time)
+            for name, value in accuracy.items():
+                path = f"elements/{name}" if name in ("spring_force", "damper_force", "reaction") else f"energy/{name}"
+                f[path].attrs["stated_accuracy"] = value
+        if checks:
+            _write_expect(f, checks)
 
         solver = f.create_group("solver")
         for key, value in result.stats.as_attrs().items():
@@ -182,6 +195,54 @@ def _write_ground(f, scenario: Scenario, model: Model, result: Result, time, dof
         file = group.create_dataset("file_text", data=spec.shape.file_text)
         file.attrs["file"] = spec.shape.file
         file.attrs["sha256"] = hashlib.sha256(spec.shape.file_text.encode()).hexdigest()
+
+
+def _write_elements(f, elements, time, dof) -> None:
+    """/elements: spring_force and damper_force (time x element, tension positive), named scales, the reaction."""
+    group = f.create_group("elements")
+    group.attrs["sign"] = "tension positive: an element connecting [a, b] pushes a by +T and b by -T"
+    tables = (("spring", elements.spring, elements.spring_names, elements.spring_connects),
+              ("damper", elements.damper, elements.damper_names, elements.damper_connects))
+    for kind, forces, names, connects in tables if elements.element_form else ():
+        scale = _strings(group, kind, names)
+        scale.make_scale(kind)
+        ds = _with_scales(group.create_dataset(f"{kind}_force", data=forces), time, scale)
+        ds.attrs["units"] = "N"
+        _strings(group, f"{kind}_connects", [f"{a} {b}" for a, b in connects])
+    if not elements.element_form:
+        group.attrs["note"] = "a [system] scene has no elements: only the reaction is given"
+    reaction = _with_scales(group.create_dataset("reaction", data=elements.reaction[:, None]), time)
+    reaction.attrs["units"] = "N"
+    reaction.attrs["description"] = elements.reaction_meaning
+    if elements.added_damping is not None:
+        ds = _with_scales(group.create_dataset("added_damping_force", data=elements.added_damping), time, dof)
+        ds.attrs["units"] = "N"
+        ds.attrs["description"] = "-C_damping x' on each DOF: the force of the [damping] table, not an element's"
+
+
+def _write_energy(f, energy, time) -> None:
+    """/energy: kinetic, strain, dissipated, input, residual (J) and the balance's max_relative_residual."""
+    from smdcli.result import ENERGY_TERMS
+
+    group = f.create_group("energy")
+    group.attrs["max_relative_residual"] = energy.max_relative_residual
+    group.attrs["quadrature"] = energy.quadrature
+    group.attrs["balance"] = "residual = kinetic + strain - (kinetic + strain)[0] + dissipated - input"
+    for name in ENERGY_TERMS:
+        ds = _with_scales(group.create_dataset(name, data=getattr(energy, name)), time)
+        ds.attrs["units"] = "J"
+
+
+def _write_expect(f, checks: list) -> None:
+    """/expect: a subgroup per check (expect/0, ...) with its quantity, measured value, bounds and verdict."""
+    group = f.create_group("expect")
+    group.attrs["passed"] = int(all(check["passed"] for check in checks))
+    group.attrs["failed"] = sum(not check["passed"] for check in checks)
+    for index, check in enumerate(checks):
+        one = group.create_group(str(index))
+        for key, value in check.items():
+            one.attrs[key] = float("nan") if value is None and key in ("min", "max") else \
+                ("" if value is None else value)
 
 
 def write_matrices(group, model_or_family, dof, member=None) -> None:

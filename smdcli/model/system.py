@@ -20,10 +20,11 @@ import numpy as np
 
 from smdcli.errors import ScenarioError
 from smdcli.model.damping import added_damping, check_damping
+from smdcli.model.elements import Element, Incidence, elements_of, incidence, incidence_row
 from smdcli.model.forcing import Signal, build_signal
 from smdcli.model.ground import MAX_JUMPS, GroundMotion, ground_motion, state_jumps
 from smdcli.model.mass import mass_solve
-from smdcli.scenario import GROUND, Scenario, TimeSpec
+from smdcli.scenario import Scenario, TimeSpec
 
 # Relative width around zeta = 1 inside which a mode is called critically damped.
 CRITICAL_BAND = 1e-8
@@ -46,18 +47,6 @@ def time_grid(spec: TimeSpec) -> np.ndarray:
         return grid
     n = int(math.floor((spec.end - spec.start) / spec.step * (1 + 1e-12))) + 1
     return spec.start + spec.step * np.arange(n)
-
-
-@dataclass(frozen=True)
-class Incidence:
-    """Nonlinear elements of one law: rows of D (+1 on the first node, -1 on the second) and coefficients."""
-
-    D: np.ndarray  # (n_elements, n)
-    coef: np.ndarray  # (n_elements,)
-    paths: tuple[str, ...]
-
-    def __len__(self) -> int:
-        return len(self.coef)
 
 
 @dataclass(frozen=True)
@@ -100,6 +89,8 @@ class Model:
     element_form: bool = True
     ground: GroundMotion | None = None  # support motion: x is measured from the moving ground
     jumps: tuple[tuple[float, np.ndarray, np.ndarray], ...] = ()  # (t, dx, dv): the state jumps there
+    elements: tuple[Element, ...] = ()  # the springs and dampers (none in a [system] scene)
+    added_damping: np.ndarray | None = None  # [damping]'s part of C
 
     def with_matrices(self, **changes) -> Model:
         """This model with other matrices (M, C, K, x0, v0...), its ground jumps made from the new M and C."""
@@ -348,7 +339,7 @@ def build(scenario: Scenario) -> Model:
         v0 = np.array([m.v0 for m in scenario.masses], dtype=float)
         cubic_rows, quad_rows = [], []
         for element in scenario.springs + scenario.dampers:
-            row = _incidence_row(element.connects, index, n)
+            row = incidence_row(element.connects, index, n)
             target = K if element.kind == "spring" else C
             if element.kind == "damper" and element.law == "quadratic":
                 quad_rows.append((row, element.coef, element.path))
@@ -357,10 +348,9 @@ def build(scenario: Scenario) -> Model:
             target[np.ix_(nodes, nodes)] += element.coef * np.outer(row[nodes], row[nodes])
             if element.law == "cubic":
                 cubic_rows.append((row, element.k3, element.path))
-        cubic = _incidence(cubic_rows)
-        quadratic = _incidence(quad_rows)
-    if scenario.damping is not None:
-        C = C + added_damping(scenario, M, K)
+        cubic, quadratic = incidence(cubic_rows), incidence(quad_rows)
+    extra = added_damping(scenario, M, K) if scenario.damping is not None else None
+    C = C if extra is None else C + extra
     signals = tuple(build_signal(f) for f in scenario.forces)
     force_dofs = tuple(index[f.on] for f in scenario.forces)
     shapes = scenario.forces
@@ -381,7 +371,7 @@ def build(scenario: Scenario) -> Model:
         force_types=tuple(f.type for f in shapes),
         cubic=cubic, quadratic=quadratic, source=scenario.path,
         element_form=scenario.system is None, ground=ground, jumps=jumps or (),
-    )
+        elements=elements_of(scenario, dofs), added_damping=extra)
     _check_forces(model, scenario)
     _check_matrices_finite(model, scenario)
     check_damping(model.C, scenario)
@@ -401,26 +391,6 @@ def _check_matrices_finite(model: Model, scenario: Scenario) -> None:
         where = f"mass[{i}].m" if scenario.system is None else "system.M"
         raise ScenarioError(scenario.path, where, f"M^-1 K or M^-1 C is not finite for DOF {model.dofs[i]!r}: "
                                                   "a mass too small for the stiffness or damping it carries")
-
-
-def _incidence_row(connects: tuple[str, str], index: dict[str, int], n: int) -> np.ndarray:
-    row = np.zeros(n)
-    a, b = connects
-    if a != GROUND:
-        row[index[a]] += 1.0
-    if b != GROUND:
-        row[index[b]] -= 1.0
-    return row
-
-
-def _incidence(rows) -> Incidence | None:
-    if not rows:
-        return None
-    return Incidence(
-        D=np.array([r for r, _, _ in rows]),
-        coef=np.array([c for _, c, _ in rows], dtype=float),
-        paths=tuple(p for _, _, p in rows),
-    )
 
 
 MAX_EDGES = 1_000_000  # force discontinuities in one run: each is a restart of the integration

@@ -64,6 +64,37 @@ def work_precision_figure(comparison, title: str):
     return fig
 
 
+def energy_precision_figure(comparison, title: str):
+    """Each run's energy balance residual against its wall time, and against its true error: the check a run
+    can make on itself, beside what only a reference can tell."""
+    runs = [r for r in comparison.runs if r.success and math.isfinite(r.energy_residual)]
+    methods = list(dict.fromkeys(r.method for r in comparison.runs))
+    styles = _method_styles(methods)
+    fig = _figure(figsize=(12, 6))
+    axes = fig.subplots(1, 2, sharey=True)
+    fig.subplots_adjust(left=0.07, right=0.8, top=0.86, bottom=0.1, wspace=0.06)
+    for ax, (cost, label) in zip(axes, (("wall_time_s", "Wall time [s] (median of repeats)"),
+                                        ("error", "Error: max |x - x_ref| / peak |x_ref|"))):
+        for m in methods:
+            mine = [r for r in runs if r.method == m and getattr(r, cost) > 0]
+            fixed = bool(mine) and not mine[0].adaptive
+            ax.plot([getattr(r, cost) for r in mine], [max(r.energy_residual, 1e-17) for r in mine],
+                    ls="--" if fixed else "-", lw=1.2, ms=5, label=m + (" (fixed step)" if fixed else ""), **styles[m])
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel(label)
+        ax.grid(True, which="major", alpha=0.4)
+    low, high = axes[1].get_xlim()
+    axes[1].plot([low, high], [low, high], color="0.5", lw=0.8, ls=":", label="residual = error")
+    axes[1].set_xlim(low, high)
+    axes[0].set_ylabel("Energy residual / largest energy (the run's own check)")
+    handles, labels = axes[1].get_legend_handles_labels()
+    axes[1].legend(handles, labels, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, frameon=False)
+    fig.suptitle(f"{title}\nenergy balance of each run: kinetic + strain - initial + dissipated - input, "
+                 f"against cost and against the error from the reference ({comparison.reference_method})", fontsize=10)
+    return fig
+
+
 GROWTH_FAILED = 3e9  # diverged runs (stopped past 1e8 times their scale) are crosses in a band up here
 
 

@@ -1,4 +1,4 @@
-"""The [solver] table (checked against the solver catalog's data) and the [sweep] table.
+"""The [solver] table (checked against the solver catalog's data), the [sweep] table and [[expect]] checks.
 
 Must not import: any solver class, model, or any layer above."""
 
@@ -7,7 +7,9 @@ from __future__ import annotations
 from typing import Any
 
 from smdcli.scenario.reader import _kind, _Table
-from smdcli.scenario.spec import SolverSpec
+from pathlib import Path
+
+from smdcli.scenario.spec import EXPECT_QUANTITIES, ExpectSpec, SolverSpec
 from smdcli.solvers.catalog import METHOD_OPTIONS, NEWMARK_SCHEMES, OPTION_RANGES, check_method_name
 
 SOLVER_KEYS = ("method", "rtol", "atol", "dt", *METHOD_OPTIONS)
@@ -87,3 +89,39 @@ def _sweep_values(t: _Table, value: Any) -> tuple:
     if isinstance(value, list) and value and all(isinstance(v, (list, str)) for v in value):
         return tuple(one(v, f"values[{i}]") for i, v in enumerate(value))
     return (one(value, "values"),)
+
+
+EXPECT_KEYS = ("quantity", "dof", "mode", "min", "max", "file", "rtol", "atol")
+_PER_DOF = ("peak_displacement", "rms_displacement", "settling_time")
+
+
+def _read_expect(t: _Table, index: int, dofs: tuple[str, ...], scenario_file: str) -> ExpectSpec:
+    """One [[expect]] table: which quantity, of which DOF or mode, within which bounds (or which golden file)."""
+    quantity = t.string("quantity", choices=EXPECT_QUANTITIES)
+    allowed = ("quantity",) + (("dof",) if quantity in _PER_DOF else ("mode",) if quantity == "natural_frequency"
+                               else ("file", "rtol", "atol") if quantity == "golden" else ()) \
+        + (() if quantity == "golden" else ("min", "max"))
+    for key in EXPECT_KEYS:
+        if t.has(key) and key not in allowed:
+            raise t.fail(key, f"does not apply to quantity {quantity!r} (it takes {', '.join(allowed[1:])})")
+    dof = t.string("dof") if quantity in _PER_DOF else None
+    if dof is not None and dof not in dofs:
+        raise t.fail("dof", f"expected one of the DOFs {', '.join(map(repr, dofs))}, found {dof!r}")
+    mode = t.integer("mode", 1, minimum=1) if quantity == "natural_frequency" else 1
+    if mode > len(dofs):
+        raise t.fail("mode", f"expected a mode from 1 to {len(dofs)}, found {mode}")
+    low, high = t.number("min", None), t.number("max", None)
+    if quantity != "golden" and low is None and high is None:
+        raise t.fail(None, "expected min, max or both")
+    if low is not None and high is not None and low > high:
+        raise t.fail("min", f"expected min <= max, found min {low:g} > max {high:g}")
+    file = None
+    if quantity == "golden":
+        name = t.string("file")
+        file = str(Path(name) if Path(name).is_absolute() else Path(scenario_file).parent / name)
+        if not Path(file).is_file():
+            raise t.fail("file", f"expected a golden result file, found no file at {file!r}")
+    rtol = t.number("rtol", 1e-9, minimum=0.0) if quantity == "golden" else 1e-9
+    atol = t.number("atol", 0.0, minimum=0.0) if quantity == "golden" else 0.0
+    t.finish(EXPECT_KEYS)
+    return ExpectSpec(index, quantity, dof, mode, low, high, file, rtol, atol)

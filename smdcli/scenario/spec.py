@@ -138,6 +138,30 @@ class SolverSpec:
     options: tuple[tuple[str, float | str], ...] = ()  # beta, gamma, scheme (newmark), alpha (hht), rho_inf
 
 
+EXPECT_QUANTITIES = ("peak_displacement", "rms_displacement", "settling_time", "natural_frequency",
+                     "energy_residual", "golden")
+
+
+@dataclass(frozen=True)
+class ExpectSpec:
+    """One acceptance check of [[expect]]: a quantity of the run within min/max, or the run against a golden file."""
+
+    index: int
+    quantity: str
+    dof: str | None = None
+    mode: int = 1
+    min: float | None = None
+    max: float | None = None
+    file: str | None = None  # golden: resolved against the scenario's folder
+    rtol: float = 1e-9
+    atol: float = 0.0
+
+    @property
+    def path(self) -> str:
+        """The check's name in the scenario: expect[0]."""
+        return f"expect[{self.index}]"
+
+
 @dataclass(frozen=True)
 class Scenario:
     """A validated scenario file, frozen; variants are made with dataclasses.replace."""
@@ -156,6 +180,7 @@ class Scenario:
     sweep: tuple[tuple[str, Any], ...] = ()
     damping: DampingSpec | None = None
     ground_motion: GroundMotionSpec | None = None
+    expect: tuple[ExpectSpec, ...] = ()
 
     @property
     def stem(self) -> str:

@@ -1,0 +1,52 @@
+"""smd from Python: load a scenario, simulate it (nothing written), write the result where you choose.
+
+    import smdcli
+    result = smdcli.simulate("scenarios/two_dof_forced.toml")      # or a Scenario from smdcli.load(...)
+    result.displacement, result.energy.max_relative_residual, result.elements.spring
+    smdcli.write(result, "out/two_dof.h5")                          # the file `smd simulate` writes
+
+Errors are exceptions: ScenarioError for bad input (the CLI's exit 2), SolverFailed when a method fails (exit 1).
+Must not import: cli.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from smdcli.errors import SolverFailed, UsageError
+from smdcli.result import Result
+from smdcli.scenario import Scenario
+
+
+def load(path: str | Path) -> Scenario:
+    """Read and validate a scenario file; raises ScenarioError with the file, field and problem."""
+    from smdcli import scenario
+
+    return scenario.load(path)
+
+
+def simulate(scenario: Scenario | str | Path, method: str | None = None, rtol: float | None = None,
+             atol: float | None = None) -> Result:
+    """Solve a scenario (a Scenario or a path) as `smd simulate` does, writing nothing; SolverFailed on failure."""
+    from smdcli.commands.simulate import Options, solve_run
+    from smdcli.model import build, time_grid
+    from smdcli.solvers.checked import failure_message
+
+    sc = scenario if isinstance(scenario, Scenario) else load(scenario)
+    model = build(sc)
+    result = solve_run(sc, model, time_grid(sc.time), Options(method=method, rtol=rtol, atol=atol))
+    if not result.success:
+        raise SolverFailed(failure_message(sc, model, result), result=result)
+    return result
+
+
+def write(result: Result, path: str | Path) -> Path:
+    """Write a result from simulate() as the HDF5 file `smd simulate` writes (atomically); returns its path."""
+    from smdcli.io.hdf5 import write_simulation
+
+    if result.origin is None:
+        raise UsageError("write() takes a result from smdcli.simulate(), which knows the scenario it came from")
+    path = Path(path)
+    scenario, model = result.origin
+    write_simulation(path, scenario, model, result)
+    return path

@@ -1,0 +1,96 @@
+"""What every smd command shares at the terminal: one-line failures, strict JSON, interrupts, carrying out work.
+
+Must not import: scipy, matplotlib, h5py at module level (`smd --help` stays fast); imports no command module.
+"""
+
+from __future__ import annotations
+
+from typing import Optional
+
+import typer
+
+from smdcli import interrupts, strict_json
+
+
+def _fail(message: str) -> None:
+    """One line on stderr."""
+    typer.echo(f"smd: {message}", err=True)
+
+
+def _interrupted(exc: KeyboardInterrupt) -> typer.Exit:
+    """Say what stopped the run; the exit code a shell expects (130 for SIGINT, 143 for SIGTERM)."""
+    import signal
+
+    global _announced
+    signum = interrupts.received() or (signal.SIGTERM if isinstance(exc, interrupts.Terminated) else signal.SIGINT)
+    if not _announced:
+        notes = "".join(f"; {note}" for note in getattr(exc, "__notes__", ()))
+        _fail(f"{'terminated' if signum == signal.SIGTERM else 'interrupted'}; no partial file was left under a "
+              f"final name{notes}")
+        _announced = True
+    return typer.Exit(interrupts.exit_code(signum))
+
+
+_announced = False  # the interrupt has been reported
+
+
+def _print_json(data) -> None:
+    """Strict JSON on stdout: no NaN or Infinity (see strict_json)."""
+    typer.echo(strict_json.dumps(data))
+
+
+def _positive(name: str):
+    """A typer callback refusing a tolerance that is not a positive number."""
+    def check(value: Optional[float]) -> Optional[float]:
+        if value is not None and not (value > 0 and value < float("inf")):
+            raise typer.BadParameter(f"expected a positive number, found {value:g}", param_hint=name)
+        return value
+    return check
+
+
+def _message(exc: Exception, doing: str = "write") -> str:
+    """The one line that says what went wrong."""
+    from smdcli.errors import SmdError
+
+    if isinstance(exc, SmdError):
+        return str(exc)
+    where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+    return f"{where}cannot {doing}: {exc.strerror or exc}"
+
+
+def _report(exc: Exception, doing: str = "write") -> int:
+    """One line for an error smd reports (its exit code) or a file that could not be written or read (2)."""
+    from smdcli.errors import SmdError
+
+    _fail(_message(exc, doing))
+    return exc.exit_code if isinstance(exc, SmdError) else 2
+
+
+def _report_json(exc: Exception, about: dict, as_json: bool, doing: str = "write", status: str | None = None) -> int:
+    """_report, and with --json the same facts as a JSON object on stdout, so that a script always gets JSON."""
+    code = _report(exc, doing)
+    if as_json:
+        _print_json({**about, "success": False, "status": status or strict_json.status(code), "exit_code": code,
+                     "message": _message(exc, doing)})
+    return code
+
+
+def _carried_out(work, about: dict, as_json: bool, quiet: bool, summarize, describe):
+    """Run a command's work: a failure is its one line and exit code (JSON too with --json), an interrupt smd's
+    own line; else summarize(run) printed as JSON, or describe(run, that summary) as text. Returns the run."""
+    from smdcli.errors import SmdError
+
+    try:
+        run = work()
+    except (SmdError, OSError) as exc:
+        raise typer.Exit(_report_json(exc, about, as_json))
+    except KeyboardInterrupt as exc:
+        raise _interrupted(exc)
+    data = summarize(run)
+    if as_json:
+        _print_json(data)
+    elif not quiet:
+        typer.echo(describe(run, data))
+    return run
+
+

@@ -1,0 +1,119 @@
+"""Forces in the springs and dampers of a solved run, and the ground's reaction on the system.
+
+Sign: an element connecting [a, b] carries the tension T = law(x_b - x_a) (the ground's motion is 0 in the
+relative coordinates of a support-motion run); it pushes a by +T and b by -T, so a stretched element pulls its
+ends together. Summed over a mass, M a = applied force + the element forces on it (+ [damping]'s force).
+
+Must not import: solvers, sweep, io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from smdcli.result import ElementForces
+from smdcli.scenario import GROUND, Scenario
+
+
+@dataclass(frozen=True)
+class Incidence:
+    """Nonlinear elements of one law: rows of D (+1 on the first node, -1 on the second) and coefficients."""
+
+    D: np.ndarray  # (n_elements, n)
+    coef: np.ndarray  # (n_elements,)
+    paths: tuple[str, ...]
+
+    def __len__(self) -> int:
+        return len(self.coef)
+
+
+@dataclass(frozen=True)
+class Element:
+    """One two-terminal element as the model uses it: node indices (-1 for the ground) and its law."""
+
+    kind: str  # spring | damper
+    name: str  # spring[0], damper[2]: its path in the scenario
+    connects: tuple[str, str]
+    a: int
+    b: int
+    coef: float  # k or c
+    law: str  # linear | cubic | quadratic
+    k3: float = 0.0
+
+
+def elements_of(scenario: Scenario, dofs: tuple[str, ...]) -> tuple[Element, ...]:
+    """The scenario's springs and dampers in file order (none for a [system] scene)."""
+    index = {name: i for i, name in enumerate(dofs)} | {GROUND: -1}
+    return tuple(Element(e.kind, f"{e.kind}[{e.index}]", tuple(e.connects), index[e.connects[0]],
+                         index[e.connects[1]], float(e.coef), e.law, float(e.k3))
+                 for e in scenario.springs + scenario.dampers)
+
+
+def incidence_row(connects: tuple[str, str], index: dict[str, int], n: int) -> np.ndarray:
+    """A row of D: +1 on the first node, -1 on the second, nothing for the ground."""
+    row = np.zeros(n)
+    a, b = connects
+    if a != GROUND:
+        row[index[a]] += 1.0
+    if b != GROUND:
+        row[index[b]] -= 1.0
+    return row
+
+
+def incidence(rows) -> Incidence | None:
+    """The Incidence of (row, coefficient, path) triples, or None for none."""
+    if not rows:
+        return None
+    return Incidence(
+        D=np.array([r for r, _, _ in rows]),
+        coef=np.array([c for _, c, _ in rows], dtype=float),
+        paths=tuple(p for _, _, p in rows),
+    )
+
+
+def _stretch(q: np.ndarray, element: Element) -> np.ndarray:
+    """q_b - q_a on the grid, the ground's q being 0."""
+    zero = np.zeros(len(q))
+    return (q[:, element.b] if element.b >= 0 else zero) - (q[:, element.a] if element.a >= 0 else zero)
+
+
+def tension(element: Element, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """The element's force, positive in tension, (N,)."""
+    if element.kind == "spring":
+        d = _stretch(x, element)
+        return element.coef * d + (element.k3 * d**3 if element.law == "cubic" else 0.0)
+    dv = _stretch(v, element)
+    return element.coef * (np.abs(dv) * dv if element.law == "quadratic" else dv)
+
+
+def element_forces(model, x: np.ndarray, v: np.ndarray) -> ElementForces:
+    """Tension in every element and the ground's reaction on the grid; a [system] scene gets -1^T (K x + C v)."""
+    springs = [e for e in model.elements if e.kind == "spring"]
+    dampers = [e for e in model.elements if e.kind == "damper"]
+    N = len(x)
+
+    def table(elements):
+        return np.stack([tension(e, x, v) for e in elements], axis=1) if elements else np.zeros((N, 0))
+
+    spring, damper = table(springs), table(dampers)
+    added = None
+    if model.element_form:
+        reaction = np.zeros(N)
+        for e, column in zip(springs + dampers, np.concatenate([spring, damper], axis=1).T):
+            if e.b < 0:
+                reaction += column  # the ground pushes a by +T
+            elif e.a < 0:
+                reaction -= column
+        meaning = "the sum of the forces of the elements attached to the ground on the masses"
+        if model.added_damping is not None:
+            added = -(v @ model.added_damping.T)
+            meaning += " ([damping]'s force, in added_damping_force, not included)"
+    else:
+        reaction = -(x @ model.K.T + v @ model.C.T).sum(axis=1)
+        meaning = ("-1^T (K x + C v): a [system] scene has no elements; this is the ground's reaction where K and C "
+                   "are assembled from two-terminal elements (internal forces cancel in the sum)")
+    return ElementForces(spring, damper, tuple(e.name for e in springs), tuple(e.name for e in dampers),
+                         tuple(e.connects for e in springs), tuple(e.connects for e in dampers), reaction, meaning,
+                         added, model.element_form)
