@@ -359,3 +359,17 @@ def test_the_hermite_rule_agrees_with_the_closed_form_where_the_grid_resolves_th
     hermite = energy._hermite_gauss(model, result)
     for exact, approximate in zip(closed, hermite):
         assert np.abs(approximate - exact).max() < 1e-9 * np.abs(exact).max()
+
+
+def test_energy_of_a_nonlinear_scene_books_the_ground_jumps_inside_output_steps():
+    """A cubic tyre over the plank, its edges between output points: the jump work comes from the dense output
+    at each jump (the right limit), the state before it by the jump itself."""
+    text = (SCENARIOS / "quarter_car_bump.toml").read_text()
+    nonlinear = text.replace('[[spring]]\nconnects = ["ground", "wheel"]',
+                             '[[spring]]\nconnects = ["ground", "wheel"]\nlaw = "cubic"\nk3 = 1e9', 1)
+    nonlinear = nonlinear.replace("t0 = 0.5", "t0 = 0.50037")
+    assert nonlinear.count("k3 = 1e9") == 1 and "t0 = 0.50037" in nonlinear
+    model, result = run(nonlinear, "Radau", rtol=1e-8, atol=1e-12)
+    assert [t for t, _, _ in model.jumps] == pytest.approx([0.50037, 0.90037])
+    assert result.energy.max_relative_residual < 1e-7
+    assert result.energy.input[-1] > 0.5 * result.energy.dissipated[-1] > 0

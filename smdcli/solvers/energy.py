@@ -91,8 +91,8 @@ def _derived_accuracy(model: Model, result: Result) -> dict[str, float]:
     return out
 
 
-def dense_output(model: Model, result: Result) -> Callable[[np.ndarray], np.ndarray] | None:
-    """v(t) at any times from the same adaptive method and tolerances (its steps do not depend on where output is
+def dense_output(model: Model, result: Result) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None:
+    """x(t), v(t) at any times from the same adaptive method and tolerances (its steps do not depend on where output is
     asked for, so this is the run's own interpolant); None for methods without one."""
     from smdcli.solvers.registry import get_solver, solve
 
@@ -100,10 +100,11 @@ def dense_output(model: Model, result: Result) -> Callable[[np.ndarray], np.ndar
     if not get_solver(s.method).adaptive or s.rtol is None:
         return None
 
-    def velocity(times: np.ndarray) -> np.ndarray:
-        return solve(model, times, s.method, Tolerances(rtol=s.rtol, atol=s.atol)).velocity
+    def states(times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        run = solve(model, times, s.method, Tolerances(rtol=s.rtol, atol=s.atol))
+        return run.displacement, run.velocity
 
-    return velocity
+    return states
 
 
 def mechanical_energy(model: Model, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -146,9 +147,9 @@ def _dissipation(model: Model, v: np.ndarray) -> np.ndarray:
     return power
 
 
-def energy_balance(model: Model, result: Result, dense: Callable[[np.ndarray], np.ndarray] | None = None) -> Energy:
+def energy_balance(model: Model, result: Result, dense: Callable | None = None) -> Energy:
     """Kinetic, strain, cumulative dissipated and input energy, and the residual of their balance; dense gives the
-    run's velocity at any times where the method has a dense output."""
+    run's (x, v) at any sorted times where the method has a dense output."""
     with np.errstate(all="ignore"):  # a scene at the edge of double precision: judged by the figures, not warned
         return _energy_balance(model, result, dense)
 
@@ -327,23 +328,44 @@ def _events(model: Model, grid: np.ndarray, h: float) -> list[tuple[int, float |
     return out
 
 
-def _dense_gauss(model: Model, result: Result, dense: Callable[[np.ndarray], np.ndarray]) -> tuple[np.ndarray, ...]:
+def _dense_gauss(model: Model, result: Result, dense: Callable) -> tuple[np.ndarray, ...]:
     """Cumulative dissipated and input energy by Gauss-Legendre on the pieces of each output step between force
     discontinuities, the velocities from the method's dense output."""
     nodes, weights = np.polynomial.legendre.leggauss(GAUSS_POINTS)
     s, w = 0.5 * (nodes + 1), 0.5 * weights
     grid = result.time
     h = (grid[-1] - grid[0]) / (len(grid) - 1)
-    inner = [t for k, t, _ in _events(model, grid, h) if t is not None]
+    events = _events(model, grid, h)
+    inner = [t for k, t, _ in events if t is not None]
     edges = np.unique(np.concatenate([grid, inner]))
     a, b = edges[:-1], edges[1:]
     times = (a[:, None] + (b - a)[:, None] * s[None, :]).ravel()
-    v = dense(np.concatenate([[grid[0]], times]))[1:].reshape(len(a), GAUSS_POINTS, model.n)
+    jumps = [(k, t, jump) for k, t, jump in events if t is not None and jump is not None]
+    # the output at a jump's time is its right limit: the state just after it
+    asked = np.concatenate([[grid[0]], times, [t for _, t, _ in jumps]])
+    order = np.argsort(asked, kind="stable")  # the solver takes sorted times
+    x_sorted, v_sorted = dense(asked[order])
+    x_all, v_all = np.empty_like(x_sorted), np.empty_like(v_sorted)
+    x_all[order], v_all[order] = x_sorted, v_sorted
+    v = v_all[1:1 + len(times)].reshape(len(a), GAUSS_POINTS, model.n)
     force = model.applied_force(times).reshape(v.shape)
     pieces = np.stack([_dissipation(model, v) @ w, (v * force).sum(axis=2) @ w]) * (b - a)
     step = np.zeros((2, len(grid)))
     np.add.at(step, (slice(None), np.searchsorted(grid, b - 1e-9 * h)), pieces)
+    for (k, _, jump), x_after, v_after in zip(jumps, x_all[1 + len(times):], v_all[1 + len(times):]):
+        step[1, k] += _jump_work(model, np.concatenate([x_after - jump[0], v_after - jump[1]]), jump)
+    step[1] += _jumps_on_grid(model, result, events)
     return np.cumsum(step[0]), np.cumsum(step[1])
+
+
+def _jumps_on_grid(model: Model, result: Result, events) -> np.ndarray:
+    """The work of the ground's jumps that fall on output points, booked there (the output is after the jump)."""
+    work = np.zeros(len(result.time))
+    for k, t, jump in events:
+        if t is None and jump is not None:
+            before = np.concatenate([result.displacement[k] - jump[0], result.velocity[k] - jump[1]])
+            work[k] += _jump_work(model, before, jump)
+    return work
 
 
 def _hermite_slopes(points: np.ndarray) -> np.ndarray:
@@ -377,4 +399,6 @@ def _hermite_gauss(model: Model, result: Result) -> tuple[np.ndarray, np.ndarray
         power = (vs * force).sum(axis=2)
         step[0, k] = (dissipation @ w) * h[:, 0, 0]
         step[1, k] = (power @ w) * h[:, 0, 0]
+    if model.jumps:
+        step[1] += _jumps_on_grid(model, result, _events(model, t, (t[-1] - t[0]) / (N - 1)))
     return np.cumsum(step[0]), np.cumsum(step[1])
