@@ -50,7 +50,7 @@ def simulate(
     fail_fast: bool = typer.Option(False, "--fail-fast", help="Stop at the first scenario that fails."),
     save_partial: bool = typer.Option(False, "--save-partial", help="When a solver fails, write what it computed "
                                       "to OUT/<stem>_partial.h5, marked failed."),
-    junit: Optional[Path] = typer.Option(None, "--junit", help="Write the scenarios' [[expect]] checks as a JUnit "
+    junit: Optional[Path] = typer.Option(None, "--junit", help="Write the scenarios' \\[\\[expect]] checks as a JUnit "
                                          "XML report, a test case per check."),
 ):
     """Solve each scenario; write OUT/<stem>.h5 and OUT/<stem>_response.png, _phase.png."""
@@ -165,7 +165,7 @@ def sweep(
                                 "<stem>_sweep.partial.h5 (same command line)."),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Run the member chunks on the Dask "
                                             "scheduler at ADDRESS (tcp://host:8786), or 'local' for a LocalCluster "
-                                            "of --workers processes (needs the [dask] extra)."),
+                                            "of --workers processes (needs the \\[dask] extra)."),
     workers: Optional[int] = typer.Option(None, "--workers", min=1, help="Processes for nonlinear members "
                                           "(default: the number of cores)."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),

@@ -138,6 +138,20 @@ def test_help_does_not_import_heavy_modules():
     assert "HEAVY []" in out
 
 
+def test_help_texts_survive_rich_markup():
+    """A bracket in an option's help ([[expect]], damper[0]) must not be eaten as a rich style tag."""
+    import typer.main
+    from rich.text import Text
+
+    from smdcli.cli import app
+
+    group = typer.main.get_command(app)
+    for name, command in group.commands.items():
+        for param in [command, *command.params]:
+            text = getattr(param, "help", None) or ""
+            assert Text.from_markup(text).plain == text.replace("\\[", "["), (name, param.name, text)
+
+
 def test_compare_solvers_writes_table_json_hdf5_and_charts(cli, tmp_path):
     import h5py
 
