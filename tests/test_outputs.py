@@ -274,6 +274,7 @@ def test_state_space_export_simulated_by_lsim_converges_to_smd(tmp_path, cli):
     assert list(arrays["state_names"]) == ["displacement.m1", "displacement.m2", "velocity.m1", "velocity.m2"]
     assert list(arrays["input_names"]) == ["force.m1", "force.m2"]
     mat = loadmat(tmp_path / "ss.mat")
+    assert list(arrays["x0"]) == [1.0, -1.0, 1.5, 1.0]  # the book's [x1 x2 v1 v2]
     assert np.array_equal(mat["A"], arrays["A"]) and np.array_equal(mat["B"], arrays["B"])
     result = smdcli.simulate(SCENARIOS / "two_dof_forced.toml")
     model = result.origin[1]
@@ -281,7 +282,7 @@ def test_state_space_export_simulated_by_lsim_converges_to_smd(tmp_path, cli):
     for refine in (5, 10, 20):
         t = np.linspace(result.time[0], result.time[-1], (len(result.time) - 1) * refine + 1)
         _, y, _ = lsim((arrays["A"], arrays["B"], arrays["C"], arrays["D"]), model.applied_force(t), t,
-                       X0=np.concatenate([model.x0, model.v0]))
+                       X0=arrays["x0"])
         errors.append(np.abs(y[::refine] - result.displacement).max() / np.abs(result.displacement).max())
     assert errors[-1] < 1e-7
     assert 3.5 < errors[0] / errors[1] < 4.5 and 3.5 < errors[1] / errors[2] < 4.5  # second order

@@ -263,5 +263,5 @@ def format_info(d: dict) -> str:
         lines.append(f"  linearized at t0: stiffness ratio {d['linearized_at_start']['stiffness_ratio']:.4g}")
     lines.append(f"  auto     {d['auto']['method']}: {d['auto']['reason']}")
     if "state_space" in d:
-        lines.append(f"  wrote    {d['state_space']} (A, B, C, D with state, input and output names)")
+        lines.append(f"  wrote    {d['state_space']} (A, B, C, D, x0 and the names of states, inputs and outputs)")
     return "\n".join(lines)

@@ -20,7 +20,7 @@ FORMATS = (".npz", ".mat")
 
 
 def state_space_arrays(model: Model) -> dict:
-    """A, B, C, D and the names of states, inputs and outputs; a nonlinear scene gives its linear part."""
+    """A, B, C, D, the initial state x0 and the names of states, inputs and outputs; a nonlinear scene gives its linear part."""
     n = model.n
     inputs = np.eye(n)
     input_names = [f"force.{d}" for d in model.dofs]
@@ -31,7 +31,8 @@ def state_space_arrays(model: Model) -> dict:
     out = {"A": model.state_matrix, "B": B, "C": np.hstack([np.eye(n), np.zeros((n, n))]),
            "D": np.zeros((n, inputs.shape[1])),
            "state_names": np.array([f"displacement.{d}" for d in model.dofs] + [f"velocity.{d}" for d in model.dofs]),
-           "input_names": np.array(input_names), "output_names": np.array([f"displacement.{d}" for d in model.dofs])}
+           "input_names": np.array(input_names), "output_names": np.array([f"displacement.{d}" for d in model.dofs]),
+           "x0": np.concatenate([model.x0, model.v0])}
     notes = []
     if not model.is_linear:
         notes.append(f"the linear part only: {', '.join(model.nonlinear_paths)} left out")
