@@ -318,8 +318,8 @@ def test_a_failing_expect_exits_1_after_writing_and_the_junit_report_names_it(tm
     scenario.write_text(CHECKED)
     ran = cli("simulate", scenario, "-o", tmp_path / "out", "--no-plots", "--junit", tmp_path / "report.xml")
     assert ran.exit_code == 1
-    assert "FAIL expect[0] peak_displacement m = 0.1 " in ran.stdout
-    assert "PASS expect[1] natural_frequency mode 1 = 5 " in ran.stdout
+    assert "FAIL expect[0] peak_displacement m = 0.1 m (max 0.05)" in ran.stdout
+    assert "PASS expect[1] natural_frequency mode 1 = 5 rad/s" in ran.stdout
     with h5py.File(tmp_path / "out" / "checked.h5") as f:
         assert f["expect"].attrs["failed"] == 1
         assert f["expect/0"].attrs["value"] == pytest.approx(0.1, rel=1e-12) and not f["expect/0"].attrs["passed"]
@@ -348,6 +348,7 @@ def test_passing_expects_and_a_golden_check_exit_0(tmp_path, cli):
 
     checks = json.loads(ran.stdout)[0]["expect"]
     assert [c["passed"] for c in checks] == [True, True] and checks[0]["value"] < 1e-9
+    assert checks[1]["units"] == "1" and checks[1]["mode"] is None and checks[1]["max"] == 1e-10
 
 
 def test_the_hermite_rule_agrees_with_the_closed_form_where_the_grid_resolves_the_motion():

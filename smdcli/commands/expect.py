@@ -41,15 +41,19 @@ class Check:
 
     def line(self) -> str:
         """PASS or FAIL, the check, the measured value and the bounds."""
-        unit = UNITS[self.spec.quantity]
-        return f"{'PASS' if self.passed else 'FAIL'} {self.name} = {self.value:.6g}{'' if unit == '1' else ' ' + unit} " \
-               f"({self.detail})"
+        return check_line(self.as_dict())
 
     def as_dict(self) -> dict:
         """Plain data for JSON."""
         s = self.spec
-        return {"name": self.name, "quantity": s.quantity, "dof": s.dof, "mode": s.mode, "value": self.value,
-                "min": s.min, "max": s.max, "passed": self.passed, "detail": self.detail}
+        return {"name": self.name, "quantity": s.quantity, "dof": s.dof, "mode": s.mode if s.quantity == "natural_frequency" else None, "value": self.value,
+                "units": UNITS[s.quantity], "min": s.min, "max": s.max, "passed": self.passed, "detail": self.detail}
+
+
+def check_line(check: dict) -> str:
+    """A check's verdict as one line (from Check.as_dict, so the summary of a --json record reads the same)."""
+    unit = "" if check["units"] == "1" else " " + check["units"]
+    return f"{'PASS' if check['passed'] else 'FAIL'} {check['name']} = {check['value']:.6g}{unit} ({check['detail']})"
 
 
 def evaluate(checks: tuple[ExpectSpec, ...], model, result: Result) -> tuple[Check, ...]:

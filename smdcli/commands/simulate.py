@@ -164,9 +164,10 @@ def format_summary(data: dict) -> str:
         lines.append(f"  energy   balance residual {data['energy_residual']:.2g} of the largest energy "
                      "(the run's physical accuracy check)")
     lines += [f"  {note}" for note in data["notes"]]
-    for check in data.get("expect", ()):
-        lines.append(f"  expect   {'PASS' if check['passed'] else 'FAIL'} {check['name']} = {check['value']:.6g} "
-                     f"({check['detail']})")
+    if data.get("expect"):
+        from smdcli.commands.expect import check_line
+
+        lines += [f"  expect   {check_line(check)}" for check in data["expect"]]
     if data["outputs"]:
         lines.append(f"  wrote    {', '.join(data['outputs'])}")
     return "\n".join(lines)
