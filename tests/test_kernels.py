@@ -264,3 +264,28 @@ def test_a_first_run_says_it_is_compiling(tmp_path):
     assert first.returncode == 0 and "compiling kernels, once per install" in first.stderr
     second = subprocess.run(args, env=env, capture_output=True, text=True, timeout=600)
     assert second.returncode == 0 and "compiling" not in second.stderr
+
+
+def test_a_changed_kernel_source_clears_the_cached_kernels(tmp_path, monkeypatch):
+    """numba keys a cached kernel on its own file only; an integrator inlines rhs.py, so a change there must clear
+    every cached kernel (stale machine code once ran the old force code under a new one), and nothing else."""
+    from smdcli.kernels import compiler
+
+    sources = []
+    for name in ("rhs.py", "fixed.py"):
+        (tmp_path / name).write_text(f"# {name}\n")
+        sources.append(tmp_path / name)
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    monkeypatch.setattr(compiler, "_SOURCES", tuple(sources))
+    monkeypatch.setattr(compiler, "_cache_folder", lambda: cache)
+    ours = [cache / "fixed.march-160.py311.nbi", cache / "fixed.march-160.py311.1.nbc", cache / "rhs.rhs-169.py311.nbi"]
+    theirs = cache / "other.kernel-3.py311.nbi"
+    for path in (*ours, theirs):
+        path.write_bytes(b"x")
+    assert compiler.clear_stale_cache()  # no stamp yet: whatever is there was compiled from unknown sources
+    assert not any(path.exists() for path in ours) and theirs.exists()
+    ours[0].write_bytes(b"x")
+    assert not compiler.clear_stale_cache() and ours[0].exists()  # same sources: the cache is kept
+    sources[0].write_text("# rhs.py, changed\n")
+    assert compiler.clear_stale_cache() and not ours[0].exists()

@@ -8,7 +8,64 @@ Must not import: solvers, sweep, io, plots, commands, cli.
 
 from __future__ import annotations
 
+import hashlib
+import os
+from pathlib import Path
+
 import numba
+
+# numba keys a cached kernel on its own file's time stamp only, while every integrator inlines or calls code of
+# other files (rhs.py, linalg.py, the opcodes of expression.py): after one of those changed it would load stale
+# machine code. The sources together stamp the cache folder; a different stamp clears our kernels from it.
+_KERNELS = Path(__file__).resolve().parent
+_SOURCES = (*sorted(_KERNELS.glob("*.py")), _KERNELS.parent / "expression.py")
+_STAMP = "smd_kernels.stamp"
+
+
+def _cache_folder() -> Path | None:
+    """The folder numba caches this package's kernels in (the first locator that takes them, as numba picks)."""
+    from numba.core.caching import CacheImpl
+
+    for locator_class in CacheImpl._locator_classes:
+        locator = locator_class.from_function(_cache_folder, str(_KERNELS / "rhs.py"))
+        if locator is None:
+            continue
+        try:
+            locator.ensure_cache_path()
+        except OSError:
+            continue
+        return Path(locator.get_cache_path())
+    return None
+
+
+def clear_stale_cache() -> bool:
+    """Remove the cached kernels when the kernels' sources differ from those they were compiled from; True if
+    it removed any. Best effort: where the cache cannot be read or written numba compiles as it would anyway."""
+    digest = hashlib.sha256()
+    for source in _SOURCES:
+        digest.update(source.name.encode() + b"\0" + source.read_bytes())
+    try:
+        folder = _cache_folder()
+        if folder is None:
+            return False
+        stamp = folder / _STAMP
+        if stamp.exists() and stamp.read_text() == digest.hexdigest():
+            return False
+        stems = tuple(f"{source.stem}." for source in _SOURCES)
+        stale = [entry for entry in folder.iterdir()
+                 if entry.name.startswith(stems) and entry.suffix in (".nbi", ".nbc")]
+        for entry in stale:
+            entry.unlink(missing_ok=True)
+        partial = folder / f"{_STAMP}.{os.getpid()}"
+        partial.write_text(digest.hexdigest())
+        os.replace(partial, stamp)
+        return bool(stale)
+    except (OSError, AttributeError, ImportError):  # AttributeError/ImportError: a numba without these internals
+        return False
+
+
+if not numba.config.DISABLE_JIT:
+    clear_stale_cache()
 
 # nogil: members of a batch run on threads; error_model numpy: 1/0 is inf as in numpy, not an exception.
 kernel = numba.njit(cache=True, nogil=True, error_model="numpy")
