@@ -183,12 +183,67 @@ class Expression:
         derived.text = ast.unparse(derived._body)
         return derived
 
+    def edges(self, t0: float, t1: float) -> np.ndarray:
+        """Sorted times in (t0, t1) where the expression may jump or kink: where an argument of sign, heaviside or
+        abs changes sign. Found on a sampling that doubles until the count settles, then bisected to adjacent
+        floats; each time is the first float on the far side, so the value just before it is the left limit."""
+        key = (float(t0), float(t1))
+        cache = self.__dict__.setdefault("_edges", {})
+        if key not in cache:
+            cache[key] = _edges(self._body, *key)
+        return cache[key]
+
     def program(self) -> tuple[list[int], list[float], int]:
         """The checked tree as a postfix program: opcodes, the constants OP_CONST pushes in order, stack depth."""
         codes: list[int] = []
         constants: list[float] = []
         depth = _postfix(self._body, codes, constants)
         return codes, constants, depth
+
+
+# ----------------------------------------------------------- edges
+
+EDGE_FUNCTIONS = ("sign", "heaviside", "abs")  # a jump, a jump, a kink where the argument crosses zero
+EDGE_SAMPLES = (2**12, 2**22)  # the first sampling of (t0, t1) and the finest
+
+
+def _edges(body: ast.AST, t0: float, t1: float) -> np.ndarray:
+    arguments = [node.args[0] for node in ast.walk(body)
+                 if isinstance(node, ast.Call) and node.func.id in EDGE_FUNCTIONS and _has_t(node.args[0])]
+    if not arguments or not t1 > t0:
+        return np.empty(0)
+    samples, counted = EDGE_SAMPLES[0], -1
+    with np.errstate(all="ignore"):
+        while True:
+            t = np.linspace(t0, t1, samples + 1)
+            brackets = []
+            for argument in arguments:
+                side = np.asarray(_interpret(argument, t) >= 0)
+                change = np.flatnonzero(side[1:] != side[:-1])
+                brackets.append((argument, t[change], t[change + 1], side[change]))
+            count = sum(len(lo) for _, lo, _, _ in brackets)
+            # settled, and fine enough that edges are far apart in samples (a coarse sampling aliases)
+            if (count == counted and samples >= 32 * count) or samples >= EDGE_SAMPLES[1]:
+                break
+            samples, counted = 2 * samples, count
+        found = [_bisect(argument, lo, hi, before) for argument, lo, hi, before in brackets]
+    times = np.unique(np.concatenate(found))
+    times = times[(times > t0) & (times < t1)]
+    if len(times) > 1:  # edges of several arguments at one instant (a float apart) are one edge: the last
+        times = times[np.concatenate([np.diff(times) > 1e-12 * max(1.0, abs(t1)), [True]])]
+    return times
+
+
+def _bisect(argument: ast.AST, lo: np.ndarray, hi: np.ndarray, before: np.ndarray) -> np.ndarray:
+    """Narrow each bracket of a sign change of argument to adjacent floats; the floats on the far side."""
+    while True:
+        mid = lo + 0.5 * (hi - lo)
+        open_ = (mid > lo) & (mid < hi)
+        if not open_.any():
+            return hi
+        near = np.asarray(_interpret(argument, mid) >= 0) == before
+        lo = np.where(open_ & near, mid, lo)
+        hi = np.where(open_ & ~near, mid, hi)
 
 
 # ----------------------------------------------------------- differentiation

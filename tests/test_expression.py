@@ -37,3 +37,24 @@ def test_evaluates_the_grammar():
 def test_refuses_anything_else(text, message):
     with pytest.raises(ExpressionError, match=message):
         Expression(text)
+
+
+@pytest.mark.parametrize("text, span, expected", [
+    ("heaviside(t - 1.013)", (0.0, 5.0), [1.013]),
+    ("sign(sin(2*pi*t))", (0.0, 5.0), [0.5 * k for k in range(1, 10)]),
+    ("abs(t - 2.5) + sin(3*t)", (0.0, 5.0), [2.5]),
+    ("sign(cos(7*t)) + heaviside(t - 3)", (0.0, 10.0), sorted([3.0] + [(math.pi / 2 + k * math.pi) / 7 for k in range(23)
+                                                               if (math.pi / 2 + k * math.pi) / 7 < 10])),
+    ("heaviside(sin(2*pi*1000*t))", (0.0, 10.0), [k / 2000 for k in range(1, 20000)]),
+    ("sin(t) + tanh(t - 1)", (0.0, 5.0), []),
+    ("heaviside(t - 1)", (0.0, 1.0), []),  # an edge at the end of the span is not inside it
+])
+def test_edges_are_where_an_argument_of_sign_heaviside_or_abs_crosses_zero(text, span, expected):
+    """Found to adjacent floats, a coarse sampling does not alias a fast square wave (20,000 edges), and each
+    edge is the first float past its crossing: the float before it gives the left limit."""
+    expression = Expression(text)
+    edges = expression.edges(*span)
+    assert len(edges) == len(expected)
+    assert np.abs(edges - np.array(expected)).max(initial=0.0) <= 4e-15 * span[1]
+    if "heaviside(t - 1.013)" in text:
+        assert expression(np.nextafter(edges[0], -np.inf)) == 0.0 and expression(edges[0]) == 1.0

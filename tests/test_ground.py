@@ -7,7 +7,7 @@ import json
 import h5py
 import numpy as np
 import pytest
-from conftest import ROOT, SCENARIOS
+from conftest import ROOT, SCENARIOS, model_of
 from scipy.integrate import solve_ivp
 
 from smdcli import scenario
@@ -204,6 +204,26 @@ def test_a_displacement_pulse_jumps_the_relative_state_and_matches_the_absolute_
     at = np.searchsorted(t, 0.5)
     np.testing.assert_allclose(relative[at], -0.05 * ones + absolute[at], atol=1e-15)  # right limit: road up
     np.testing.assert_allclose(road, np.where((t >= 0.5) & (t < 0.9), 0.05, 0.0))
+
+
+@pytest.mark.parametrize("method", ["Radau", "rk4", "auto"])
+def test_a_ground_displacement_expression_with_jumps_is_the_pulse_it_spells(method):
+    """0.05 heaviside(t - a) - 0.05 heaviside(t - b) is the quarter car's plank: its edges are located (to
+    adjacent floats, between output points here) and jump the relative state as the pulse's do. Integrators give
+    the pulse's answer to rounding; auto (DOP853 for an expression, exact for the pulse) within its tolerance."""
+    pulse = (SCENARIOS / "quarter_car_bump.toml").read_text().replace("t0 = 0.5", "t0 = 0.5004").replace(
+        "duration = 0.4", "duration = 0.4003")
+    spelled = pulse.replace('type = "pulse"\namplitude = 0.05\nt0 = 0.5004\nduration = 0.4003',
+                            'type = "expression"\nexpr = "0.05 * heaviside(t - 0.5004) - 0.05 * heaviside(t - 0.9007)"')
+    assert "heaviside" in spelled and "pulse" not in spelled.split("[ground_motion]")[1]
+    runs = []
+    for text in (pulse, spelled):
+        _, model, grid = model_of(text)
+        runs.append(solve(model, grid, method, Tolerances(rtol=1e-9, atol=1e-12)))
+    assert [(t, du) for t, du, _ in model.ground.jumps] == pytest.approx([(0.5004, 0.05), (0.9007, -0.05)], abs=1e-15)
+    peak = np.abs(runs[0].displacement).max()
+    bound = 1e-12 if method != "auto" else 1e-7
+    assert np.abs(runs[1].displacement - runs[0].displacement).max() <= bound * peak
 
 
 def test_nonlinear_elements_see_relative_motion(tmp_path):

@@ -122,3 +122,37 @@ k3 = -1.0
     assert 0.1 < r.t_failed < 10.0
     assert "failed at t =" in r.stats.message
     assert np.isnan(r.displacement[-1, 0])
+
+
+STEP_AS_EXPRESSION = one_dof(0.4, end=5.0, step=0.05, extra="""
+[[force]]
+on = "m"
+type = "expression"
+expr = "sin(3*t)*exp(-0.1*t) + heaviside(t - 1.013)"
+""")
+STEP_AS_STEP = one_dof(0.4, end=5.0, step=0.05, extra="""
+[[force]]
+on = "m"
+type = "expression"
+expr = "sin(3*t)*exp(-0.1*t)"
+[[force]]
+on = "m"
+type = "step"
+amplitude = 1.0
+t0 = 1.013
+""")
+
+
+@pytest.mark.parametrize("method", ["rk4", "newmark", "DOP853", "Radau", "ode45", "LSODA"])
+def test_a_jump_inside_an_expression_is_restarted_at_as_a_step_force_is(method):
+    """heaviside(t - 1.013) in an expression is the step force at 1.013: every method restarts there (the edge
+    is located to adjacent floats) and takes the left limit before it, so both scenes give one answer to
+    rounding, the compiled kernels included. Before, fixed-step RK4 stepped across it with 36x the error."""
+    tol = Tolerances(rtol=1e-9, atol=1e-12)
+    _, expression_model, grid = model_of(STEP_AS_EXPRESSION)
+    _, step_model, _ = model_of(STEP_AS_STEP)
+    assert expression_model.breakpoints(0.0, 5.0).tolist() == pytest.approx([1.013], abs=1e-15)
+    expression_run = solve(expression_model, grid, method, tol)
+    step_run = solve(step_model, grid, method, tol)
+    peak = np.abs(step_run.displacement).max()
+    assert np.abs(expression_run.displacement - step_run.displacement).max() <= 1e-12 * peak

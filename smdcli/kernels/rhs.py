@@ -148,8 +148,13 @@ def force_value(m, j, t, left, stack):
     if kind == TABLE_LINEAR or kind == TABLE_PREVIOUS:
         half = len(data) // 2
         return _table(data[:half], data[half:], t, kind == TABLE_PREVIOUS, left)
-    if kind == EXPRESSION:
-        return _expression(m.f_code[m.f_cptr[j]:m.f_cptr[j + 1]], data, t, stack)
+    if kind == EXPRESSION:  # its edges are first floats past a crossing: the float before gives the left limit
+        program = m.f_code[m.f_cptr[j]:m.f_cptr[j + 1]]
+        if left:
+            before = _expression(program, data, np.nextafter(t, -np.inf), stack)
+            if math.isfinite(before):
+                return before
+        return _expression(program, data, t, stack)
     return math.nan
 
 

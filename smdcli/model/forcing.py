@@ -273,7 +273,7 @@ class Table(Signal):
 
 
 class ExpressionSignal(Signal):
-    """A parsed expression in t; breakpoints inside it are not known."""
+    """A parsed expression in t; it jumps or kinks where an argument of sign, heaviside or abs crosses zero."""
 
     exact = False
 
@@ -284,6 +284,15 @@ class ExpressionSignal(Signal):
 
     def value(self, t):
         return self.expression(t)
+
+    def value_left(self, t):
+        # an edge is the first float past the crossing (Expression.edges): the float before it is on the near side;
+        # where that float is outside the expression's domain (sqrt(t) at t = 0) the value at t is the limit
+        before = self.expression(np.nextafter(t, -np.inf))
+        return np.where(np.isfinite(before), before, self.expression(t))
+
+    def breakpoints(self, t0, t1):
+        return self.expression.edges(t0, t1)
 
 
 def build_signal(spec: ForceSpec) -> Signal:
