@@ -27,6 +27,7 @@ def _cache_folder() -> Path | None:
     from numba.core.caching import CacheImpl
 
     for locator_class in CacheImpl._locator_classes:
+        # a locator reads only the source file's path; any function stands for the kernel
         locator = locator_class.from_function(_cache_folder, str(_KERNELS / "rhs.py"))
         if locator is None:
             continue

@@ -289,7 +289,8 @@ class ExpressionSignal(Signal):
         # an edge is the first float past the crossing (Expression.edges): the float before it is on the near side;
         # where that float is outside the expression's domain (sqrt(t) at t = 0) the value at t is the limit
         before = self.expression(np.nextafter(t, -np.inf))
-        return np.where(np.isfinite(before), before, self.expression(t))
+        outside = ~np.isfinite(before)
+        return np.where(outside, self.expression(t), before) if outside.any() else before
 
     def breakpoints(self, t0, t1):
         return self.expression.edges(t0, t1)

@@ -17,14 +17,19 @@ def _method_styles(methods: list[str]) -> dict[str, dict]:
     return {m: {"color": f"C{i % 10}", "marker": markers[i % len(markers)]} for i, m in enumerate(methods)}
 
 
-def work_precision_figure(comparison, title: str):
-    """Error against wall time and against RHS evaluations, log-log, one line per method; failures as crosses."""
-    runs = comparison.runs
+def _two_panels(runs):
+    """The methods in run order, their styles, and a figure of two panels sharing y with room for a legend."""
     methods = list(dict.fromkeys(r.method for r in runs))
-    styles = _method_styles(methods)
     fig = _figure(figsize=(12, 6))
     axes = fig.subplots(1, 2, sharey=True)
     fig.subplots_adjust(left=0.07, right=0.8, top=0.86, bottom=0.1, wspace=0.06)
+    return methods, _method_styles(methods), fig, axes
+
+
+def work_precision_figure(comparison, title: str):
+    """Error against wall time and against RHS evaluations, log-log, one line per method; failures as crosses."""
+    runs = comparison.runs
+    methods, styles, fig, axes = _two_panels(runs)
     costs = (("wall_time_s", "Wall time [s] (median of repeats)"), ("nfev", "Right-hand-side evaluations"))
     for ax, (cost, label) in zip(axes, costs):
         for m in methods:
@@ -68,11 +73,7 @@ def energy_precision_figure(comparison, title: str):
     """Each run's energy balance residual against its wall time, and against its true error: the check a run
     can make on itself, beside what only a reference can tell."""
     runs = [r for r in comparison.runs if r.success and math.isfinite(r.energy_residual)]
-    methods = list(dict.fromkeys(r.method for r in comparison.runs))
-    styles = _method_styles(methods)
-    fig = _figure(figsize=(12, 6))
-    axes = fig.subplots(1, 2, sharey=True)
-    fig.subplots_adjust(left=0.07, right=0.8, top=0.86, bottom=0.1, wspace=0.06)
+    methods, styles, fig, axes = _two_panels(comparison.runs)
     for ax, (cost, label) in zip(axes, (("wall_time_s", "Wall time [s] (median of repeats)"),
                                         ("error", "Error: max |x - x_ref| / peak |x_ref|"))):
         for m in methods:

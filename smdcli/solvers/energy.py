@@ -30,7 +30,7 @@ from typing import Callable
 import numpy as np
 
 from smdcli.model import Model
-from smdcli.model.elements import element_forces
+from smdcli.model.elements import element_forces, incidence_row
 from smdcli.result import Energy, Result
 from smdcli.solvers.base import Tolerances
 
@@ -83,8 +83,7 @@ def _derived_accuracy(model: Model, result: Result) -> dict[str, float]:
         out["reaction"] = relative(sum(grounded), e.reaction)
     energy = result.energy
     if energy is not None:
-        largest = max(float(np.max(energy.kinetic + energy.strain, initial=0.0)),
-                      float(np.max(np.abs(energy.dissipated), initial=0.0)), float(np.max(np.abs(energy.input), initial=0.0)))
+        largest = _largest_energy(energy.kinetic, energy.strain, energy.dissipated, energy.input)
         moved = 2 * s * largest
         off = float(np.max(np.abs(energy.residual), initial=0.0))
         for name in ("kinetic", "strain"):
@@ -127,20 +126,17 @@ def mechanical_energy(model: Model, x: np.ndarray, v: np.ndarray) -> tuple[np.nd
 def _incidence(model: Model, kind: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rows d = x_a - x_b of the linear-law elements of a kind, their coefficients, and k3 (0 but for cubic)."""
     chosen = [e for e in model.elements if e.kind == kind and e.law != "quadratic"]
-    D = np.zeros((len(chosen), model.n))
-    for row, e in enumerate(chosen):
-        if e.a >= 0:
-            D[row, e.a] += 1.0
-        if e.b >= 0:
-            D[row, e.b] -= 1.0
+    index = {name: i for i, name in enumerate(model.dofs)}
+    D = np.array([incidence_row(e.connects, index, model.n) for e in chosen]).reshape(len(chosen), model.n)
     return D, np.array([e.coef for e in chosen]), np.array([e.k3 if e.law == "cubic" else 0.0 for e in chosen])
 
 
-def _dissipation(model: Model, v: np.ndarray) -> np.ndarray:
-    """x'^T C x' + c |d'|^3 of quadratic dampers, per element where the scene has them, over the last axis."""
+def _dissipation(model: Model, v: np.ndarray, dampers: tuple | None = None) -> np.ndarray:
+    """x'^T C x' + c |d'|^3 of quadratic dampers, per element where the scene has them, over the last axis;
+    dampers: _incidence(model, "damper") where the caller has it already."""
     if not model.element_form:
         return ((v @ model.C) * v).sum(axis=-1)
-    D, c, _ = _incidence(model, "damper")
+    D, c, _ = dampers if dampers is not None else _incidence(model, "damper")
     dv = v @ D.T
     power = (c * dv**2).sum(axis=-1)
     if model.added_damping is not None:
@@ -180,12 +176,17 @@ def _energy_balance(model: Model, result: Result, dense) -> Energy:
                       "re-integrated from the run's state at their start")
     initial = kinetic[0] + strain[0] if len(kinetic) else 0.0
     residual = kinetic + strain - initial + dissipated - work
-    reached = max(float(np.max(kinetic + strain, initial=0.0)), float(np.max(np.abs(dissipated), initial=0.0)),
-                  float(np.max(np.abs(work), initial=0.0)))
+    reached = _largest_energy(kinetic, strain, dissipated, work)
     worst = float(np.max(np.abs(residual), initial=0.0))
     relative = worst / reached if reached > 0 else 0.0
     return Energy(kinetic, strain, dissipated, work, residual, relative if math.isfinite(relative) else math.inf,
                   quadrature)
+
+
+def _largest_energy(kinetic, strain, dissipated, work) -> float:
+    """The largest energy the run reached: mechanical, dissipated or put in; what the residual is measured by."""
+    return max(float(np.max(kinetic + strain, initial=0.0)), float(np.max(np.abs(dissipated), initial=0.0)),
+               float(np.max(np.abs(work), initial=0.0)))
 
 
 def _closed_form_applies(model: Model) -> bool:
@@ -423,20 +424,21 @@ def _reintegrated_step(model: Model, ta: float, tb: float, x: np.ndarray, v: np.
     from scipy.integrate import solve_ivp
 
     from smdcli.solvers.base import force_function
-    from smdcli.solvers.ivp import _rhs
 
     n = model.n
+    dampers = _incidence(model, "damper")
     z = np.concatenate([x, v, [0.0, 0.0]])
     scale = max(float(np.abs(z).max()), 1e-300)
     t = ta
     for t_event, jump in [*inner, (tb, None)]:
         if t_event > t:
-            motion, u = _rhs(model, t, t_event), force_function(model, t, t_event)
+            u = force_function(model, t, t_event) if model.signals else (lambda time: np.empty(0))
 
-            def flow(time, y, motion=motion, u=u):
-                velocity = y[n:2 * n]
-                power = velocity @ (model.B @ u(time)) if model.signals else 0.0
-                return np.concatenate([motion(time, y[:2 * n]), [_dissipation(model, velocity), power]])
+            def flow(time, y, u=u):
+                values, velocity = u(time), y[n:2 * n]
+                power = velocity @ (model.B @ values) if len(values) else 0.0
+                return np.concatenate([model.rhs(time, y[:2 * n], values),
+                                       [_dissipation(model, velocity, dampers), power]])
 
             z = solve_ivp(flow, (t, t_event), z, method="DOP853", rtol=1e-12, atol=1e-14 * scale).y[:, -1]
         if jump is not None:
