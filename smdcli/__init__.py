@@ -1,11 +1,15 @@
 """smd: lumped spring-mass-damper systems, solved exactly where they can be.
 
 The Python API (smdcli.api): load(path) -> Scenario, simulate(scenario_or_path, method, rtol, atol) -> Result,
-write(result, path). They are imported on first use, so `smd --help` imports nothing heavy.
+write(result, path). They are imported on first use, so `smd --help` imports nothing heavy. Every error is an
+SmdError with the line the command line prints: ScenarioError (bad input, exit 2), UsageError (a bad option or
+path, exit 2), SolverFailed (exit 1).
 """
 
+from smdcli.errors import ScenarioError, SmdError, SolverFailed, UsageError
+
 __version__ = "0.1.0"
-__all__ = ["load", "simulate", "write", "__version__"]
+__all__ = ["load", "simulate", "write", "SmdError", "ScenarioError", "UsageError", "SolverFailed", "__version__"]
 
 
 def __getattr__(name: str):

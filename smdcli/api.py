@@ -30,8 +30,9 @@ def simulate(scenario: Scenario | str | Path, method: str | None = None, rtol: f
     """Solve a scenario (a Scenario or a path) as `smd simulate` does, writing nothing; SolverFailed on failure."""
     from smdcli.commands.simulate import Options, solve_run
     from smdcli.model import build, time_grid
-    from smdcli.solvers.checked import failure_message
+    from smdcli.solvers.checked import check_overrides, failure_message
 
+    check_overrides(method, rtol, atol)
     sc = scenario if isinstance(scenario, Scenario) else load(scenario)
     model = build(sc)
     result = solve_run(sc, model, time_grid(sc.time), Options(method=method, rtol=rtol, atol=atol))

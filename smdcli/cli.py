@@ -14,7 +14,7 @@ import typer
 
 from smdcli import __version__, interrupts
 from smdcli.cli_files import diff_files, export
-from smdcli.cli_support import _carried_out, _fail, _interrupted, _message, _positive, _print_json, _report
+from smdcli.cli_support import _carried_out, _fail, _interrupted, _message, _print_json, _report
 from smdcli.progress import wanted as progress_wanted
 from smdcli.text import plural
 
@@ -39,10 +39,8 @@ def simulate(
     scenarios: List[Path] = typer.Argument(..., help="Scenario TOML files."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
     method: Optional[str] = typer.Option(None, "--method", help="Solver, overriding the scenario's solver.method."),
-    rtol: Optional[float] = typer.Option(None, "--rtol", callback=_positive("--rtol"),
-                                         help="Relative tolerance override (> 0)."),
-    atol: Optional[float] = typer.Option(None, "--atol", callback=_positive("--atol"),
-                                         help="Absolute tolerance override (> 0)."),
+    rtol: Optional[float] = typer.Option(None, "--rtol", help="Relative tolerance override (> 0)."),
+    atol: Optional[float] = typer.Option(None, "--atol", help="Absolute tolerance override (> 0)."),
     no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
     as_json: bool = typer.Option(False, "--json",
@@ -60,6 +58,15 @@ def simulate(
     from smdcli.errors import SmdError
     from smdcli.progress import bar
 
+    from smdcli.solvers.checked import check_overrides
+
+    try:  # once, before any scenario: the same check as smdcli.simulate()'s
+        check_overrides(method, rtol, atol)
+    except SmdError as exc:
+        code = _report(exc)
+        if as_json:  # a script still gets its entry per file
+            _print_json([failed_summary(path, _message(exc), code) for path in scenarios])
+        raise typer.Exit(code)
     options = Options(method=method, rtol=rtol, atol=atol, plots=not no_plots, save_partial=save_partial)
     worst = 0
     summaries, suites = [], []
@@ -312,8 +319,16 @@ def run(args: list[str]) -> int:
     no_args = getattr(exceptions, "NoArgsIsHelpError", ())
 
     provenance.set_command_line(shlex.join(["smd", *args]))
+    import os
+    import warnings
+
     try:
-        code = app(args=args, prog_name="smd", standalone_mode=False)
+        with warnings.catch_warnings():
+            if not os.environ.get("SMD_DEBUG"):
+                # smd says what went wrong in its own lines; numpy's RuntimeWarnings (an overflow it then reports)
+                # and libraries' notices would only bury them
+                warnings.simplefilter("ignore")
+            code = app(args=args, prog_name="smd", standalone_mode=False)
     except no_args:  # `smd` alone: the help was printed
         code = 2
     except usage_error as exc:
@@ -325,8 +340,6 @@ def run(args: list[str]) -> int:
         sys.stderr.close()
         code = 1
     except Exception as exc:  # a defect of smd's, not of the input: one line, unless asked for the traceback
-        import os
-
         if interrupts.received() is not None:  # e.g. an import cut short by the signal: an interrupt, not a defect
             return _interrupted(KeyboardInterrupt()).exit_code
         if os.environ.get("SMD_DEBUG"):

@@ -62,8 +62,8 @@ def export(
     from smdcli.errors import SmdError
 
     try:
-        path, rows, columns = export_csv(result, out, datasets.split(",") if datasets else None)
+        path, rows, columns, note = export_csv(result, out, datasets.split(",") if datasets else None)
     except (SmdError, OSError) as exc:
         raise typer.Exit(_report_json(exc, {"result": str(result)}, False, doing="export"))
     if not quiet:
-        typer.echo(f"wrote {path}: {rows} rows x {columns} columns")
+        typer.echo(f"wrote {path}: {rows} rows x {columns} columns" + (f" ({note})" if note else ""))

@@ -39,15 +39,6 @@ def _print_json(data) -> None:
     typer.echo(strict_json.dumps(data))
 
 
-def _positive(name: str):
-    """A typer callback refusing a tolerance that is not a positive number."""
-    def check(value: Optional[float]) -> Optional[float]:
-        if value is not None and not (value > 0 and value < float("inf")):
-            raise typer.BadParameter(f"expected a positive number, found {value:g}", param_hint=name)
-        return value
-    return check
-
-
 def _message(exc: Exception, doing: str = "write") -> str:
     """The one line that says what went wrong."""
     from smdcli.errors import SmdError

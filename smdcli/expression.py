@@ -19,6 +19,8 @@ import numpy as np
 
 MAX_LENGTH = 2000
 MAX_NODES = 500
+MAX_DEPTH = 64  # nesting of operations and calls, checked while parsing (before anything recurses)
+MAX_PROGRAM = 20_000  # operations one evaluation runs, derivatives included (a ground displacement's second)
 
 
 def _heaviside(x):
@@ -75,6 +77,13 @@ def _check(node: ast.AST) -> None:
     elif isinstance(node, ast.Constant):
         if isinstance(node.value, bool) or not isinstance(node.value, (int, float)):
             raise ExpressionError(f"only real numbers are allowed, found {node.value!r}")
+        try:
+            value = float(node.value)
+        except OverflowError:  # an integer literal of hundreds of digits
+            raise ExpressionError(f"the number {_digits(node.value)} is too large for double precision") from None
+        if not math.isfinite(value):
+            raise ExpressionError("the number 1e309 or larger is too large for double precision; expected finite "
+                                  "numbers")
     elif isinstance(node, ast.Name):
         if node.id != "t" and node.id not in CONSTANTS:
             raise ExpressionError(
@@ -105,19 +114,70 @@ def _check(node: ast.AST) -> None:
         raise ExpressionError(f"{_describe(node)} is not allowed")
 
 
-def _interpret(node: ast.AST, t: np.ndarray):
+def _digits(value: int) -> str:
+    """An integer literal by its size (str() of a huge int is refused past 4300 digits)."""
+    return f"of about {int(abs(value).bit_length() * 0.30103) + 1} digits"
+
+
+def _depth(tree: ast.AST) -> int:
+    """The nesting depth of a tree, without recursion (a deep tree must not exhaust Python's stack)."""
+    deepest, stack = 0, [(tree, 1)]
+    while stack:
+        node, depth = stack.pop()
+        deepest = max(deepest, depth)
+        stack.extend((child, depth + 1) for child in ast.iter_child_nodes(node))
+    return deepest
+
+
+def _interpret(node: ast.AST, t: np.ndarray, memo: dict | None = None):
+    """The value of a checked tree at t. A derivative shares subtrees (a DAG): memo evaluates each node once."""
+    if memo is not None:
+        key = id(node)
+        if key in memo:
+            return memo[key][1]
     if isinstance(node, ast.Constant):
-        return float(node.value)
-    if isinstance(node, ast.Name):
-        return t if node.id == "t" else CONSTANTS[node.id]
+        value = float(node.value)
+    elif isinstance(node, ast.Name):
+        value = t if node.id == "t" else CONSTANTS[node.id]
+    elif isinstance(node, ast.BinOp):
+        value = _BINARY[type(node.op)](_interpret(node.left, t, memo), _interpret(node.right, t, memo))
+    elif isinstance(node, ast.UnaryOp):
+        value = _interpret(node.operand, t, memo)
+        value = -value if isinstance(node.op, ast.USub) else value
+    elif isinstance(node, ast.Call):
+        value = FUNCTIONS[node.func.id](_interpret(node.args[0], t, memo))
+    else:
+        raise AssertionError("unchecked node")  # _check guarantees this is unreachable
+    if memo is not None:
+        memo[id(node)] = (node, value)  # the node is kept so that its id is not reused while memo lives
+    return value
+
+
+def program_size(node: ast.AST) -> tuple[int, int]:
+    """(operations, depth) of the postfix program of a tree whose subtrees may be shared, counted without
+    expanding it: a derivative's program can be far larger than its tree."""
+    sizes: dict[int, tuple[int, int]] = {}
+    order, stack = [], [node]
+    while stack:  # post-order without recursion
+        n = stack.pop()
+        if id(n) in sizes:
+            continue
+        order.append(n)
+        stack.extend(_operands(n))
+    for n in reversed(order):
+        children = [sizes.get(id(c), (0, 0)) for c in _operands(n)]
+        sizes[id(n)] = (1 + sum(c[0] for c in children), 1 + max((c[1] for c in children), default=0))
+    return sizes[id(node)]
+
+
+def _operands(node: ast.AST) -> list[ast.AST]:
     if isinstance(node, ast.BinOp):
-        return _BINARY[type(node.op)](_interpret(node.left, t), _interpret(node.right, t))
+        return [node.left, node.right]
     if isinstance(node, ast.UnaryOp):
-        value = _interpret(node.operand, t)
-        return -value if isinstance(node.op, ast.USub) else value
+        return [node.operand]
     if isinstance(node, ast.Call):
-        return FUNCTIONS[node.func.id](_interpret(node.args[0], t))
-    raise AssertionError("unchecked node")  # _check guarantees this is unreachable
+        return [node.args[0]]
+    return []
 
 
 # Opcodes of the postfix program a compiled kernel runs (smdcli.kernels.forces): one per grammar element.
@@ -165,7 +225,13 @@ class Expression:
             raise ExpressionError(f"cannot parse expression: {getattr(exc, 'msg', exc)}") from None
         if sum(1 for _ in ast.walk(tree)) > MAX_NODES:
             raise ExpressionError(f"expression has more than {MAX_NODES} terms")
+        # Python's tree is ~3 levels an operation deep (calls, names, contexts); it is measured without recursion
+        # before anything recurses on it, the operations after the check
+        if _depth(tree) > 4 * MAX_DEPTH:
+            raise ExpressionError(f"expression is nested more than {MAX_DEPTH} levels deep")
         _check(tree)
+        if program_size(tree.body)[1] > MAX_DEPTH:
+            raise ExpressionError(f"expression is nested more than {MAX_DEPTH} levels deep")
         self.text = text
         self._body = tree.body
 
@@ -173,24 +239,32 @@ class Expression:
         """Evaluate at t (scalar or array); float64 result of t's shape."""
         t_arr = np.asarray(t, dtype=float)
         with np.errstate(all="ignore"):
-            value = _interpret(self._body, t_arr)
+            value = _interpret(self._body, t_arr, {})
         return np.broadcast_to(np.asarray(value, dtype=float), t_arr.shape).copy()
 
     def derivative(self) -> "Expression":
-        """d/dt of the expression, as an expression (functions that jump, sign and heaviside, count as flat)."""
+        """d/dt of the expression, as an expression (functions that jump, sign and heaviside, count as flat);
+        ExpressionError when its program would exceed MAX_PROGRAM operations."""
         derived = Expression.__new__(Expression)
         derived._body = _derive(self._body)
-        derived.text = ast.unparse(derived._body)
+        size, depth = program_size(derived._body)
+        if size > MAX_PROGRAM:
+            raise ExpressionError(f"its derivative takes {size} operations to evaluate (limit {MAX_PROGRAM}); "
+                                  "simplify the expression, or give the derivative itself")
+        derived.text = f"d/dt ({self.text})"
         return derived
 
-    def edges(self, t0: float, t1: float) -> np.ndarray:
+    def edges(self, t0: float, t1: float, limit: int | None = None) -> np.ndarray:
         """Sorted times in (t0, t1) where the expression may jump or kink: where an argument of sign, heaviside or
         abs changes sign. Found on a sampling that doubles until the count settles, then bisected to adjacent
-        floats; each time is the first float on the far side, so the value just before it is the left limit."""
+        floats; each time is the first float on the far side, so the value just before it is the left limit.
+        TooManyEdges as soon as a sampling sees more than `limit`, before any is located."""
         key = (float(t0), float(t1))
         cache = self.__dict__.setdefault("_edges", {})
         if key not in cache:
-            cache[key] = _edges(self._body, *key)
+            cache[key] = _edges(self._body, *key, limit=limit)
+        if limit is not None and len(cache[key]) > limit:
+            raise TooManyEdges(len(cache[key]))
         return cache[key]
 
     def program(self) -> tuple[list[int], list[float], int]:
@@ -205,25 +279,39 @@ class Expression:
 
 EDGE_FUNCTIONS = ("sign", "heaviside", "abs")  # a jump, a jump, a kink where the argument crosses zero
 EDGE_SAMPLES = (2**12, 2**22)  # the first sampling of (t0, t1) and the finest
+EDGE_WORK = 2**27  # node evaluations of one sampling (about 0.5 s): a large expression is sampled less finely
 
 
-def _edges(body: ast.AST, t0: float, t1: float) -> np.ndarray:
-    arguments = [node.args[0] for node in ast.walk(body)
+class TooManyEdges(ExpressionError):
+    """More edges than a run may restart at; `count` is how many were seen (a lower bound)."""
+
+    def __init__(self, count: int):
+        self.count = count
+        super().__init__(f"at least {count} edges")
+
+
+def _edges(body: ast.AST, t0: float, t1: float, limit: int | None = None) -> np.ndarray:
+    arguments = [node.args[0] for node in _unique_nodes(body)
                  if isinstance(node, ast.Call) and node.func.id in EDGE_FUNCTIONS and _has_t(node.args[0])]
     if not arguments or not t1 > t0:
         return np.empty(0)
+    cost = sum(1 for n in _unique_nodes(ast.Tuple(arguments)))  # each shared node is evaluated once a sampling
+    finest = max(EDGE_SAMPLES[0], min(EDGE_SAMPLES[1], EDGE_WORK // max(cost, 1)))
     samples, counted = EDGE_SAMPLES[0], -1
     with np.errstate(all="ignore"):
         while True:
             t = np.linspace(t0, t1, samples + 1)
+            memo: dict = {}
             brackets = []
             for argument in arguments:
-                side = np.asarray(_interpret(argument, t) >= 0)
+                side = np.asarray(_interpret(argument, t, memo) >= 0)
                 change = np.flatnonzero(side[1:] != side[:-1])
                 brackets.append((argument, t[change], t[change + 1], side[change]))
             count = sum(len(lo) for _, lo, _, _ in brackets)
+            if limit is not None and count > limit:
+                raise TooManyEdges(count)
             # settled, and fine enough that edges are far apart in samples (a coarse sampling aliases)
-            if (count == counted and samples >= 32 * count) or samples >= EDGE_SAMPLES[1]:
+            if (count == counted and samples >= 32 * count) or samples >= finest:
                 break
             samples, counted = 2 * samples, count
         found = [_bisect(argument, lo, hi, before) for argument, lo, hi, before in brackets]
@@ -234,6 +322,18 @@ def _edges(body: ast.AST, t0: float, t1: float) -> np.ndarray:
     return times
 
 
+def _unique_nodes(tree: ast.AST):
+    """Every node of a tree whose subtrees may be shared, once each."""
+    seen, stack = set(), [tree]
+    while stack:
+        node = stack.pop()
+        if id(node) in seen:
+            continue
+        seen.add(id(node))
+        yield node
+        stack.extend(ast.iter_child_nodes(node))
+
+
 def _bisect(argument: ast.AST, lo: np.ndarray, hi: np.ndarray, before: np.ndarray) -> np.ndarray:
     """Narrow each bracket of a sign change of argument to adjacent floats; the floats on the far side."""
     while True:
@@ -241,7 +341,7 @@ def _bisect(argument: ast.AST, lo: np.ndarray, hi: np.ndarray, before: np.ndarra
         open_ = (mid > lo) & (mid < hi)
         if not open_.any():
             return hi
-        near = np.asarray(_interpret(argument, mid) >= 0) == before
+        near = np.asarray(_interpret(argument, mid, {}) >= 0) == before
         lo = np.where(open_ & near, mid, lo)
         hi = np.where(open_ & ~near, mid, hi)
 
@@ -280,21 +380,39 @@ def _call(name: str, arg: ast.AST) -> ast.AST:
 
 
 def _has_t(node: ast.AST) -> bool:
-    return any(isinstance(n, ast.Name) and n.id == "t" for n in ast.walk(node))
+    return any(isinstance(n, ast.Name) and n.id == "t" for n in _unique_nodes(node))
 
 
 def _derive(node: ast.AST) -> ast.AST:
-    """The derivative in t of a checked tree, by the chain rule."""
-    if not _has_t(node):
+    """The derivative in t of a checked tree, by the chain rule; each shared subtree is differentiated once."""
+    derived: dict[int, tuple[ast.AST, ast.AST]] = {}
+    timed: dict[int, tuple[ast.AST, bool]] = {}
+
+    def has_t(n: ast.AST) -> bool:
+        if id(n) not in timed:
+            timed[id(n)] = (n, (isinstance(n, ast.Name) and n.id == "t") or any(map(has_t, _operands(n))))
+        return timed[id(n)][1]
+
+    def d(n: ast.AST) -> ast.AST:
+        if id(n) not in derived:
+            derived[id(n)] = (n, _derive_one(n, d, has_t))
+        return derived[id(n)][1]
+
+    return d(node)
+
+
+def _derive_one(node: ast.AST, d, has_t) -> ast.AST:
+    """One node's derivative; d differentiates its operands, has_t tells whether a subtree depends on t."""
+    if not has_t(node):
         return ast.Constant(0.0)
     if isinstance(node, ast.Name):
         return ast.Constant(1.0)
     if isinstance(node, ast.UnaryOp):
-        inner = _derive(node.operand)
+        inner = d(node.operand)
         return ast.UnaryOp(ast.USub(), inner) if isinstance(node.op, ast.USub) and _number(inner) != 0.0 else inner
     if isinstance(node, ast.BinOp):
         u, v = node.left, node.right
-        du, dv = _derive(u), _derive(v)
+        du, dv = d(u), d(v)
         if isinstance(node.op, (ast.Add, ast.Sub)):
             return _add(du, dv, type(node.op))
         if isinstance(node.op, ast.Mult):
@@ -302,14 +420,14 @@ def _derive(node: ast.AST) -> ast.AST:
         if isinstance(node.op, ast.Div):  # (du v - u dv) / v^2
             top = _add(_mul(du, v), _mul(u, dv), ast.Sub)
             return ast.BinOp(top, ast.Div(), ast.BinOp(v, ast.Pow(), ast.Constant(2.0)))
-        if not _has_t(v):  # u^c: c u^(c-1) du
+        if not has_t(v):  # u^c: c u^(c-1) du
             return _mul(_mul(v, ast.BinOp(u, ast.Pow(), ast.BinOp(v, ast.Sub(), ast.Constant(1.0)))), du)
         # u^v = exp(v log u): u^v (dv log u + v du / u)
         inner = _add(_mul(dv, _call("log", u)), ast.BinOp(_mul(v, du), ast.Div(), u))
         return _mul(node, inner)
     if isinstance(node, ast.Call):
         name, u = node.func.id, node.args[0]
-        du = _derive(u)
+        du = d(u)
         outer = {
             "sin": lambda: _call("cos", u),
             "cos": lambda: ast.UnaryOp(ast.USub(), _call("sin", u)),

@@ -15,6 +15,7 @@ from contextlib import contextmanager
 
 SIGNALS = frozenset({signal.SIGINT, signal.SIGTERM})
 _received: int | None = None
+_deferring = 0  # inside deferred(): a signal is recorded, and raised when the block ends
 
 
 class Terminated(KeyboardInterrupt):
@@ -24,6 +25,8 @@ class Terminated(KeyboardInterrupt):
 def _handler(signum, frame):
     global _received
     _received = _received or signum
+    if _deferring:
+        return
     raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 
 
@@ -101,3 +104,43 @@ def raise_if_received() -> None:
     signum = received()
     if signum is not None:
         raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+
+@contextmanager
+def deferred(raise_after: bool = True):
+    """In the block a signal is recorded, not raised: an exception raised inside a lock's wait (a thread pool's
+    future, a thread's join) leaves the lock inconsistent, and the thread that next uses it fails ("release
+    unlocked lock"). With raise_after, a signal received by the end of the block raises there."""
+    global _deferring
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():  # signals are only ever raised in the main one
+        yield
+        return
+    _deferring += 1
+    try:
+        yield
+    finally:
+        _deferring -= 1
+    if raise_after:
+        raise_if_received()
+
+
+SLICE = 0.1  # s: how long one deferred wait lasts before a received signal is raised
+
+
+def result(future, timeout_error=TimeoutError):
+    """future.result(), waited for in slices with signals deferred, so that an interrupt raises between slices,
+    never inside the future's lock."""
+    while True:
+        with deferred():
+            try:
+                return future.result(timeout=SLICE)
+            except timeout_error:
+                pass
+
+
+def settled(future) -> None:
+    """Wait for a future to finish, whatever signals arrive meanwhile (cleanup after an interrupt)."""
+    with deferred(raise_after=False):
+        future.exception()

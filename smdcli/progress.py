@@ -4,7 +4,7 @@ Every long command (simulate batches, sweep, compare-solvers, frequency
 responses, phase, animate) reports through `bar(label, total)`, a context
 manager yielding `advance(count=1, note=None)`. The library calls `advance`
 whatever the output is; the CLI decides with `wanted(...)` whether a bar is
-drawn. Imports nothing from smd.
+drawn. Imports nothing from smd but interrupts.
 """
 
 from __future__ import annotations
@@ -35,10 +35,15 @@ def bar(label: str, total: int, enabled: bool = True) -> Iterator[Advance]:
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
                                TimeRemainingColumn)
 
+    from smdcli.interrupts import deferred
+
     console = Console(file=sys.stderr)
     columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                TextColumn("eta"), TimeRemainingColumn(), TextColumn("{task.fields[note]}", style="dim"))
-    with Progress(*columns, console=console, transient=False, refresh_per_second=8) as progress:
+    progress = Progress(*columns, console=console, transient=False, refresh_per_second=8)
+    with deferred():  # its refresh thread starts and stops under locks that an interrupt must not cut
+        progress.start()
+    try:
         task = progress.add_task(label, total=max(total, 1), note="")
 
         def advance(count: int = 1, note: str | None = None) -> None:
@@ -46,3 +51,6 @@ def bar(label: str, total: int, enabled: bool = True) -> Iterator[Advance]:
             progress.update(task, advance=count, **fields)
 
         yield advance
+    finally:
+        with deferred(raise_after=False):
+            progress.stop()

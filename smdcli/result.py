@@ -50,6 +50,7 @@ class GroundHistory:
     velocity: np.ndarray
     acceleration: np.ndarray
     given: str = "acceleration"  # the quantity the scenario gave
+    integrated_accuracy: float = 0.0  # stated accuracy of what was integrated from rest (relative to its peak)
 
 
 @dataclass(frozen=True)
@@ -81,6 +82,11 @@ class Energy:
     max_relative_residual: float  # largest |residual| over the largest energy reached
     quadrature: str  # how dissipated and input were integrated
 
+    @property
+    def largest(self) -> float:
+        """The largest energy the run reached, J: what the residual is measured by."""
+        return largest_energy(self.kinetic, self.strain, self.dissipated, self.input)
+
     def to_dict(self) -> dict:
         """The time series as lists and the figure of merit, for JSON."""
         return {name: getattr(self, name).tolist() for name in ENERGY_TERMS} | {
@@ -88,6 +94,12 @@ class Energy:
 
 
 ENERGY_TERMS = ("kinetic", "strain", "dissipated", "input", "residual")
+
+
+def largest_energy(kinetic, strain, dissipated, work) -> float:
+    """The largest energy a run reached: mechanical, dissipated or put in; what the residual is measured by."""
+    return max(float(np.max(kinetic + strain, initial=0.0)), float(np.max(np.abs(dissipated), initial=0.0)),
+               float(np.max(np.abs(work), initial=0.0)))
 
 
 @dataclass(frozen=True)

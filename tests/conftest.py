@@ -59,6 +59,18 @@ def force_block(kind: str, on: str = "m", **fields) -> str:
     return "\n".join(lines) + "\n"
 
 
+def replaced(doc, path, value):
+    """A copy of a TOML document with the value at a path (keys and indices) replaced."""
+    import copy
+
+    doc = copy.deepcopy(doc)
+    node = doc
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = value
+    return doc
+
+
 @dataclass
 class Ran:
     """What a run of `smd` printed, and its exit code."""

@@ -193,3 +193,31 @@ def test_a_signal_ignored_at_start_stays_ignored():
             "time.sleep(0.2)\n"
             "print(interrupts.received(), signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL)\n")
     assert _python_prints(code) == ["None", "True"]
+
+
+def test_interrupted_sweeps_never_print_a_traceback(tmp_path):
+    """Ctrl-C at random moments of a multi-threaded sweep (solver threads, the writer thread, chunk waits): the one
+    line and exit 130, never a traceback or a thread's "Exception in worker" (an interrupt raised inside a lock's
+    wait used to leave it broken for the thread that next took it). SMD_INTERRUPT_RUNS sets how many (10)."""
+    import random
+
+    scene = tmp_path / "duffing.toml"
+    text = (SCENARIOS / "duffing_frequency_response.toml").read_text()
+    scene.write_text(text[:text.index("[sweep]")])
+    runs = int(os.environ.get("SMD_INTERRUPT_RUNS", 10))
+    generator = random.Random(28)
+    command = [sys.executable, "-m", "smdcli", "sweep", str(scene), "--param", "spring[0].k", "--values",
+               "linspace(10,50,40000)", "--keep", "metrics", "--no-plots"]
+    codes = []
+    for i in range(runs):
+        process = subprocess.Popen([*command, "-o", str(tmp_path / f"out{i}")], stdout=subprocess.PIPE,
+                                   stderr=subprocess.PIPE, text=True, cwd=ROOT)
+        time.sleep(generator.uniform(0.4, 3.0))
+        process.send_signal(signal.SIGINT)
+        stdout, stderr = process.communicate(timeout=120)
+        codes.append(process.returncode)
+        assert "Traceback" not in stderr and "Exception" not in stderr and "Error" not in stderr, (i, stderr)
+        assert process.returncode in (0, 130, -signal.SIGINT), (i, process.returncode, stderr)
+        if process.returncode == 130:
+            assert stderr.strip().splitlines()[-1].startswith("smd: interrupted"), stderr
+    assert codes.count(130) >= runs // 2, codes

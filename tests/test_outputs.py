@@ -201,11 +201,50 @@ def test_export_of_a_sweep_is_a_row_per_member(tmp_path, cli):
     h5 = tmp_path / "one_dof_regimes_sweep_sweep.h5"
     assert cli("export", h5, "-o", tmp_path / "s.csv").exit_code == 0
     lines = (tmp_path / "s.csv").read_text().splitlines()
-    assert lines[1].split(",")[:3] == ["member", "damper[0].c", "peak_displacement.m"]
+    assert lines[1].split(",")[:5] == ["member", "damper[0].c", "x0.m", "v0.m", "peak_displacement.m"]
     table = np.genfromtxt(tmp_path / "s.csv", delimiter=",", skip_header=2)
     with h5py.File(h5) as f:
         assert np.array_equal(table[:, 1], f["parameters/damper[0].c"][()])
-        assert np.array_equal(table[:, 2], f["metrics/peak_displacement"][()][:, 0])
+        assert np.array_equal(table[:, 2], f["initial_conditions/x0"][()][:, 0])
+        assert np.array_equal(table[:, 3], f["initial_conditions/v0"][()][:, 0])
+        assert np.array_equal(table[:, 4], f["metrics/peak_displacement"][()][:, 0])
+
+
+def test_export_of_an_initial_condition_sweep_matches_rows_to_members(tmp_path, cli):
+    assert cli("sweep", SCENARIOS / "ic_underdamped.toml", "-o", tmp_path, "--no-plots", "-q").exit_code == 0
+    h5 = tmp_path / "ic_underdamped_sweep.h5"
+    assert cli("export", h5, "-o", tmp_path / "s.csv").exit_code == 0
+    header = (tmp_path / "s.csv").read_text().splitlines()[1].split(",")
+    table = np.genfromtxt(tmp_path / "s.csv", delimiter=",", skip_header=2)
+    with h5py.File(h5) as f:
+        x0, v0 = f["initial_conditions/x0"][()], f["initial_conditions/v0"][()]
+        assert len(np.unique(np.column_stack([x0, v0]), axis=0)) == len(x0) > 1  # the members differ by them
+        assert np.array_equal(table[:, header.index("x0.m")], x0[:, 0])
+        assert np.array_equal(table[:, header.index("v0.m")], v0[:, 0])
+
+
+def test_export_of_an_interrupted_sweep_gives_the_members_done(tmp_path, cli):
+    assert cli("sweep", SCENARIOS / "one_dof_regimes_sweep.toml", "-o", tmp_path, "--no-plots", "-q").exit_code == 0
+    h5 = tmp_path / "one_dof_regimes_sweep_sweep.h5"
+    for done in (0, 2):
+        partial = tmp_path / f"partial{done}.h5"
+        partial.write_bytes(h5.read_bytes())
+        with h5py.File(partial, "r+") as f:  # as an interrupted sweep leaves it: rows past members_done dropped
+            f.attrs["complete"], f.attrs["members_done"] = False, done
+            for name in ("success", "metrics/peak_displacement", "metrics/settling_time"):
+                f[name].resize(done, axis=0)
+        out = tmp_path / f"p{done}.csv"
+        result = cli("export", partial, "-o", out)
+        if done == 0:
+            assert result.exit_code == 2 and "no member done yet" in result.stderr and "--resume" in result.stderr
+            assert result.stderr.count("\n") == 1 and not out.exists()
+            continue
+        assert result.exit_code == 0, result.output
+        assert "2 of 4 members done" in result.stdout and "--resume" in result.stdout
+        table = np.genfromtxt(out, delimiter=",", skip_header=2)
+        with h5py.File(h5) as f:
+            assert np.array_equal(table[:, 0], [0, 1])
+            assert np.array_equal(table[:, 4], f["metrics/peak_displacement"][()][:2, 0])
 
 
 # ------------------------------------------------------------------------------------------------ API

@@ -4,7 +4,7 @@ give either a model or a ScenarioError, never another exception."""
 import tomllib
 
 import tomli_w
-from conftest import SCENARIOS
+from conftest import SCENARIOS, replaced
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -71,17 +71,6 @@ def leaves(node, path=()):
     elif isinstance(node, list):
         for i, value in enumerate(node):
             yield from leaves(value, path + (i,))
-
-
-def replaced(doc, path, value):
-    import copy
-
-    doc = copy.deepcopy(doc)
-    node = doc
-    for key in path[:-1]:
-        node = node[key]
-    node[path[-1]] = value
-    return doc
 
 
 @SETTINGS

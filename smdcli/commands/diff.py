@@ -126,22 +126,38 @@ def _where(ds, index: tuple) -> dict:
 
 
 def stated_accuracy(ds) -> float | None:
-    """The accuracy a data set's run vouches for, relative to its peak (its `stated_accuracy` attribute), or None."""
+    """The accuracy a data set's run vouches for, relative to its peak or to its `accuracy_scale` (its
+    `stated_accuracy` attribute; inf where the data are not determined), or None where it states none."""
     value = ds.attrs.get("stated_accuracy")
     if value is None:
         return None
     value = float(np.max(value))
-    return value if np.isfinite(value) else None
+    return None if np.isnan(value) else value
+
+
+def _stated_bound(ds, data: np.ndarray) -> float | None:
+    """The largest error a data set vouches for, in its units: stated accuracy times its accuracy_scale or peak."""
+    accuracy = stated_accuracy(ds)
+    if accuracy is None:
+        return None
+    if accuracy == np.inf:
+        return np.inf
+    scale = ds.attrs.get("accuracy_scale")
+    if scale is None:
+        with np.errstate(invalid="ignore"):
+            finite = np.abs(data[np.isfinite(data)])
+        scale = float(finite.max()) if finite.size else 0.0
+    return accuracy * float(scale)
 
 
 def _stated_tolerances(da, db, a, b) -> tuple[float, float]:
-    """rtol, atol for --tolerance stated: the two files' stated accuracies times the peak, else rounding."""
+    """rtol, atol for --tolerance stated: the sum of the errors the two files vouch for, else rounding."""
+    bounds = (_stated_bound(da, a), _stated_bound(db, b))
+    if None not in bounds:
+        return 0.0, bounds[0] + bounds[1]
     with np.errstate(invalid="ignore"):
         finite = [np.abs(x[np.isfinite(x)]) for x in (a, b)]
     peak = max((float(x.max()) for x in finite if x.size), default=0.0)
-    sa, sb = stated_accuracy(da), stated_accuracy(db)
-    if sa is not None and sb is not None:
-        return 0.0, (sa + sb) * peak
     return STATED_OTHER_RTOL, STATED_OTHER_ATOL * peak
 
 
@@ -166,7 +182,7 @@ def _compare(name: str, da, db, rtol: float | None, atol: float | None) -> Datas
         gap = np.where(both_nan | same_inf, 0.0, gap)
         gap = np.where(np.isnan(gap), np.inf, gap)  # NaN on one side only
         bound = atol + rtol * np.maximum(np.abs(a), np.abs(b))
-        bad = gap > np.where(np.isfinite(bound), bound, 0.0)
+        bad = gap > np.where(np.isfinite(bound) | (atol == np.inf), bound, 0.0)
     count = int(bad.sum())
     if not count:
         return DatasetDiff(name, "same", shape_a, shape_b, 0, int(a.size))

@@ -68,20 +68,34 @@ def _chosen(wanted: list[str], present: dict) -> list[str]:
     return chosen
 
 
+def members_done(f) -> int:
+    """How many members a sweep file holds results for: all of them, or an interrupted sweep's members_done."""
+    total = len(f["member"])
+    return total if bool(f.attrs.get("complete", True)) else min(total, int(f.attrs.get("members_done", 0)))
+
+
 def _sweep_table(f, wanted: list[str] | None) -> tuple[list[str], list[str], list[np.ndarray]]:
-    """Header, units and columns of a sweep file: per member its parameters and metrics."""
-    header, units, columns = ["member"], ["1"], [f["member"][()]]
+    """Header, units and columns of a sweep file: per member its parameters, initial conditions and metrics (the
+    members done, for an interrupted sweep)."""
+    done = members_done(f)
+    header, units, columns = ["member"], ["1"], [f["member"][:done]]
     for path, ds in (f["parameters"].items() if "parameters" in f else ()):
         header.append(path)
         units.append(str(ds.attrs.get("units", "")))
-        columns.append(ds[()])
+        columns.append(ds[:done])
     dofs = _names(f, "dof")
+    for name in ("x0", "v0") if "initial_conditions" in f and "frequency" not in f else ():
+        ds = f[f"initial_conditions/{name}"]
+        for j, dof in enumerate(dofs):
+            header.append(f"{name}.{dof}")
+            units.append("m" if name == "x0" else "m/s")
+            columns.append(ds[:done, j])
     if "frequency" in f:  # a frequency response: a row per member and frequency
         return _response_table(f, wanted, header, units, columns, dofs)
     metrics = f["metrics"] if "metrics" in f else {}
     names = list(metrics) if wanted is None else _chosen(wanted, dict.fromkeys(metrics))
     for name in names:
-        data = metrics[name][()]
+        data = metrics[name][:done]
         unit = str(metrics[name].attrs.get("units", ""))
         for j, dof in enumerate(dofs if data.ndim == 2 else [""]):
             header.append(f"{name}.{dof}" if dof else name)
@@ -109,16 +123,23 @@ def _response_table(f, wanted, header, units, columns, dofs):
     return header, units, columns
 
 
-def export_csv(result: Path, out: Path | None, wanted: list[str] | None) -> tuple[Path, int, int]:
-    """Write the CSV; returns its path, rows and columns."""
+def export_csv(result: Path, out: Path | None, wanted: list[str] | None) -> tuple[Path, int, int, str | None]:
+    """Write the CSV; returns its path, rows, columns and a note (an interrupted sweep's members done), or None."""
     from smdcli.io.atomic import atomic_path
 
     result = Path(result)
+    note = None
     with open_result(result) as f:
         kind = str(f.attrs["kind"])
         if kind == "simulate":
             header, units, columns = _simulate_table(f, wanted)
         elif kind == "sweep":
+            done, total = members_done(f), len(f["member"])
+            if done < total:
+                resume = "run the same `smd sweep` command with --resume to finish it"
+                if done == 0:
+                    raise UsageError(f"{result}: an interrupted sweep with no member done yet; {resume}")
+                note = f"an interrupted sweep: {done} of {total} members done; {resume}"
             header, units, columns = _sweep_table(f, wanted)
         else:
             raise UsageError(f"{result}: a {kind} file; export takes simulate and sweep results")
@@ -127,4 +148,4 @@ def export_csv(result: Path, out: Path | None, wanted: list[str] | None) -> tupl
     with atomic_path(path) as tmp:
         np.savetxt(tmp, table, fmt="%.17g", delimiter=",", header=f"# units: {','.join(units)}\n{','.join(header)}",
                    comments="")
-    return path, table.shape[0], table.shape[1]
+    return path, table.shape[0], table.shape[1], note

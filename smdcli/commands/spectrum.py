@@ -64,12 +64,17 @@ def spectrum(path: str | Path, out: str | Path, periods: str = DEFAULT_PERIODS, 
         record = scenario_record(path)
     else:
         record = read_record(path, units, scale, shift)
+    _check_cost(record, T, len(zeta))
     out_dir = output_folder(out)
     from smdcli.progress import bar
 
     start = time.perf_counter()
     with bar("spectra", len(T) * len(zeta), progress) as advance:
         result = response_spectrum(record.time, record.acceleration, T, zeta, advance)
+    if not np.isfinite(result.Sa).all():
+        raise UsageError(f"{record.path}: the spectrum overflows double precision (peak acceleration "
+                         f"{np.abs(record.acceleration).max():.3g} m/s^2 over periods up to {T.max():g} s); "
+                         "check the record's units and --scale")
     run = SpectrumRun(record, result, time.perf_counter() - start)
     warning = record.drift_warning()
     if warning:
@@ -89,6 +94,21 @@ def spectrum(path: str | Path, out: str | Path, periods: str = DEFAULT_PERIODS, 
             save_figure(spectrum_figure(result, record, f"Response spectrum of {path.name}"), png)
             run.outputs.append(png)
     return run
+
+
+def _check_cost(record: Record, periods: np.ndarray, dampings: int) -> None:
+    """Refuse, before anything is allocated, periods the record cannot resolve and runs too large to finish."""
+    from smdcli.solvers.spectrum import MAX_SUB_POINTS, MAX_WORK, POINTS_PER_PERIOD, spectrum_cost
+
+    most, work = spectrum_cost(len(record.time), record.step, periods, dampings)
+    if most > MAX_SUB_POINTS:
+        shortest = record.step * POINTS_PER_PERIOD / MAX_SUB_POINTS
+        raise UsageError(f"--periods: {periods.min():.3g} s is far below the record's sampling interval "
+                         f"{record.step:.3g} s ({record.path}); the shortest period it resolves is {shortest:.3g} s")
+    if work > MAX_WORK:
+        raise UsageError(f"--periods x --damping: {work:.3g} response values to evaluate over {len(record.time)} "
+                         f"samples of {record.path} (limit {MAX_WORK:.0e}); use fewer or longer periods, fewer "
+                         "damping ratios, or a shorter record")
 
 
 def scenario_record(path: Path) -> Record:

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from smdcli import interrupts
 from smdcli import scenario as scenario_mod
 from smdcli.errors import UsageError
 from smdcli.progress import bar
@@ -64,6 +65,10 @@ def run_and_write(path, out, cli: dict[str, Any], workers: int | None = None, pl
         if not family.base.is_linear or spec.measure:
             for s in {0, len(family) - 1}:
                 _driving_force(family.member_scenario(s))
+    elif scheduler not in (None, "local"):
+        from smdcli.sweep.cluster import check_address
+
+        check_address(scheduler)  # before the output folder is made: an address smd cannot use writes nothing
     out_dir = output_folder(out)
     run = SweepRun(family)
     with together():  # the files appear together, or none of them
@@ -171,7 +176,7 @@ def _solve_chunks(run: SweepRun, stream, plan: list[range], method, workers, gri
 
     def make_room() -> None:  # at most two chunks held: the one being written and the one being solved
         if len(writing) == 2:
-            writing.pop(0).result()
+            interrupts.result(writing.pop(0))
 
     try:
         with resumable_path(partial, final):
@@ -192,7 +197,7 @@ def _solve_chunks(run: SweepRun, stream, plan: list[range], method, workers, gri
                         make_room()
                         writing.append(writer.submit(_write_chunk, run, stream, chunk))
                 for pending in writing:
-                    pending.result()
+                    interrupts.result(pending)
             run.wall_time_s = time.perf_counter() - started
             if cluster is not None:
                 run.how = f"Dask tasks on {cluster.where}, each chunk in {run.how}"
@@ -207,18 +212,14 @@ def _solve_chunks(run: SweepRun, stream, plan: list[range], method, workers, gri
         _settle(writing)
         raise
     finally:
-        writer.shutdown()
+        with interrupts.deferred(raise_after=False):
+            writer.shutdown()
 
 
 def _settle(writing: list) -> None:
     """Wait for chunks still being written, whatever interrupts the wait."""
     for pending in writing:
-        while True:
-            try:
-                pending.exception()
-                break
-            except KeyboardInterrupt:
-                continue
+        interrupts.settled(pending)
 
 
 def _measure_and_write(run: SweepRun, stream, members: range, result, grid, length: int) -> None:

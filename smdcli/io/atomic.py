@@ -2,7 +2,7 @@
 final one and renamed when complete; inside together(), a run's files are renamed together at its end.
 A signal received while writing (even one whose exception was swallowed) stops the rename.
 
-Must not import: anything of smd but interrupts."""
+Must not import: anything of smd but interrupts, errors and io.folders."""
 
 from __future__ import annotations
 
@@ -19,10 +19,15 @@ _kept: set[str] = set()  # temporary files that record progress (a streamed swee
 
 def _commit(renames: list[tuple[str, Path]]) -> None:
     """Rename temporary files onto their final names, unless a signal came (even one whose exception was swallowed)."""
+    from smdcli.errors import UsageError
+
     with interrupts.held():  # the check and the renames are one step for a signal
         interrupts.raise_if_received()
         for tmp, final in renames:
-            os.replace(tmp, final)
+            try:
+                os.replace(tmp, final)
+            except OSError as exc:
+                raise UsageError(f"{final}: cannot write: {exc.strerror or exc}") from None
 
 
 def _discard(paths) -> None:
@@ -55,10 +60,20 @@ def together():
 
 @contextmanager
 def atomic_path(final: Path):
-    """Yield a temporary path beside `final`; rename it onto `final` only if the block succeeds
-    (inside together(): when that block ends)."""
+    """Yield a temporary path beside `final`, its folder made as -o makes one; rename it onto `final` only if the
+    block succeeds (inside together(): when that block ends). A file that cannot be written is a UsageError that
+    names `final`, never the temporary name."""
+    from smdcli.errors import UsageError
+    from smdcli.io.folders import output_folder
+
     final = Path(final)
-    fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".part", dir=final.parent)
+    if final.is_dir():
+        raise UsageError(f"{final}: cannot write: a folder has that name; expected a file name")
+    output_folder(final.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".part", dir=final.parent)
+    except OSError as exc:
+        raise UsageError(f"{final}: cannot write: {exc.strerror or exc}") from None
     os.close(fd)
     try:
         yield Path(tmp)
@@ -70,9 +85,20 @@ def atomic_path(final: Path):
             _pending.append((tmp, final))
         else:
             _commit([(tmp, final)])
+    except OSError as exc:
+        _discard([tmp])
+        raise UsageError(f"{final}: cannot write: {_reason(exc, tmp)}") from None
     except BaseException:
         _discard([tmp])
         raise
+
+
+def _reason(exc: OSError, tmp: str) -> str:
+    """Why writing failed, in words that do not name the temporary file."""
+    if exc.strerror:
+        return exc.strerror
+    text = str(exc).replace(tmp, "the file")
+    return text.split(" (")[0] if "unable to" in text.lower() else text
 
 
 @contextmanager

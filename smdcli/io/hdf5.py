@@ -13,11 +13,13 @@ import numpy as np
 from smdcli import __version__, provenance
 from smdcli.io.atomic import atomic_path
 from smdcli.model import Model
+from smdcli.model.accuracy import evaluation_accuracy, matrix_accuracy, modes_accuracy
 from smdcli.result import Result
 from smdcli.scenario import Scenario
 from smdcli.solvers.base import acceleration_accuracy
 
 SCHEMA_VERSION = 1
+TIME_ACCURACY = float(np.finfo(float).eps)  # each output time is a decimal start + k*step rounded once
 
 
 def write_header(f, scenario: Scenario, kind: str) -> None:
@@ -106,8 +108,14 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
         time = f.create_dataset("time", data=result.time)
         time.attrs["units"] = "s"
         time.make_scale("time")
+        stated(time, TIME_ACCURACY)
         dof = _strings(f, "dof", result.dofs)
         dof.make_scale("dof")
+        accuracy = {"displacement": result.stats.stated_accuracy, "velocity": result.stats.stated_accuracy,
+                    "acceleration": float(acceleration_accuracy(
+                        model.M, model.C, model.K, result.stats.stated_accuracy, result.displacement,
+                        result.velocity, result.acceleration, result.force)[0]),
+                    "force": evaluation_accuracy(model.applied_force, result.time) if model.is_forced else 0.0}
         for name, data, units in (
             ("displacement", result.displacement, "m"),
             ("velocity", result.velocity, "m/s"),
@@ -118,15 +126,10 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
             ds.attrs["units"] = units
             ds.dims[0].attach_scale(time)
             ds.dims[1].attach_scale(dof)
-            if name in ("displacement", "velocity"):  # the applied force is evaluated, not solved for
-                ds.attrs["stated_accuracy"] = result.stats.stated_accuracy
-            elif name == "acceleration":
-                ds.attrs["stated_accuracy"] = float(acceleration_accuracy(
-                    model.M, model.C, model.K, result.stats.stated_accuracy, result.displacement, result.velocity,
-                    result.acceleration, result.force)[0])
+            stated(ds, accuracy[name])
 
         if result.ground is not None:
-            _write_ground(f, scenario, model, result, time, dof)
+            _write_ground(f, scenario, model, result, time, dof, accuracy)
         if result.elements is not None or result.energy is not None:
             from smdcli.solvers.energy import derived_accuracy
 
@@ -137,7 +140,10 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
                 _write_energy(f, result.energy, time)
             for name, value in accuracy.items():
                 path = f"elements/{name}" if name in ("spring_force", "damper_force", "reaction") else f"energy/{name}"
-                f[path].attrs["stated_accuracy"] = value
+                if path in f:  # a [system] scene has no element forces
+                    stated(f[path], value, result.energy.largest if path.startswith("energy/") else None)
+            if "elements/added_damping_force" in f:  # C_damping v: the velocity's accuracy, through a product
+                stated(f["elements/added_damping_force"], result.stats.stated_accuracy * (model.n + 2))
         if checks:
             _write_expect(f, checks)
 
@@ -149,6 +155,7 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
 
         group = f.create_group("model")
         write_matrices(group, model, dof)
+        modes_stated = modes_accuracy(model)
         modes = group.create_group("modes")
         m = model.modes
         modes.attrs["natural_frequencies_rad_s"] = m.natural_frequencies
@@ -159,26 +166,35 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
         mode.make_scale("mode")
         for name, data, units in (("natural_frequencies_rad_s", m.natural_frequencies, "rad/s"),
                                   ("damping_ratios", m.damping_ratios, "1")):
-            _with_scales(modes.create_dataset(name, data=data), mode).attrs["units"] = units
+            ds = _with_scales(modes.create_dataset(name, data=data), mode)
+            ds.attrs["units"] = units
+            stated(ds, modes_stated[name])
         shapes = _with_scales(modes.create_dataset("shapes", data=m.shapes), dof, mode)
         shapes.attrs["units"] = "1"
         shapes.attrs["normalization"] = "mass-normalized (shapes^T M shapes = I), largest entry of each column positive"
+        stated(shapes, modes_stated["shapes"])
         eigen = modes.create_dataset("eigenvalues", data=np.stack([m.eigenvalues.real, m.eigenvalues.imag], axis=1))
         eigen.attrs["units"] = "1/s"
         eigen.attrs["columns"] = ["real", "imag"]
+        stated(eigen, modes_stated["eigenvalues"])
         if model.nonlinear_paths:
             group.attrs["nonlinear_elements"] = list(model.nonlinear_paths)
 
 
-def _write_ground(f, scenario: Scenario, model: Model, result: Result, time, dof) -> None:
+def _write_ground(f, scenario: Scenario, model: Model, result: Result, time, dof, accuracy: dict) -> None:
     """Absolute displacement, velocity and acceleration beside the relative ones, and the support's own motion."""
     f.attrs["relative_to_ground"] = 1
     spec = scenario.ground_motion
+    ground = _ground_accuracy(model, result)
     for name, units in (("displacement", "m"), ("velocity", "m/s"), ("acceleration", "m/s^2")):
-        ds = _with_scales(f.create_dataset(f"absolute_{name}", data=result.absolute(name)), time, dof)
+        absolute = result.absolute(name)
+        ds = _with_scales(f.create_dataset(f"absolute_{name}", data=absolute), time, dof)
         ds.attrs["units"] = units
         ds.attrs["description"] = f"{name} in the fixed frame: the relative {name} plus the ground's"
         f[name].attrs["description"] = f"{name} relative to the moving ground"
+        # the two parts' errors add: each part's accuracy times its own peak, over the sum's peak
+        parts = accuracy[name] * _peak(getattr(result, name)) + ground[name] * _peak(getattr(result.ground, name))
+        stated(ds, parts / _peak(absolute) if _peak(absolute) > 0 else 0.0)
     group = f.create_group("ground")
     group.attrs["quantity"] = spec.quantity
     group.attrs["type"] = spec.shape.type
@@ -187,6 +203,7 @@ def _write_ground(f, scenario: Scenario, model: Model, result: Result, time, dof
     for name, units in (("displacement", "m"), ("velocity", "m/s"), ("acceleration", "m/s^2")):
         ds = _with_scales(group.create_dataset(name, data=getattr(result.ground, name)), time)
         ds.attrs["units"] = units
+        stated(ds, ground[name])
         ds.attrs["description"] = ("as given" if name == spec.quantity else
                                    "derived exactly" if spec.quantity == "displacement" or
                                    (spec.quantity == "velocity" and name == "acceleration") else
@@ -195,6 +212,29 @@ def _write_ground(f, scenario: Scenario, model: Model, result: Result, time, dof
         file = group.create_dataset("file_text", data=spec.shape.file_text)
         file.attrs["file"] = spec.shape.file
         file.attrs["sha256"] = hashlib.sha256(spec.shape.file_text.encode()).hexdigest()
+
+
+def _ground_accuracy(model: Model, result: Result) -> dict[str, float]:
+    """The ground's displacement, velocity and acceleration: evaluated from their signals where given or derived,
+    integrated from rest (with that run's stated accuracy) otherwise."""
+    g, history = model.ground, result.ground
+    signals = {"displacement": g.given if g.quantity == "displacement" else None,
+               "velocity": g.velocity, "acceleration": g.acceleration}
+    return {name: evaluation_accuracy(signal.value, result.time) if signal is not None
+            else (history.integrated_accuracy if name != "acceleration" else 0.0)
+            for name, signal in signals.items()}
+
+
+def _peak(data: np.ndarray) -> float:
+    return float(np.max(np.abs(data), initial=0.0))
+
+
+def stated(ds, accuracy: float, scale: float | None = None) -> None:
+    """A data set's stated accuracy: each entry's error is at most accuracy times its largest magnitude, or times
+    `scale` (in the data set's units) where one is given; inf where the data are not determined to any digit."""
+    ds.attrs["stated_accuracy"] = float(accuracy)
+    if scale is not None:
+        ds.attrs["accuracy_scale"] = float(scale)
 
 
 def _write_elements(f, elements, time, dof) -> None:
@@ -246,12 +286,15 @@ def _write_expect(f, checks: list) -> None:
 
 
 def write_matrices(group, model_or_family, dof, member=None) -> None:
-    """M, C, K with units, their axes named by the DOF scale (and the member scale for a family)."""
+    """M, C, K with units and stated accuracies, their axes named by the DOF scale (and the member scale for a
+    family)."""
+    accuracy = matrix_accuracy(model_or_family if member is None else model_or_family.base)
     for name, units in (("M", "kg"), ("C", "N s/m"), ("K", "N/m")):
         ds = group.create_dataset(name, data=getattr(model_or_family, name))
         ds.attrs["units"] = units
         axes = (dof, dof) if member is None else (member, dof, dof)
         _with_scales(ds, *axes)
+        stated(ds, accuracy[name])
 
 
 def _strings(f, name: str, values):

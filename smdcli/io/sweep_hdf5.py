@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from smdcli.io.atomic import atomic_path
-from smdcli.io.hdf5 import _strings, _with_scales, write_header, write_matrices
+from smdcli.io.hdf5 import TIME_ACCURACY, _strings, _with_scales, stated, write_header, write_matrices
+from smdcli.model.accuracy import EPS, evaluation_accuracy
 from smdcli.sweep.spec import METRIC_UNITS, SETTLING_BAND, parameter_units
 
 
@@ -45,11 +46,13 @@ def _write_family(f, family):
         ds = params.create_dataset(name, data=family.values[:, i])
         ds.attrs["units"] = parameter_units(name)
         ds.dims[0].attach_scale(member)
+        stated(ds, INPUT_ACCURACY * len(family))
         # The grid's own axis: member reshapes to grid_shape, and these are its coordinates.
         axis = grid.create_dataset(name, data=np.asarray(spec.values[i], dtype=float))
         axis.attrs["units"] = parameter_units(name)
         axis.attrs["axis"] = i
         axis.make_scale(name)
+        stated(axis, INPUT_ACCURACY * len(family))
     dof = _strings(f, "dof", family.base.dofs)
     dof.make_scale("dof")
     initial = f.create_group("initial_conditions")
@@ -57,6 +60,7 @@ def _write_family(f, family):
         ds = initial.create_dataset(name, data=getattr(family, name))
         ds.dims[0].attach_scale(member)
         ds.dims[1].attach_scale(dof)
+        stated(ds, INPUT_ACCURACY)
     model = f.create_group("model")
     write_matrices(model, family, dof, member)
     return member, dof
@@ -68,6 +72,8 @@ def _write_run(f, run: dict | None) -> None:
         group.attrs[key] = value
 
 
+INPUT_ACCURACY = 4 * EPS  # numbers parsed from the scenario or a values spec (linspace...): a rounding or two each
+ESTIMATE_ACCURACY = 0.5  # an error estimate is an estimate: good to within half its size, not to its digits
 HISTORY_UNITS = {"displacement": "m", "velocity": "m/s", "acceleration": "m/s^2", "force": "N"}
 CHUNK_BYTES = 1 << 20  # an HDF5 chunk of a growing data set: about 1 MB
 
@@ -106,11 +112,15 @@ class SweepFile:
             else:
                 time = _growing(f, "time", (length,), float)
             time.attrs["units"] = "s"
+            stated(time, TIME_ACCURACY)
             if keep == "full":
                 for name, units in HISTORY_UNITS.items():
                     ds = _growing(f, name, (length, n), float)
                     ds.attrs["units"] = units
                     _with_scales(ds, member, time if grid is not None else None, dof)
+                base = family.base
+                if grid is not None:  # the applied force is evaluated; members differ in it only by its numbers
+                    stated(f["force"], evaluation_accuracy(base.applied_force, grid) if base.is_forced else 0.0)
             _growing(f, "success", (), bool, compressed=True).dims[0].attach_scale(member)
             for name in ("message", "method"):
                 _growing(f, name, (), h5py.string_dtype("utf-8"), compressed=True).dims[0].attach_scale(member)
@@ -118,6 +128,7 @@ class SweepFile:
             ds.attrs["units"] = "1"
             ds.attrs["meaning"] = "each member's vouched error, relative to its peak"
             ds.dims[0].attach_scale(member)
+            stated(ds, ESTIMATE_ACCURACY)
             group = f.create_group("metrics")
             group.attrs["settling_band"] = SETTLING_BAND
             for name, units in METRIC_UNITS.items():
@@ -192,9 +203,11 @@ class SweepFile:
         worst = {name: stated for name in ("displacement", "velocity")}
         worst["acceleration"] = chunk.acceleration_stated
         worst.update({f"metrics/{m}": stated for m in METRIC_UNITS if m != "settling_time"})
+        worst["metrics/settling_time"] = chunk.settling_error  # in seconds: its accuracy_scale is 1 s
         for name, value in worst.items():  # the worst member's so far, relative to the peak
             if name in f:
                 f[name].attrs["stated_accuracy"] = max(float(f[name].attrs.get("stated_accuracy", 0.0)), value)
+        f["metrics/settling_time"].attrs["accuracy_scale"] = 1.0
         f.attrs["members_done"] = stop
         f.flush()
 
@@ -260,8 +273,8 @@ def _write_response(f, response, member, dof, family, normalized: bool) -> None:
             stacked(f, "normalized_amplitude", response.amplitude * k[:, None, None], "1")
     for direction, (amp, lag) in response.measured.items():
         group = f.create_group(f"measured/{direction}")
-        stacked(group, "amplitude", amp, "m/N")
-        stacked(group, "phase", lag, "rad")
+        stated(stacked(group, "amplitude", amp, "m/N"), response.accuracy["measured"])
+        stated(stacked(group, "phase", lag, "rad"), response.accuracy["measured"])
         ds = group.create_dataset("steady", data=response.steady[direction])
         ds.dims[0].attach_scale(member)
         ds.dims[1].attach_scale(freq)
@@ -272,5 +285,8 @@ def _write_response(f, response, member, dof, family, normalized: bool) -> None:
     _strings(peaks, "dof", [p["dof"] for p in response.peaks])
     peaks.create_dataset("omega", data=np.array([p["omega"] for p in response.peaks], dtype=float))
     peaks.create_dataset("amplitude", data=np.array([p["amplitude"] for p in response.peaks], dtype=float))
+    for name, value in response.accuracy.items():  # the exact data sets': amplitudes, phases, peaks
+        if name in f:
+            stated(f[name], value)
     _strings(peaks, "source", [f"measured, sweep {p['direction']}" if "direction" in p else "exact"
                                for p in response.peaks])

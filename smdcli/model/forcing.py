@@ -49,8 +49,9 @@ class Signal:
         """Times in (t0, t1) where the signal or its slope jumps."""
         return np.empty(0)
 
-    def edge_count(self, t0: float, t1: float) -> float:
-        """How many discontinuities fall in [t0, t1] (a signal with many overrides this to count without listing)."""
+    def edge_count(self, t0: float, t1: float, limit: int | None = None) -> float:
+        """How many discontinuities fall in [t0, t1] (a signal with many overrides this to count without listing);
+        past `limit` the count may stop early at any number above it."""
         return len(self.breakpoints(t0, t1))
 
     def exo(self) -> Exo | None:
@@ -161,7 +162,7 @@ class Square(Signal):
         p = self._phase(t)
         return np.where((p > 0) & (p <= self.duty), self.amplitude, -self.amplitude)
 
-    def edge_count(self, t0: float, t1: float) -> float:
+    def edge_count(self, t0: float, t1: float, limit: int | None = None) -> float:
         """About how many edges fall in [t0, t1], without listing them."""
         return 2 * (t1 - t0) / self.period + 4
 
@@ -204,8 +205,13 @@ class FourierSquare(Signal):
 
     def value(self, t):
         t = np.asarray(t, dtype=float)
-        arg = np.multiply.outer(t - self.t0, self.harmonics * self.omega) + self.phase
-        return np.sin(arg) @ self.coefs
+        flat = t.ravel()
+        out = np.empty(flat.shape)
+        block = max(1, 2**21 // max(len(self.harmonics), 1))  # times x harmonics held at once: 16 MB at most
+        for lo in range(0, len(flat), block):
+            arg = np.multiply.outer(flat[lo:lo + block] - self.t0, self.harmonics * self.omega) + self.phase
+            out[lo:lo + block] = np.sin(arg) @ self.coefs
+        return out.reshape(t.shape)
 
     def exo(self):
         m = len(self.harmonics)
@@ -294,6 +300,14 @@ class ExpressionSignal(Signal):
 
     def breakpoints(self, t0, t1):
         return self.expression.edges(t0, t1)
+
+    def edge_count(self, t0, t1, limit=None):
+        from smdcli.expression import TooManyEdges
+
+        try:
+            return len(self.expression.edges(t0, t1, limit))
+        except TooManyEdges as exc:
+            return exc.count
 
 
 def build_signal(spec: ForceSpec) -> Signal:

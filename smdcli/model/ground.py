@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from smdcli.errors import ScenarioError
 from smdcli.model.forcing import (Chirp, Constant, ExpressionSignal, FourierSquare, Harmonic, Pulse, Signal, Square,
                                   Step, Table, build_signal)
 from smdcli.model.mass import mass_solve
@@ -56,8 +57,30 @@ class GroundMotion:
         return all(s is None or s.exo() is not None for s in (self.given, self.velocity, self.acceleration))
 
 
-def ground_motion(spec: GroundMotionSpec, start: float, end: float) -> GroundMotion:
-    """The ground motion of a validated [ground_motion] over the run [start, end]."""
+def ground_motion(spec: GroundMotionSpec, start: float, end: float, source: str = "<scenario>") -> GroundMotion:
+    """The ground motion of a validated [ground_motion] over the run [start, end]; ScenarioError (naming `source`)
+    for one that jumps more often than a run can restart, or whose derivatives are too large to evaluate."""
+    from smdcli.expression import ExpressionError
+
+    try:
+        return _ground_motion(spec, start, end)
+    except TooManyJumps as exc:
+        raise ScenarioError(source, "ground_motion", f"the ground's displacement or velocity jumps {exc.count:.3g} "
+                            f"times or more in the run (limit {MAX_JUMPS}); each is a restart") from None
+    except ExpressionError as exc:
+        raise ScenarioError(source, "ground_motion.expr", f"{exc}; a {spec.quantity} is differentiated to the "
+                            "ground's acceleration") from None
+
+
+class TooManyJumps(ValueError):
+    """A ground motion that jumps more than MAX_JUMPS times in the run; `count` is how many were seen (at least)."""
+
+    def __init__(self, count: float):
+        self.count = count
+        super().__init__(f"{count:.3g} jumps")
+
+
+def _ground_motion(spec: GroundMotionSpec, start: float, end: float) -> GroundMotion:
     given = build_signal(spec.shape)
     if isinstance(given, Chirp):  # differentiated as the expression it is
         text = (f"{given.amplitude!r} * sin(2 * pi * ({given.f0!r} * t + 0.5 * {given.rate!r} * t ** 2) + "
@@ -87,7 +110,11 @@ def ground_motion(spec: GroundMotionSpec, start: float, end: float) -> GroundMot
 
 
 def derivative(signal: Signal, start: float, end: float) -> tuple[Signal | None, list[tuple[float, float]]]:
-    """d/dt of a signal between its jumps (None where that is zero), and its jumps (t, size) inside (start, end)."""
+    """d/dt of a signal between its jumps (None where that is zero), and its jumps (t, size) inside (start, end);
+    TooManyJumps, counted before any is listed, past MAX_JUMPS."""
+    count = signal.edge_count(start, end, MAX_JUMPS)
+    if not count <= MAX_JUMPS:
+        raise TooManyJumps(count)
     edges = signal.breakpoints(start, end)
     jumps = [(float(t), float(signal.value(t) - signal.value_left(t))) for t in edges]
     jumps = [(t, size) for t, size in jumps if size != 0.0]

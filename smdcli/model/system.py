@@ -24,7 +24,8 @@ from smdcli.model.elements import Element, Incidence, elements_of, incidence, in
 from smdcli.model.forcing import Signal, build_signal
 from smdcli.model.ground import MAX_JUMPS, GroundMotion, ground_motion, state_jumps
 from smdcli.model.mass import mass_solve
-from smdcli.scenario import Scenario, TimeSpec
+from smdcli.model.grid import time_grid
+from smdcli.scenario import Scenario
 
 # Relative width around zeta = 1 inside which a mode is called critically damped.
 CRITICAL_BAND = 1e-8
@@ -36,17 +37,6 @@ STIFF_RATIO = 1e3
 MODAL_FORM_DOFS = 64
 # The DOF index of a signal that is the ground's acceleration: its column of B is -M 1, on every DOF.
 GROUND_DOF = -1
-
-
-def time_grid(spec: TimeSpec) -> np.ndarray:
-    """Output times: start + k*step up to end (as MATLAB's start:step:end), or `points` evenly."""
-    if spec.points is not None:
-        h = (spec.end - spec.start) / (spec.points - 1)
-        grid = spec.start + h * np.arange(spec.points)
-        grid[-1] = spec.end
-        return grid
-    n = int(math.floor((spec.end - spec.start) / spec.step * (1 + 1e-12))) + 1
-    return spec.start + spec.step * np.arange(n)
 
 
 @dataclass(frozen=True)
@@ -345,19 +335,29 @@ def build(scenario: Scenario) -> Model:
                 quad_rows.append((row, element.coef, element.path))
                 continue
             nodes = np.flatnonzero(row)  # one or two: the element's stamp, not an n x n outer product per element
-            target[np.ix_(nodes, nodes)] += element.coef * np.outer(row[nodes], row[nodes])
+            with np.errstate(over="ignore", invalid="ignore"):  # an overflow is named by _check_finite below
+                target[np.ix_(nodes, nodes)] += element.coef * np.outer(row[nodes], row[nodes])
             if element.law == "cubic":
                 cubic_rows.append((row, element.k3, element.path))
         cubic, quadratic = incidence(cubic_rows), incidence(quad_rows)
-    extra = added_damping(scenario, M, K) if scenario.damping is not None else None
-    C = C if extra is None else C + extra
+    _check_finite(scenario, dofs, K=K, C=C)
+    _check_matrices_finite(M, C, K, scenario, dofs)  # before [damping], which needs the undamped modes
+    with np.errstate(all="ignore"):
+        try:
+            extra = added_damping(scenario, M, K) if scenario.damping is not None else None
+        except (np.linalg.LinAlgError, ValueError) as exc:  # LAPACK's eigensolver gave up on these matrices
+            raise ScenarioError(scenario.path, f"damping.{scenario.damping.given}", "the undamped modes it is "
+                                f"defined by cannot be computed ({str(exc).split('.')[0]}); check M and K") from None
+        C = C if extra is None else C + extra
+    _check_finite(scenario, dofs, C=C)
+    _check_matrices_finite(M, C, K, scenario, dofs)
     signals = tuple(build_signal(f) for f in scenario.forces)
     force_dofs = tuple(index[f.on] for f in scenario.forces)
     shapes = scenario.forces
     ground = jumps = None
     if scenario.ground_motion is not None:
-        ground = ground_motion(scenario.ground_motion, scenario.time.start, scenario.time.end)
-        if len(ground.jumps) > MAX_JUMPS:
+        ground = ground_motion(scenario.ground_motion, scenario.time.start, scenario.time.end, scenario.path)
+        if len(ground.jumps) > MAX_JUMPS:  # jumps of displacement and of velocity together
             raise ScenarioError(scenario.path, "ground_motion", f"the ground's displacement or velocity jumps "
                                 f"{len(ground.jumps)} times in the run (limit {MAX_JUMPS}); each is a restart")
         jumps = state_jumps(ground, M, C)
@@ -373,24 +373,50 @@ def build(scenario: Scenario) -> Model:
         element_form=scenario.system is None, ground=ground, jumps=jumps or (),
         elements=elements_of(scenario, dofs), added_damping=extra)
     _check_forces(model, scenario)
-    _check_matrices_finite(model, scenario)
     check_damping(model.C, scenario)
     return model
 
 
-def _check_matrices_finite(model: Model, scenario: Scenario) -> None:
-    """Refuse a scene whose accelerations overflow (a mass of 1e-320 kg, say): no method could solve it."""
+def _check_matrices_finite(M: np.ndarray, C: np.ndarray, K: np.ndarray, scenario: Scenario,
+                           dofs: tuple[str, ...]) -> None:
+    """Refuse a scene whose accelerations overflow (a mass of 1e-320 kg under a stiffness), naming the mass: no
+    method could solve it, and the undamped modes [damping] needs could not be computed."""
     with np.errstate(all="ignore"):
         try:
-            rows = model.state_matrix[model.n:]
+            rows = np.hstack([mass_solve(M, K), mass_solve(M, C)])
         except np.linalg.LinAlgError:
-            rows = np.full((model.n, 2 * model.n), np.nan)
+            rows = np.full((len(dofs), 2 * len(dofs)), np.nan)
     bad = ~np.isfinite(rows).all(axis=1)
     if bad.any():
         i = int(np.argmax(bad))
         where = f"mass[{i}].m" if scenario.system is None else "system.M"
-        raise ScenarioError(scenario.path, where, f"M^-1 K or M^-1 C is not finite for DOF {model.dofs[i]!r}: "
+        raise ScenarioError(scenario.path, where, f"M^-1 K or M^-1 C is not finite for DOF {dofs[i]!r}: "
                                                   "a mass too small for the stiffness or damping it carries")
+
+
+def _check_finite(scenario: Scenario, dofs: tuple[str, ...], **matrices: np.ndarray) -> None:
+    """Refuse an assembled K or C that overflows, naming the field that put the overflow there."""
+    for name, matrix in matrices.items():
+        bad = ~np.isfinite(matrix).all(axis=1)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise ScenarioError(scenario.path, _blame(scenario, name, dofs[i]),
+                                f"the assembled {name} overflows double precision at DOF {dofs[i]!r}; expected "
+                                "numbers whose sums and products stay below 1.8e308")
+
+
+def _blame(scenario: Scenario, matrix: str, dof: str) -> str:
+    """The field that put an overflowing entry into K or C at a DOF: [damping], an element on it, or [system]."""
+    if scenario.system is not None:
+        return f"system.{matrix}" if matrix == "K" or scenario.damping is None else f"damping.{scenario.damping.given}"
+    elements = scenario.springs if matrix == "K" else scenario.dampers
+    own = [e for e in elements if dof in e.connects]
+    with np.errstate(all="ignore"):
+        if own and not math.isfinite(sum(abs(e.coef) for e in own)):
+            return f"{own[0].path}.{'k' if matrix == 'K' else 'c'}"
+    if matrix == "C" and scenario.damping is not None:
+        return f"damping.{scenario.damping.given}"
+    return f"{own[0].path}.{'k' if matrix == 'K' else 'c'}" if own else "mass"
 
 
 MAX_EDGES = 1_000_000  # force discontinuities in one run: each is a restart of the integration
@@ -402,7 +428,7 @@ def _check_forces(model: Model, scenario: Scenario) -> None:
     if not model.signals:
         return
     for j, signal in enumerate(model.signals):
-        edges = signal.edge_count(scenario.time.start, scenario.time.end)
+        edges = signal.edge_count(scenario.time.start, scenario.time.end, MAX_EDGES)
         if not edges <= MAX_EDGES:
             raise ScenarioError(scenario.path, model.force_paths[j],
                                 f"{edges:.3g} discontinuities in the run (limit {MAX_EDGES:.0e}); "

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from smdcli.scenario.reader import _Table
-from smdcli.scenario.records import ColumnsError, read_text, two_columns
+from smdcli.scenario.records import ColumnsError, check_scaled, read_text, slope_problem, two_columns
 from smdcli.scenario.spec import FORCE_TYPES, GROUND, GROUND_QUANTITIES, GROUND_UNITS, ForceSpec, GroundMotionSpec
 
 _FORCE_FIELDS = {
@@ -79,6 +79,9 @@ def _read_shape(t: _Table, index: int, on: str, others: tuple[str, ...]) -> Forc
             raise t.fail("terms", f"expected at most 10000 harmonics, found {spec['terms']}")
     elif kind == "pulse":
         spec["duration"] = t.number("duration", positive=True)
+        if spec["t0"] + spec["duration"] == spec["t0"]:
+            raise t.fail("duration", f"expected a duration that moves the time t0 = {spec['t0']:g} s, found "
+                                     f"{spec['duration']:g} s, below its rounding ({math.ulp(spec['t0']):.3g} s)")
     elif kind == "chirp":
         spec["f0"] = t.number("f0", minimum=0.0)
         spec["f1"] = t.number("f1", minimum=0.0)
@@ -124,8 +127,12 @@ def _read_ground_motion(t: _Table) -> GroundMotionSpec:
             shape = replace(shape, expr=f"({shape.expr}) * {factor!r}")
     else:
         shape = replace(shape, amplitude=shape.amplitude * factor)
-    if not all(math.isfinite(v) for v in shape.values + (shape.amplitude,)):
-        raise t.fail("scale", "the scaled ground motion overflows; expected finite values")
+    si_units = next(u for u, f in allowed.items() if f == 1.0)
+    if shape.type == "table":
+        check_scaled(t.file, t.path, shape.t, shape.values, si_units)
+    elif not math.isfinite(shape.amplitude):
+        raise t.fail("amplitude", f"the amplitude in {si_units} overflows double precision once converted; "
+                                  "expected a finite value")
     return GroundMotionSpec(quantity=quantity, shape=shape, units=units)
 
 
@@ -145,6 +152,9 @@ def _read_table_force(t: _Table) -> dict[str, Any]:
     for i in range(1, len(times)):
         if times[i] <= times[i - 1]:
             raise t.fail(f"t[{i}]", f"expected strictly increasing times, found {times[i]:g} after {times[i - 1]:g}")
+    problem = None if t.has("file") else slope_problem(times, values)
+    if problem is not None:
+        raise t.fail(f"values[{problem[0]}]", problem[1])
     spec = {"t": times, "values": values, "interpolation": interpolation}
     if t.has("file"):
         spec.update(file=file, file_text=file_text)

@@ -44,18 +44,23 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
     """Validate scenario text; `file` names it in messages and anchors relative paths."""
     if not text.strip():
         raise ScenarioError(file, None, "is empty; a scenario needs at least [time] and one [[mass]] or [system]")
+    text = text.removeprefix("\ufeff")  # a byte-order mark, as Windows editors save UTF-8
     try:
         doc = tomllib.loads(text)
     except RecursionError:
         raise ScenarioError(file, None, "invalid TOML: arrays or tables nested too deeply") from None
-    except ValueError as exc:  # Python refuses integer literals of more than 4300 digits
-        raise ScenarioError(file, None, f"invalid TOML: a number literal too long ({str(exc).split(':')[0]})") from None
-    except tomllib.TOMLDecodeError as exc:
+    except tomllib.TOMLDecodeError as exc:  # before ValueError, its base class: the parser's own words and line
         message = str(exc)
-        match = re.search(r"\(at line (\d+), column \d+\)", message)
+        match = re.search(r"\(at line (\d+), column (\d+)\)", message)
         line = int(match.group(1)) if match else None
         message = re.sub(r"\s*\(at line \d+, column \d+\)", "", message)
-        raise ScenarioError(file, None, f"invalid TOML: {message}", line=line) from None
+        column = f" (column {match.group(2)})" if match else ""
+        if "(at end of document)" in message:  # where the file ran out: its last line
+            line = text.count("\n") + (0 if text.endswith("\n") else 1)
+            message, column = message.replace("(at end of document)", "").strip(), " (at the end of the file)"
+        raise ScenarioError(file, None, f"invalid TOML: {message}{column}", line=line) from None
+    except ValueError as exc:  # Python refuses integer literals of more than 4300 digits
+        raise ScenarioError(file, None, f"invalid TOML: a number literal too long ({str(exc).split(':')[0]})") from None
     return parse_document(doc, text, file)
 
 
@@ -94,6 +99,7 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
                    for i, raw in enumerate(top.tables("expect")))
     top.finish(_TOP_KEYS)
 
+    _check_size(file, len(dofs), system is not None)
     if not math.isfinite(time.end - time.start):
         raise ScenarioError(file, "time.end", f"expected a time span that is a finite number, found {time.end:g} - {time.start:g}")
     # In floating point: a huge span over a small step is refused before it becomes an integer.
@@ -113,6 +119,20 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
         system=system, forces=forces, solver=solver, title=title, description=description,
         sweep=sweep, damping=damping, ground_motion=ground_motion, expect=expect,
     )
+
+
+DENSE_MATRICES = 12  # n x n doubles a linear solve holds at its peak (9.8 GB measured for 10,000 masses)
+
+
+def _check_size(file: str, n: int, matrix_form: bool) -> None:
+    """Refuse, before anything is assembled, a scene whose dense matrices could not fit in memory."""
+    from smdcli.resources import fits, physical_memory
+
+    needed = DENSE_MATRICES * 8.0 * n * n
+    if not fits(needed):
+        raise ScenarioError(file, "system.dofs" if matrix_form else "mass",
+                            f"{n} DOFs need about {needed / 2**30:.3g} GB for their dense matrices, more than half of "
+                            f"this machine's {physical_memory() / 2**30:.3g} GB; model fewer masses")
 
 
 def _check_chirp_resolved(file: str, force: ForceSpec, time: TimeSpec, n_points: float) -> None:

@@ -121,7 +121,40 @@ def _read_expect(t: _Table, index: int, dofs: tuple[str, ...], scenario_file: st
         file = str(Path(name) if Path(name).is_absolute() else Path(scenario_file).parent / name)
         if not Path(file).is_file():
             raise t.fail("file", f"expected a golden result file, found no file at {file!r}")
+        problem = _golden_problem(file)
+        if problem:
+            raise t.fail("file", f"expected a result file of `smd simulate` as golden, found {file!r}: {problem}")
     rtol = t.number("rtol", 1e-9, minimum=0.0) if quantity == "golden" else 1e-9
     atol = t.number("atol", 0.0, minimum=0.0) if quantity == "golden" else 0.0
     t.finish(EXPECT_KEYS)
     return ExpectSpec(index, quantity, dof, mode, low, high, file, rtol, atol)
+
+
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+def _golden_problem(file: str) -> str | None:
+    """Why a file cannot serve as a golden (not HDF5, not smd's, not a simulate result), or None."""
+    try:
+        with open(file, "rb") as f:
+            head = f.read(len(HDF5_SIGNATURE))
+    except OSError as exc:
+        return f"cannot be read ({exc.strerror})"
+    if head != HDF5_SIGNATURE:
+        return "it is not an HDF5 file"
+    import h5py
+
+    try:
+        with h5py.File(file, "r") as f:
+            if "smd_version" not in f.attrs or "kind" not in f.attrs:
+                return "an HDF5 file, but not one smd wrote"
+            kind = f.attrs["kind"]
+            kind = kind.decode() if isinstance(kind, bytes) else str(kind)
+            if kind != "simulate":
+                return f"an smd {kind} file"
+            missing = [name for name in ("time", "displacement") if name not in f]
+            if missing:
+                return f"it has no {missing[0]} data set"
+    except Exception as exc:  # h5py raises OSError, KeyError or RuntimeError for damaged files
+        return f"it cannot be read as HDF5 ({str(exc).split('(')[0].strip() or type(exc).__name__})"
+    return None

@@ -27,9 +27,125 @@ class ColumnsError(ValueError):
     """A row that is not two finite numbers, or times that do not increase; the message names the line."""
 
 
+MAX_ROWS = 1_000_000  # rows of a table or record file: 16 min at 1 kHz, 10 s at 100 kHz
+_SEPARATORS = str.maketrans({",": " ", ";": " ", "\t": " "})
+
+
 def two_columns(text: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """(times, values) of two-column text: separated by commas, semicolons, tabs or spaces; blank lines and lines
-    starting with # skipped; a first row that is not numbers is a header."""
+    starting with # skipped; a first row that does not start with a number is a header, whatever its separators;
+    a byte-order mark is ignored. Checked: finite numbers, strictly increasing times, slopes that stay finite."""
+    import io
+
+    text = text.replace("\ufeff", "")
+    lines = text.count("\n") + 1
+    if lines > MAX_ROWS + 1000:  # counted before anything is parsed: a size refusal costs a scan, not a parse
+        raise ColumnsError(f"has {lines} lines, more than the {MAX_ROWS} rows a table or record may have")
+    body = _without_header(text)
+    try:
+        with np.errstate(all="ignore"):
+            table = np.loadtxt(io.StringIO(body.translate(_SEPARATORS)), comments="#", ndmin=2, dtype=float)
+    except ValueError:
+        table = None
+    if table is None or table.shape[1] != 2 or not len(table):
+        return _slow_two_columns(text)  # says which line is wrong
+    if len(table) > MAX_ROWS:
+        raise ColumnsError(f"has {len(table)} rows, more than the {MAX_ROWS} a table or record may have")
+    times, values = table[:, 0], table[:, 1]
+    bad = ~np.isfinite(table).all(axis=1)
+    if bad.any():
+        row = int(np.argmax(bad))
+        raise ColumnsError(f"line {_line_of_row(text, row)}: expected finite numbers, found "
+                           f"{_line_text(text, _line_of_row(text, row))!r}")
+    steps = np.diff(times)
+    if (steps <= 0).any():
+        row = int(np.argmax(steps <= 0)) + 1
+        raise ColumnsError(f"line {_line_of_row(text, row)}: expected strictly increasing times, found "
+                           f"{times[row]:g} after {times[row - 1]:g}")
+    problem = slope_problem(times, values)
+    if problem is not None:
+        row, message = problem
+        raise ColumnsError(f"line {_line_of_row(text, row)}: {message}")
+    return tuple(times.tolist()), tuple(values.tolist())
+
+
+def slope_problem(times, values) -> tuple[int, str] | None:
+    """(row, why) where samples cannot be interpolated in double precision: the time span or a step overflows,
+    a step is subnormal, or a slope between neighbours overflows; None when every interval is sound."""
+    t = np.asarray(times, dtype=float)
+    v = np.asarray(values, dtype=float)
+    if len(t) < 2:
+        return None
+    with np.errstate(all="ignore"):
+        steps = np.diff(t)
+        if not np.isfinite(t[-1] - t[0]):
+            return len(t) - 1, f"expected a time span that is a finite number, found {t[-1]:g} - {t[0]:g}"
+        tiny = np.finfo(float).tiny
+        small = steps < tiny
+        if small.any():
+            row = int(np.argmax(small)) + 1
+            return row, (f"expected a time step of at least {tiny:.3g} s (a normal double), found {steps[row - 1]:.3g} "
+                         "s, below what double precision resolves")
+        slopes = np.diff(v) / steps
+        bad = ~np.isfinite(slopes)
+        if bad.any():
+            row = int(np.argmax(bad)) + 1
+            return row, (f"the slope between this sample and the one before, {v[row] - v[row - 1]:.3g} over "
+                         f"{steps[row - 1]:.3g} s, overflows double precision")
+    return None
+
+
+def _without_header(text: str) -> str:
+    """The text with a header row's words removed (its line kept, so that numpy's rows map to the file's lines)."""
+    start = 0
+    while start < len(text):
+        end = text.find("\n", start)
+        end = len(text) if end < 0 else end
+        line = text[start:end].strip()
+        if line and not line.startswith("#"):
+            return text[:start] + text[end:] if _is_header(line) else text
+        start = end + 1
+    return text
+
+
+def _is_header(line: str) -> bool:
+    """A first row whose first cell is not a number names the columns."""
+    first = _cells(line)[0]
+    try:
+        float(first)
+    except ValueError:
+        return True
+    return False
+
+
+def _cells(line: str) -> list[str]:
+    return [c for c in re.split(r"\s*[,;\t]\s*|\s+", line.strip()) if c != ""]
+
+
+def _line_of_row(text: str, row: int) -> int:
+    """The 1-based line number of data row `row` (0-based, header, blank and comment lines not counted)."""
+    seen = -1
+    header_done = False
+    for number, line in enumerate(text.split("\n"), start=1):
+        stripped = line.strip()
+        if not stripped or stripped.startswith("#"):
+            continue
+        if not header_done:
+            header_done = True
+            if _is_header(stripped):
+                continue
+        seen += 1
+        if seen == row:
+            return number
+    return number
+
+
+def _line_text(text: str, number: int) -> str:
+    return text.split("\n")[number - 1].strip()[:40]
+
+
+def _slow_two_columns(text: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Line by line, to name the first line that is not two finite numbers."""
     times: list[float] = []
     values: list[float] = []
     seen_row = False
@@ -37,15 +153,15 @@ def two_columns(text: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
         stripped = line.strip()
         if not stripped or stripped.startswith("#"):
             continue
-        cells = [c for c in re.split(r"\s*[,;\t]\s*|\s+", stripped) if c != ""]
+        cells = _cells(stripped)
+        if not seen_row and _is_header(stripped):
+            seen_row = True
+            continue
+        seen_row = True
         try:
             numbers = [float(c) for c in cells]
         except ValueError:
-            if not seen_row and len(cells) == 2:
-                seen_row = True
-                continue  # a header row
             raise ColumnsError(f"line {number}: expected two numbers (time, value), found {stripped[:40]!r}") from None
-        seen_row = True
         if len(numbers) != 2:
             raise ColumnsError(f"line {number}: expected two columns (time, value), found {len(numbers)}")
         if not all(math.isfinite(x) for x in numbers):
@@ -57,6 +173,10 @@ def two_columns(text: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
         values.append(numbers[1])
     if not times:
         raise ColumnsError("no data rows")
+    # numpy refused what Python's float() reads (digit separators such as 1_000): the same checks as the fast path
+    problem = slope_problem(times, values)
+    if problem is not None:
+        raise ColumnsError(f"line {_line_of_row(text, problem[0])}: {problem[1]}")
     return tuple(times), tuple(values)
 
 
@@ -123,8 +243,25 @@ def read_record(path: str | Path, units: str = "g", scale: float = 1.0, shift: f
         times, values = two_columns(text)
     except ColumnsError as exc:
         raise ScenarioError(where, None if field is None else "file", f"{path}: {exc}" if field else str(exc)) from None
-    acceleration = (np.asarray(values) * scale + shift) * UNITS[units]
+    with np.errstate(all="ignore"):
+        acceleration = (np.asarray(values) * scale + shift) * UNITS[units]
+    check_scaled(str(path), field, times, acceleration, "m/s^2")
     return sampled_record(where, None, str(path), times, acceleration, units, text)
+
+
+def check_scaled(file: str, field: str | None, times, values, units: str) -> None:
+    """Samples after scale, shift and unit conversion: finite, with finite slopes between them (ScenarioError)."""
+    values = np.asarray(values, dtype=float)
+    bad = ~np.isfinite(values)
+    key = f"{field}.scale" if field else "scale"
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ScenarioError(file, key, f"sample {i} at t = {times[i]:g} s overflows double precision once scaled and "
+                                       f"converted to {units}; expected finite values")
+    problem = slope_problem(times, values)
+    if problem is not None:
+        i, why = problem
+        raise ScenarioError(file, key, f"sample {i} at t = {times[i]:g} s, once scaled and converted to {units}: {why}")
 
 
 def sampled_record(file: str, field: str | None, path: str, times, acceleration, units: str, text: str) -> Record:

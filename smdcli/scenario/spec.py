@@ -125,6 +125,7 @@ class DampingSpec:
     alpha: float = 0.0  # 1/s
     beta: float = 0.0  # s
     modal: tuple[float, ...] = ()  # one ratio for every mode, or one per mode
+    given: str = "alpha"  # the key the scenario gave first (alpha, beta, zeta or modal): what a message names
 
 
 @dataclass(frozen=True)

@@ -171,7 +171,7 @@ def _read_damping(t: _Table, n: int) -> DampingSpec:
         else:
             ratios = (t.number("modal", minimum=0.0),)
         t.finish(DAMPING_KEYS)
-        return DampingSpec(modal=tuple(ratios))
+        return DampingSpec(modal=tuple(ratios), given="modal")
     if "zeta" in given or "omega" in given:
         for key in ("zeta", "omega"):
             if not t.has(key):
@@ -181,10 +181,15 @@ def _read_damping(t: _Table, n: int) -> DampingSpec:
         w1, w2 = t.numbers("omega", length=2)
         if not (w1 > 0 and w2 > 0 and w1 != w2):
             raise t.fail("omega", f"expected two distinct positive frequencies in rad/s, found [{w1!r}, {w2!r}]")
-        # zeta = alpha / (2 w) + beta w / 2 at w1 and at w2
+        # zeta = alpha / (2 w) + beta w / 2 at w1 and at w2, computed so that no intermediate overflows
         t.finish(DAMPING_KEYS)
-        return DampingSpec(alpha=2 * zeta * w1 * w2 / (w1 + w2), beta=2 * zeta / (w1 + w2))
+        mean = 0.5 * w1 + 0.5 * w2
+        alpha, beta = zeta * min(w1, w2) * (max(w1, w2) / mean), zeta / mean
+        if not (math.isfinite(alpha) and math.isfinite(beta)):
+            raise t.fail("zeta", f"Rayleigh coefficients alpha = {alpha:.3g} 1/s and beta = {beta:.3g} s overflow "
+                                 f"double precision for zeta = {zeta:g} at omega = [{w1:g}, {w2:g}] rad/s")
+        return DampingSpec(alpha=alpha, beta=beta, given="zeta")
     alpha = t.number("alpha", 0.0)
     beta = t.number("beta", 0.0)
     t.finish(DAMPING_KEYS)
-    return DampingSpec(alpha=alpha, beta=beta)
+    return DampingSpec(alpha=alpha, beta=beta, given="alpha" if t.has("alpha") else "beta")

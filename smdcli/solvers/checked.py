@@ -9,17 +9,38 @@ import math
 
 import numpy as np
 
-from smdcli.errors import SolverFailed
+from smdcli.errors import SolverFailed, UsageError
 from smdcli.model import Model, build, time_grid
 from smdcli.result import Result
 from smdcli.scenario import Scenario
 from smdcli.solvers.base import Tolerances
 
 
+def check_overrides(method: str | None = None, rtol: float | None = None, atol: float | None = None) -> None:
+    """The overrides of a scenario's [solver] (--method, --rtol, --atol, or simulate()'s arguments), checked the
+    same way for the command line and the Python API: UsageError naming the option."""
+    from smdcli.solvers.catalog import check_method_name
+
+    if method is not None:
+        problem = check_method_name(method) if isinstance(method, str) else \
+            f"expected a method name, found {type(method).__name__} {method!r}"
+        if problem:
+            raise UsageError(f"--method: {problem}")
+    for option, value in (("--rtol", rtol), ("--atol", atol)):
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+            raise UsageError(f"{option}: expected a positive number, found {type(value).__name__} {value!r}")
+        if not 0 < value < math.inf:
+            raise UsageError(f"{option}: expected a positive number, found {float(value):g}")
+
+
 def solve_scenario(sc: Scenario, model: Model, grid: np.ndarray, method: str | None = None,
                    rtol: float | None = None, atol: float | None = None) -> Result:
     """Solve with the scenario's [solver] settings, overridden by those given (the command line's)."""
     from smdcli.solvers.registry import solve
+
+    check_overrides(method, rtol, atol)
 
     tol = Tolerances(rtol=sc.solver.rtol if rtol is None else rtol, atol=sc.solver.atol if atol is None else atol,
                      dt=sc.solver.dt, options=sc.solver.options)

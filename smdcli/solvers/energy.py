@@ -31,7 +31,7 @@ import numpy as np
 
 from smdcli.model import Model
 from smdcli.model.elements import element_forces, incidence_row
-from smdcli.result import Energy, Result
+from smdcli.result import ENERGY_TERMS, Energy, Result, largest_energy
 from smdcli.solvers.base import Tolerances
 
 VAN_LOAN_SIZE = 400  # largest augmented state taken in closed form: two exponentials of twice this size
@@ -48,10 +48,10 @@ def with_physics(model: Model, result: Result) -> Result:
 
 
 def derived_accuracy(model: Model, result: Result) -> dict[str, float]:
-    """The accuracy, relative to each data set's peak, that element forces and energies inherit from the run's
-    stated accuracy s of x and v: an element moves by at most 2 s times the peak motion, an energy by 2 s of the
+    """The accuracy that element forces and energies inherit from the run's stated accuracy s of x and v: an element
+    force moves by at most 2 s times the peak motion (relative to the data set's peak); an energy by 2 s of the
     largest energy, and the integrals also by the balance's residual (which holds their quadrature and method
-    error); the residual vouches for nothing below its own size."""
+    error), each relative to the largest energy; the residual vouches for nothing below its own size."""
     with np.errstate(all="ignore"):
         return _derived_accuracy(model, result)
 
@@ -64,7 +64,7 @@ def _derived_accuracy(model: Model, result: Result) -> dict[str, float]:
 
     def relative(bound: float, data: np.ndarray) -> float:
         peak = float(np.max(np.abs(data), initial=0.0))
-        return bound / peak if peak > 0 else math.nan
+        return bound / peak if peak > 0 else (0.0 if bound == 0 else math.inf)
 
     e = result.elements
     if e is not None:
@@ -73,24 +73,22 @@ def _derived_accuracy(model: Model, result: Result) -> dict[str, float]:
         slope = [x.coef + (12 * x.k3 * X * X if x.law == "cubic" else 0.0) for x in springs]
         drag = [x.coef * (4 * V if x.law == "quadratic" else 1.0) for x in dampers]
         moved = [k * 2 * s * X for k in slope] + [c * 2 * s * V for c in drag]
-        if springs:
-            out["spring_force"] = relative(max(moved[:len(springs)]), e.spring)
-        if dampers:
-            out["damper_force"] = relative(max(moved[len(springs):]), e.damper)
+        out["spring_force"] = relative(max(moved[:len(springs)], default=0.0), e.spring)
+        out["damper_force"] = relative(max(moved[len(springs):], default=0.0), e.damper)
         grounded = [m for m, x in zip(moved, springs + dampers) if min(x.a, x.b) < 0]
         if not model.element_form:
             grounded = [2 * s * (np.abs(model.K).sum() * X + np.abs(model.C).sum() * V)]
         out["reaction"] = relative(sum(grounded), e.reaction)
     energy = result.energy
     if energy is not None:
-        largest = _largest_energy(energy.kinetic, energy.strain, energy.dissipated, energy.input)
+        # Every energy is measured by the largest the run reached (each data set's accuracy_scale), not by its own
+        # peak: an input work that stays zero, or a residual at rounding, is known to that, not to its own digits.
+        largest = energy.largest
         moved = 2 * s * largest
-        off = float(np.max(np.abs(energy.residual), initial=0.0))
-        for name in ("kinetic", "strain"):
-            out[name] = relative(moved, getattr(energy, name))
-        for name in ("dissipated", "input"):
-            out[name] = relative(moved + off, getattr(energy, name))
-        out["residual"] = max(1.0, relative(moved + off, energy.residual)) if off > 0 else math.nan
+        off = float(np.max(np.abs(energy.residual), initial=0.0))  # the balance's quadrature and method error
+        for name in ENERGY_TERMS:
+            bound = moved if name in ("kinetic", "strain") else moved + off
+            out[name] = bound / largest if largest > 0 else 0.0
     return out
 
 
@@ -176,17 +174,11 @@ def _energy_balance(model: Model, result: Result, dense) -> Energy:
                       "re-integrated from the run's state at their start")
     initial = kinetic[0] + strain[0] if len(kinetic) else 0.0
     residual = kinetic + strain - initial + dissipated - work
-    reached = _largest_energy(kinetic, strain, dissipated, work)
+    reached = largest_energy(kinetic, strain, dissipated, work)
     worst = float(np.max(np.abs(residual), initial=0.0))
     relative = worst / reached if reached > 0 else 0.0
     return Energy(kinetic, strain, dissipated, work, residual, relative if math.isfinite(relative) else math.inf,
                   quadrature)
-
-
-def _largest_energy(kinetic, strain, dissipated, work) -> float:
-    """The largest energy the run reached: mechanical, dissipated or put in; what the residual is measured by."""
-    return max(float(np.max(kinetic + strain, initial=0.0)), float(np.max(np.abs(dissipated), initial=0.0)),
-               float(np.max(np.abs(work), initial=0.0)))
 
 
 def _closed_form_applies(model: Model) -> bool:

@@ -29,6 +29,7 @@ from smdcli.model.forcing import Table
 from smdcli.result import Result, SolverStats
 from smdcli.solvers.accurate_expm import expm_times, needed
 from smdcli.solvers.base import Solver, Tolerances, make_result, segments, stated_rounding
+from smdcli.solvers.harmonic import from_rest_less, split
 from smdcli.solvers.action import ACTION_DOFS, Action, action_cost, solve_action
 from smdcli.solvers.modal import modal_applies, solve_modal
 from smdcli.text import plural
@@ -118,14 +119,17 @@ class Exact(Solver):
 
         start = time.perf_counter()
         original = model
-        held: tuple[str, ...] = ()
-        if modal_applies(model):
-            x, v, stated, message = solve_modal(model, grid)
+        model, held = first_order_hold(model, grid)
+        harmonics = split(model)
+        if harmonics is not None:  # thousands of Fourier terms: superposed in closed form, not augmented
+            reduced, particular = harmonics
+            x, v, stated, message = _solve_linear(from_rest_less(reduced, particular, float(grid[0])), grid)
+            xp, vp = particular.at(grid)
+            x, v = x + xp, v + vp
+            stated = stated + particular.accuracy(grid)
+            message += f"; {plural(len(particular.w), 'harmonic')} superposed in closed form"
         else:
-            model, held = first_order_hold(model, grid)
-            action = sparse_action(model, grid)
-            x, v, stated, message = solve_action(model, grid, action) if action is not None \
-                else solve_dense(model, grid)
+            x, v, stated, message = _solve_linear(model, grid)
         if held:
             stated = max(stated, hold_error(original, grid, held))
             message += f"; first-order hold on the output grid for {', '.join(held)} (error O(step^2))"
@@ -135,6 +139,14 @@ class Exact(Solver):
             message=message, stated_accuracy=stated,
         )
         return make_result(model, grid, x, v, stats)
+
+
+def _solve_linear(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:
+    """x, v, stated accuracy and a description, by the cheapest exact path: modal, the sparse action or dense."""
+    if modal_applies(model):
+        return solve_modal(model, grid)
+    action = sparse_action(model, grid)
+    return solve_action(model, grid, action) if action is not None else solve_dense(model, grid)
 
 
 def solve_dense(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:

@@ -97,7 +97,8 @@ def ground_history(model: Model, grid: np.ndarray, solve: Callable[..., Result])
     tol = Tolerances(rtol=GROUND_RTOL, atol=GROUND_RTOL * size)
     result = solve(free, grid, "exact" if exact else "DOP853", tol)
     velocity = g.velocity.value(grid) if g.velocity is not None else result.velocity[:, 0]
-    return GroundHistory(result.displacement[:, 0], velocity, acceleration, g.quantity)
+    return GroundHistory(result.displacement[:, 0], velocity, acceleration, g.quantity,
+                         integrated_accuracy=result.stats.stated_accuracy)
 
 
 def drift_note(model: Model, history: GroundHistory) -> str | None:

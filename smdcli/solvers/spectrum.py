@@ -51,6 +51,19 @@ class Spectrum:
         return self.Sd * self.omega**2
 
 
+MAX_SUB_POINTS = 4096  # sub-points per record interval: a period below dt / 64 has no meaning on such a record
+MAX_WORK = 4e9  # sub-point values over the whole run (about 10 s on 2 cores)
+
+
+def spectrum_cost(samples: int, dt: float, periods: np.ndarray, dampings: int) -> tuple[float, float]:
+    """(the most sub-points any oscillator needs per record interval, all sub-point values of the run): what
+    response_spectrum would compute, estimated in floating point before anything is allocated."""
+    with np.errstate(all="ignore"):
+        per_interval = np.maximum(1.0, np.ceil(POINTS_PER_PERIOD * dt / np.asarray(periods, dtype=float)))
+    most = float(per_interval.max(initial=1.0))
+    return most, float(per_interval.sum() * max(samples - 1, 1) * dampings)
+
+
 def _propagators(omega: np.ndarray, zeta: np.ndarray, dt) -> np.ndarray:
     """exp(A dt) of the scaled augmented state (u, u'/w, a, a'/w), one (4, 4) per oscillator (dt a number or one
     per oscillator): all in one call, as scipy's expm takes a stack."""

@@ -20,6 +20,33 @@ from smdcli.sweep.stream import Chunk, solve_chunk
 INSTALL = "pip install -e '.[dask]'"  # what a user without dask.distributed is told
 
 
+# Transports a plain address can use; tls:// and wss:// need certificates, ucx:// the UCX library, inproc:// a
+# scheduler inside this very process: none can be given on a command line.
+SCHEMES = ("tcp", "ws")
+
+
+def check_address(scheduler: str) -> None:
+    """Refuse, before connecting, an address whose transport smd cannot use from the command line."""
+    scheme, sep, rest = scheduler.partition("://")
+    if not sep:
+        scheme, rest = "tcp", scheduler
+    if scheme not in SCHEMES:
+        why = {"tls": "needs TLS certificates", "wss": "needs TLS certificates", "ucx": "needs the UCX transport",
+               "inproc": "names a scheduler inside one Python process"}.get(scheme, "is not a Dask transport")
+        raise UsageError(f"--scheduler {scheduler}: the scheme {scheme}:// {why}; expected tcp://HOST:PORT (or "
+                         "HOST:PORT), ws://HOST:PORT, or local")
+    host, _, port = rest.rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise UsageError(f"--scheduler {scheduler}: expected an address HOST:PORT with a port from 1 to 65535")
+    import socket
+
+    try:  # a refused or unroutable port is told at once, not after distributed's 10 s of retries
+        socket.create_connection((host.strip("[]"), int(port)), timeout=2).close()
+    except OSError as exc:
+        raise UsageError(f"--scheduler {scheduler}: cannot reach a Dask scheduler there "
+                         f"({exc.strerror or 'timed out'})") from None
+
+
 class Cluster:
     """A Client on the scheduler at an address, or on a new LocalCluster of `workers` processes; close() ends both."""
 
@@ -35,10 +62,12 @@ class Cluster:
                                       dashboard_address=None, silence_logs=logging.CRITICAL)
             self.client = Client(self.local)
         else:
+            check_address(scheduler)
             try:
                 self.client = Client(scheduler, timeout="10s")
-            except (OSError, TimeoutError, ValueError) as exc:
-                raise UsageError(f"--scheduler {scheduler}: cannot reach a Dask scheduler there ({exc})") from None
+            except Exception as exc:  # distributed raises OSError, TimeoutError, ValueError, TypeError... by transport
+                raise UsageError(f"--scheduler {scheduler}: cannot reach a Dask scheduler there "
+                                 f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
 
     def close(self) -> None:
         """Disconnect, and stop the LocalCluster if this started one. Tasks cut short by an interrupt are expected

@@ -237,6 +237,17 @@ def _stack(models: list[Model]) -> dict[str, np.ndarray]:
     return {name: np.stack([getattr(m, name) for m in models]) for name in ("M", "C", "K", "x0", "v0")}
 
 
+def _check_memory(sc: Scenario, members: int, n: int) -> None:
+    """Refuse, before anything is allocated, a family whose matrices and values would not fit in half of memory."""
+    from smdcli.resources import fits, physical_memory
+
+    needed = 4 * 8 * members * (3 * n * n + 4 * n + 4)  # M, C, K, x0, v0 and the grid, with working copies
+    if not fits(needed):
+        raise UsageError(f"{sc.path}: {members} members of {n} DOFs need about {needed / 2**30:.3g} GB for their "
+                         f"matrices, more than half of this machine's {physical_memory() / 2**30:.3g} GB; sweep "
+                         "fewer members")
+
+
 def build_family(sc: Scenario, spec: SweepSpec) -> Family:
     """The sweep's members, validated. Structural sweeps become matrices (and a nonlinear scene's element
     coefficients) interpolated between validated corner members (every check on a value is an interval, so
@@ -268,6 +279,7 @@ def build_family(sc: Scenario, spec: SweepSpec) -> Family:
         return Family(sc, spec, (), np.empty((1, 0)), (1,), base, **stacks)
     if "zeta" in spec.parameters and len(spec.parameters) > 1:
         raise UsageError("--param zeta: cannot be combined with a second parameter (zeta is set from k and m)")
+    _check_memory(sc, math.prod(len(v) for v in spec.values), base.n)
     grids = np.meshgrid(*spec.values, indexing="ij")
     combos = np.stack([g.ravel() for g in grids], axis=1)
     shape = tuple(len(v) for v in spec.values)

@@ -15,10 +15,11 @@ import numpy as np
 
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import Model
+from smdcli.model.accuracy import modes_accuracy
 from smdcli.scenario import Scenario
 from smdcli.sweep.family import Family
 from smdcli.sweep.pool import default_workers, run_pool
-from smdcli.sweep.shooting import _measure_direction
+from smdcli.sweep.shooting import MEASURED_ACCURACY, _measure_direction
 
 # ------------------------------------------------------- frequency response
 
@@ -41,6 +42,9 @@ class FrequencyResponse:
     # Under [ground_motion]: amplitude is the displacement transmissibility |X / U| (absolute motion over the
     # ground's), phase its lag, and this the force transmissibility |F_T| / (k_g |U|), (S, F).
     force_transmissibility: np.ndarray | None = None
+    # Stated accuracies of the exact data sets, relative to each one's largest magnitude: amplitudes and phases
+    # through the condition of the dynamic stiffness, peaks through how well their zero of slope is determined.
+    accuracy: dict[str, float] = field(default_factory=dict)
 
     @property
     def ground(self) -> bool:
@@ -124,23 +128,26 @@ def phase_lag(family: Family, omega: np.ndarray, H: np.ndarray) -> np.ndarray:
 
 def resonance_peaks(family: Family, omega: np.ndarray, amplitude: np.ndarray, dof: int,
                     ground: bool = False) -> list[dict]:
-    """Local maxima of every member's amplitude per DOF, refined on the exact receptance (or transmissibility)
-    between grid neighbours."""
-    from scipy.optimize import minimize_scalar
-
+    """Local maxima of every member's amplitude per DOF, each located as the zero of d|H|^2/dw between grid
+    neighbours (well-conditioned, where the maximum of |H| itself is not: its location moves by sqrt(eps)), with
+    the accuracy of that location and of the amplitude there."""
     peaks = []
     labels = family.labels
     for s in range(len(family)):
         if not np.any(family.C[s]):
             # Undamped: the peaks are poles at the natural frequencies, of unbounded amplitude.
-            modes = family.model(s).modes
+            model = family.model(s)
+            modes = model.modes
+            w_error = modes_accuracy(model)["natural_frequencies_rad_s"] * float(modes.natural_frequencies.max())
             for w, shape in zip(modes.natural_frequencies, modes.shapes.T):
                 if omega[0] <= w <= omega[-1] and abs(shape[dof]) > 1e-12 * np.abs(shape).max():
                     for j, name in enumerate(family.base.dofs):
                         if abs(shape[j]) > 1e-12 * np.abs(shape).max():
                             peaks.append({"member": s, "label": labels[s], "dof": name, "omega": float(w),
-                                          "amplitude": math.inf})
+                                          "amplitude": math.inf, "omega_error": w_error,
+                                          "amplitude_error": 0.0})
             continue
+        matrices = (family.M[s], family.C[s], family.K[s])
         for j, name in enumerate(family.base.dofs):
             a = amplitude[s, :, j]
             for f in range(1, len(omega) - 1):
@@ -148,20 +155,93 @@ def resonance_peaks(family: Family, omega: np.ndarray, amplitude: np.ndarray, do
                     continue
                 if not np.isfinite(a[f]):
                     peaks.append({"member": s, "label": labels[s], "dof": name, "omega": float(omega[f]),
-                                  "amplitude": math.inf})
+                                  "amplitude": math.inf, "omega_error": 0.0, "amplitude_error": 0.0})
                     continue
-
-                def negative(w, s=s, j=j):
-                    matrices = (family.M[s:s + 1], family.C[s:s + 1], family.K[s:s + 1])
-                    if ground:
-                        return -abs(transmissibility(*matrices, np.array([w]))[0][0, 0, j])
-                    return -abs(receptance(*matrices, np.array([w]), dof)[0, 0, j])
-
-                best = minimize_scalar(negative, bounds=(omega[f - 1], omega[f + 1]), method="bounded",
-                                       options={"xatol": 1e-10 * max(omega[f], 1.0)})
-                peaks.append({"member": s, "label": labels[s], "dof": name, "omega": float(best.x),
-                              "amplitude": float(-best.fun)})
+                w, size, w_error, size_error = _peak(matrices, omega[f - 1], omega[f + 1], j, dof, ground)
+                peaks.append({"member": s, "label": labels[s], "dof": name, "omega": w, "amplitude": size,
+                              "omega_error": w_error, "amplitude_error": size_error})
     return peaks
+
+
+def _slope(matrices, w: float, j: int, dof: int, ground: bool) -> tuple[float, float, float, float]:
+    """(d|H_j|^2/dw, |H_j|, the condition number of Z, a bound of the slope's rounding) at w: H = Z^-1 b with
+    Z = K - w^2 M + i w C, dH/dw = Z^-1 (db/dw - Z' H), Z' = -2 w M + i C; under ground motion H is the absolute
+    motion 1 + Y with b = w^2 M 1."""
+    M, C, K = matrices
+    n = len(M)
+    Z = K - w**2 * M + 1j * w * C
+    if ground:
+        ones = np.ones(n)
+        b, db = w**2 * (M @ ones), 2 * w * (M @ ones)
+    else:
+        b, db = np.zeros(n, complex), np.zeros(n, complex)
+        b[dof] = 1.0
+    Y = np.linalg.solve(Z, b.astype(complex))
+    dY = np.linalg.solve(Z, db - (-2 * w * M + 1j * C) @ Y)
+    H = Y[j] + 1.0 if ground else Y[j]
+    slope = 2.0 * float((np.conj(H) * dY[j]).real)
+    condition = float(np.linalg.cond(Z))
+    rounding = 2.0 * abs(H) * abs(dY[j]) * 8 * n * np.finfo(float).eps * condition
+    return slope, abs(H), condition, rounding
+
+
+def _peak(matrices, low: float, high: float, j: int, dof: int, ground: bool) -> tuple[float, float, float, float]:
+    """(w, |H_j(w)|, error of w, error of |H_j|) of the maximum of |H_j| in [low, high]: the zero of its slope where
+    the slope falls through zero, bisected by Brent's method to rounding."""
+    from scipy.optimize import brentq
+
+    def slope(w):
+        return _slope(matrices, w, j, dof, ground)[0]
+
+    grid = np.linspace(low, high, 17)
+    values = np.array([slope(w) for w in grid])
+    falls = np.flatnonzero((values[:-1] > 0) & (values[1:] <= 0))
+    if not len(falls):  # flat to rounding: the sample with the largest amplitude
+        sizes = [_slope(matrices, w, j, dof, ground)[1] for w in grid]
+        w = float(grid[int(np.argmax(sizes))])
+        return w, float(max(sizes)), float(grid[1] - grid[0]), 0.0
+    best = max(falls, key=lambda i: _slope(matrices, grid[i + 1], j, dof, ground)[1])
+    lo, hi = grid[best], grid[best + 1]
+    w = float(brentq(slope, lo, hi, xtol=1e-300, rtol=4 * np.finfo(float).eps))
+    _, size, condition, rounding = _slope(matrices, w, j, dof, ground)
+    # The zero moves by the slope's rounding over the slope's own derivative there (a central difference)
+    h = 1e-5 * max(w, 1e-300)
+    curvature = abs(slope(w + h) - slope(w - h)) / (2 * h)
+    w_error = rounding / curvature if curvature > 0 else float(hi - lo)
+    w_error = max(w_error, 4 * np.finfo(float).eps * w)
+    size_error = 8 * len(matrices[0]) * np.finfo(float).eps * condition * size
+    return w, size, float(w_error), float(size_error)
+
+
+def frequency_accuracy(omega: np.ndarray) -> float:
+    """The frequency grid: parsed values (a start:stop:step or linspace), each a few roundings from its decimal."""
+    return 4 * float(np.finfo(float).eps) * len(omega)
+
+
+def exact_accuracy(family: Family, omega: np.ndarray, phase: np.ndarray, peaks: list[dict]) -> dict[str, float]:
+    """Stated accuracies of an exact response: a solve of Z = K - w^2 M + i w C is exact for a Z within c n eps of it,
+    so |H| and its phase move by c n eps cond(Z) (relative and in radians), at worst over members and frequencies."""
+    from smdcli.model.accuracy import EPS
+
+    w = omega[None, :, None, None]
+    Z = family.K[:, None] - w**2 * family.M[:, None] + 1j * w * family.C[:, None]
+    with np.errstate(all="ignore"):
+        condition = np.linalg.cond(Z)
+    worst = float(np.nanmax(np.where(np.isfinite(condition), condition, np.inf), initial=1.0))
+    n = family.base.n
+    amplitude = 8 * n * EPS * worst
+    top_phase = float(np.nanmax(np.abs(phase), initial=0.0))
+    accuracy = {"amplitude": amplitude, "normalized_amplitude": amplitude + 2 * EPS,
+                "force_transmissibility": (n + 2) * amplitude,
+                "phase": amplitude / top_phase if top_phase > 0 else 0.0,
+                "frequency": frequency_accuracy(omega), "frequency_ratio": 8 * EPS}
+    finite = [p for p in peaks if math.isfinite(p["amplitude"])]
+    top = max((abs(p["omega"]) for p in peaks), default=0.0)
+    tallest = max((p["amplitude"] for p in finite), default=0.0)
+    accuracy["peaks/omega"] = max((p["omega_error"] for p in peaks), default=0.0) / top if top > 0 else 0.0
+    accuracy["peaks/amplitude"] = (max((p["amplitude_error"] for p in finite), default=0.0) / tallest
+                                   if tallest > 0 else 0.0)
+    return accuracy
 
 
 def _driving_force(sc: Scenario) -> int:
@@ -206,6 +286,8 @@ def frequency_response(family: Family, workers: int | None = None,
         peaks = []
     response = FrequencyResponse(omega, base.dofs, "ground" if ground else base.dofs[dof], amplitude, phase, peaks,
                                  exact=linear, force_transmissibility=None if forces is None else np.abs(forces))
+    if linear:
+        response.accuracy = exact_accuracy(family, omega, phase, peaks)
     if linear and not spec.measure:
         response.wall_time_s = time.perf_counter() - start
         if progress:
@@ -236,6 +318,10 @@ def frequency_response(family: Family, workers: int | None = None,
                     f = int(np.nanargmax(amp[s, :, j]))
                     response.peaks.append({"member": s, "label": family.labels[s], "dof": name, "direction": d,
                                            "omega": float(omega[f]), "amplitude": float(amp[s, f, j])})
+    response.accuracy["measured"] = MEASURED_ACCURACY
+    if not linear:  # the peaks are the measured ones: at a grid frequency, of a measured amplitude
+        response.accuracy.update({"peaks/omega": 0.0, "peaks/amplitude": MEASURED_ACCURACY,
+                                  "frequency": frequency_accuracy(omega)})
     if linear:
         amp = response.measured[directions[0]][0]
         ok = np.isfinite(amplitude) & np.isfinite(amp)

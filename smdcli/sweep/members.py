@@ -195,25 +195,33 @@ def _ground_force(family: Family, x: np.ndarray, v: np.ndarray, members: slice, 
     return force
 
 
-def metrics(family: Family, result: FamilyResult) -> dict[str, np.ndarray]:
+def metrics(family: Family, result: FamilyResult, errors: dict | None = None) -> dict[str, np.ndarray]:
     """Scalar measures of each member per DOF, (S, n) each: peak and RMS displacement, 2 % settling
-    time (NaN where the response has not settled by the end) and peak force passed to the ground."""
+    time (NaN where the response has not settled by the end) and peak force passed to the ground. Into `errors`,
+    if given: settling_time, how far (s) each may be off because of the members' errors of x."""
     S, N, n = result.displacement.shape
     tied = _ground_elements(family)
-    measured = {name: np.empty((S, n)) for name in METRICS}
+    measured = {name: np.empty((S, n)) for name in METRICS + ("settling_time_error",)}
     block = max(1, METRIC_SAMPLES // (N * n))
     for start in range(0, S, block):
         members = slice(start, min(start + block, S))
         t = result.time[members] if result.time.ndim == 2 else result.time
         # DOFs by time: every reduction below runs along contiguous memory (20x faster than along the middle axis)
         x, v = (np.ascontiguousarray(q[members].transpose(0, 2, 1)) for q in (result.displacement, result.velocity))
-        for name, values in measures(t, x, _ground_force(family, x, v, members, tied), N).items():
+        with np.errstate(all="ignore"):
+            error = np.nan_to_num(result.stated_accuracy[members], nan=np.inf) * _peak(_peak(x))
+        for name, values in measures(t, x, _ground_force(family, x, v, members, tied), N, error).items():
             measured[name][members] = values
+    settling_error = measured.pop("settling_time_error")
+    if errors is not None:
+        errors["settling_time"] = settling_error
     return measured
 
 
-def measures(t: np.ndarray, x: np.ndarray, ground: np.ndarray, N: int) -> dict[str, np.ndarray]:
-    """The metrics of a few members: t (N,) shared or (s, N) padded with NaN, x and ground (s, n, N)."""
+def measures(t: np.ndarray, x: np.ndarray, ground: np.ndarray, N: int,
+             error: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """The metrics of a few members: t (N,) shared or (s, N) padded with NaN, x and ground (s, n, N); with each
+    member's error of x (s,), also settling_time_error, how far (s) the settling time may be off because of it."""
     S = len(x)
     t = np.broadcast_to(t, (S, N))
     count = np.isfinite(t).sum(axis=1)
@@ -235,14 +243,27 @@ def measures(t: np.ndarray, x: np.ndarray, ground: np.ndarray, N: int) -> dict[s
         final = x[np.arange(S), :, count - 1]  # (S, n)
         deviation = np.abs(np.subtract(x, final[:, :, None]))
         band = SETTLING_BAND * np.fmax.reduce(deviation, axis=2)
-        outside = deviation > band[:, :, None]
-        last_out = np.where(outside.any(axis=2), N - 1 - np.argmax(outside[:, :, ::-1], axis=2), -1)
-        after = np.minimum(last_out + 1, N - 1)
-        settling = np.where(last_out < 0, t[:, :1], np.take_along_axis(t, after, axis=1))
-        settling = np.where(last_out >= (count[:, None] - 1) - max(1, int(SETTLING_BAND * N)), np.nan, settling)
+
+        def settled(outside: np.ndarray) -> np.ndarray:  # the sample after the last one outside the band
+            last_out = np.where(outside.any(axis=2), N - 1 - np.argmax(outside[:, :, ::-1], axis=2), -1)
+            after = np.minimum(last_out + 1, N - 1)
+            at = np.where(last_out < 0, t[:, :1], np.take_along_axis(t, after, axis=1))
+            return np.where(last_out >= (count[:, None] - 1) - max(1, int(SETTLING_BAND * N)), np.nan, at)
+
+        settling = settled(deviation > band[:, :, None])
         ground = _peak(ground)
-    return {"peak_displacement": peak, "rms_displacement": rms, "settling_time": settling,
-            "peak_ground_force": ground}
+        found = {"peak_displacement": peak, "rms_displacement": rms, "settling_time": settling,
+                 "peak_ground_force": ground}
+        if error is not None:
+            # A sample within x's error of the band's edge may lie on either side of it: the settling time is then
+            # anywhere between the times those choices give (a step of the grid, or a whole lobe away)
+            slack = 2 * (1 + SETTLING_BAND) * np.asarray(error, dtype=float)[:, None, None]
+            early = settled(deviation > band[:, :, None] + slack)
+            late = settled(deviation > band[:, :, None] - slack)
+            flips = np.isnan(early) != np.isnan(late)
+            spread = np.fmax(np.abs(late - settling), np.abs(settling - early))
+            found["settling_time_error"] = np.where(flips, np.inf, np.nan_to_num(spread))
+    return found
 
 
 def _peak(q: np.ndarray) -> np.ndarray:

@@ -9,12 +9,23 @@ import sys
 import threading
 from typing import Callable
 
+from smdcli import interrupts
+
 _TICKS = None  # in a worker: where it reports finished steps of a long task (see run_pool's steps mode)
 
 
 def _set_ticks(queue) -> None:
+    """A worker process's start: where it reports steps; Ctrl-C is the parent's to handle (it stops the workers),
+    so that no worker prints a traceback of its own, nor a warning."""
+    import os
+    import signal
+    import warnings
+
     global _TICKS
     _TICKS = queue
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if not os.environ.get("SMD_DEBUG"):  # as in the parent (cli.run): smd's own lines say what went wrong
+        warnings.simplefilter("ignore")
 
 
 def _tick() -> None:
@@ -41,7 +52,7 @@ def run_threads(function: Callable, tasks: list, workers: int, progress: Callabl
     release the GIL, so members share this process's memory and kernels (no pickling, no start-up per worker).
     Progress advances by one per task, or with steps=True by the tasks' own steps (_tick)."""
     global _TICKS
-    from concurrent.futures import ThreadPoolExecutor, as_completed
+    from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
     from smdcli.solvers.compiled import warm
 
@@ -56,12 +67,17 @@ def run_threads(function: Callable, tasks: list, workers: int, progress: Callabl
     sys.setswitchinterval(5e-4)
     try:
         futures = {pool.submit(function, task): i for i, task in enumerate(tasks)}
-        for future in as_completed(futures):
-            results[futures[future]] = future.result()
-            if reporter and not steps:
-                reporter.put(1)
+        pending = set(futures)
+        while pending:
+            with interrupts.deferred():  # an interrupt raises between waits, never inside a future's lock
+                done, pending = wait(pending, timeout=interrupts.SLICE, return_when=FIRST_COMPLETED)
+            for future in done:
+                results[futures[future]] = future.result()
+                if reporter and not steps:
+                    reporter.put(1)
     finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+        with interrupts.deferred(raise_after=False):
+            pool.shutdown(wait=True, cancel_futures=True)
         sys.setswitchinterval(interval)
         _TICKS = None
     return results
@@ -91,27 +107,31 @@ def run_pool(function: Callable, tasks: list, workers: int, progress: Callable[[
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
     ticks = multiprocessing.get_context().Queue() if (steps and progress) else None
-    with ProcessPoolExecutor(max_workers=min(workers, len(tasks)), initializer=_set_ticks,
-                             initargs=(ticks,)) as pool:
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(tasks)), initializer=_set_ticks, initargs=(ticks,))
+    try:
         futures = {pool.submit(function, task): i for i, task in enumerate(tasks)}
         pending = set(futures)
-        try:
-            while pending:
-                done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-                for future in done:
-                    results[futures[future]] = future.result()
-                    if progress and not steps:
-                        progress(1)
-                while ticks is not None:
-                    try:
-                        ticks.get_nowait()
-                    except queue_mod.Empty:
-                        break
+        while pending:
+            with interrupts.deferred():
+                done, pending = wait(pending, timeout=interrupts.SLICE, return_when=FIRST_COMPLETED)
+            for future in done:
+                results[futures[future]] = future.result()
+                if progress and not steps:
                     progress(1)
-        except BaseException:
-            for future in futures:
-                future.cancel()
-            raise
+            while ticks is not None:
+                try:
+                    ticks.get_nowait()
+                except queue_mod.Empty:
+                    break
+                progress(1)
+    except BaseException:
+        with interrupts.deferred(raise_after=False):
+            for process in list(getattr(pool, "_processes", {}).values()):  # tasks cut short: stop at once
+                process.terminate()
+        raise
+    finally:
+        with interrupts.deferred(raise_after=False):
+            pool.shutdown(wait=True, cancel_futures=True)
     return results
 
 

@@ -17,6 +17,7 @@ from smdcli.sweep.pool import _tick
 PERIOD_SAMPLES = 256
 MAX_PERIODS = 600
 STEADY_RTOL = 1e-8
+MEASURED_ACCURACY = 10 * STEADY_RTOL  # a measured amplitude or phase: the steady state's tolerance, with margin
 NEWTON_ITERATIONS = 8
 WARMUP = 20  # periods integrated between Newton attempts
 

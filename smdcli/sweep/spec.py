@@ -15,7 +15,8 @@ import numpy as np
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.scenario import Scenario
 
-MAX_MEMBERS = 100_000
+MAX_MEMBERS = 100_000  # values of one parameter
+MAX_GRID_MEMBERS = 10_000_000  # members of a two-parameter grid (memory is checked too: see family.py)
 _trapezoid = getattr(np, "trapezoid", None) or np.trapz
 MAX_STACKED = 40_000_000  # samples per stacked data set (members x time points x DOFs)
 METRICS = ("peak_displacement", "rms_displacement", "settling_time", "peak_ground_force")
@@ -189,6 +190,10 @@ def read_spec(sc: Scenario, cli: dict[str, Any]) -> SweepSpec:
             values.append(parse_values(raw))
         except ValueError as exc:
             raise fail("values", str(exc)) from None
+    members = math.prod(len(v) for v in values)
+    if members > MAX_GRID_MEMBERS:  # counted before any grid is made: a 100,000 x 100,000 grid is 75 GB of it
+        raise fail("values", f"a grid of {' x '.join(str(len(v)) for v in values)} = {members} members; at most "
+                             f"{MAX_GRID_MEMBERS}")
     labels = tuple(pick("labels", ()))
     ics = tuple(pick("ic", ()))
     frequency, unit = None, "rad/s"

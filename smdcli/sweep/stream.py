@@ -64,6 +64,7 @@ class Chunk:
     methods: list[str]
     stated: np.ndarray  # (k,) each member's vouched error relative to its peak
     acceleration_stated: float  # the worst member's, for the acceleration (derived from x and v); 0 if not kept
+    settling_error: float  # s: how far the worst member's settling time may be off (x's error at the band's edge)
     how: str
     traces: dict[int, tuple[np.ndarray, np.ndarray, bool]]  # member -> (time, plotted quantity (N, n), success)
 
@@ -86,7 +87,10 @@ def measure_chunk(family: Family, members: range, result: FamilyResult, keep: st
     from smdcli.solvers.base import acceleration_accuracy
 
     part = family.take(members)
-    measured = metrics(part, result)
+    errors: dict[str, np.ndarray] = {}
+    measured = metrics(part, result, errors)
+    with np.errstate(invalid="ignore"):
+        settling_error = float(np.max(errors["settling_time"], initial=0.0))
 
     def padded(a: np.ndarray) -> np.ndarray:  # members whose grids are shorter than the family's longest
         if a.shape[1] == length:
@@ -110,4 +114,4 @@ def measure_chunk(family: Family, members: range, result: FamilyResult, keep: st
         t = result.time if time is None else time[row]
         traces[int(s)] = (t, np.array(histories[quantity][row]), bool(result.success[row]))
     return Chunk(members.start, time, histories if keep == "full" else None, measured, result.success,
-                 result.messages, result.methods, result.stated_accuracy, accuracy, result.how, traces)
+                 result.messages, result.methods, result.stated_accuracy, accuracy, settling_error, result.how, traces)

@@ -1,0 +1,125 @@
+"""How accurately the model's own numbers are computed: its matrices and its modes.
+
+A stated accuracy is relative to the data set's largest magnitude: every entry's error is at most
+stated_accuracy * max|data| (see docs/accuracy.md). Matrices are sums of a few element stamps, rounded a few
+times. Modes come from eigensolvers that are backward stable: what they return is exact for a matrix within
+c n eps of the one given, and how far that moves an eigenvalue or a shape depends on the problem (a rigid-body
+mode's frequency moves by sqrt(eps), a shape of a repeated frequency is not determined at all). That is measured
+here as it happens: the modes of the model perturbed by its solver's backward error, compared with its own.
+
+Must not import: solvers, sweep, io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+EPS = float(np.finfo(float).eps)
+SAFETY = 10.0  # a perturbation shows an error's size, not its worst case: stated accuracies carry this margin
+MEASURED_UP_TO = 200  # DOFs up to which modes are measured by perturbation; beyond, normwise bounds
+
+
+def matrix_accuracy(model) -> dict[str, float]:
+    """M, C, K: each entry a sum of at most n element stamps (and [damping]'s products), rounded once a term."""
+    n = model.n
+    stamps = 4 * (n + 1) * EPS
+    accuracy = {"M": stamps, "K": stamps, "C": stamps}
+    if model.added_damping is not None:  # alpha M + beta K, or M Phi diag Phi^T M from an eigensolver
+        accuracy["C"] = max(stamps, modes_accuracy(model)["shapes"])
+    return accuracy
+
+
+def modes_accuracy(model) -> dict[str, float]:
+    """Stated accuracies of natural_frequencies_rad_s, damping_ratios, shapes and eigenvalues, each relative to its
+    data set's largest magnitude (inf where a quantity is not determined by the model, as a repeated mode's shape)."""
+    if "_modes_accuracy" not in model.__dict__:  # kept with the (frozen) model, as its cached properties are
+        with np.errstate(all="ignore"):  # a scene at the edge of double precision: an inf accuracy says so
+            found = _measured(model) if model.n <= MEASURED_UP_TO else _bounded(model)
+        model.__dict__["_modes_accuracy"] = {k: (v if v == v else np.inf) for k, v in found.items()}
+    return model.__dict__["_modes_accuracy"]
+
+
+def _relative(a: np.ndarray, b: np.ndarray) -> float:
+    scale = max(float(np.abs(a).max(initial=0.0)), float(np.abs(b).max(initial=0.0)))
+    if scale == 0:
+        return 0.0
+    with np.errstate(invalid="ignore"):
+        gap = np.abs(a - b)
+    gap = np.where(np.isnan(gap), np.inf, gap)
+    return float(gap.max(initial=0.0) / scale)
+
+
+def _perturbed(model, seed: int):
+    """The model with M, C and K moved by a symmetric perturbation of norm 8 n eps times each one's norm: the
+    backward error of the eigensolvers that give its modes."""
+    rng = np.random.default_rng(seed)
+    n = model.n
+    changed = {}
+    for name in ("M", "C", "K"):
+        A = getattr(model, name)
+        E = rng.standard_normal((n, n))
+        E = E + E.T
+        norm = np.linalg.norm(E, 2)
+        size = 8 * n * EPS * float(np.linalg.norm(A, 2))
+        changed[name] = A + (E * (size / norm) if norm > 0 else 0.0)
+    return dataclasses.replace(model, **changed)
+
+
+def _measured(model) -> dict[str, float]:
+    """The largest change of each modal quantity over two perturbations by the backward error, times SAFETY."""
+    base = model.modes
+    worst = {"natural_frequencies_rad_s": 0.0, "damping_ratios": 0.0, "shapes": 0.0, "eigenvalues": 0.0}
+    for seed in (1, 2):
+        try:
+            other = _perturbed(model, seed).modes
+        except (np.linalg.LinAlgError, ValueError):  # a perturbed M not positive definite: nothing is determined
+            return {key: np.inf for key in worst}
+        pairs = {"natural_frequencies_rad_s": (base.natural_frequencies, other.natural_frequencies),
+                 "damping_ratios": (_finite(base.damping_ratios), _finite(other.damping_ratios)),
+                 "shapes": (base.shapes, other.shapes),
+                 "eigenvalues": (_sorted(base.eigenvalues), _sorted(other.eigenvalues))}
+        for key, (a, b) in pairs.items():
+            worst[key] = max(worst[key], _relative(a, b))
+    return {key: SAFETY * value + 4 * EPS for key, value in worst.items()}
+
+
+def _finite(values: np.ndarray) -> np.ndarray:
+    """Damping ratios with a rigid-body mode's inf kept comparable (inf on both sides is no error)."""
+    return np.where(np.isinf(values), 0.0, values)
+
+
+def _sorted(eigenvalues: np.ndarray) -> np.ndarray:
+    return eigenvalues[np.lexsort((eigenvalues.imag, eigenvalues.real))]
+
+
+def _bounded(model) -> dict[str, float]:
+    """Normwise bounds for large models: eigenvalues within c n eps of the largest; a frequency w moves by that over
+    w (sqrt of it for a rigid-body mode); a shape by it over the gap to the nearest other mode."""
+    modes = model.modes
+    squared = np.sort(modes.natural_frequencies ** 2)
+    top = float(squared.max(initial=0.0))
+    change = 8 * model.n * EPS * top
+    w = np.sqrt(squared)
+    frequency = float((change / (w + np.sqrt(change))).max(initial=0.0)) / max(float(w.max(initial=0.0)), 1e-300)
+    gaps = np.diff(squared)
+    shapes = change / float(gaps.min()) if len(gaps) and gaps.min() > 0 else (np.inf if len(gaps) else 4 * EPS)
+    eig = float(np.abs(modes.eigenvalues).max(initial=0.0))
+    return {"natural_frequencies_rad_s": frequency, "damping_ratios": frequency,
+            "shapes": float(min(shapes, np.inf)), "eigenvalues": float(np.sqrt(change) / max(eig, 1e-300))}
+
+
+def evaluation_accuracy(evaluate, time: np.ndarray) -> float:
+    """Values computed from the time alone (applied forces, a given ground motion): t is itself rounded, so a value
+    is known to what moving t by its rounding changes (a sine's argument w t carries eps w t), times SAFETY.
+    Relative to the values' largest magnitude."""
+    time = np.asarray(time, dtype=float)
+    with np.errstate(all="ignore"):
+        value = np.asarray(evaluate(time), dtype=float)
+        moved = np.asarray(evaluate(time * (1 + 2 * EPS)), dtype=float)
+        peak = float(np.max(np.abs(value), initial=0.0))
+        if not peak > 0:
+            return 4 * EPS
+        change = float(np.max(np.abs(moved - value), initial=0.0))
+    return SAFETY * change / peak + 4 * EPS
