@@ -1,8 +1,31 @@
-"""Allow ``python -m smdcli``.
+"""`smd` and `python -m smdcli`: interrupts first, then the command line.
 
-The top, beside cli.py: may import anything.
+The signal handlers go in before anything heavy is imported (typer, rich: a tenth of a second and more), so a
+Ctrl-C or SIGTERM that lands while the command line is being imported ends the run as one anywhere else does
+(exit 130 or 143, one line), not as a traceback. The top, beside cli.py: may import anything.
 """
 
-from smdcli.cli import main
+import signal
+import sys
 
-main()
+from smdcli import interrupts
+
+
+def main() -> None:
+    """Console-script entry point."""
+    interrupts.install()
+    try:
+        from smdcli.cli import main as command_line
+    except KeyboardInterrupt:
+        import os
+
+        signum = interrupts.settle()
+        print(f"smd: {'terminated' if signum == signal.SIGTERM else 'interrupted'} while starting; nothing was written",
+              file=sys.stderr)
+        sys.stderr.flush()
+        os._exit(interrupts.exit_code(signum or 2))
+    command_line()
+
+
+if __name__ == "__main__":
+    main()
