@@ -238,23 +238,27 @@ def phase(
     periods: Optional[int] = typer.Option(None, "--periods", help="Run this many forcing periods instead of the "
                                           "scenario's time span."),
     skip_periods: int = typer.Option(0, "--skip-periods", help="Poincare: leave out the first periods (transient)."),
+    hysteresis: bool = typer.Option(False, "--hysteresis", help="Plot force against deformation of every "
+                                    "hysteretic spring instead (OUT/NAME_hysteresis.png and .h5)."),
     method: Optional[str] = typer.Option(None, "--method", help="Solver, overriding the scenario's solver.method."),
     name: Optional[str] = typer.Option(None, "--name", help="Output name: OUT/NAME_portrait.png and .h5 (default: "
                                        "the scenario's stem, or FIRST_and_K_more for several)."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
 ):
-    """Phase portraits (x against v) of DOFs, scenarios or a family, start and direction marked; --poincare."""
+    """Phase portraits (x against v) of DOFs, scenarios or a family, start and direction marked; --poincare;
+    --hysteresis: force against deformation of hysteretic springs."""
     from smdcli.commands.phase import portraits
 
     def describe(run, _) -> str:
         points = sum(len(c.x) for c in run.poincare or ())
-        return (plural(len(run.curves), "trajectory", "trajectories")
+        return (plural(len(run.curves), "hysteresis loop" if run.hysteresis else "trajectory",
+                       "hysteresis loops" if run.hysteresis else "trajectories")
                 + (f", {plural(points, 'Poincare point')} (T = {run.period:.4g} s)" if run.poincare else "")
                 + "\nwrote " + ", ".join(str(p) for p in run.outputs))
 
     _carried_out(lambda: portraits(scenarios, out, dof, tuple(ic or ()), poincare, periods, skip_periods, method,
-                                   progress=progress_wanted(quiet), name=name),
+                                   progress=progress_wanted(quiet), name=name, hysteresis=hysteresis),
                  {}, False, quiet, lambda run: None, describe)
 
 

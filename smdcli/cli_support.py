@@ -5,8 +5,6 @@ Must not import: scipy, matplotlib, h5py at module level (`smd --help` stays fas
 
 from __future__ import annotations
 
-from typing import Optional
-
 import typer
 
 from smdcli import interrupts, strict_json

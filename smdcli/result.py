@@ -54,6 +54,20 @@ class GroundHistory:
 
 
 @dataclass(frozen=True)
+class NonsmoothHistory:
+    """The nonsmooth elements along a run (hysteretic springs, friction contacts, stops): each one's tension on
+    the grid (N, E), its internal variables ("spring[0].plastic_deformation" -> (N,)), the events (time, element,
+    kind) and the energy terms they bring: hysteretic, friction, impact (cumulative), contact (stored)."""
+
+    paths: tuple[str, ...]
+    kinds: tuple[str, ...]  # spring | friction | stop
+    tension: np.ndarray  # (N, E), positive in tension; a hysteretic spring's whole force (its linear part too)
+    internal: dict[str, np.ndarray]
+    events: tuple[tuple[float, str, str], ...]
+    energy: dict[str, np.ndarray]  # per term, (N,): as the solver integrated them on its own pieces
+
+
+@dataclass(frozen=True)
 class ElementForces:
     """Force in each spring and damper, (N, elements), positive in tension (an element on [a, b] pulls a toward b),
     and the ground's reaction on the system, (N,); a matrix scene has no elements, only the reaction."""
@@ -68,6 +82,13 @@ class ElementForces:
     reaction_meaning: str
     added_damping: np.ndarray | None = None  # (N, n): the force of [damping]'s C on each DOF, not an element's
     element_form: bool = True
+    friction: np.ndarray | None = None  # (N, frictions): each contact's force, tension positive
+    friction_names: tuple[str, ...] = ()
+    friction_connects: tuple[tuple[str, str], ...] = ()
+    stop: np.ndarray | None = None  # (N, stops): each stop's contact force (0 while free)
+    stop_names: tuple[str, ...] = ()
+    stop_connects: tuple[tuple[str, str], ...] = ()
+    internal: dict = field(default_factory=dict)  # "spring[0].plastic_deformation" -> (N,): hysteretic variables
 
 
 @dataclass(frozen=True)
@@ -81,19 +102,34 @@ class Energy:
     residual: np.ndarray
     max_relative_residual: float  # largest |residual| over the largest energy reached
     quadrature: str  # how dissipated and input were integrated
+    # with nonsmooth elements (None otherwise): dissipated by yielding (and Bouc-Wen loops), by friction, lost at
+    # impacts (and in compliant stops' dampers), all cumulative; stored in compliant stops
+    hysteretic: np.ndarray | None = None
+    friction: np.ndarray | None = None
+    impact: np.ndarray | None = None
+    contact: np.ndarray | None = None
 
     @property
     def largest(self) -> float:
         """The largest energy the run reached, J: what the residual is measured by."""
-        return largest_energy(self.kinetic, self.strain, self.dissipated, self.input)
+        losses = [q for q in (self.hysteretic, self.friction, self.impact) if q is not None]
+        stored = self.strain + (self.contact if self.contact is not None else 0.0)
+        return max(largest_energy(self.kinetic, stored, self.dissipated, self.input),
+                   *(float(np.max(np.abs(q), initial=0.0)) for q in losses), 0.0)
+
+    @property
+    def terms(self) -> tuple[str, ...]:
+        """The terms this balance holds: the five of every run, and the nonsmooth ones where there are any."""
+        return ENERGY_TERMS + tuple(name for name in NONSMOOTH_TERMS if getattr(self, name) is not None)
 
     def to_dict(self) -> dict:
         """The time series as lists and the figure of merit, for JSON."""
-        return {name: getattr(self, name).tolist() for name in ENERGY_TERMS} | {
+        return {name: getattr(self, name).tolist() for name in self.terms} | {
             "max_relative_residual": self.max_relative_residual, "quadrature": self.quadrature}
 
 
 ENERGY_TERMS = ("kinetic", "strain", "dissipated", "input", "residual")
+NONSMOOTH_TERMS = ("hysteretic", "friction", "impact", "contact")
 
 
 def largest_energy(kinetic, strain, dissipated, work) -> float:
@@ -118,6 +154,7 @@ class Result:
     ground: GroundHistory | None = None  # with support motion: displacement, velocity, acceleration are relative
     elements: ElementForces | None = None  # attached after a successful run (solvers.energy.with_physics)
     energy: Energy | None = None
+    nonsmooth: NonsmoothHistory | None = None  # a scene with hysteretic springs, friction or stops: their history
     origin: tuple | None = field(default=None, repr=False, compare=False)  # (Scenario, Model) it was solved from
 
     def absolute(self, quantity: str) -> np.ndarray:

@@ -18,7 +18,7 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from smdcli import scenario
-from smdcli.errors import ScenarioError, SmdError
+from smdcli.errors import ScenarioError
 from smdcli.expression import MAX_DEPTH, Expression, ExpressionError, TooManyEdges
 from smdcli.model import build, time_grid
 from smdcli.scenario.records import ColumnsError, two_columns
@@ -109,7 +109,10 @@ def numeric_leaves(node, path=()):
         yield path
 
 
-FIELDS = [(stem, path) for stem, doc in sorted(DOCS.items()) for path in numeric_leaves(doc)]
+# Scenes an integrator drives from Python (Bouc-Wen) can take minutes on an extreme number: their fields are the
+# property tests of test_properties; here every scene solved exactly or by a compiled method.
+FIELDS = [(stem, path) for stem, doc in sorted(DOCS.items()) if stem != "bouc_wen_multisine"
+          for path in numeric_leaves(doc)]
 
 
 @settings(max_examples=max(EXAMPLES // 3, 20), deadline=None,

@@ -19,12 +19,14 @@ from typing import Callable
 
 import numpy as np
 
-from smdcli.errors import UsageError
+from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import Model
 from smdcli.progress import bar, silent
 from smdcli.result import Result
 from smdcli.scenario import Scenario
 from smdcli.solvers.base import Tolerances
+from smdcli.commands.compare_nonsmooth import (NONSMOOTH_RTOLS, VARIANTS, nonsmooth_defaults, refusals, run_energy,
+                                               smoothed, split_variant, verdict)
 
 DEFAULT_ADAPTIVE = ("ode45", "ode23", "ode113", "ode15s", "ode23s", "ode23t", "ode23tb", "DOP853", "Radau", "LSODA")
 DEFAULT_FIXED = ("newmark", "hht", "generalized_alpha", "central_difference", "euler", "rk4")
@@ -33,8 +35,9 @@ DEFAULT_RTOLS = tuple(10.0 ** -k for k in range(3, 11))
 DEFAULT_H_OMEGA = (3.0, 2.6, 2.1, 1.9, 1.0, 0.5, 0.2, 0.1, 0.05, 0.02)
 ATOL_PER_RTOL = 1e-3
 STEP_BUDGET = 200_000  # for methods driven from Python (scipy's): about 200 us a step
+NONSMOOTH_STEP_BUDGET = 20_000  # on a nonsmooth scene, where a step count past this is the failure to chart
 COMPILED_STEP_BUDGET = 50_000_000  # for compiled methods, about 1 us a step: ode23s at rtol 1e-10 takes ~15 million
-TIME_ONCE_S = 0.5  # runs longer than this are timed once, not repeated: their noise is a small share of them
+TIME_ONCE_S = 0.2  # runs longer than this are timed once, not repeated: their noise is a small share of them
 
 
 @dataclass
@@ -73,6 +76,7 @@ class Comparison:
     omega_max: float
     breakpoints: bool
     runs: list[Run] = field(default_factory=list)
+    refused: dict[str, str] = field(default_factory=dict)  # method -> why it cannot take this (nonsmooth) scene
 
     @property
     def exact_point(self) -> tuple[float, float] | None:
@@ -83,15 +87,22 @@ class Comparison:
         return s.wall_time_s, s.stated_accuracy
 
 
-def parse_methods(text: str | None) -> list[str]:
-    """A comma list of method names, checked against the registry."""
+def parse_methods(text: str | None, model: Model | None = None) -> list[str]:
+    """A comma list of method names (a nonsmooth scene's may end /tanh or /penalty: run on its friction or stops
+    smoothed), checked against the registry; by default every method, or for a nonsmooth scene the ODE family and
+    three of them on its smoothed laws."""
     from smdcli.solvers.catalog import check_method_name
 
     if not text:
+        if model is not None and model.nonsmooth:
+            return list(nonsmooth_defaults(model))
         return list(DEFAULT_ADAPTIVE + DEFAULT_FIXED)
     methods = [m.strip() for m in text.split(",") if m.strip()]
     for m in methods:
-        problem = check_method_name(m)
+        variant, base = split_variant(m)
+        if variant is not None and variant not in VARIANTS:
+            raise UsageError(f"--methods: {m!r}: expected /tanh or /penalty after a method, found /{variant}")
+        problem = check_method_name(base)
         if problem:
             raise UsageError(f"--methods: {problem}")
         if m in ("auto", "exact", "closed_form"):
@@ -101,10 +112,11 @@ def parse_methods(text: str | None) -> list[str]:
     return methods
 
 
-def parse_tolerances(text: str | None) -> list[tuple[float, float]]:
+def parse_tolerances(text: str | None, model: Model | None = None) -> list[tuple[float, float]]:
     """'rtol[/atol],...' pairs; atol defaults to rtol * 1e-3."""
     if not text:
-        return [(r, r * ATOL_PER_RTOL) for r in DEFAULT_RTOLS]
+        ladder = NONSMOOTH_RTOLS if model is not None and model.nonsmooth else DEFAULT_RTOLS
+        return [(r, r * ATOL_PER_RTOL) for r in ladder]
     pairs = []
     for item in text.split(","):
         parts = item.strip().split("/")
@@ -143,6 +155,9 @@ def reference_solution(model: Model, grid: np.ndarray) -> tuple[Result, str, flo
     if model.is_linear:
         exact = solve(model, grid, "exact", Tolerances())
         return exact, "exact (matrix exponential)", 0.0
+    if model.is_piecewise_linear and all(s.exo() is not None for s in model.signals):
+        exact = solve(model, grid, "exact", Tolerances())
+        return exact, "exact (event to event, every event located on the exact flow)", 0.0
     tight = Tolerances(rtol=1e-12, atol=1e-14)
     radau = solve(model, grid, "Radau", tight)
     dop = solve(model, grid, "DOP853", tight)
@@ -160,7 +175,7 @@ def plan(methods: list[str], tolerances, steps) -> list[tuple[str, Tolerances]]:
 
     jobs = []
     for m in methods:
-        if get_solver(m).adaptive:
+        if get_solver(split_variant(m)[1]).adaptive:
             jobs += [(m, Tolerances(rtol=r, atol=a)) for r, a in sorted(tolerances, reverse=True)]
         else:
             jobs += [(m, Tolerances(dt=h)) for h in sorted(steps, reverse=True)]
@@ -173,7 +188,6 @@ def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], to
     """Run the plan; failures are recorded, never raised. A method that ran out of budget skips its tighter rungs.
     The step budget is STEP_BUDGET for Python-driven methods and COMPILED_STEP_BUDGET for compiled ones, unless
     `budget` says otherwise."""
-    from smdcli.solvers.energy import energy_balance
     from smdcli.solvers.registry import get_solver, solve
 
     reference, ref_name, ref_error = reference_solution(model, grid)
@@ -183,27 +197,37 @@ def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], to
         reference = dataclasses.replace(reference, stats=dataclasses.replace(
             reference.stats, wall_time_s=statistics.median(times[1:])))
     omega_max = model.omega_max
-    out = Comparison(sc, model, grid, reference, ref_name, ref_error, omega_max, breakpoints)
+    out = Comparison(sc, model, grid, reference, ref_name, ref_error, omega_max, breakpoints,
+                     refused=refusals(model, DEFAULT_ADAPTIVE + DEFAULT_FIXED, methods))
     peak = float(np.abs(reference.displacement).max()) or 1.0
     exhausted: set[str] = set()
     span = float(grid[-1] - grid[0])
     for method, tol in plan(methods, tolerances, steps):
         progress(0, f"{method} {'dt ' + format(tol.dt, '.3g') if tol.dt else 'rtol ' + format(tol.rtol, '.0e')}")
-        solver = get_solver(method)
+        solver = get_solver(split_variant(method)[1])
         adaptive = solver.adaptive
-        allowed = budget or (COMPILED_STEP_BUDGET if solver.compiled else STEP_BUDGET)
+        compiled = solver.compiled and not model.nonsmooth  # a nonsmooth scene is driven from Python, event by event
+        allowed = budget or (COMPILED_STEP_BUDGET if compiled else NONSMOOTH_STEP_BUDGET if model.nonsmooth
+                             else STEP_BUDGET)
         tol = Tolerances(rtol=tol.rtol, atol=tol.atol, dt=tol.dt, max_steps=allowed, breakpoints=breakpoints)
         if method in exhausted or (tol.dt and span / tol.dt > allowed):
             needed = f"{math.ceil(span / tol.dt)} steps" if tol.dt else "more steps than a looser tolerance"
             out.runs.append(_skipped(method, adaptive, tol, omega_max, f"skipped: needs {needed}, budget {allowed}"))
             progress(1)
             continue
+        variant, base = split_variant(method)
+        scene = model if variant is None else smoothed(model, variant, reference)
         times, result = [], None
-        for _ in range(max(1, repeats)):
-            result = solve(model, grid, method, tol)
-            times.append(result.stats.wall_time_s)
-            if result.stats.wall_time_s > TIME_ONCE_S or not result.success:
-                break
+        try:
+            for _ in range(max(1, repeats)):
+                result = solve(scene, grid, base, tol)
+                times.append(result.stats.wall_time_s)
+                if result.stats.wall_time_s > TIME_ONCE_S or not result.success:
+                    break
+        except ScenarioError as exc:  # a method that cannot take the scene says so, and is not charted
+            out.runs.append(_skipped(method, adaptive, tol, omega_max, f"refused: {exc.message}"))
+            progress(1)
+            continue
         s = result.stats
         if not s.success and "steps" in s.message:
             exhausted.add(method)
@@ -211,13 +235,14 @@ def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], to
             computed = np.abs(result.displacement[np.isfinite(result.displacement).all(axis=1)])
         growth = float(computed.max() / peak) if computed.size else math.nan
         error = float(np.abs(result.displacement - reference.displacement).max() / peak) if s.success else math.nan
-        energy = energy_balance(model, result).max_relative_residual if s.success else math.nan
+        energy = run_energy(scene, result).max_relative_residual if s.success else math.nan
+        failure = verdict(result, error, energy, growth, reference, variant) if s.success else s.message
         out.runs.append(Run(
             method=method, adaptive=adaptive, rtol=tol.rtol, atol=tol.atol, dt=tol.dt or math.nan,
             h_omega=(tol.dt * omega_max) if tol.dt else math.nan, error=error, energy_residual=energy, growth=growth,
             wall_time_s=statistics.median(times), nfev=s.nfev, njev=s.njev, nlu=s.nlu,
-            steps_accepted=s.steps_accepted, steps_rejected=s.steps_rejected, success=s.success,
-            message=s.message))
+            steps_accepted=s.steps_accepted, steps_rejected=s.steps_rejected, success=not failure,
+            message=failure or s.message))
         progress(1)
     return out
 
@@ -316,7 +341,7 @@ def stability_limits(methods: list[str]) -> dict[str, float]:
 
     limits = {}
     for m in methods:
-        solver = get_solver(m)
+        solver = get_solver(split_variant(m)[1])
         if not solver.adaptive:
             limits[m] = solver.omega_limit()  # with the method's default parameters
     return limits
@@ -330,8 +355,8 @@ def run_and_write(path: str | Path, out: str | Path, methods: str | None = None,
     from smdcli.io.folders import output_folder
 
     sc, model, grid = prepare(path)
-    method_list = parse_methods(methods)
-    tolerance_list = parse_tolerances(tolerances)
+    method_list = parse_methods(methods, model)
+    tolerance_list = parse_tolerances(tolerances, model)
     step_list = parse_steps(steps, model.omega_max, float(grid[-1] - grid[0]))
     if repeats < 1:
         raise UsageError(f"--repeats: expected an integer >= 1, found {repeats}")
@@ -356,7 +381,12 @@ def run_and_write(path: str | Path, out: str | Path, methods: str | None = None,
             save_figure(energy_precision_figure(comparison, title), out_dir / f"{stem}_energy_precision.png")
             written.append(out_dir / f"{stem}_energy_precision.png")
             limits = stability_limits(method_list)
-            if limits:
+            if model.nonsmooth:
+                from smdcli.plots.compare import failure_map_figure
+
+                save_figure(failure_map_figure(comparison, title), out_dir / f"{stem}_failures.png")
+                written.append(out_dir / f"{stem}_failures.png")
+            elif limits:
                 save_figure(stability_figure(comparison, title, limits), out_dir / f"{stem}_stability.png")
                 written.append(out_dir / f"{stem}_stability.png")
     return comparison, written

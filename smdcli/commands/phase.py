@@ -1,4 +1,5 @@
-"""smd phase: phase portraits (displacement against velocity) of runs, families and Poincare sections.
+"""smd phase: phase portraits (displacement against velocity) of runs, families and Poincare sections, and the
+hysteresis loops (force against deformation) of hysteretic springs.
 
 Must not import: cli.
 """
@@ -40,6 +41,7 @@ class PhaseRun:
     curves: list[Curve]
     poincare: list[Curve] | None = None
     period: float | None = None
+    hysteresis: bool = False  # curves are (deformation, force) loops of hysteretic springs, not (x, v)
     outputs: list[Path] = field(default_factory=list)
 
 
@@ -70,11 +72,34 @@ def _solve(sc: Scenario, method: str | None) -> tuple[np.ndarray, np.ndarray, np
     return result.time, result.displacement, result.velocity
 
 
+def hysteretic_springs(sc: Scenario) -> list:
+    """The springs of the scene whose law has a history (elastoplastic, bilinear, Bouc-Wen)."""
+    return [e for e in sc.springs if e.nonsmooth is not None]
+
+
+def _loops(sc: Scenario, method: str | None, label: str | None) -> list[Curve]:
+    """Force against deformation d = x_b - x_a of every hysteretic spring (Curve.x = d, Curve.v = tension)."""
+    from smdcli.model import build
+    from smdcli.solvers.checked import solve_checked
+    from smdcli.solvers.energy import with_physics
+
+    result = with_physics(build(sc), solve_checked(sc, method))
+    forces, index = result.elements, {name: j for j, name in enumerate(sc.dof_names)}
+    loops = []
+    for spring in hysteretic_springs(sc):
+        a, b = (result.displacement[:, index[n]] if n in index else np.zeros(len(result.time)) for n in spring.connects)
+        tension = forces.spring[:, forces.spring_names.index(spring.path)]
+        name = f"{spring.path} ({spring.law}, {' - '.join(spring.connects)})"
+        loops.append(Curve(f"{label}: {name}" if label else name, result.time, b - a, tension))
+    return loops
+
+
 def portraits(paths: list[Path], out: Path, dofs: str | None = None, ics: tuple[str, ...] = (),
               poincare: bool = False, periods: int | None = None, skip_periods: int = 0,
               method: str | None = None, plots: bool = True, progress: bool = False,
-              name: str | None = None) -> PhaseRun:
-    """Load every scenario first (input errors before any work), solve, draw and write `<name>_portrait.*`.
+              name: str | None = None, hysteresis: bool = False) -> PhaseRun:
+    """Load every scenario first (input errors before any work), solve, draw and write `<name>_portrait.*`
+    (`<name>_hysteresis.*` with `hysteresis`: force against deformation of every hysteretic spring).
 
     The name is the scenario's stem, `<first>_and_<k>_more` for several scenarios, or `name`."""
     from smdcli.io.folders import output_folder
@@ -89,6 +114,13 @@ def portraits(paths: list[Path], out: Path, dofs: str | None = None, ics: tuple[
         missing = [d for d in chosen or () if d not in sc.dof_names]
         if missing:
             raise UsageError(f"--dof: {sc.path} has no DOF {missing[0]!r}; its DOFs are {', '.join(sc.dof_names)}")
+    if hysteresis:
+        if poincare or dofs:
+            raise UsageError("--hysteresis draws springs, not DOFs: leave out --poincare and --dof")
+        for sc in scenarios:
+            if not hysteretic_springs(sc):
+                raise UsageError(f"--hysteresis: {sc.path} has no hysteretic spring (law = \"elastoplastic\", "
+                                 "\"bilinear\" or \"bouc_wen\")")
     runs = [(label if len(scenarios) == 1 else f"{sc.stem}: {label}", member, sc)
             for sc in scenarios for label, member in _runs(sc, ics)]
     if periods is not None and periods < 1 or skip_periods < 0:
@@ -111,6 +143,10 @@ def portraits(paths: list[Path], out: Path, dofs: str | None = None, ics: tuple[
                 spacing = np.diff(time_grid(member.time)[:2])[0]
                 member = dataclasses.replace(member, time=TimeSpec(
                     member.time.start, member.time.start + periods * span, step=min(spacing, span / POINTS_PER_PERIOD)))
+            if hysteresis:  # labels short enough for the legend: the stem stands for the title
+                curves += _loops(member, method, None if alone else label if member is not sc else sc.stem)
+                advance(1, label)
+                continue
             t, x, v = _solve(member, method)
             advance(1, label)
             dofs = chosen or member.dof_names
@@ -131,33 +167,39 @@ def portraits(paths: list[Path], out: Path, dofs: str | None = None, ics: tuple[
                 for dof in dofs:
                     j = member.dof_names.index(dof)
                     sections.append(Curve(names[dof], ts[keep], xs[keep, j], vs[keep, j]))
-    run = PhaseRun(curves, sections, period)
+    run = PhaseRun(curves, sections, period, hysteresis)
+    kind = "hysteresis" if hysteresis else "portrait"
     stem = name or (scenarios[0].stem if len(scenarios) == 1 else f"{scenarios[0].stem}_and_{len(scenarios) - 1}_more")
     from smdcli.io.atomic import together
 
     with together():  # the files appear together, or none of them
-        h5 = out_dir / f"{stem}_portrait.h5"
+        h5 = out_dir / f"{stem}_{kind}.h5"
         _write(h5, scenarios[0], run)
         run.outputs.append(h5)
         if plots:
             from smdcli.plots.common import save_figure
-            from smdcli.plots.response import portrait_figure
+            from smdcli.plots.response import hysteresis_figure, portrait_figure
 
             title = scenarios[0].title or scenarios[0].stem if len(scenarios) == 1 else \
                 " vs ".join(sc.stem for sc in scenarios)
-            title += "\nphase plot: displacement vs velocity" + (
-                f"; Poincare section: dots once per forcing period T = {period:.4g} s"
-                + (f" after {skip_periods} periods" if skip_periods else "") if poincare else "")
-            figure = portrait_figure([(c.label, c.x, c.v) for c in curves], title,
-                                              [(c.label, c.x, c.v) for c in sections] if poincare else None)
-            png = out_dir / f"{stem}_portrait.png"
+            if hysteresis:
+                figure = hysteresis_figure([(c.label, c.x, c.v) for c in curves],
+                                           title + "\nhysteresis: spring force vs deformation")
+            else:
+                title += "\nphase plot: displacement vs velocity" + (
+                    f"; Poincare section: dots once per forcing period T = {period:.4g} s"
+                    + (f" after {skip_periods} periods" if skip_periods else "") if poincare else "")
+                figure = portrait_figure([(c.label, c.x, c.v) for c in curves], title,
+                                         [(c.label, c.x, c.v) for c in sections] if poincare else None)
+            png = out_dir / f"{stem}_{kind}.png"
             save_figure(figure, png)
             run.outputs.append(png)
     return run
 
 
 def _write(path: Path, sc: Scenario, run: PhaseRun) -> None:
-    """One group per curve (time, displacement, velocity), Poincare points apart."""
+    """One group per curve (time, displacement, velocity; time, deformation, force for loops), Poincare points
+    apart."""
     import h5py
 
     from smdcli.io.atomic import atomic_path
@@ -174,5 +216,7 @@ def _write(path: Path, sc: Scenario, run: PhaseRun) -> None:
             for i, c in enumerate(curves):
                 g = group.create_group(f"{i:03d}")
                 g.attrs["label"] = c.label
-                for name, data, units in (("time", c.time, "s"), ("displacement", c.x, "m"), ("velocity", c.v, "m/s")):
+                columns = (("deformation", "m"), ("force", "N")) if run.hysteresis else \
+                    (("displacement", "m"), ("velocity", "m/s"))
+                for (name, units), data in zip((("time", "s"),) + columns, (c.time, c.x, c.v)):
                     g.create_dataset(name, data=data).attrs["units"] = units

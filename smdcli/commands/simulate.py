@@ -127,7 +127,17 @@ def summary(run: Run) -> dict:
         "expect": [check.as_dict() for check in run.checks],
         "outputs": [str(p) for p in run.outputs],
     } | ({} if run.result.ground is None else {"peak_absolute_displacement_m": dict(zip(
-        run.result.dofs, map(float, np.nanmax(np.abs(run.result.absolute("displacement")), axis=0))))})
+        run.result.dofs, map(float, np.nanmax(np.abs(run.result.absolute("displacement")), axis=0))))}) \
+      | ({} if run.result.nonsmooth is None else _events(run.result.nonsmooth))
+
+
+def _events(history) -> dict:
+    """The events of a run with nonsmooth elements: their count by kind, and each (time, element, kind)."""
+    counts: dict[str, int] = {}
+    for _, _, kind in history.events:
+        counts[kind] = counts.get(kind, 0) + 1
+    return {"event_counts": counts,
+            "events": [{"time": t, "element": element, "kind": kind} for t, element, kind in history.events]}
 
 
 def failed_summary(path: str | Path, message: str | None, exit_code: int | None) -> dict:
@@ -160,6 +170,12 @@ def format_summary(data: dict) -> str:
                      + (" ..." if len(top) > SHOWN else ""))
     else:
         lines.append(f"  peak |x| {peaks}")
+    if "event_counts" in data:
+        counts = data["event_counts"]
+        told = ", ".join(f"{count} {kind}" for kind, count in counts.items())
+        lines.append(f"  events   {sum(counts.values())}" + (f" ({told})" if told else "")
+                     + (f"; the last at t = {data['events'][-1]['time']:.6g} s ({data['events'][-1]['element']} "
+                        f"{data['events'][-1]['kind']})" if data["events"] else ""))
     if data.get("energy_residual") is not None:
         lines.append(f"  energy   balance residual {data['energy_residual']:.2g} of the largest energy "
                      "(the run's physical accuracy check)")
@@ -189,6 +205,8 @@ def info(path: str | Path, state_space: Path | None = None) -> dict:
         "scenario": sc.path, "title": sc.title, "dofs": list(model.dofs),
         "form": "element" if model.element_form else "matrix",
         "M": model.M.tolist(), "C": model.C.tolist(), "K": model.K.tolist(),
+        # with hysteretic springs, K holds only their always-present part; at rest (the modes') they are elastic
+        **({"K_initial": model.initial_K.tolist()} if not np.array_equal(model.initial_K, model.K) else {}),
         "linear": model.is_linear, "nonlinear_elements": list(model.nonlinear_paths),
         "forces": [f"{p} on {model.dofs[d]}: {kind}"
                    for p, kind, d in zip(model.force_paths, model.force_types, model.force_dofs) if d != GROUND_DOF],
@@ -249,7 +267,9 @@ def format_info(d: dict) -> str:
         lines.append(f"  ground   {ground['type']} {ground['quantity']}"
                      + (f", {ground['jumps']} jump(s)" if ground["jumps"] else "")
                      + "; x, v, a relative to the ground")
-    lines += [matrix("M", d["M"]), matrix("C", d["C"]), matrix("K", d["K"])]
+    lines += [matrix("M", d["M"]), matrix("C", d["C"]),
+              matrix("K (at rest, the hysteretic springs elastic: the modes')", d["K_initial"]) if "K_initial" in d
+              else matrix("K", d["K"])]
     lines.append("  modes    omega_n [rad/s]   f_n [Hz]   zeta        regime")
     for i, mode in enumerate(d["modes"], 1):
         if SHOWN // 2 < i <= len(d["modes"]) - SHOWN // 2:

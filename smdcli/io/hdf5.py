@@ -13,7 +13,7 @@ import numpy as np
 from smdcli import __version__, provenance
 from smdcli.io.atomic import atomic_path
 from smdcli.model import Model
-from smdcli.model.accuracy import evaluation_accuracy, matrix_accuracy, modes_accuracy
+from smdcli.model.accuracy import derived_accuracy, evaluation_accuracy, matrix_accuracy, modes_accuracy
 from smdcli.result import Result
 from smdcli.scenario import Scenario
 from smdcli.solvers.base import acceleration_accuracy
@@ -131,19 +131,21 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
         if result.ground is not None:
             _write_ground(f, scenario, model, result, time, dof, accuracy)
         if result.elements is not None or result.energy is not None:
-            from smdcli.solvers.energy import derived_accuracy
-
             accuracy = derived_accuracy(model, result)
             if result.elements is not None:
                 _write_elements(f, result.elements, time, dof)
             if result.energy is not None:
                 _write_energy(f, result.energy, time)
             for name, value in accuracy.items():
-                path = f"elements/{name}" if name in ("spring_force", "damper_force", "reaction") else f"energy/{name}"
+                path = f"elements/{name}" if name in ("spring_force", "damper_force", "reaction", "friction_force",
+                                                       "stop_force") or name.startswith("internal/") \
+                    else f"energy/{name}"
                 if path in f:  # a [system] scene has no element forces
                     stated(f[path], value, result.energy.largest if path.startswith("energy/") else None)
             if "elements/added_damping_force" in f:  # C_damping v: the velocity's accuracy, through a product
                 stated(f["elements/added_damping_force"], result.stats.stated_accuracy * (model.n + 2))
+        if result.nonsmooth is not None:
+            _write_events(f, result.nonsmooth)
         if checks:
             _write_expect(f, checks)
 
@@ -237,6 +239,20 @@ def stated(ds, accuracy: float, scale: float | None = None) -> None:
         ds.attrs["accuracy_scale"] = float(scale)
 
 
+def _write_events(f, history) -> None:
+    """/events: time (s), element and kind of every event, on an `event` axis."""
+    group = f.create_group("events")
+    group.attrs["kinds"] = "yield, unload, stick, slip, contact, impact, separation, rest"
+    event = group.create_dataset("event", data=np.arange(len(history.events)))
+    event.make_scale("event")
+    times = _with_scales(group.create_dataset("time", data=np.array([t for t, _, _ in history.events], dtype=float)),
+                         event)
+    times.attrs["units"] = "s"
+    stated(times, 4 * float(np.finfo(float).eps))  # located to rounding on the flow (the exact path)
+    for name, index in (("element", 1), ("kind", 2)):
+        _with_scales(_strings(group, name, [e[index] for e in history.events]), event)
+
+
 def _write_elements(f, elements, time, dof) -> None:
     """/elements: spring_force and damper_force (time x element, tension positive), named scales, the reaction."""
     group = f.create_group("elements")
@@ -251,6 +267,26 @@ def _write_elements(f, elements, time, dof) -> None:
         _strings(group, f"{kind}_connects", [f"{a} {b}" for a, b in connects])
     if not elements.element_form:
         group.attrs["note"] = "a [system] scene has no elements: only the reaction is given"
+    for kind, forces, names, connects in (("friction", elements.friction, elements.friction_names,
+                                           elements.friction_connects),
+                                          ("stop", elements.stop, elements.stop_names, elements.stop_connects)):
+        if forces is None or not names:
+            continue
+        scale = _strings(group, kind, names)
+        scale.make_scale(kind)
+        ds = _with_scales(group.create_dataset(f"{kind}_force", data=forces), time, scale)
+        ds.attrs["units"] = "N"
+        ds.attrs["description"] = ("the contact's friction force, tension positive (stuck: the force that holds it)"
+                                   if kind == "friction" else "the stop's contact force (0 while free), tension "
+                                   "positive: a stop pushing its ends apart is negative")
+        _strings(group, f"{kind}_connects", [f"{a} {b}" for a, b in connects])
+    if elements.internal:
+        internal = group.create_group("internal")
+        internal.attrs["description"] = ("each hysteretic spring's internal variable: plastic_deformation (m) of an "
+                                         "elastoplastic or bilinear spring, z (m) of a Bouc-Wen one")
+        for name, values in elements.internal.items():
+            ds = _with_scales(internal.create_dataset(name, data=values), time)
+            ds.attrs["units"] = "m"
     reaction = _with_scales(group.create_dataset("reaction", data=elements.reaction[:, None]), time)
     reaction.attrs["units"] = "N"
     reaction.attrs["description"] = elements.reaction_meaning
@@ -262,13 +298,12 @@ def _write_elements(f, elements, time, dof) -> None:
 
 def _write_energy(f, energy, time) -> None:
     """/energy: kinetic, strain, dissipated, input, residual (J) and the balance's max_relative_residual."""
-    from smdcli.result import ENERGY_TERMS
 
     group = f.create_group("energy")
     group.attrs["max_relative_residual"] = energy.max_relative_residual
     group.attrs["quadrature"] = energy.quadrature
     group.attrs["balance"] = "residual = kinetic + strain - (kinetic + strain)[0] + dissipated - input"
-    for name in ENERGY_TERMS:
+    for name in energy.terms:
         ds = _with_scales(group.create_dataset(name, data=getattr(energy, name)), time)
         ds.attrs["units"] = "J"
 

@@ -4,6 +4,7 @@ Modules: system (assembly, modes, stiffness, the nonlinear element tables), forc
 discontinuities, exosystems for exact integration). Must not import: solvers, sweep, io, plots, commands, cli.
 """
 
-from smdcli.model.system import GROUND_DOF, Incidence, Model, Modes, build, mass_solve, regime, time_grid
+from smdcli.model.grid import time_grid
+from smdcli.model.system import GROUND_DOF, Incidence, Model, Modes, build, mass_solve, regime
 
 __all__ = ["GROUND_DOF", "Incidence", "Model", "Modes", "build", "mass_solve", "regime", "time_grid"]

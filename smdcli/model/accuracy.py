@@ -13,8 +13,16 @@ Must not import: solvers, sweep, io, plots, commands, cli.
 from __future__ import annotations
 
 import dataclasses
+import math
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from smdcli.scenario import GROUND
+
+if TYPE_CHECKING:
+    from smdcli.model.system import Model
+    from smdcli.result import Result
 
 EPS = float(np.finfo(float).eps)
 SAFETY = 10.0  # a perturbation shows an error's size, not its worst case: stated accuracies carry this margin
@@ -123,3 +131,57 @@ def evaluation_accuracy(evaluate, time: np.ndarray) -> float:
             return 4 * EPS
         change = float(np.max(np.abs(moved - value), initial=0.0))
     return SAFETY * change / peak + 4 * EPS
+
+
+def derived_accuracy(model: Model, result: Result) -> dict[str, float]:
+    """The accuracy that element forces and energies inherit from the run's stated accuracy s of x and v: an element
+    force moves by at most 2 s times the peak motion (relative to the data set's peak); an energy by 2 s of the
+    largest energy, and the integrals also by the balance's residual (which holds their quadrature and method
+    error), each relative to the largest energy; the residual vouches for nothing below its own size."""
+    with np.errstate(all="ignore"):
+        return _derived_accuracy(model, result)
+
+
+def _derived_accuracy(model: Model, result: Result) -> dict[str, float]:
+    s = result.stats.stated_accuracy
+    X = float(np.max(np.abs(result.displacement), initial=0.0))
+    V = float(np.max(np.abs(result.velocity), initial=0.0))
+    out = {}
+
+    def relative(bound: float, data: np.ndarray) -> float:
+        peak = float(np.max(np.abs(data), initial=0.0))
+        return bound / peak if peak > 0 else (0.0 if bound == 0 else math.inf)
+
+    e = result.elements
+    if e is not None:
+        springs = [x for x in model.elements if x.kind == "spring"]
+        dampers = [x for x in model.elements if x.kind == "damper"]
+        slope = [x.coef + (12 * x.k3 * X * X if x.law == "cubic" else 0.0) for x in springs]
+        drag = [x.coef * (4 * V if x.law == "quadratic" else 1.0) for x in dampers]
+        moved = [k * 2 * s * X for k in slope] + [c * 2 * s * V for c in drag]
+        out["spring_force"] = relative(max(moved[:len(springs)], default=0.0), e.spring)
+        out["damper_force"] = relative(max(moved[len(springs):], default=0.0), e.damper)
+        contacts = 0.0  # what the contacts to the ground add to the reaction's error, N
+        for name, forces, connects in (("friction_force", e.friction, e.friction_connects),
+                                       ("stop_force", e.stop, e.stop_connects)):
+            if forces is not None and forces.shape[1]:  # constraint forces, from x, v and the forces: n roundings
+                out[name] = max(s, 8 * 2.0**-53) * (model.n + 2)
+                contacts += sum(out[name] * float(np.max(np.abs(forces[:, j]))) for j, ends in enumerate(connects)
+                                if GROUND in ends)
+        for name in e.internal:
+            out[f"internal/{name}"] = max(s, 8 * 2.0**-53) * (model.n + 2)
+        grounded = [m for m, x in zip(moved, springs + dampers) if min(x.a, x.b) < 0]
+        if not model.element_form:
+            grounded = [2 * s * (np.abs(model.K).sum() * X + np.abs(model.C).sum() * V)]
+        out["reaction"] = relative(sum(grounded) + contacts, e.reaction)
+    energy = result.energy
+    if energy is not None:
+        # Every energy is measured by the largest the run reached (each data set's accuracy_scale), not by its own
+        # peak: an input work that stays zero, or a residual at rounding, is known to that, not to its own digits.
+        largest = energy.largest
+        moved = 2 * s * largest
+        off = float(np.max(np.abs(energy.residual), initial=0.0))  # the balance's quadrature and method error
+        for name in energy.terms:
+            bound = moved if name in ("kinetic", "strain", "contact") else moved + off
+            out[name] = bound / largest if largest > 0 else 0.0
+    return out

@@ -23,8 +23,9 @@ from smdcli.model.damping import added_damping, check_damping
 from smdcli.model.elements import Element, Incidence, elements_of, incidence, incidence_row
 from smdcli.model.forcing import Signal, build_signal
 from smdcli.model.ground import MAX_JUMPS, GroundMotion, ground_motion, state_jumps
+from smdcli.model.checks import check_finite, check_forces, check_matrices_finite
 from smdcli.model.mass import mass_solve
-from smdcli.model.grid import time_grid
+from smdcli.model.nonsmooth import NonsmoothElement, initial_stiffness, nonsmooth_elements
 from smdcli.scenario import Scenario
 
 # Relative width around zeta = 1 inside which a mode is called critically damped.
@@ -81,6 +82,7 @@ class Model:
     jumps: tuple[tuple[float, np.ndarray, np.ndarray], ...] = ()  # (t, dx, dv): the state jumps there
     elements: tuple[Element, ...] = ()  # the springs and dampers (none in a [system] scene)
     added_damping: np.ndarray | None = None  # [damping]'s part of C
+    nonsmooth: tuple[NonsmoothElement, ...] = ()  # hysteretic springs, friction contacts, stops (their laws)
 
     def with_matrices(self, **changes) -> Model:
         """This model with other matrices (M, C, K, x0, v0...), its ground jumps made from the new M and C."""
@@ -97,8 +99,20 @@ class Model:
 
     @property
     def is_linear(self) -> bool:
-        """True when there is no cubic spring and no quadratic damper."""
-        return self.cubic is None and self.quadratic is None
+        """True when there is no cubic spring, quadratic damper or nonsmooth element."""
+        return self.cubic is None and self.quadratic is None and not self.nonsmooth
+
+    @property
+    def is_piecewise_linear(self) -> bool:
+        """Linear between events: nonsmooth elements of piecewise-linear laws only (elastoplastic, bilinear,
+        Coulomb friction, stops), no cubic spring or quadratic damper. Solved exactly, event to event."""
+        return bool(self.nonsmooth) and self.cubic is None and self.quadratic is None and \
+            all(e.law.piecewise_linear for e in self.nonsmooth)
+
+    @cached_property
+    def initial_K(self) -> np.ndarray:
+        """K with the hysteretic springs at their elastic stiffness: the scene at rest (modes, [damping])."""
+        return initial_stiffness(self.K, self.nonsmooth)
 
     @property
     def is_forced(self) -> bool:
@@ -107,8 +121,9 @@ class Model:
 
     @property
     def nonlinear_paths(self) -> tuple[str, ...]:
-        """Field paths of the nonlinear elements."""
-        return sum((inc.paths for inc in (self.cubic, self.quadratic) if inc is not None), ())
+        """Field paths of the nonlinear elements, nonsmooth ones included."""
+        smooth = sum((inc.paths for inc in (self.cubic, self.quadratic) if inc is not None), ())
+        return smooth + tuple(e.path for e in self.nonsmooth)
 
     @cached_property
     def Minv(self) -> np.ndarray:
@@ -129,12 +144,7 @@ class Model:
     @cached_property
     def state_matrix(self) -> np.ndarray:
         """A = [[0, I], [-M^-1 K, -M^-1 C]] of the linear part."""
-        n = self.n
-        A = np.zeros((2 * n, 2 * n))
-        A[:n, n:] = np.eye(n)
-        A[n:, :n] = -mass_solve(self.M, self.K)  # not Minv @ K: a division where M is diagonal, O(n^2)
-        A[n:, n:] = -mass_solve(self.M, self.C)
-        return A
+        return _state_matrix(self.M, self.C, self.K)
 
     @cached_property
     def input_matrix(self) -> np.ndarray:
@@ -221,10 +231,11 @@ class Model:
     # ----------------------------------------------------------------- modes
     @cached_property
     def modes(self) -> Modes:
-        """Natural frequencies, damping ratios and regimes of the linear part."""
+        """Natural frequencies, damping ratios and regimes of the linear part (hysteretic springs elastic)."""
+        K = self.initial_K
         n = self.n
         if n == 1:
-            m, c, k = self.M[0, 0], self.C[0, 0], self.K[0, 0]
+            m, c, k = self.M[0, 0], self.C[0, 0], K[0, 0]
             wn = math.sqrt(k / m)
             zeta = c / (2 * math.sqrt(k * m)) if k > 0 else math.inf
             eig = np.roots([m, c, k]).astype(complex)
@@ -235,10 +246,10 @@ class Model:
         if n >= MODAL_FORM_DOFS and np.count_nonzero(self.M) == np.count_nonzero(masses):
             # Diagonal M: the standard problem of M^-1/2 K M^-1/2 by divide and conquer, half the generalized time
             root = 1.0 / np.sqrt(masses)
-            squared, shapes = eigh(self.K * root[:, None] * root[None, :], driver="evd")
+            squared, shapes = eigh(K * root[:, None] * root[None, :], driver="evd")
             shapes = shapes * root[:, None]
         else:
-            squared, shapes = eigh(self.K, self.M)
+            squared, shapes = eigh(K, self.M)
         classical = self.proportional_damping and squared.min() > 0
         if classical:  # C = Phi^-T diag(c) Phi^-1: each mode a 1-DOF oscillator (symmetric solver, 5-10x faster)
             wn = np.sqrt(squared)
@@ -253,7 +264,7 @@ class Model:
             modal[n:, n:] = -(shapes.T @ self.C @ shapes)
             eig = np.linalg.eigvals(modal)
         else:
-            eig = np.linalg.eigvals(self.state_matrix)
+            eig = np.linalg.eigvals(self.state_matrix if K is self.K else _state_matrix(self.M, self.C, K))
         eig = eig[np.lexsort((eig.real, eig.imag))]  # one order whatever LAPACK returns
         if not classical:
             wn, zeta = _pair_modes(eig)
@@ -269,8 +280,9 @@ class Model:
     @cached_property
     def proportional_damping(self) -> bool:
         """C M^-1 K = K M^-1 C (Caughey's condition): the undamped modes decouple the damped system too."""
-        CK = self.C @ mass_solve(self.M, self.K)
-        scale = np.abs(self.C).max(initial=0.0) * np.abs(self.Minv).max(initial=0.0) * np.abs(self.K).max(initial=0.0)
+        K = self.initial_K
+        CK = self.C @ mass_solve(self.M, K)
+        scale = np.abs(self.C).max(initial=0.0) * np.abs(self.Minv).max(initial=0.0) * np.abs(K).max(initial=0.0)
         return bool(np.abs(CK - CK.T).max(initial=0.0) <= 1e-12 * self.n * scale)
 
     @cached_property
@@ -290,6 +302,16 @@ class Model:
     def is_stiff(self) -> bool:
         """Stiff in the classical sense: decay rates spread over STIFF_RATIO (1000) or more."""
         return self.stiffness_ratio >= STIFF_RATIO * (1 - 1e-9)
+
+
+def _state_matrix(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """[[0, I], [-M^-1 K, -M^-1 C]]."""
+    n = len(M)
+    A = np.zeros((2 * n, 2 * n))
+    A[:n, n:] = np.eye(n)
+    A[n:, :n] = -mass_solve(M, K)  # not Minv @ K: a division where M is diagonal, O(n^2)
+    A[n:, n:] = -mass_solve(M, C)
+    return A
 
 
 def _pair_modes(eig: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -335,22 +357,25 @@ def build(scenario: Scenario) -> Model:
                 quad_rows.append((row, element.coef, element.path))
                 continue
             nodes = np.flatnonzero(row)  # one or two: the element's stamp, not an n x n outer product per element
+            # a hysteretic spring stamps only the stiffness it always has (a bilinear spring's b k); its law the rest
+            coef = element.coef if element.nonsmooth is None else element.nonsmooth.linear_stiffness
             with np.errstate(over="ignore", invalid="ignore"):  # an overflow is named by _check_finite below
-                target[np.ix_(nodes, nodes)] += element.coef * np.outer(row[nodes], row[nodes])
+                target[np.ix_(nodes, nodes)] += coef * np.outer(row[nodes], row[nodes])
             if element.law == "cubic":
                 cubic_rows.append((row, element.k3, element.path))
         cubic, quadratic = incidence(cubic_rows), incidence(quad_rows)
-    _check_finite(scenario, dofs, K=K, C=C)
-    _check_matrices_finite(M, C, K, scenario, dofs)  # before [damping], which needs the undamped modes
+    nonsmooth = nonsmooth_elements(scenario, dofs)
+    check_finite(scenario, dofs, K=K, C=C)
+    check_matrices_finite(M, C, initial_stiffness(K, nonsmooth), scenario, dofs)  # before [damping]'s modes
     with np.errstate(all="ignore"):
-        try:
-            extra = added_damping(scenario, M, K) if scenario.damping is not None else None
+        try:  # of the scene at rest: hysteretic springs at their elastic stiffness, as structural codes take it
+            extra = added_damping(scenario, M, initial_stiffness(K, nonsmooth)) if scenario.damping is not None else None
         except (np.linalg.LinAlgError, ValueError) as exc:  # LAPACK's eigensolver gave up on these matrices
             raise ScenarioError(scenario.path, f"damping.{scenario.damping.given}", "the undamped modes it is "
                                 f"defined by cannot be computed ({str(exc).split('.')[0]}); check M and K") from None
         C = C if extra is None else C + extra
-    _check_finite(scenario, dofs, C=C)
-    _check_matrices_finite(M, C, K, scenario, dofs)
+    check_finite(scenario, dofs, C=C)
+    check_matrices_finite(M, C, K, scenario, dofs)
     signals = tuple(build_signal(f) for f in scenario.forces)
     force_dofs = tuple(index[f.on] for f in scenario.forces)
     shapes = scenario.forces
@@ -371,72 +396,7 @@ def build(scenario: Scenario) -> Model:
         force_types=tuple(f.type for f in shapes),
         cubic=cubic, quadratic=quadratic, source=scenario.path,
         element_form=scenario.system is None, ground=ground, jumps=jumps or (),
-        elements=elements_of(scenario, dofs), added_damping=extra)
-    _check_forces(model, scenario)
+        elements=elements_of(scenario, dofs), added_damping=extra, nonsmooth=nonsmooth)
+    check_forces(model, scenario)
     check_damping(model.C, scenario)
     return model
-
-
-def _check_matrices_finite(M: np.ndarray, C: np.ndarray, K: np.ndarray, scenario: Scenario,
-                           dofs: tuple[str, ...]) -> None:
-    """Refuse a scene whose accelerations overflow (a mass of 1e-320 kg under a stiffness), naming the mass: no
-    method could solve it, and the undamped modes [damping] needs could not be computed."""
-    with np.errstate(all="ignore"):
-        try:
-            rows = np.hstack([mass_solve(M, K), mass_solve(M, C)])
-        except np.linalg.LinAlgError:
-            rows = np.full((len(dofs), 2 * len(dofs)), np.nan)
-    bad = ~np.isfinite(rows).all(axis=1)
-    if bad.any():
-        i = int(np.argmax(bad))
-        where = f"mass[{i}].m" if scenario.system is None else "system.M"
-        raise ScenarioError(scenario.path, where, f"M^-1 K or M^-1 C is not finite for DOF {dofs[i]!r}: "
-                                                  "a mass too small for the stiffness or damping it carries")
-
-
-def _check_finite(scenario: Scenario, dofs: tuple[str, ...], **matrices: np.ndarray) -> None:
-    """Refuse an assembled K or C that overflows, naming the field that put the overflow there."""
-    for name, matrix in matrices.items():
-        bad = ~np.isfinite(matrix).all(axis=1)
-        if bad.any():
-            i = int(np.argmax(bad))
-            raise ScenarioError(scenario.path, _blame(scenario, name, dofs[i]),
-                                f"the assembled {name} overflows double precision at DOF {dofs[i]!r}; expected "
-                                "numbers whose sums and products stay below 1.8e308")
-
-
-def _blame(scenario: Scenario, matrix: str, dof: str) -> str:
-    """The field that put an overflowing entry into K or C at a DOF: [damping], an element on it, or [system]."""
-    if scenario.system is not None:
-        return f"system.{matrix}" if matrix == "K" or scenario.damping is None else f"damping.{scenario.damping.given}"
-    elements = scenario.springs if matrix == "K" else scenario.dampers
-    own = [e for e in elements if dof in e.connects]
-    with np.errstate(all="ignore"):
-        if own and not math.isfinite(sum(abs(e.coef) for e in own)):
-            return f"{own[0].path}.{'k' if matrix == 'K' else 'c'}"
-    if matrix == "C" and scenario.damping is not None:
-        return f"damping.{scenario.damping.given}"
-    return f"{own[0].path}.{'k' if matrix == 'K' else 'c'}" if own else "mass"
-
-
-MAX_EDGES = 1_000_000  # force discontinuities in one run: each is a restart of the integration
-
-
-def _check_forces(model: Model, scenario: Scenario) -> None:
-    """Refuse forces with more discontinuities than a run can restart at, or not finite on the output grid
-    (e.g. exp(9**9), 1/(t-1))."""
-    if not model.signals:
-        return
-    for j, signal in enumerate(model.signals):
-        edges = signal.edge_count(scenario.time.start, scenario.time.end, MAX_EDGES)
-        if not edges <= MAX_EDGES:
-            raise ScenarioError(scenario.path, model.force_paths[j],
-                                f"{edges:.3g} discontinuities in the run (limit {MAX_EDGES:.0e}); "
-                                "the period is too short for the time span")
-    grid = time_grid(scenario.time)
-    for j, signal in enumerate(model.signals):
-        values = signal.value(grid)
-        bad = ~np.isfinite(values)
-        if bad.any():
-            t_bad = grid[np.argmax(bad)]
-            raise ScenarioError(scenario.path, model.force_paths[j], f"force is not finite at t = {t_bad:g} s (value {values[bad][0]})")

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 
-from smdcli.plots.common import _figure
+from smdcli.plots.common import _figure, _wrap
 
 FAILED_LEVEL = 3.0  # failed runs are drawn as crosses on a band above error = 1
 
@@ -24,6 +24,18 @@ def _two_panels(runs):
     axes = fig.subplots(1, 2, sharey=True)
     fig.subplots_adjust(left=0.07, right=0.8, top=0.86, bottom=0.1, wspace=0.06)
     return methods, _method_styles(methods), fig, axes
+
+
+def _span_decades(ax, decades: float = 1.5) -> None:
+    """Widen a log x axis to span at least `decades` about its middle (a power of ten at least is labelled) and label
+    no minor tick: on a narrow axis matplotlib labels them, and those labels run into each other."""
+    from matplotlib.ticker import NullFormatter
+
+    low, high = ax.get_xlim()
+    if low > 0 and high / low < 10 ** decades:
+        middle = math.sqrt(low * high)
+        ax.set_xlim(middle / 10 ** (decades / 2), middle * 10 ** (decades / 2))
+    ax.xaxis.set_minor_formatter(NullFormatter())
 
 
 def work_precision_figure(comparison, title: str):
@@ -47,9 +59,11 @@ def work_precision_figure(comparison, title: str):
                 ax.plot([getattr(r, cost) for r in bad], [FAILED_LEVEL] * len(bad), "x", color=style["color"], ms=8)
         exact = comparison.exact_point
         if exact is not None and cost == "wall_time_s":
+            how = "matrix exponential" if comparison.model.is_linear else "event to event"
             ax.plot([exact[0]], [max(exact[1], 1e-17)], "*", color="black", ms=14, zorder=5,
-                    label="exact (matrix exponential):\nits stated accuracy")
+                    label=f"exact ({how}):\nits stated accuracy")
         ax.set_xscale("log")
+        _span_decades(ax)
         ax.set_yscale("log")
         ax.axhspan(1.0, 10.0, color="0.9", zorder=0)
         ax.text(0.99, 1.15, "band: failed, or error >= 1 (x)", transform=ax.get_yaxis_transform(), ha="right",
@@ -64,8 +78,8 @@ def work_precision_figure(comparison, title: str):
     if comparison.reference_error:
         ref += f" (own error {comparison.reference_error:.1e})"
     extra = "" if comparison.breakpoints else "; integration NOT restarted at force discontinuities"
-    fig.suptitle(f"{title}\nwork-precision: solid adaptive (one point per rtol), dashed fixed step (one per h); "
-                 f"{ref}{extra}", fontsize=10)
+    fig.suptitle(_wrap(f"{title}\nwork-precision: solid adaptive (one point per rtol), dashed fixed step (one per h); "
+                       f"{ref}{extra}", 150), fontsize=10)
     return fig
 
 
@@ -83,6 +97,7 @@ def energy_precision_figure(comparison, title: str):
                     ls="--" if fixed else "-", lw=1.2, ms=5, label=m + (" (fixed step)" if fixed else ""), **styles[m])
         ax.set_xscale("log")
         ax.set_yscale("log")
+        _span_decades(ax)
         ax.set_xlabel(label)
         ax.grid(True, which="major", alpha=0.4)
     low, high = axes[1].get_xlim()
@@ -91,8 +106,9 @@ def energy_precision_figure(comparison, title: str):
     axes[0].set_ylabel("Energy residual / largest energy (the run's own check)")
     handles, labels = axes[1].get_legend_handles_labels()
     axes[1].legend(handles, labels, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, frameon=False)
-    fig.suptitle(f"{title}\nenergy balance of each run: kinetic + strain - initial + dissipated - input, "
-                 f"against cost and against the error from the reference ({comparison.reference_method})", fontsize=10)
+    fig.suptitle(_wrap(f"{title}\nenergy balance of each run: kinetic + strain - initial + dissipated - input, "
+                       f"against cost and against the error from the reference ({comparison.reference_method})", 150),
+                 fontsize=10)
     return fig
 
 
@@ -142,4 +158,70 @@ def stability_figure(comparison, title: str, limits: dict[str, float]):
     if notes:
         ax.text(1.02, 0.0, "\n".join(notes), transform=ax.transAxes, fontsize=8, va="bottom")
     fig.suptitle(f"{title}\nstability of fixed-step methods: a bounded run stays near 1", fontsize=10)
+    return fig
+
+
+# What each verdict looks like on the failure map of a nonsmooth scene.
+VERDICTS = (("ok", "#4c9a5b"), ("missed", "#d62728"), ("chattered", "#ff7f0e"), ("energy", "#9467bd"),
+            ("wrong law", "#e377c2"), ("diverged", "#8c564b"), ("too many steps", "#bcbd22"), ("failed", "#7f7f7f"),
+            ("refused", "#e6e6e6"))
+
+
+def _verdict(run) -> str:
+    if run.success:
+        return "ok"
+    for word in ("missed", "chattered", "energy", "wrong law", "diverged", "refused"):
+        if run.message.startswith(word):
+            return word
+    if run.message.startswith("skipped: needs") or "steps" in run.message:
+        return "too many steps"
+    return "failed"
+
+
+def failure_map_figure(comparison, title: str):
+    """A nonsmooth scene: each method (rows) at each tolerance or step (columns), coloured by what happened (events
+    missed, a stick that chattered, energy created, a smoothed law that changed the scene, divergence, a step budget
+    spent), its error and steps written in."""
+    from matplotlib.patches import Patch, Rectangle
+
+    runs = comparison.runs  # a rung skipped for its step count is one too: the budget is what it would exceed
+    methods = list(dict.fromkeys(r.method for r in runs))
+    settings = sorted({(r.rtol if r.adaptive else r.dt) for r in runs}, reverse=True)
+    width, rows = max(9.0, 1.6 * len(settings) + 3.5), 0.42 * len(methods)
+    top, bottom = 0.8, 1.3 + (0.45 if comparison.refused else 0.0)  # inches: the title; the axis label, legend, notes
+    height = rows + top + bottom
+    fig = _figure(figsize=(width, height))
+    ax = fig.subplots()
+    fig.subplots_adjust(left=1.6 / width, right=1 - 0.2 / width, top=1 - top / height, bottom=bottom / height)
+    colours = dict(VERDICTS)
+    for i, method in enumerate(methods):
+        for r in (r for r in runs if r.method == method):
+            j = settings.index(r.rtol if r.adaptive else r.dt)
+            kind = _verdict(r)
+            ax.add_patch(Rectangle((j, i), 1, 1, facecolor=colours[kind], edgecolor="white"))
+            text = f"{r.error:.0e}\n{r.steps_accepted} st" if kind == "ok" else \
+                kind.replace("too many ", "too many\n") + (f"\n{r.error:.0e}" if kind == "wrong law" else "")
+            ax.text(j + 0.5, i + 0.5, text, ha="center", va="center", fontsize=6.5,
+                    color="white" if kind not in ("refused",) else "0.3")
+    ax.set_xlim(0, len(settings))
+    ax.set_ylim(len(methods), 0)
+    ax.set_xticks([j + 0.5 for j in range(len(settings))])
+    ax.set_xticklabels([f"{s:.0e}" for s in settings], fontsize=8)
+    ax.set_yticks([i + 0.5 for i in range(len(methods))])
+    ax.set_yticklabels(methods, fontsize=8)
+    ax.set_xlabel("rtol (adaptive methods) or step [s] (fixed-step methods)")
+    handles = [Patch(color=c, label=k) for k, c in VERDICTS]
+    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.55 / rows), ncol=len(VERDICTS),
+              fontsize=7, frameon=False, bbox_transform=ax.transAxes, handlelength=1.5, columnspacing=1.0)
+    if comparison.refused:  # methods that cannot take the scene at all, grouped by why
+        groups: dict[str, list[str]] = {}
+        for method, reason in comparison.refused.items():
+            why = reason.split(";")[0].split(":")[0].removeprefix(repr(method)).strip()
+            groups.setdefault(why, []).append(method)
+        text = "; ".join(f"{', '.join(methods)} {why}" for why, methods in groups.items())
+        fig.text(0.02, 0.1 / height, _wrap(f"refused (exit 2, not run): {text}", int(width * 17)), fontsize=7,
+                 va="bottom")
+    events = len(comparison.reference.nonsmooth.events) if comparison.reference.nonsmooth is not None else 0
+    fig.suptitle(f"{title}\nwhere each method fails, against the exact event-driven solution ({events} events); "
+                 "ok cells: error over the peak and steps", fontsize=9)
     return fig

@@ -16,16 +16,23 @@ def energy_figure(result: Result, title: str):
     t = result.time
     fig = _figure(figsize=(9, 6.5), layout="constrained")
     top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=(2, 1))
-    for name, data, style in (("kinetic", e.kinetic, "-"), ("strain", e.strain, "-"),
-                              ("kinetic + strain", e.kinetic + e.strain, "-"),
-                              ("dissipated (cumulative)", e.dissipated, "--"), ("input (cumulative)", e.input, "--")):
+    stored = e.kinetic + e.strain + (e.contact if e.contact is not None else 0.0)
+    curves = [("kinetic", e.kinetic, "-"), ("strain", e.strain, "-")]
+    if e.contact is not None and np.any(e.contact):
+        curves.append(("contact (stored)", e.contact, "-"))
+    curves += [("kinetic + strain" + (" + contact" if e.contact is not None and np.any(e.contact) else ""), stored, "-"),
+               ("dissipated (cumulative)", e.dissipated, "--"), ("input (cumulative)", e.input, "--")]
+    for name in ("hysteretic", "friction", "impact"):
+        data = getattr(e, name)
+        if data is not None and np.any(data):
+            curves.append((f"{name} (cumulative)", data, "-."))
+    for name, data, style in curves:
         top.plot(*envelope(t, data), style, lw=1.0, label=name)
     top.set_ylabel("energy [J]")
     top.legend(loc="best", fontsize=8)
     top.grid(alpha=0.3)
     top.set_title(_wrap(f"{title}\nenergy balance ({result.stats.method})", 90), fontsize=10)
-    reached = max(float(np.max(e.kinetic + e.strain, initial=0.0)), float(np.max(np.abs(e.dissipated), initial=0.0)),
-                  float(np.max(np.abs(e.input), initial=0.0)))
+    reached = e.largest
     relative = np.abs(e.residual) / reached if reached > 0 else np.zeros_like(e.residual)
     floor = np.finfo(float).eps  # an exact zero has no place on a log axis: drawn at machine epsilon
     bottom.semilogy(*envelope(t, np.maximum(relative, floor)), lw=1.0, color="C3")
@@ -33,6 +40,8 @@ def energy_figure(result: Result, title: str):
     bottom.set_ylabel("|residual| / largest energy")
     bottom.set_xlabel("time [s]")
     bottom.grid(alpha=0.3, which="both")
-    bottom.set_title(_wrap(f"kinetic + strain - initial + dissipated - input: at most {e.max_relative_residual:.2g} "
-                           f"of the largest energy ({e.quadrature})", 110), fontsize=8)
+    losses = "".join(f" + {name}" for name in ("hysteretic", "friction", "impact") if getattr(e, name) is not None)
+    contact = " + contact" if e.contact is not None else ""
+    bottom.set_title(_wrap(f"kinetic + strain{contact} - initial + dissipated{losses} - input: at most "
+                           f"{e.max_relative_residual:.2g} of the largest energy ({e.quadrature})", 110), fontsize=8)
     return fig

@@ -169,20 +169,44 @@ def portrait_figure(curves, title: str, poincare=None):
         color = f"C{i % 10}"
         faint = poincare is not None
         ax.plot(x, v, _STYLES[i % len(_STYLES)] if len(curves) <= 4 else "-", lw=0.6 if faint else 1.3, color=color,
-                alpha=0.35 if faint else 1.0, label=_wrap(label, 32))
+                alpha=0.35 if faint else 1.0, label=_wrap(label, 26))
         ax.plot(x[0], v[0], "o", color=color, ms=7, mfc="white", mew=1.5)
         _direction_arrows(ax, x, v, color)
     if poincare is not None:
         for i, (label, x, v) in enumerate(poincare):
             ax.plot(x, v, "o", color=f"C{i % 10}", ms=6, mec="k", mew=0.6, zorder=5,
-                    label=_wrap(f"{label}: once per period", 32))
+                    label=_wrap(f"{label}: once per period", 26))
+    return _portrait_frame(fig, ax, title, "Displacement x [m]", "Velocity v [m/s]")
+
+
+def _portrait_frame(fig, ax, title: str, xlabel: str, ylabel: str):
+    """A portrait's legend (with the start marker's entry) beside it, its axis labels, grid and title."""
     ax.plot([], [], "o", color="k", mfc="white", label="start")
-    ax.set_xlabel("Displacement x [m]")
-    ax.set_ylabel("Velocity v [m/s]")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
     ax.grid(True, alpha=0.4)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     ax.set_title(_wrap(title, 80), fontsize=10)
     return fig
+
+
+def hysteresis_figure(loops, title: str):
+    """Hysteresis loops: each spring's force against its deformation (label, d, T), start marked, direction
+    arrowed."""
+    fig = _figure(figsize=(7.5, 6.5))
+    ax = fig.subplots()
+    fig.subplots_adjust(left=0.13, right=0.72, top=0.88, bottom=0.1)
+    for i, (label, d, force) in enumerate(loops):
+        color = f"C{i % 10}"
+        ax.plot(d, force, "-", lw=1.1, color=color, label=_wrap(label, 26))
+        ax.plot(d[0], force[0], "o", color=color, ms=7, mfc="white", mew=1.5)
+        _direction_arrows(ax, d, force, color)
+    ax.axhline(0.0, color="k", lw=0.5)
+    ax.axvline(0.0, color="k", lw=0.5)
+    from matplotlib.ticker import MaxNLocator
+
+    ax.xaxis.set_major_locator(MaxNLocator(nbins=6))
+    return _portrait_frame(fig, ax, title, "Deformation d = x_b - x_a [m]", "Spring force (tension) [N]")
 
 
 def _direction_arrows(ax, x: np.ndarray, v: np.ndarray, color, count: int = 4) -> None:

@@ -15,7 +15,8 @@ from smdcli.scenario.options import EXPECT_KEYS, SOLVER_KEYS, SWEEP_KEYS, _read_
 from smdcli.scenario.reader import (_SYSTEM_KEYS, _TIME_KEYS, _TOP_KEYS, MAX_SCENARIO_BYTES, _NotRegular, _Table,
                                     read_regular_file)
 from smdcli.scenario.spec import MAX_SAMPLES, ForceSpec, Scenario, SolverSpec, TimeSpec
-from smdcli.scenario.structure import DAMPING_KEYS, _read_damping, _read_elements, _read_masses, _read_system, _read_time
+from smdcli.scenario.structure import (DAMPING_KEYS, _read_damping, _read_elements, _read_masses, _read_system,
+                                      _read_time, read_law_elements)
 
 
 def load(path: str | Path) -> Scenario:
@@ -73,11 +74,11 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
     time = _read_time(_Table(file, "time", top.raw("time"), _TIME_KEYS) if top.has("time") else None, file)
 
     if top.has("system"):
-        for element in ("mass", "spring", "damper"):
+        for element in ("mass", "spring", "damper", "friction", "stop"):
             if top.has(element):
                 raise ScenarioError(file, element, "cannot be combined with [system]; use one form or the other")
         system = _read_system(_Table(file, "system", top.raw("system"), _SYSTEM_KEYS))
-        masses, springs, dampers = (), (), ()
+        masses, springs, dampers, frictions, stops = (), (), (), (), ()
         dofs = system.dofs
     else:
         system = None
@@ -85,6 +86,8 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
         dofs = tuple(m.name for m in masses)
         springs = _read_elements(top, file, "spring", dofs)
         dampers = _read_elements(top, file, "damper", dofs)
+        frictions = read_law_elements(top, file, "friction", dofs)
+        stops = read_law_elements(top, file, "stop", dofs)
 
     forces = tuple(
         _read_force(_Table(file, f"force[{i}]", raw, _ANY_FORCE_KEYS), i, dofs) for i, raw in enumerate(top.tables("force"))
@@ -117,7 +120,7 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
     return Scenario(
         path=file, text=text, time=time, masses=masses, springs=springs, dampers=dampers,
         system=system, forces=forces, solver=solver, title=title, description=description,
-        sweep=sweep, damping=damping, ground_motion=ground_motion, expect=expect,
+        sweep=sweep, damping=damping, ground_motion=ground_motion, expect=expect, frictions=frictions, stops=stops,
     )
 
 

@@ -184,7 +184,7 @@ _SYNONYMS = {"stiffness": "k", "spring_constant": "k", "spring_rate": "k", "damp
              "kind": "type", "expression": "expr", "formula": "expr"}
 
 
-_TOP_KEYS = ("title", "description", "time", "mass", "spring", "damper", "system",
+_TOP_KEYS = ("title", "description", "time", "mass", "spring", "damper", "friction", "stop", "system",
              "force", "solver", "sweep", "damping", "ground_motion", "expect")
 _TIME_KEYS = ("start", "end", "step", "points")
 _MASS_KEYS = ("name", "m", "x0", "v0")

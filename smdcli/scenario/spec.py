@@ -41,14 +41,16 @@ class MassSpec:
 
 @dataclass(frozen=True)
 class ElementSpec:
-    """A two-terminal spring (coef = k [N/m]) or damper (coef = c [N s/m])."""
+    """A two-terminal element: a spring (coef = k [N/m]), a damper (coef = c [N s/m]), a friction contact or a
+    stop (coef unused: their law holds their parameters)."""
 
-    kind: str  # "spring" | "damper"
+    kind: str  # "spring" | "damper" | "friction" | "stop"
     index: int
     connects: tuple[str, str]
     coef: float
-    law: str = "linear"  # spring: linear | cubic; damper: linear | quadratic
+    law: str = "linear"  # spring: linear | cubic | elastoplastic | bilinear | bouc_wen; damper: linear | quadratic
     k3: float = 0.0  # cubic spring coefficient [N/m^3]
+    nonsmooth: Any = None  # the law (smdcli.elements) of a hysteretic spring, a [[friction]] or a [[stop]]
 
     @property
     def path(self) -> str:
@@ -182,6 +184,8 @@ class Scenario:
     damping: DampingSpec | None = None
     ground_motion: GroundMotionSpec | None = None
     expect: tuple[ExpectSpec, ...] = ()
+    frictions: tuple[ElementSpec, ...] = ()
+    stops: tuple[ElementSpec, ...] = ()
 
     @property
     def stem(self) -> str:

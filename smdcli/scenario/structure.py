@@ -55,12 +55,24 @@ def _read_masses(top: _Table, file: str) -> tuple[MassSpec, ...]:
 
 
 def _read_elements(top: _Table, file: str, kind: str, dofs: tuple[str, ...]) -> tuple[ElementSpec, ...]:
-    coef_key, laws = ("k", ("linear", "cubic")) if kind == "spring" else ("c", ("linear", "quadratic"))
+    from smdcli.elements import SPRING_LAWS
+
+    coef_key, laws = ("k", ("linear", "cubic", *SPRING_LAWS)) if kind == "spring" else ("c", ("linear", "quadratic"))
+    hysteretic_keys = tuple(dict.fromkeys(k for law in SPRING_LAWS.values() for k in law.keys if k != "k"))
     elements = []
     for i, item in enumerate(top.tables(kind)):
-        t = _Table(file, f"{kind}[{i}]", item, ("connects", coef_key, "law") + (("k3",) if kind == "spring" else ()))
+        keys = ("connects", coef_key, "law") + (("k3",) + hysteretic_keys if kind == "spring" else ())
+        t = _Table(file, f"{kind}[{i}]", item, keys)
         connects = _read_connects(t, dofs)
         law = t.string("law", "linear", choices=laws)
+        if law in SPRING_LAWS:  # a hysteretic spring: its law reads and checks its own keys
+            cls = SPRING_LAWS[law]
+            _refuse_other_keys(t, law, ("connects", "law") + cls.keys)
+            model = cls.read(t)
+            t.finish(("connects", "law") + cls.keys)
+            elements.append(ElementSpec(kind=kind, index=i, connects=connects, coef=model.k, law=law,
+                                        nonsmooth=model))
+            continue
         coef = t.number(coef_key, minimum=0.0)
         k3 = 0.0
         allowed = ("connects", coef_key, "law")
@@ -70,8 +82,39 @@ def _read_elements(top: _Table, file: str, kind: str, dofs: tuple[str, ...]) -> 
                 k3 = t.number("k3")
             elif t.has("k3"):
                 raise t.fail("k3", 'only a cubic spring has k3; set law = "cubic"')
+            _refuse_other_keys(t, law, allowed)
         t.finish(allowed)
         elements.append(ElementSpec(kind=kind, index=i, connects=connects, coef=coef, law=law, k3=k3))
+    return tuple(elements)
+
+
+def _refuse_other_keys(t: _Table, law: str, allowed: tuple[str, ...]) -> None:
+    """A key of another spring law (fy on a linear spring, say) named with the law that takes it."""
+    from smdcli.elements import SPRING_LAWS
+
+    for key in t.data:
+        if key not in allowed:
+            owners = [name for name, cls in SPRING_LAWS.items() if key in cls.keys] + (["cubic"] if key == "k3" else [])
+            raise t.fail(key, f"a {law} spring has no {key}" + (f"; it belongs to law = {owners[0]!r}" if owners
+                                                                else ""))
+
+
+def read_law_elements(top: _Table, file: str, table: str, dofs: tuple[str, ...]) -> tuple[ElementSpec, ...]:
+    """[[friction]] or [[stop]]: each entry one law, which reads and checks its own keys."""
+    from smdcli.elements import TABLES
+
+    cls = TABLES[table]
+    elements = []
+    for i, item in enumerate(top.tables(table)):
+        t = _Table(file, f"{table}[{i}]", item, ("connects",) + cls.keys)
+        connects = _read_connects(t, dofs)
+        model = cls.read(t)
+        if table == "friction" and model.belt_velocity and GROUND not in connects:
+            raise t.fail("belt_velocity", f"a belt is the ground moving under a mass; this contact connects "
+                                          f"{connects[0]!r} and {connects[1]!r}, neither of them the ground")
+        t.finish(("connects",) + cls.keys)
+        elements.append(ElementSpec(kind=table, index=i, connects=connects, coef=0.0, law=getattr(model, "law_name", table),
+                                    nonsmooth=model))
     return tuple(elements)
 
 

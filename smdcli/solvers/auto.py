@@ -69,6 +69,10 @@ class Auto(Solver):
                 reason = (f"nonlinear ({', '.join(model.nonlinear_paths)}) and stiff: explicit DOP853 was "
                           f"stability-limited on {stiff.fraction:.0%} of its steps by t = {stiff.t:.3g} s "
                           f"(h*|lambda| = {stiff.rho:.2f}); implicit Radau with the analytic Jacobian")
+        elif model.nonsmooth:
+            from smdcli.solvers.nonsmooth import solve_nonsmooth
+
+            result = solve_nonsmooth(solver, model, grid, tol)
         else:
             result = solver.solve(model, grid, tol)
         stats = dataclasses.replace(result.stats, requested_method=self.name, reason=reason,
@@ -77,6 +81,8 @@ class Auto(Solver):
 
     def choose(self, model: Model, grid: np.ndarray) -> tuple[Solver | None, str]:
         """The solver for a model on a grid and the reason, or (None, '') where the trajectory must decide."""
+        if model.nonsmooth:
+            return _nonsmooth_choice(model)
         if model.is_linear:
             # Stiffness does not matter to exact methods, but the user should know an integrator would feel it;
             # not at the price of a general eigenvalue problem larger than the exact solve (smd info computes it).
@@ -103,3 +109,18 @@ class Auto(Solver):
             return DOP853(), (f"linear, but {_unheld(model)} has no exact integral; not stiff "
                               f"(stiffness ratio {model.stiffness_ratio:.3g}): DOP853 at the scenario's tolerances")
         return None, ""
+
+
+def _nonsmooth_choice(model: Model) -> tuple[Solver, str]:
+    """Exact event to event for a piecewise-linear scene; else the ODE family, event to event: Radau where a law is
+    stiff (Bouc-Wen pinned at its saturation, a regularized friction near zero speed), DOP853 otherwise."""
+    laws = ", ".join(f"{e.path} {getattr(e.law, 'law_name', e.law.name)}" for e in model.nonsmooth)
+    if model.is_piecewise_linear and all(s.exo() is not None for s in model.signals):
+        return Exact(), (f"piecewise linear ({laws}), {_loads(model) if model.is_forced or model.ground else 'free'}: "
+                         "exact between events, each event located on the exact flow to rounding")
+    stiff = [e.path for e in model.nonsmooth if e.law.name == "bouc_wen" or getattr(e.law, "regularization", None)]
+    if stiff:
+        return Radau(), (f"nonsmooth ({laws}); {', '.join(stiff)} stiff where it saturates or sticks: "
+                                     "implicit Radau, each event located on its interpolant, restarted there")
+    return DOP853(), (f"nonsmooth ({laws}), not linear between events: DOP853 at the scenario's "
+                                  "tolerances, each event located on its interpolant, restarted there")

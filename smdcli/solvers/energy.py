@@ -31,7 +31,7 @@ import numpy as np
 
 from smdcli.model import Model
 from smdcli.model.elements import element_forces, incidence_row
-from smdcli.result import ENERGY_TERMS, Energy, Result, largest_energy
+from smdcli.result import Energy, Result, largest_energy
 from smdcli.solvers.base import Tolerances
 
 VAN_LOAN_SIZE = 400  # largest augmented state taken in closed form: two exponentials of twice this size
@@ -43,53 +43,24 @@ _DENSE_VALUES = 20_000_000  # node velocities (nodes x DOFs) a dense-output re-r
 def with_physics(model: Model, result: Result) -> Result:
     """The run with its element forces and energy balance attached (a successful run's outputs)."""
     with np.errstate(all="ignore"):  # a scene at the edge of double precision: judged by the figures, not warned
-        elements = element_forces(model, result.displacement, result.velocity)
+        elements = element_forces(model, result.displacement, result.velocity, result.nonsmooth)
+    if result.nonsmooth is not None:  # the solver integrated the balance on its own pieces, modes known
+        return dataclasses.replace(result, elements=elements, energy=nonsmooth_balance(result.nonsmooth))
     return dataclasses.replace(result, elements=elements, energy=energy_balance(model, result, dense_output(model, result)))
 
 
-def derived_accuracy(model: Model, result: Result) -> dict[str, float]:
-    """The accuracy that element forces and energies inherit from the run's stated accuracy s of x and v: an element
-    force moves by at most 2 s times the peak motion (relative to the data set's peak); an energy by 2 s of the
-    largest energy, and the integrals also by the balance's residual (which holds their quadrature and method
-    error), each relative to the largest energy; the residual vouches for nothing below its own size."""
-    with np.errstate(all="ignore"):
-        return _derived_accuracy(model, result)
-
-
-def _derived_accuracy(model: Model, result: Result) -> dict[str, float]:
-    s = result.stats.stated_accuracy
-    X = float(np.max(np.abs(result.displacement), initial=0.0))
-    V = float(np.max(np.abs(result.velocity), initial=0.0))
-    out = {}
-
-    def relative(bound: float, data: np.ndarray) -> float:
-        peak = float(np.max(np.abs(data), initial=0.0))
-        return bound / peak if peak > 0 else (0.0 if bound == 0 else math.inf)
-
-    e = result.elements
-    if e is not None:
-        springs = [x for x in model.elements if x.kind == "spring"]
-        dampers = [x for x in model.elements if x.kind == "damper"]
-        slope = [x.coef + (12 * x.k3 * X * X if x.law == "cubic" else 0.0) for x in springs]
-        drag = [x.coef * (4 * V if x.law == "quadratic" else 1.0) for x in dampers]
-        moved = [k * 2 * s * X for k in slope] + [c * 2 * s * V for c in drag]
-        out["spring_force"] = relative(max(moved[:len(springs)], default=0.0), e.spring)
-        out["damper_force"] = relative(max(moved[len(springs):], default=0.0), e.damper)
-        grounded = [m for m, x in zip(moved, springs + dampers) if min(x.a, x.b) < 0]
-        if not model.element_form:
-            grounded = [2 * s * (np.abs(model.K).sum() * X + np.abs(model.C).sum() * V)]
-        out["reaction"] = relative(sum(grounded), e.reaction)
-    energy = result.energy
-    if energy is not None:
-        # Every energy is measured by the largest the run reached (each data set's accuracy_scale), not by its own
-        # peak: an input work that stays zero, or a residual at rounding, is known to that, not to its own digits.
-        largest = energy.largest
-        moved = 2 * s * largest
-        off = float(np.max(np.abs(energy.residual), initial=0.0))  # the balance's quadrature and method error
-        for name in ENERGY_TERMS:
-            bound = moved if name in ("kinetic", "strain") else moved + off
-            out[name] = bound / largest if largest > 0 else 0.0
-    return out
+def nonsmooth_balance(history) -> Energy:
+    """The balance of a run with nonsmooth elements, from the terms its solver integrated: stored (kinetic, strain,
+    contact) less its start, plus everything dissipated or lost, less the work put in."""
+    e = history.energy
+    stored = e["kinetic"] + e["strain"] + e["contact"]
+    residual = stored - stored[0] + e["dissipated"] + e["hysteretic"] + e["friction"] + e["impact"] - e["input"]
+    energy = Energy(e["kinetic"], e["strain"], e["dissipated"], e["input"], residual, 0.0,
+                    e.get("quadrature", "8-point Gauss-Legendre on the exact flow between events"),
+                    hysteretic=e["hysteretic"], friction=e["friction"], impact=e["impact"], contact=e["contact"])
+    reached = energy.largest
+    worst = float(np.max(np.abs(residual), initial=0.0))
+    return dataclasses.replace(energy, max_relative_residual=worst / reached if reached > 0 else 0.0)
 
 
 def dense_output(model: Model, result: Result) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None:

@@ -111,6 +111,18 @@ class Exact(Solver):
     linear_only = True
     adaptive = False
 
+    def refuse(self, model: Model) -> str | None:
+        """A linear scene, or a piecewise-linear one (elastoplastic, bilinear, Coulomb friction, stops)."""
+        if model.is_linear or model.is_piecewise_linear:
+            return None
+        smooth = [p for p in model.nonlinear_paths if p not in {e.path for e in model.nonsmooth}]
+        curved = [f"{e.path} ({getattr(e.law, 'law_name', e.law.name)})" for e in model.nonsmooth
+                  if not e.law.piecewise_linear]
+        first = (smooth or curved)[0]
+        return (f"'exact' needs a linear model; {first} is nonlinear" + (" between events" if not smooth else "")
+                + " (piecewise-linear scenes of elastoplastic and bilinear springs, Coulomb friction and stops are "
+                "solved exactly too); try 'DOP853', 'Radau' or 'auto'")
+
     def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
         import scipy.linalg  # before the clock: the wall time is the solve's own, not the import's
         import scipy.sparse
@@ -120,6 +132,8 @@ class Exact(Solver):
         start = time.perf_counter()
         original = model
         model, held = first_order_hold(model, grid)
+        if model.nonsmooth:
+            return self._events(model, original, grid, held, start)
         harmonics = split(model)
         if harmonics is not None:  # thousands of Fourier terms: superposed in closed form, not augmented
             reduced, particular = harmonics
@@ -139,6 +153,28 @@ class Exact(Solver):
             message=message, stated_accuracy=stated,
         )
         return make_result(model, grid, x, v, stats)
+
+
+    def _events(self, model: Model, original: Model, grid: np.ndarray, held: tuple[str, ...], start: float) -> Result:
+        """A piecewise-linear scene, event to event (piecewise.py); a scene it cannot advance is a failed run."""
+        from smdcli.solvers.piecewise import PiecewiseFailed, solve_piecewise
+
+        try:
+            x, v, a, history, message, stated = solve_piecewise(model, grid)
+        except PiecewiseFailed as exc:
+            stats = SolverStats(method=self.name, requested_method=self.name, reason="", success=False,
+                                message=f"failed: {exc}", wall_time_s=time.perf_counter() - start)
+            nan = np.full((len(grid), model.n), np.nan)
+            return dataclasses.replace(make_result(model, grid, nan, nan, stats), t_failed=float(grid[0]))
+        if held:
+            stated = max(stated, hold_error(original, grid, held))
+            message += f"; first-order hold on the output grid for {', '.join(held)} (error O(step^2))"
+        stats = SolverStats(method=self.name, requested_method=self.name, reason="", nlu=0,
+                            steps_accepted=max(len(grid) - 1, 0), wall_time_s=time.perf_counter() - start,
+                            message=message, stated_accuracy=stated)
+        force = model.applied_force(grid) if model.is_forced else np.zeros_like(x)
+        return Result(time=grid, dofs=model.dofs, displacement=x, velocity=v, acceleration=a, force=force,
+                      stats=stats, nonsmooth=history)
 
 
 def _solve_linear(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:

@@ -16,6 +16,7 @@ from smdcli.result import Result
 from smdcli.solvers.base import Solver, Tolerances, stated_rounding, stated_tolerance
 from smdcli.solvers.catalog import check_method_name
 from smdcli.solvers.ground import across_jumps, drift_note, ground_history
+from smdcli.solvers.nonsmooth import nonsmooth_refusal, solve_nonsmooth
 
 
 def _solvers() -> dict[str, type[Solver]]:
@@ -48,11 +49,14 @@ def solve(model: Model, grid: np.ndarray, method: str, tol: Tolerances, field: s
     if problem:
         raise ScenarioError(model.source, field, problem)
     solver = _solvers()[method]()
-    problem = solver.refuse(model)
+    problem = nonsmooth_refusal(method, model) if model.nonsmooth else solver.refuse(model)
     if problem:
         raise ScenarioError(model.source, field, problem)
     with np.errstate(all="ignore"):  # overflow is judged below, on the result, not warned about midway
-        result = across_jumps(lambda piece, times: solver.solve(piece, times, tol), model, grid)
+        if model.nonsmooth:  # its elements' modes and internal state carry across the ground's jumps: no restart
+            result = solve_nonsmooth(solver, model, grid, tol)
+        else:
+            result = across_jumps(lambda piece, times: solver.solve(piece, times, tol), model, grid)
     result = _refuse_non_finite(result)
     notes = result.notes
     if model.ground is not None:

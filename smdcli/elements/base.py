@@ -1,0 +1,110 @@
+"""What every nonsmooth element law answers: its TOML form, its force in each mode, the events that end a mode,
+and what happens at them.
+
+An element connects two nodes a and b; its deformation is d = x_b - x_a (the ground's x is 0, or moves with a
+belt), its rate d' likewise, and its force is a tension T: it pushes a by +T and b by -T (as a spring's k d).
+
+Between two events every law here is in one *mode* (elastic or yielding, stuck or slipping, free or in contact),
+and in a mode its tension is a Piece: a stiffness and a damping added along d, a constant, or a constraint that
+holds d (or d') where it is, the tension then being whatever keeps it there. A mode ends where a Guard's quantity
+(d, d', or a held element's tension) crosses its level in its direction: the event. For a piecewise-linear law
+every quantity is linear in the state, so a scene of such elements is linear between events and solved exactly
+(smdcli.solvers.piecewise); a smooth law adds a nonlinear tension (and internal states) that integrators take.
+
+Imports nothing of smd but errors (the bottom layer): the scenario reader, the model and the solvers consult it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, ClassVar
+
+import numpy as np
+
+# Guard quantities: the deformation, its rate, a held element's tension, or an internal variable ("internal:z").
+D, RATE, TENSION = "d", "rate", "tension"
+KINK = "kink"  # not an event: where a smooth law's right-hand side has a kink, an integrator restarts
+# Event kinds, as /events/kind names them.
+EVENT_KINDS = ("yield", "unload", "stick", "slip", "contact", "impact", "separation", "rest")
+
+
+@dataclass(frozen=True)
+class Guard:
+    """The end of a mode: `quantity` crosses `level` going `direction` (+1 up, -1 down); `kind` names the event."""
+
+    quantity: str
+    level: float
+    direction: int
+    kind: str
+
+
+@dataclass(frozen=True)
+class Piece:
+    """An element's tension in one mode: T = stiffness d + damping d' + constant, or held (a constraint)."""
+
+    stiffness: float = 0.0
+    damping: float = 0.0
+    constant: float = 0.0
+    held: bool = False  # d' = 0 (relative to a belt): the tension is the constraint's force
+    nonlinear: Callable[[float, float, np.ndarray], float] | None = None  # T(d, d', internal) added, if smooth
+    guards: tuple[Guard, ...] = ()
+
+
+@dataclass
+class State:
+    """An element's discrete mode and internal variables, carried from event to event."""
+
+    mode: str
+    internal: dict[str, float] = field(default_factory=dict)
+
+
+class Law:
+    """A nonsmooth element law. Subclasses are frozen dataclasses of their parameters."""
+
+    table: ClassVar[str]  # the scenario table: spring, friction or stop
+    name: ClassVar[str]  # the law as the scenario names it
+    keys: ClassVar[tuple[str, ...]]  # the table's keys beyond connects (and law)
+    piecewise_linear: ClassVar[bool] = True  # linear between events: solvable exactly
+    ode_states: ClassVar[tuple[str, ...]] = ()  # internal variables with a differential equation (Bouc-Wen's z)
+    internal_names: ClassVar[tuple[str, ...]] = ()  # what /elements writes per step (plastic_deformation, z)
+
+    @property
+    def linear_stiffness(self) -> float:
+        """The part of the stiffness that is always there (a bilinear spring's b k): stamped into K."""
+        return 0.0
+
+    def start(self, d: float, rate: float) -> State:
+        """The mode at the start, from rest deformation and rate (internal variables at their initial values)."""
+        raise NotImplementedError
+
+    def piece(self, state: State) -> Piece:
+        """The tension in the state's mode, and the guards that end it."""
+        raise NotImplementedError
+
+    def event(self, state: State, kind: str, d: float, rate: float, tension: float) -> State:
+        """The state after an event of this element (kind from one of its guards)."""
+        raise NotImplementedError
+
+    def tension(self, state: State, d: float, rate: float) -> float:
+        """The tension in a mode that is not held, at d and d'."""
+        piece = self.piece(state)
+        value = piece.stiffness * d + piece.damping * rate + piece.constant
+        if piece.nonlinear is not None:
+            value += piece.nonlinear(d, rate, state.internal)
+        return value
+
+    def internal_values(self, state: State, d: float) -> tuple[float, ...]:
+        """The internal variables /elements records, at deformation d in this state."""
+        return ()
+
+    def ode(self, state: State, d: float, rate: float) -> tuple[float, ...]:
+        """Rates of the ode_states."""
+        return ()
+
+    def dissipation(self, state: State, d: float, rate: float, tension: float) -> tuple[str, float]:
+        """(energy term, power) this element dissipates: hysteretic, friction, impact; ('', 0) if none."""
+        return "", 0.0
+
+    def stored(self, state: State, d: float) -> tuple[str, float]:
+        """(energy term, energy) this element stores: strain for springs, contact for compliant stops."""
+        return "", 0.0

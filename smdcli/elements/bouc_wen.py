@@ -1,0 +1,129 @@
+"""The Bouc-Wen hysteretic spring (OpenSees' BoucWen without degradation):
+
+    [[spring]]
+    connects = ["ground", "m1"]
+    law = "bouc_wen"
+    k = 4000.0       # N/m, initial stiffness
+    alpha = 0.1      # post-yield stiffness ratio, 0 <= alpha < 1
+    beta = 5000.0    # 1/m^n
+    gamma = 5000.0   # 1/m^n
+    n = 1.0          # sharpness, >= 1
+    A = 1.0          # default 1
+    z0 = 0.0         # m, default 0
+
+T = alpha k d + (1 - alpha) k z with dz/dt = A d' - beta |d'| |z|^(n-1) z - gamma d' |z|^n. Smooth, with the
+hysteretic variable z as an internal state: integrators take it (the ODE family and the Newmark family, the
+latter by a trapezoidal update of z inside each step's Newton iteration). The energy (1 - alpha) k z z' is
+stored, the rest of (1 - alpha) k z d' dissipated: hysteretic.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from smdcli.elements.base import KINK, RATE, Guard, Law, Piece, State
+
+SMOOTH = "smooth"
+
+
+@dataclass(frozen=True)
+class BoucWen(Law):
+    """Bouc-Wen: initial stiffness k [N/m], post-yield ratio alpha, shape A, beta, gamma [1/m^n], n; z0 [m]."""
+
+    k: float
+    alpha: float
+    beta: float
+    gamma: float
+    n: float = 1.0
+    A: float = 1.0
+    z0: float = 0.0
+
+    table: ClassVar[str] = "spring"
+    name: ClassVar[str] = "bouc_wen"
+    keys: ClassVar[tuple[str, ...]] = ("k", "alpha", "A", "beta", "gamma", "n", "z0")
+    piecewise_linear: ClassVar[bool] = False
+    ode_states: ClassVar[tuple[str, ...]] = ("z",)
+    internal_names: ClassVar[tuple[str, ...]] = ("z",)
+
+    @classmethod
+    def read(cls, t) -> "BoucWen":
+        """From a [[spring]] table."""
+        k = t.number("k", positive=True)
+        alpha = t.number("alpha")
+        if not 0.0 <= alpha < 1.0:
+            raise t.fail("alpha", f"expected a post-yield stiffness ratio 0 <= alpha < 1, found {alpha:g}")
+        n = t.number("n", 1.0)
+        if n < 1.0:
+            raise t.fail("n", f"expected n >= 1 (the sharpness of the yield), found {n:g}")
+        beta, gamma = t.number("beta"), t.number("gamma")
+        A = t.number("A", 1.0, positive=True)
+        if beta + gamma <= 0:
+            raise t.fail("beta", f"expected beta + gamma > 0 (z bounded by (A / (beta + gamma))^(1/n)), found "
+                                 f"beta = {beta:g}, gamma = {gamma:g}")
+        return cls(k=k, alpha=alpha, beta=beta, gamma=gamma, n=n, A=A, z0=t.number("z0", 0.0))
+
+    @property
+    def linear_stiffness(self) -> float:
+        return self.alpha * self.k
+
+    def start(self, d: float, rate: float) -> State:
+        return State(SMOOTH, {"z": self.z0})
+
+    def piece(self, state: State) -> Piece:
+        # dz/dt has kinks where d' and z change sign (|d'|, |z|^n): an integrator restarts there, as at an event
+        kinks = (Guard(RATE, 0.0, +1, KINK), Guard(RATE, 0.0, -1, KINK),
+                 Guard("internal:z", 0.0, +1, KINK), Guard("internal:z", 0.0, -1, KINK))
+        return Piece(nonlinear=lambda d, rate, internal: (1 - self.alpha) * self.k * internal["z"], guards=kinks)
+
+    def event(self, state: State, kind: str, d: float, rate: float, tension: float) -> State:
+        return state  # a kink: nothing changes but the integrator's start
+
+    def z_rate(self, z: float, rate: float) -> float:
+        """dz/dt at z and d'."""
+        size = abs(z)
+        return self.A * rate - self.beta * abs(rate) * size ** (self.n - 1) * z - self.gamma * rate * size ** self.n
+
+    def ode(self, state: State, d: float, rate: float) -> tuple[float, ...]:
+        return (self.z_rate(state.internal["z"], rate),)
+
+    def internal_values(self, state: State, d: float) -> tuple[float, ...]:
+        return (state.internal["z"],)
+
+    def dissipation(self, state: State, d: float, rate: float, tension: float) -> tuple[str, float]:
+        z = state.internal["z"]
+        return "hysteretic", (1 - self.alpha) * self.k * z * (rate - self.z_rate(z, rate))
+
+    def stored(self, state: State, d: float) -> tuple[str, float]:
+        z = state.internal["z"]
+        return "strain", 0.5 * (1 - self.alpha) * self.k * z * z
+
+    def _partials(self, z: float, rate: float) -> tuple[float, float]:
+        """(d z_rate / d z, d z_rate / d d') at z and d'."""
+        size = abs(z)
+        sign_z = 1.0 if z >= 0 else -1.0
+        sign_rate = 1.0 if rate >= 0 else -1.0
+        power = size ** (self.n - 1)
+        by_z = -self.beta * abs(rate) * self.n * power - self.gamma * rate * self.n * power * sign_z
+        by_rate = self.A - self.beta * sign_rate * power * z - self.gamma * size ** self.n
+        return by_z, by_rate
+
+    def z_step(self, z_old: float, d_old: float, d_new: float, h: float) -> tuple[float, float]:
+        """(z, dz/dd_new) after a step from d_old to d_new over h, by the trapezoidal rule at the step's mean rate
+        (second order, as the Newmark family), z solved by Newton: the family's update and the derivative its
+        consistent tangent needs."""
+        if h <= 0:
+            return z_old, 0.0
+        rate = (d_new - d_old) / h
+        start = self.z_rate(z_old, rate)
+        z = z_old + h * start
+        for _ in range(50):
+            by_z, _ = self._partials(z, rate)
+            f = z - z_old - 0.5 * h * (start + self.z_rate(z, rate))
+            step = f / (1.0 - 0.5 * h * by_z)
+            z -= step
+            if abs(step) <= 1e-15 * max(abs(z), abs(z_old), 1e-300):
+                break
+        by_z, by_rate = self._partials(z, rate)
+        _, by_rate_old = self._partials(z_old, rate)
+        return z, 0.5 * (by_rate_old + by_rate) / (1.0 - 0.5 * h * by_z)

@@ -1,0 +1,136 @@
+"""Elastic-perfectly-plastic and bilinear (kinematic hardening) springs: OpenSees' ElasticPP and Steel01-like
+Hardening without isotropic hardening.
+
+    [[spring]]
+    connects = ["ground", "m1"]
+    law = "elastoplastic"   # k (N/m), fy (N): |T| <= fy, the plastic deformation d_p absorbs the rest
+    k = 4000.0
+    fy = 150.0
+    # law = "bilinear", hardening = b (0 <= b < 1): an elastic b k in parallel with an elastoplastic (1-b) k
+    #   yielding at (1-b) fy, so the first yield is at fy and the post-yield stiffness b k
+
+Modes: elastic (T = k (d - d_p)), plastic+ (T = fy, d_p = d - fy/k follows d), plastic- (T = -fy). Yield where
+the elastic tension reaches +-fy; unloading where d' turns back (then elastic with d_p frozen). The plastic work
+fy |d d_p| is the hysteretic energy. The return mapping of a step (return_map) is what the Newmark family uses,
+with its consistent tangent (k elastic, 0 plastic).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from smdcli.elements.base import D, RATE, Guard, Law, Piece, State
+
+ELASTIC, PLUS, MINUS = "elastic", "plastic+", "plastic-"
+
+
+@dataclass(frozen=True)
+class Elastoplastic(Law):
+    """Elastic-perfectly-plastic: stiffness k [N/m] up to the yield force fy [N]."""
+
+    k: float
+    fy: float
+
+    table: ClassVar[str] = "spring"
+    name: ClassVar[str] = "elastoplastic"
+    keys: ClassVar[tuple[str, ...]] = ("k", "fy")
+    internal_names: ClassVar[tuple[str, ...]] = ("plastic_deformation",)
+
+    @classmethod
+    def read(cls, t) -> "Elastoplastic":
+        """From a [[spring]] table (t: the scenario reader's table)."""
+        return cls(k=t.number("k", positive=True), fy=t.number("fy", positive=True))
+
+    @property
+    def core(self) -> "Elastoplastic":
+        """The elastoplastic part (itself)."""
+        return self
+
+    def start(self, d: float, rate: float) -> State:
+        state = State(ELASTIC, {"dp": 0.0, "work": 0.0})
+        return self._settle(state, d, rate)
+
+    def _settle(self, state: State, d: float, rate: float) -> State:
+        """At the yield surface, loading outward: plastic; else elastic (the mode a point on the surface takes)."""
+        core = self.core
+        trial = core.k * (d - state.internal["dp"])
+        if trial >= core.fy and rate > 0:
+            return State(PLUS, {**state.internal, "dp": d - core.fy / core.k})
+        if trial <= -core.fy and rate < 0:
+            return State(MINUS, {**state.internal, "dp": d + core.fy / core.k})
+        return State(ELASTIC, dict(state.internal))
+
+    def piece(self, state: State) -> Piece:
+        core = self.core
+        if state.mode == ELASTIC:
+            dp = state.internal["dp"]
+            return Piece(stiffness=core.k, constant=-core.k * dp,
+                         guards=(Guard(D, dp + core.fy / core.k, +1, "yield"),
+                                 Guard(D, dp - core.fy / core.k, -1, "yield")))
+        sign = 1.0 if state.mode == PLUS else -1.0
+        return Piece(constant=sign * core.fy, guards=(Guard(RATE, 0.0, -int(sign), "unload"),))
+
+    def event(self, state: State, kind: str, d: float, rate: float, tension: float) -> State:
+        core = self.core
+        if kind == "yield":
+            plus = d >= state.internal["dp"]
+            return State(PLUS if plus else MINUS, dict(state.internal))
+        # unload: elastic again, the plastic deformation where yielding left it
+        sign = 1.0 if state.mode == PLUS else -1.0
+        return State(ELASTIC, {**state.internal, "dp": d - sign * core.fy / core.k})
+
+    def plastic_deformation(self, state: State, d: float) -> float:
+        """d_p at deformation d: frozen while elastic, following d while yielding."""
+        core = self.core
+        if state.mode == ELASTIC:
+            return state.internal["dp"]
+        return d - (core.fy if state.mode == PLUS else -core.fy) / core.k
+
+    def internal_values(self, state: State, d: float) -> tuple[float, ...]:
+        return (self.plastic_deformation(state, d),)
+
+    def dissipation(self, state: State, d: float, rate: float, tension: float) -> tuple[str, float]:
+        core = self.core
+        return "hysteretic", (core.fy * abs(rate) if state.mode != ELASTIC else 0.0)
+
+    def stored(self, state: State, d: float) -> tuple[str, float]:
+        core = self.core
+        elastic = d - self.plastic_deformation(state, d)
+        return "strain", 0.5 * core.k * elastic * elastic
+
+    def return_map(self, d: float, dp: float) -> tuple[float, float, float]:
+        """(tension, tangent, d_p) of a trial deformation d from the committed d_p: a step's return mapping."""
+        core = self.core
+        trial = core.k * (d - dp)
+        if abs(trial) <= core.fy:
+            return trial, core.k, dp
+        sign = 1.0 if trial > 0 else -1.0
+        return sign * core.fy, 0.0, d - sign * core.fy / core.k
+
+
+@dataclass(frozen=True)
+class Bilinear(Elastoplastic):
+    """Bilinear with kinematic hardening: initial stiffness k, yield fy, post-yield stiffness b k."""
+
+    hardening: float = 0.0
+
+    name: ClassVar[str] = "bilinear"
+    keys: ClassVar[tuple[str, ...]] = ("k", "fy", "hardening")
+
+    @classmethod
+    def read(cls, t) -> "Bilinear":
+        k, fy = t.number("k", positive=True), t.number("fy", positive=True)
+        b = t.number("hardening")
+        if not 0.0 <= b < 1.0:
+            raise t.fail("hardening", f"expected a post-yield stiffness ratio b with 0 <= b < 1, found {b:g}")
+        return cls(k=k, fy=fy, hardening=b)
+
+    @property
+    def core(self) -> Elastoplastic:
+        """The elastoplastic part: stiffness (1 - b) k, yield (1 - b) fy."""
+        return Elastoplastic((1 - self.hardening) * self.k, (1 - self.hardening) * self.fy)
+
+    @property
+    def linear_stiffness(self) -> float:
+        return self.hardening * self.k

@@ -1,0 +1,108 @@
+"""Stops, gaps and impacts: a limit on an element's deformation d = x_b - x_a.
+
+    [[stop]]
+    connects = ["ground", "m1"]
+    min = 0.0            # m: contact when d reaches min (omit: no lower limit)
+    max = 0.02           # m: contact when d reaches max (omit: no upper limit)
+    restitution = 0.8    # rigid impact: the relative velocity is reversed and scaled, 0 <= e <= 1
+    # k = 1e6, c = 50.0  # compliant contact instead: a spring and a damper acting only while in contact
+
+Rigid: at contact the relative velocity d' jumps to -e d', by an impulse along the element that conserves the
+momentum of the masses involved (the energy lost is the impact term). With e = 0, or once a sequence of impacts
+accumulates (a ball coming to rest: impacts whose flight times shrink by e each, summed as the geometric series
+they are, then persistent contact), the stop holds d at its limit, its tension whatever keeps it there, until
+that tension would pull (separation). Compliant: while d is past the limit, T = k (d - limit) + c d', the spring's
+energy is the contact term and the damper's loss the impact term. Both are linear between events.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from smdcli.elements.base import D, TENSION, Guard, Law, Piece, State
+
+FREE, AT_MIN, AT_MAX = "free", "contact-min", "contact-max"
+
+
+@dataclass(frozen=True)
+class Stop(Law):
+    """Limits min and max [m] of d; a rigid stop's restitution e, or a compliant contact's k [N/m] and c [N s/m]."""
+
+    min: float | None
+    max: float | None
+    restitution: float | None = None
+    k: float | None = None
+    c: float = 0.0
+
+    table: ClassVar[str] = "stop"
+    name: ClassVar[str] = "stop"
+    keys: ClassVar[tuple[str, ...]] = ("min", "max", "restitution", "k", "c")
+
+    @classmethod
+    def read(cls, t) -> "Stop":
+        """From a [[stop]] table."""
+        low, high = t.number("min", None), t.number("max", None)
+        if low is None and high is None:
+            raise t.fail("min", "expected min, max or both (the limits of d = x_b - x_a, in m)")
+        if low is not None and high is not None and not low < high:
+            raise t.fail("max", f"expected max > min, found min {low:g} and max {high:g}")
+        compliant = t.has("k") or t.has("c")
+        if compliant and t.has("restitution"):
+            raise t.fail("restitution", "a stop is rigid (restitution) or compliant (k and c), not both")
+        if compliant:
+            return cls(low, high, k=t.number("k", positive=True), c=t.number("c", 0.0, minimum=0.0))
+        e = t.number("restitution", 1.0)
+        if not 0.0 <= e <= 1.0:
+            raise t.fail("restitution", f"expected a coefficient of restitution 0 <= e <= 1, found {e:g}")
+        return cls(low, high, restitution=e)
+
+    @property
+    def rigid(self) -> bool:
+        """An impact and persistent contact (True), or a spring and damper while in contact (False)."""
+        return self.k is None
+
+    def start(self, d: float, rate: float) -> State:
+        if self.min is not None and d <= self.min and (not self.rigid or d < self.min or rate <= 0):
+            return State(AT_MIN)
+        if self.max is not None and d >= self.max and (not self.rigid or d > self.max or rate >= 0):
+            return State(AT_MAX)
+        return State(FREE)
+
+    def limit(self, state: State) -> float:
+        """The limit the state is in contact with."""
+        return self.min if state.mode == AT_MIN else self.max
+
+    def piece(self, state: State) -> Piece:
+        if state.mode == FREE:
+            guards = []
+            if self.min is not None:
+                guards.append(Guard(D, self.min, -1, "impact" if self.rigid else "contact"))
+            if self.max is not None:
+                guards.append(Guard(D, self.max, +1, "impact" if self.rigid else "contact"))
+            return Piece(guards=tuple(guards))
+        at_min = state.mode == AT_MIN
+        if self.rigid:  # held at the limit; it separates where its force would pull (min) or push (max)
+            return Piece(held=True, guards=(Guard(TENSION, 0.0, +1 if at_min else -1, "separation"),))
+        limit = self.limit(state)
+        return Piece(stiffness=self.k, damping=self.c, constant=-self.k * limit,
+                     guards=(Guard(D, limit, +1 if at_min else -1, "separation"),))
+
+    def event(self, state: State, kind: str, d: float, rate: float, tension: float) -> State:
+        if kind == "separation":
+            return State(FREE)
+        if kind in ("contact", "rest"):
+            at_min = self.min is not None and (self.max is None or abs(d - self.min) <= abs(d - self.max))
+            return State(AT_MIN if at_min else AT_MAX)
+        return State(FREE)  # an impact with e > 0: free again, moving away
+
+    def dissipation(self, state: State, d: float, rate: float, tension: float) -> tuple[str, float]:
+        if state.mode == FREE or self.rigid:
+            return "", 0.0
+        return "impact", self.c * rate * rate
+
+    def stored(self, state: State, d: float) -> tuple[str, float]:
+        if state.mode == FREE or self.rigid:
+            return "contact", 0.0
+        gap = d - self.limit(state)
+        return "contact", 0.5 * self.k * gap * gap

@@ -1,0 +1,383 @@
+"""Integrators on scenes with nonsmooth elements: each mode integrated as the smooth system it is, every event
+located on the method's own interpolant and the method restarted there.
+
+A scene that is not linear between events (Bouc-Wen springs, Stribeck or regularized friction, stops and
+friction beside cubic springs or quadratic dampers) is integrated mode by mode, with the same modes, guards and
+decisions as the exact event-driven solver (modes.py): its state y = [x, v, q] carries the laws' internal
+variables q (Bouc-Wen's z) with their differential equations. After every accepted step each guard is looked at
+on the step's dense output (its ends and four interior points, so that a touch within a step is seen), a
+crossing located by Brent's method on that interpolant, the step cut back there, the event decided, and the
+method started afresh from the event. The energy terms are integrated on the same dense output (8-point
+Gauss-Legendre a step).
+
+Every OdeSolver of the ODE family takes part: scipy's RK45, RK23, DOP853, Radau, BDF and LSODA (under their own
+names, MATLAB's and scipy:'s) and smd's own ode23s, ode23t and ode23tb.
+
+Must not import: sweep, io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from smdcli.elements import State
+from smdcli.model import Model
+from smdcli.result import NonsmoothHistory, Result, SolverStats
+from smdcli.solvers.base import Tolerances, divergence_bound, diverged, force_function
+from smdcli.solvers.modes import Scene
+from smdcli.solvers.piecewise import MAX_EVENTS_AT_ONE_TIME, PiecewiseRun, event_root
+
+# The OdeSolver class each method name integrates nonsmooth scenes with.
+EVENT_METHODS = {"RK45": "RK45", "ode45": "RK45", "scipy:RK45": "RK45", "RK23": "RK23", "ode23": "RK23",
+                 "scipy:RK23": "RK23", "DOP853": "DOP853", "scipy:DOP853": "DOP853", "Radau": "Radau",
+                 "scipy:Radau": "Radau", "BDF": "BDF", "ode15s": "BDF", "scipy:BDF": "BDF", "LSODA": "LSODA",
+                 "ode23s": "Rosenbrock23", "scipy:ode23s": "Rosenbrock23", "ode23t": "Trapezoid",
+                 "scipy:ode23t": "Trapezoid", "ode23tb": "TRBDF2", "scipy:ode23tb": "TRBDF2"}
+INTERIOR = 4  # interior points of each step where guards are looked at too
+PYTHON_STEPS = 200_000  # steps a run may take, driven from Python (about 300 us each)
+ACCUMULATED = ("dissipated", "input", "hysteretic", "friction", "impact")  # energy terms integrated with y
+
+
+def solver_class(name: str):
+    """The OdeSolver class of a method name (scipy's, or smd's own stiff ones)."""
+    scipy_name = EVENT_METHODS[name]
+    if scipy_name in ("Rosenbrock23", "Trapezoid", "TRBDF2"):
+        from smdcli.solvers import stiff23
+
+        return getattr(stiff23, scipy_name)
+    import scipy.integrate as si
+
+    return getattr(si, scipy_name)
+
+
+class SmoothScene(Scene):
+    """A scene whose modes carry smooth nonlinear forces and internal differential equations: y = [x, v, q]."""
+
+    def __init__(self, model: Model):
+        super().__init__(model)
+        self.q_slices = []
+        start = 2 * self.n
+        for element in self.elements:
+            count = len(element.law.ode_states)
+            self.q_slices.append(slice(start, start + count))
+            start += count
+        self.q_size = start - 2 * self.n
+        self.now = 0.0  # the time evaluate() looks at (the driver sets it)
+        self.force = None  # u(t) on the current segment
+
+    def reseed(self, z: np.ndarray, t: float) -> None:
+        """No generators here: forces are evaluated at t (y holds x, v and the laws' variables)."""
+
+    def live(self, states: list[State], y: np.ndarray) -> list[State]:
+        """The states with their internal ODE variables taken from y."""
+        out = []
+        for element, state, part in zip(self.elements, states, self.q_slices):
+            names = element.law.ode_states
+            if names:
+                state = State(state.mode, {**state.internal, **dict(zip(names, y[part]))})
+            out.append(state)
+        return out
+
+    def parts(self, states: list[State], t: float, y: np.ndarray):
+        """(x'', T, q') at (t, y): the mode's linear part, its smooth forces, the held rows' constraint forces."""
+        n = self.n
+        x, v = y[:n], y[n:2 * n]
+        mode = self.mode(states)
+        model = self.model
+        F = mode.g - mode.Kt @ x - mode.Ct @ v
+        if model.signals:
+            F = F + model.B @ self.force(t)
+        if not model.is_linear and (model.cubic is not None or model.quadratic is not None):
+            F = F - model.nonlinear_force(x, v)
+        d = self.R @ x
+        rate = self.R @ v + self.belts
+        tension = np.zeros(self.E)
+        qdot = np.zeros(self.q_size)
+        live = self.live(states, y)
+        for e, (element, state) in enumerate(zip(self.elements, live)):
+            piece = element.law.piece(state)
+            if piece.held:
+                continue
+            tension[e] = piece.stiffness * d[e] + piece.damping * rate[e] + piece.constant
+            if piece.nonlinear is not None:
+                extra = piece.nonlinear(d[e], rate[e], state.internal)
+                tension[e] += extra
+                F = F - extra * self.R[e]
+            part = self.q_slices[e]
+            if part.stop > part.start:
+                qdot[part.start - 2 * n:part.stop - 2 * n] = element.law.ode(state, d[e], rate[e])
+        accel = self.Minv @ F
+        if mode.hold is not None:
+            MG, S_pinv, _ = mode.hold
+            mu = -S_pinv @ (mode.hold[2] @ accel)
+            accel = accel + MG @ mu
+            tension[list(mode.held)] = -mu
+        return accel, tension, qdot
+
+    def evaluate(self, states, y):
+        """(d, d', T, x'') at y, at the time the driver set."""
+        n = self.n
+        accel, tension, _ = self.parts(states, self.now, y)
+        return self.R @ y[:n], self.R @ y[n:2 * n] + self.belts, tension, accel
+
+
+class EventDriver(PiecewiseRun):
+    """An OdeSolver, mode by mode, events located on its interpolant."""
+
+    def __init__(self, model: Model, grid: np.ndarray, tol: Tolerances, name: str):
+        super().__init__(model, grid)
+        self.scene = SmoothScene(model)
+        self.tol, self.name = tol, name
+        self.cls = solver_class(name)
+        self.own = EVENT_METHODS[name] in ("Rosenbrock23", "Trapezoid", "TRBDF2")  # smd's: they take a Jacobian
+        self.counts = {"nfev": 0, "njev": 0, "nlu": 0, "steps_accepted": 0, "steps_rejected": -1}
+        self.max_steps = tol.max_steps or PYTHON_STEPS
+        self.fired = None  # (time, element, guard) of the last event
+
+    def run(self):
+        """x, v, a (N, n), the history, and why it stopped (None: it reached the end) with where."""
+        scene, n, grid, model = self.scene, self.n, self.grid, self.model
+        y = np.concatenate([model.x0, model.v0, np.zeros(scene.q_size), np.zeros(len(ACCUMULATED))])
+        for element, part in zip(scene.elements, scene.q_slices):
+            start = element.law.start(0.0, 0.0)
+            y[part] = [start.internal[name] for name in element.law.ode_states]
+        t = float(grid[0])
+        cuts = self.cut_times()
+        scene.force = self.force_on(cuts, 0)
+        scene.now = t
+        states = [e.law.start(float(e.row @ model.x0), float(e.row @ model.v0 + e.belt)) for e in scene.elements]
+        states, y = self.start(states, y, t)
+        outputs = _Outputs(self, grid)
+        outputs.store(0, t, y, states)
+        bound = divergence_bound(model, grid)
+        k, segment = 1, 0
+        failure, t_reached = None, t
+        same, last = 0, None
+        while k < len(grid) and failure is None:
+            while segment + 1 < len(cuts) and cuts[segment + 1][0] <= t:
+                segment += 1
+            t_end = cuts[segment + 1][0] if segment + 1 < len(cuts) else float(grid[-1])
+            scene.force = self.force_on(cuts, segment)
+            fun = self.rhs(states)
+            options = {"jac": _numeric_jacobian(fun)} if self.own else {}
+            solver = self.cls(fun, t, y, t_end, rtol=self.tol.rtol, atol=self.tol.atol, **options)
+            event = None
+            while solver.status == "running":
+                t_old = solver.t
+                message = solver.step()
+                if solver.status == "failed":
+                    failure = message or "step failed"
+                    break
+                self.counts["steps_accepted"] += 1
+                if self.counts["steps_accepted"] > self.max_steps:
+                    failure = f"more than {self.max_steps} steps"
+                    break
+                dense = solver.dense_output()
+                event = self.first_crossing_on(dense, states, t_old, solver.t)
+                t_stop = solver.t if event is None else event[0]
+                while k < len(grid) and grid[k] <= t_stop and (event is None or grid[k] < t_stop):
+                    outputs.store(k, float(grid[k]), dense(grid[k]), states)
+                    k += 1
+                t_reached = t_stop
+                failure = diverged(dense(t_stop)[:2 * n], bound)
+                if event is not None or failure:
+                    y = dense(t_stop)
+                    break
+                y = solver.y
+            self.counts["nfev"] += solver.nfev
+            self.counts["njev"] += solver.njev
+            self.counts["nlu"] += solver.nlu
+            if failure:
+                break
+            if event is not None:
+                t_event, element, guard = event
+                self.fired = event
+                same = same + 1 if t_event == last else 0
+                last = t_event
+                if same > MAX_EVENTS_AT_ONE_TIME:
+                    failure = f"events at t = {t_event:.6g} s do not settle"
+                    break
+                t = t_event
+                scene.now = t
+                states, y = self.apply(states, y, t, element, guard.kind)
+                while k < len(grid) and grid[k] <= t:
+                    outputs.store(k, float(grid[k]), y, states)
+                    k += 1
+                continue
+            t = t_end
+            if segment + 1 < len(cuts) and t == cuts[segment + 1][0]:
+                jump = cuts[segment + 1][1]
+                if jump is not None:
+                    scene.now = t
+                    states, y = self.cross_break(states, y, t, jump)
+                if k < len(grid) and grid[k] == t:
+                    outputs.store(k, t, y, states)
+                    k += 1
+        self.events.sort(key=lambda event: event[0])
+        return outputs.finish(), failure, t_reached
+
+    # ----------------------------------------------------------------------------------- the steps
+    def cut_times(self) -> list[tuple[float, object]]:
+        """Where the method restarts: the start, force discontinuities, the ground's jumps, the end."""
+        t0, t1 = float(self.grid[0]), float(self.grid[-1])
+        inner = self.breaks()
+        return [(t0, None)] + [(t, jump) for t, jump in inner if t < t1] + [(t1, None)]
+
+    def force_on(self, cuts, segment: int):
+        """u(t) on a segment: left limits at its end, as the method must not see the next jump."""
+        ta = cuts[segment][0]
+        tb = cuts[segment + 1][0] if segment + 1 < len(cuts) else ta
+        return force_function(self.model, ta, tb) if self.model.is_forced else (lambda t: np.empty(0))
+
+    def rhs(self, states):
+        """y' in a mode: the motion, the laws' internal variables, and the energy terms' powers (integrated with the
+        motion, so that the method's own error control holds the balance to its tolerance)."""
+        n, scene = self.n, self.scene
+
+        def fun(t, y):
+            accel, tension, qdot = scene.parts(states, t, y)
+            return np.concatenate([y[n:2 * n], accel, qdot, self.powers(states, t, y, tension)])
+
+        return fun
+
+    def powers(self, states, t: float, y: np.ndarray, tension: np.ndarray) -> np.ndarray:
+        """The rates of ACCUMULATED at (t, y): what the dampers and the elements dissipate, what is put in."""
+        scene, n, model = self.scene, self.n, self.model
+        x, v = y[:n], y[n:2 * n]
+        out = np.zeros(len(ACCUMULATED))
+        out[0] = float(v @ model.C @ v) + _quadratic_power(model, v)
+        out[1] = float(tension @ scene.belts)  # a belt's work on its contacts
+        if model.signals:
+            out[1] += float((model.B @ scene.force(t)) @ v)
+        d, rate = scene.R @ x, scene.R @ v + scene.belts
+        for e, (element, state) in enumerate(zip(scene.elements, scene.live(states, y))):
+            term, power = element.law.dissipation(state, float(d[e]), float(rate[e]), float(tension[e]))
+            if term:
+                out[ACCUMULATED.index(term)] += power
+        return out
+
+    def first_crossing_on(self, dense, states, t0: float, t1: float):
+        """(t, element, guard) of the earliest guard crossing in (t0, t1] on the step's interpolant, or None."""
+        scene = self.scene
+        guards = [(e, guard) for e, (el, s) in enumerate(zip(scene.elements, states)) for guard in el.law.piece(s).guards]
+        if not guards:
+            return None
+        times = np.linspace(t0, t1, INTERIOR + 2)
+        values = np.array([self.guard_values(guards, states, t, dense(t)) for t in times])
+        best = None
+        for j, (e, guard) in enumerate(guards):
+            s = guard.direction
+            for i in range(len(times) - 1):
+                if s * values[i, j] < 0 <= s * values[i + 1, j]:
+                    def value(t, j=j):
+                        return self.guard_values(guards, states, t, dense(t))[j]
+
+                    lo, hi = times[i], times[i + 1]
+                    root = hi if value(hi) == 0 else event_root(value, lo, hi, hi - lo)
+                    if self.fired is not None and self.fired[1:] == (e, guard) and \
+                            root - self.fired[0] <= 16 * np.spacing(max(abs(self.fired[0]), 1e-300)):
+                        continue  # the guard that just fired, read again on the far side of its own rounding
+                    if best is None or root < best[0]:
+                        best = (root, e, guard)
+                    break
+        return best
+
+    def guard_values(self, guards, states, t: float, y: np.ndarray) -> np.ndarray:
+        """Each guard's quantity less its level at (t, y)."""
+        self.scene.now = t
+        d, rate, tension, _ = self.scene.evaluate(states, y)
+        table = {"d": d, "rate": rate, "tension": tension}
+        live = None
+        values = []
+        for e, g in guards:
+            if g.quantity.startswith("internal:"):
+                live = live or self.scene.live(states, y)
+                values.append(live[e].internal[g.quantity.split(":", 1)[1]] - g.level)
+            else:
+                values.append(table[g.quantity][e] - g.level)
+        return np.array(values)
+
+def _numeric_jacobian(fun):
+    """A forward-difference Jacobian of fun(t, y), for the methods that ask for one."""
+    def jac(t, y):
+        f0 = fun(t, y)
+        J = np.empty((len(y), len(y)))
+        for j in range(len(y)):
+            h = 1.5e-8 * max(abs(y[j]), 1e-8)
+            step = y.copy()
+            step[j] += h
+            J[:, j] = (fun(t, step) - f0) / h
+        return J
+
+    return jac
+
+
+def _quadratic_power(model: Model, v: np.ndarray) -> float:
+    """What the quadratic dampers dissipate at v: the sum of c |d'| d'^2."""
+    q = model.quadratic
+    if q is None:
+        return 0.0
+    rate = q.D @ v
+    return float((q.coef * np.abs(rate) * rate * rate).sum())
+
+
+class _Outputs:
+    """What an integrator run records at each output point."""
+
+    def __init__(self, run: EventDriver, grid: np.ndarray):
+        self.run = run
+        N, n, E = len(grid), run.n, run.scene.E
+        self.x, self.v, self.a = np.full((N, n), np.nan), np.full((N, n), np.nan), np.full((N, n), np.nan)
+        self.tension = np.full((N, E), np.nan)
+        self.internal = {f"{el.path}.{name}": np.full(N, np.nan) for el in run.scene.elements
+                         for name in el.law.internal_names}
+        self.energy = {name: np.full(N, np.nan) for name in run.energy_terms + ("kinetic", "strain", "contact")}
+
+    def store(self, k: int, t: float, y: np.ndarray, states) -> None:
+        run = self.run
+        scene, n = run.scene, run.n
+        scene.now = t
+        accel, tension, _ = scene.parts(states, t, y)
+        self.x[k], self.v[k], self.a[k] = y[:n], y[n:2 * n], accel
+        run.v_scale = max(run.v_scale, float(np.abs(self.v[k]).max(initial=0.0)))
+        d = scene.R @ y[:n]
+        for e, (element, state) in enumerate(zip(scene.elements, scene.live(states, y))):
+            law = element.law
+            self.tension[k, e] = tension[e] + law.linear_stiffness * d[e]
+            for name, value in zip(law.internal_names, law.internal_values(state, float(d[e]))):
+                self.internal[f"{element.path}.{name}"][k] = value
+        kinetic, strain, contact = run.stored(states, y)
+        self.energy["kinetic"][k] = kinetic
+        self.energy["strain"][k] = strain
+        self.energy["contact"][k] = contact
+        last = y[len(y) - len(ACCUMULATED):]
+        for name in run.energy_terms:
+            self.energy[name][k] = run.cumulative[name] + last[ACCUMULATED.index(name)]
+
+    def finish(self):
+        run = self.run
+        paths = tuple(e.path for e in run.scene.elements)
+        kinds = tuple(e.kind for e in run.scene.elements)
+        energy = dict(self.energy, quadrature="8-point Gauss-Legendre a step on the method's dense output, split at "
+                                             "events")
+        return self.x, self.v, self.a, NonsmoothHistory(paths, kinds, self.tension, self.internal,
+                                                         tuple(run.events), energy)
+
+
+def solve_events(model: Model, grid: np.ndarray, tol: Tolerances, name: str) -> Result:
+    """A nonsmooth scene integrated by method `name` (an EVENT_METHODS key), event to event."""
+    solver_class(name)  # imported before the clock
+    start = time.perf_counter()
+    driver = EventDriver(model, grid, tol, name)
+    (x, v, a, history), failure, t_reached = driver.run()
+    events = len(history.events)
+    stats = SolverStats(method=name, requested_method=name, reason="", rtol=tol.rtol, atol=tol.atol,
+                        wall_time_s=time.perf_counter() - start, success=failure is None,
+                        message=(f"ok: {events} events located on the method's interpolant, a restart at each"
+                                 if failure is None else f"failed at t = {t_reached:.6g} s: {failure}"),
+                        **driver.counts)
+    force = model.applied_force(grid) if model.is_forced else np.zeros_like(x)
+    return Result(time=grid, dofs=model.dofs, displacement=x, velocity=v, acceleration=a, force=force, stats=stats,
+                  t_failed=None if failure is None else t_reached, nonsmooth=history)

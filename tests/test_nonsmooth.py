@@ -1,0 +1,574 @@
+"""Yield, friction, stops and impacts, each against an independent reference: closed forms, or a separate
+event-driven integration written here (scipy's DOP853 or Radau with their own event location, on equations
+written out again), never smd's own code path."""
+
+import math
+import time
+
+import h5py
+import numpy as np
+import pytest
+from conftest import SCENARIOS, bundled, model_of
+
+from smdcli.errors import ScenarioError
+from smdcli.solvers import solve
+from smdcli.solvers.base import Tolerances
+from smdcli.solvers.energy import with_physics
+
+G = 9.80665
+
+
+# --------------------------------------------------------------------------------------------- Coulomb
+
+
+def coulomb_closed_form(t: np.ndarray, m: float, k: float, F: float, x0: float) -> tuple[np.ndarray, float]:
+    """x(t) of a mass on a spring with Coulomb friction F released from x0 at rest: half cycles about +-F/k, each
+    turning point 2 F / k nearer the rest, stopping for good at the first within F/k. (x, time it stops)."""
+    w = math.sqrt(k / m)
+    x = np.empty_like(t)
+    start, amplitude, j = 0.0, x0, 0
+    while True:
+        if abs(amplitude) <= F / k:  # stuck here for good
+            x[t >= start] = amplitude
+            return x, start
+        centre = math.copysign(F / k, amplitude)  # sliding toward the rest: friction pulls back toward it
+        end = start + math.pi / w
+        part = (t >= start) & (t < end)
+        x[part] = centre + (amplitude - centre) * np.cos(w * (t[part] - start))
+        amplitude = 2 * centre - amplitude
+        start, j = end, j + 1
+
+
+def test_coulomb_free_decay_is_exact_and_stops_for_good():
+    sc, model, grid = bundled("coulomb_free_decay")
+    result = with_physics(model, solve(model, grid, "auto", Tolerances()))
+    assert result.stats.method == "exact"
+    closed, stop = coulomb_closed_form(grid, 1.0, 100.0, 1.0, 0.1)
+    assert np.abs(result.displacement[:, 0] - closed).max() <= 1e-12 * 0.1
+    # the amplitude falls by 4 F / k = 0.04 a cycle; the stick is at the first turning point within F/k = 0.01
+    events = result.nonsmooth.events
+    assert [kind for _, _, kind in events] == ["slip"] * 5 + ["stick"]
+    assert abs(events[-1][0] - stop) <= 1e-12 * stop and abs(stop - 5 * math.pi / 10) < 1e-12
+    after = grid > stop
+    assert np.all(result.velocity[after, 0] == 0.0) and np.ptp(result.displacement[after, 0]) == 0.0  # no chatter
+    assert result.energy.max_relative_residual <= 1e-12
+    assert abs(result.energy.friction[-1] - 0.5 * 100.0 * 0.1**2) <= 1e-12  # all of 1/2 k x0^2, rest at x = 0
+
+
+@pytest.mark.parametrize("method, rtol", [("DOP853", 1e-9), ("Radau", 1e-9), ("ode45", 1e-8), ("BDF", 1e-7),
+                                          ("ode23s", 1e-6)])
+def test_integrators_take_coulomb_decay_to_their_tolerance_without_chatter(method, rtol):
+    sc, model, grid = bundled("coulomb_free_decay")
+    result = with_physics(model, solve(model, grid, method, Tolerances(rtol=rtol, atol=rtol * 1e-3)))
+    closed, stop = coulomb_closed_form(grid, 1.0, 100.0, 1.0, 0.1)
+    assert np.abs(result.displacement[:, 0] - closed).max() <= 10 * rtol * 0.1 * 10
+    kinds = [kind for _, _, kind in result.nonsmooth.events]
+    assert kinds == ["slip"] * 5 + ["stick"]  # no chatter: one stick, and nothing after it
+    after = grid > stop + 1e-6
+    assert np.abs(result.velocity[after, 0]).max() <= 1e-12
+    # the balance is the method's global error: within 10x the tolerance for the one-step methods; BDF's and
+    # ode23s's low orders let it grow to 40x (3.4e-6 at rtol 1e-7, measured), which the residual says honestly
+    assert result.energy.max_relative_residual <= (10 if method in ("DOP853", "Radau", "ode45") else 100) * rtol
+
+
+# ------------------------------------------------------------------------------------------- bouncing ball
+
+
+def stick_slip_closed_form(t: np.ndarray, m: float, k: float, Fk: float, Fs: float, vb: float):
+    """x(t) of a block on a spring to a wall riding a belt at vb, released at rest at x = 0: it slips (the belt
+    drags it with Fk) until its speed meets the belt's, moves with the belt until the spring's pull reaches Fs,
+    slips back about Fk / k until its speed meets the belt's again, and so on. (x on t, [(time, kind)])."""
+    w = math.sqrt(k / m)
+    x = np.empty_like(t)
+    t_stick = math.asin(vb * k / (Fk * w)) / w  # the first slip from rest: x = Fk/k (1 - cos w t)
+    part = t < t_stick
+    x[part] = Fk / k * (1 - np.cos(w * t[part]))
+    x_stick = Fk / k * (1 - math.cos(w * t_stick))
+    A = (Fs - Fk) / k  # each later slip starts at Fs / k with the belt's speed
+    R, phi = math.hypot(w * A, vb), math.atan2(w * A, vb)
+    slip_time = (2 * math.pi - math.acos(vb / R) - phi) / w  # -w A sin(w s) + vb cos(w s) = vb again
+    x_restick = Fk / k + A * math.cos(w * slip_time) + vb / w * math.sin(w * slip_time)
+    events = []
+    while t_stick < t[-1]:
+        events.append((t_stick, "stick"))
+        t_slip = t_stick + (Fs / k - x_stick) / vb
+        part = (t >= t_stick) & (t < t_slip)
+        x[part] = x_stick + vb * (t[part] - t_stick)
+        events.append((t_slip, "slip"))
+        t_stick = t_slip + slip_time
+        part = (t >= t_slip) & (t < t_stick)
+        s = t[part] - t_slip
+        x[part] = Fk / k + A * np.cos(w * s) + vb / w * np.sin(w * s)
+        x_stick = x_restick
+    return x, [(time, kind) for time, kind in events if time <= t[-1]]
+
+
+def test_a_stick_slip_oscillator_on_a_belt_matches_its_closed_form():
+    sc, model, grid = bundled("stick_slip_belt")
+    result = with_physics(model, solve(model, grid, "auto", Tolerances()))
+    assert result.stats.method == "exact"
+    x, events = stick_slip_closed_form(grid, 1.0, 100.0, 2.0, 3.0, 0.1)
+    assert np.abs(result.displacement[:, 0] - x).max() <= 1e-10 * np.abs(x).max()
+    found = [(time, kind) for time, _, kind in result.nonsmooth.events]
+    assert [kind for _, kind in found] == [kind for _, kind in events] and len(events) > 20
+    assert max(abs(a - b) for (a, _), (b, _) in zip(found, events)) <= 1e-12 * grid[-1]
+    stuck = (result.velocity[:, 0] == 0.1)  # while stuck the block moves with the belt, exactly
+    assert stuck.mean() > 0.2 and result.energy.max_relative_residual <= 1e-10
+
+
+def test_a_bouncing_ball_matches_the_closed_form_and_comes_to_rest_at_the_accumulation_time():
+    sc, model, grid = bundled("bouncing_ball")
+    start = time.monotonic()
+    result = with_physics(model, solve(model, grid, "auto", Tolerances()))
+    took = time.monotonic() - start
+    h, e = 1.0, 0.8
+    t1 = math.sqrt(2 * h / G)
+    v1 = G * t1
+    closed = t1 + np.concatenate([[0.0], np.cumsum(2 * v1 * e ** np.arange(1, 40) / G)])
+    impacts = [t for t, _, kind in result.nonsmooth.events if kind == "impact"]
+    assert len(impacts) >= 20
+    np.testing.assert_allclose(impacts[:20], closed[:20], rtol=0, atol=1e-10)
+    rest = [t for t, _, kind in result.nonsmooth.events if kind == "rest"]
+    accumulation = t1 + 2 * v1 / G * e / (1 - e)
+    assert len(rest) == 1 and abs(rest[0] - accumulation) <= 1e-9
+    after = grid > accumulation
+    assert np.all(result.displacement[after, 0] == 0.0) and np.all(result.velocity[after, 0] == 0.0)
+    assert took < 1.0, f"{took:.2f} s"
+    # the energy lost at the impacts is all there was: m g h, and the balance closes to rounding
+    assert abs(result.energy.impact[-1] - 0.1 * G * h) <= 1e-12 and result.energy.max_relative_residual <= 1e-12
+
+
+def test_restitution_zero_holds_at_the_first_contact():
+    text = (SCENARIOS / "bouncing_ball.toml").read_text().replace("restitution = 0.8", "restitution = 0.0")
+    _, model, grid = model_of(text)
+    result = solve(model, grid, "exact", Tolerances())
+    kinds = [kind for _, _, kind in result.nonsmooth.events]
+    assert kinds == ["impact", "rest"]
+    t1 = math.sqrt(2 / G)
+    assert abs(result.nonsmooth.events[0][0] - t1) <= 1e-12
+
+
+# ------------------------------------------------------------------------------ elastoplastic and bilinear
+
+
+def chain_reference(time_grid, record_t, record_a, m, C, k, fy, b):
+    """An independent event-driven solution of a chain of masses m[i] from the ground, storey i a bilinear spring
+    between mass i-1 (the ground for i = 0) and mass i: an elastic b k[i] with an elastoplastic core of stiffness
+    (1 - b) k[i] yielding at (1 - b) fy[i], under M x'' + C x' + (storey forces) = -M 1 a_g(t), a_g linear between
+    record samples. scipy's DOP853 at rtol 1e-13 on each stretch between samples and events, each storey's yield
+    and unloading found by solve_ivp's own event location. Returns x (N, n) on the grid and the final plastic
+    deformations."""
+    from scipy.integrate import solve_ivp
+
+    m, k, fy = np.asarray(m, float), np.asarray(k, float), np.asarray(fy, float)
+    n = len(m)
+    kc, fc = (1 - b) * k, (1 - b) * fy
+    mode, dp = np.zeros(n, int), np.zeros(n)  # per storey: 0 elastic, +1/-1 yielding; plastic deformation
+
+    def drift(x):
+        return x - np.concatenate([[0.0], x[:-1]])
+
+    def rhs(t, y):
+        x, v = y[:n], y[n:]
+        d = drift(x)
+        T = b * k * d + np.where(mode == 0, kc * (d - dp), mode * fc)
+        on_mass = -T + np.concatenate([T[1:], [0.0]])
+        return np.concatenate([v, (on_mass - C @ v) / m - np.interp(t, record_t, record_a)])
+
+    def events_now():
+        found = []
+        for i in range(n):
+            if mode[i] == 0:
+                for sign in (1, -1):
+                    def crossing(t, y, i=i, sign=sign):
+                        return kc[i] * (drift(y[:n])[i] - dp[i]) - sign * fc[i]
+                    crossing.terminal, crossing.direction = True, sign
+                    found.append((i, sign, crossing))
+            else:
+                def unload(t, y, i=i):
+                    return drift(y[n:])[i]
+                unload.terminal, unload.direction = True, -mode[i]
+                found.append((i, 0, unload))
+        return found
+
+    y, t = np.zeros(2 * n), 0.0
+    out = np.zeros((len(time_grid), n))
+    knots = list(record_t[(record_t > 0) & (record_t < time_grid[-1])]) + [time_grid[-1]]
+    for knot in knots:
+        while t < knot:
+            events = events_now()
+            inside = time_grid[(time_grid > t) & (time_grid <= knot)]
+            sol = solve_ivp(rhs, (t, knot), y, method="DOP853", rtol=1e-13, atol=1e-16,
+                            events=[e for _, _, e in events], dense_output=True)
+            t_end = sol.t[-1]
+            for tk in inside[inside <= t_end]:
+                out[np.searchsorted(time_grid, tk)] = sol.sol(tk)[:n]
+            y, t = sol.y[:, -1], t_end
+            if sol.status == 1:  # the earliest event
+                j = min((j for j in range(len(events)) if sol.t_events[j].size), key=lambda j: sol.t_events[j][0])
+                i, sign, _ = events[j]
+                d = drift(y[:n])[i]
+                if sign:
+                    mode[i] = sign
+                else:
+                    dp[i], mode[i] = d - mode[i] * fc[i] / kc[i], 0
+    d = drift(y[:n])
+    return out, np.where(mode == 0, dp, d - mode * fc / kc)
+
+
+@pytest.mark.parametrize("stem_or_law", ["elastoplastic", "bilinear"])
+def test_an_elastoplastic_and_a_bilinear_oscillator_under_a_record_match_an_independent_solution(stem_or_law):
+    text = (SCENARIOS / "elastoplastic_record.toml").read_text().replace(
+        "../records/", str(SCENARIOS.parent / "records") + "/").replace("end = 20.0", "end = 12.0")
+    b = 0.0
+    if stem_or_law == "bilinear":
+        b = 0.1
+        text = text.replace('law = "elastoplastic"', 'law = "bilinear"\nhardening = 0.1')
+    _, model, grid = model_of(text)
+    result = with_physics(model, solve(model, grid, "auto", Tolerances()))
+    assert result.stats.method == "exact"
+    record_t = model.ground.given.t
+    record_a = model.ground.given.v
+    reference, dp_end = chain_reference(grid, record_t, record_a, [1000.0], np.array([[1256.6370614359173]]),
+                                        [157913.67041742973], [1067.0], b)
+    reference, dp_end = reference[:, 0], dp_end[0]
+    x = result.displacement[:, 0]
+    peak = np.abs(reference).max()
+    assert np.abs(x - reference).max() <= 1e-6 * peak  # the whole history
+    assert abs(np.abs(x).max() - peak) <= 1e-6 * peak
+    dp = result.elements.internal["spring[0].plastic_deformation"]
+    assert abs(dp[-1] - dp_end) <= 1e-6 * peak  # the residual deformation
+    assert abs(dp[-1]) > 0.1 * peak  # it did yield, and for good
+    # the hysteretic energy is the plastic work: the core's yield force times the plastic deformation travelled
+    core_fy = (1 - b) * 1067.0
+    events = result.nonsmooth.events
+    work = core_fy * np.abs(np.diff(dp)).sum()
+    assert abs(result.energy.hysteretic[-1] - work) <= 1e-6 * work and len(events) > 10
+    assert result.energy.max_relative_residual <= 1e-12
+
+
+def test_a_shear_frame_of_bilinear_storeys_matches_an_independent_solution():
+    text = (SCENARIOS / "shear_frame_bilinear.toml").read_text().replace(
+        "../records/", str(SCENARIOS.parent / "records") + "/").replace("end = 20.0", "end = 8.0")
+    _, model, grid = model_of(text)
+    result = with_physics(model, solve(model, grid, "auto", Tolerances()))
+    assert result.stats.method == "exact"
+    m, k, fy = np.array([2.0e5, 2.0e5, 1.5e5]), np.array([3.0e8, 2.4e8, 1.6e8]), np.array([1.5e6, 1.13e6, 6.2e5])
+    w1, w2, zeta = 17.18, 41.79, 0.05  # Rayleigh damping on the initial stiffness, as [damping] states it
+    K0 = np.diag(k + np.append(k[1:], 0.0)) - np.diag(k[1:], 1) - np.diag(k[1:], -1)
+    C = 2 * zeta * w1 * w2 / (w1 + w2) * np.diag(m) + 2 * zeta / (w1 + w2) * K0
+    reference, dp_end = chain_reference(grid, model.ground.given.t, model.ground.given.v, m, C, k, fy, 0.05)
+    peak = np.abs(reference).max()
+    assert np.abs(result.displacement - reference).max() <= 1e-6 * peak
+    dp = np.array([result.elements.internal[f"spring[{i}].plastic_deformation"][-1] for i in range(3)])
+    assert np.abs(dp - dp_end).max() <= 1e-6 * peak and np.abs(dp).max() > 1e-3 * peak  # yielded, for good
+    kinds = {kind for _, _, kind in result.nonsmooth.events}
+    assert kinds == {"yield", "unload"} and result.energy.max_relative_residual <= 1e-10
+
+
+def test_a_vibro_impact_oscillator_matches_an_independent_event_driven_solution():
+    """Two masses, a clearance of +-5 mm between them, impacts that keep their momentum and reverse their relative
+    speed times e: scipy's DOP853 at rtol 1e-12 from impact to impact, written out here."""
+    from scipy.integrate import solve_ivp
+
+    sc, model, grid = bundled("vibro_impact_gap")
+    result = with_physics(model, solve(model, grid, "auto", Tolerances()))
+    assert result.stats.method == "exact"
+    mp, mi, k, c, k2, gap, e = 1.0, 0.1, 400.0, 4.0, 10.0, 0.005, 0.5
+
+    def rhs(t, y):
+        xp, xi, vp, vi = y
+        coupling = k2 * (xi - xp)
+        return [vp, vi, (2 * math.sin(15 * t) - k * xp - c * vp + coupling) / mp, -coupling / mi]
+
+    def hits(sign):
+        def hit(t, y):
+            return sign * (y[1] - y[0]) - gap
+        hit.terminal, hit.direction = True, 1
+        return hit
+
+    y, t, out, impacts = np.zeros(4), 0.0, np.zeros((len(grid), 2)), []
+    while t < grid[-1]:
+        sol = solve_ivp(rhs, (t, grid[-1]), y, method="DOP853", rtol=1e-12, atol=1e-15, dense_output=True,
+                        events=[hits(1), hits(-1)])
+        inside = (grid >= t) & (grid <= sol.t[-1])
+        if inside.any():
+            out[inside] = sol.sol(grid[inside])[:2].T
+        t, y = sol.t[-1], sol.y[:, -1].copy()
+        if sol.status == 1:
+            relative = y[3] - y[2]
+            y[2] += mi / (mp + mi) * (1 + e) * relative
+            y[3] -= mp / (mp + mi) * (1 + e) * relative
+            impacts.append(t)
+    peak = np.abs(out).max()
+    assert np.abs(result.displacement - out).max() <= 1e-9 * peak  # the reference's own error, rtol 1e-12
+    found = [time for time, _, kind in result.nonsmooth.events if kind == "impact"]
+    assert len(found) == len(impacts) > 50 and np.abs(np.array(found) - impacts).max() <= 1e-8
+    assert result.energy.impact[-1] > 0 and result.energy.max_relative_residual <= 1e-10
+
+
+def test_a_friction_isolated_building_matches_an_independent_stick_slip_solution():
+    """The base stuck to the ground (relative x = v = 0) while the force that holds it stays within F, sliding
+    against F otherwise, the two storeys above linear: scipy's DOP853 at rtol 1e-12 from event to event."""
+    from scipy.integrate import solve_ivp
+
+    sc, model, grid = bundled("friction_isolated_building")
+    grid = grid[grid <= 10.0]
+    result = with_physics(model, solve(model, grid, "auto", Tolerances()))
+    assert result.stats.method == "exact"
+    m = np.array([2.0e5, 2.0e5, 1.5e5])
+    K = np.array([[2.4e8, -2.4e8, 0], [-2.4e8, 4.0e8, -1.6e8], [0, -1.6e8, 1.6e8]])
+    C = np.array([[4.0e5, -4.0e5, 0], [-4.0e5, 6.7e5, -2.7e5], [0, -2.7e5, 2.7e5]])
+    F = 5.39e5
+    record_t, record_a = model.ground.given.t, model.ground.given.v
+
+    def ground(t):
+        return np.interp(t, record_t, record_a)
+
+    def holding(t, y):  # the friction force the base needs to stay stuck; sliding, it is -F sign(v)
+        x, v = y[:3], y[3:]
+        return m[0] * ground(t) + (K @ x + C @ v)[0]
+
+    def rhs(t, y, sliding):
+        x, v = y[:3], y[3:]
+        force = -(K @ x + C @ v) - m * ground(t)
+        if sliding:
+            force[0] -= sliding * F
+        a = force / m
+        if not sliding:
+            a[0] = 0.0
+        return np.concatenate([v, a])
+
+    y, t, out, sliding = np.zeros(6), 0.0, np.zeros((len(grid), 3)), 0
+    knots = list(record_t[(record_t > 0) & (record_t < grid[-1])]) + [grid[-1]]
+    for knot in knots:
+        while t < knot:
+            if sliding:
+                def stop(t, y):
+                    return y[3]
+                stop.terminal, stop.direction = True, -sliding
+                events = [stop]
+            else:
+                def breaks(t, y):
+                    return abs(holding(t, y)) - F
+                breaks.terminal, breaks.direction = True, 1
+                events = [breaks]
+            sol = solve_ivp(lambda t, y, s=sliding: rhs(t, y, s), (t, knot), y, method="DOP853", rtol=1e-12,
+                            atol=1e-15, dense_output=True, events=events)
+            inside = (grid > t) & (grid <= sol.t[-1])
+            if inside.any():
+                out[inside] = sol.sol(grid[inside])[:3].T
+            t, y = sol.t[-1], sol.y[:, -1].copy()
+            if sol.status == 1:
+                if sliding:
+                    y[3] = 0.0
+                    h = holding(t, y)  # stuck if the friction can hold it; else it slides back the other way
+                    sliding = 0 if abs(h) <= F else -int(np.sign(h))
+                else:
+                    sliding = -int(np.sign(holding(t, y)))
+    peak = np.abs(out).max()
+    assert np.abs(result.displacement - out).max() <= 1e-9 * peak  # the reference's own error, rtol 1e-12
+    kinds = [kind for _, _, kind in result.nonsmooth.events]
+    assert kinds.count("slip") > 5 and result.energy.friction[-1] > 0
+
+
+# -------------------------------------------------------------------------------------------- Bouc-Wen
+
+
+def test_bouc_wen_at_a_tight_tolerance_matches_scipy_radau_on_the_same_equations():
+    from scipy.integrate import solve_ivp
+
+    sc, model, grid = bundled("bouc_wen_multisine")
+    grid = grid[grid <= 5.0]
+    result = solve(model, grid, "auto", Tolerances(rtol=1e-10, atol=1e-13))
+    k, alpha, beta, gamma, n, A = 100.0, 0.1, 5.0, 5.0, 1.0, 1.0
+
+    def rhs(t, y):
+        x, v, z = y
+        force = 5 * math.sin(3 * t) + 8 * math.sin(7 * t) + 4 * math.sin(11 * t)
+        zdot = A * v - beta * abs(v) * abs(z) ** (n - 1) * z - gamma * v * abs(z) ** n
+        return [v, force - 0.5 * v - alpha * k * x - (1 - alpha) * k * z, zdot]
+
+    ref = solve_ivp(rhs, (0.0, grid[-1]), [0.0, 0.0, 0.0], method="Radau", rtol=1e-12, atol=1e-15, t_eval=grid)
+    peak = np.abs(ref.y[0]).max()
+    assert np.abs(result.displacement[:, 0] - ref.y[0]).max() <= 1e-8 * peak
+    z = result.nonsmooth.internal["spring[0].z"]
+    assert np.abs(z - ref.y[2]).max() <= 1e-8 * np.abs(ref.y[2]).max() * 10
+
+
+# ------------------------------------------------------------------------------------------ energy residual
+
+PIECEWISE = ["elastoplastic_record", "coulomb_free_decay", "stick_slip_belt", "bouncing_ball", "vibro_impact_gap",
+             "shear_frame_bilinear", "friction_isolated_building"]
+
+
+@pytest.mark.parametrize("stem", PIECEWISE)
+def test_exact_closes_the_energy_balance_to_rounding_on_every_piecewise_linear_scene(stem):
+    sc, model, grid = bundled(stem)
+    result = with_physics(model, solve(model, grid, "exact", Tolerances()))
+    e = result.energy
+    scale = max(float(np.abs(e.input).max()), float((e.kinetic + e.strain)[0]), 1e-300)
+    assert np.abs(e.residual).max() <= 1e-10 * scale
+
+
+@pytest.mark.parametrize("stem, method", [("stick_slip_belt", "DOP853"), ("stick_slip_belt", "Radau"),
+                                          ("friction_isolated_building", "DOP853"),
+                                          ("coulomb_free_decay", "ode45")])
+def test_integrators_close_the_energy_balance_to_their_tolerance(stem, method):
+    sc, model, grid = bundled(stem)
+    rtol = 1e-9
+    result = with_physics(model, solve(model, grid, method, Tolerances(rtol=rtol, atol=rtol * 1e-3)))
+    assert result.success and result.energy.max_relative_residual <= 10 * rtol
+    exact = solve(model, grid, "exact", Tolerances())
+    peak = np.abs(exact.displacement).max()
+    assert np.abs(result.displacement - exact.displacement).max() <= 1e3 * rtol * peak
+
+
+# -------------------------------------------------------------------------------------------- refusals
+
+
+@pytest.mark.parametrize("method, says", [("euler", "has no interpolant"), ("rk4", "has no interpolant"),
+                                          ("closed_form", "linear 1-DOF free response"),
+                                          ("newmark", "friction[0] is a coulomb friction contact"),
+                                          ("hht", "an ODE method")])
+def test_methods_that_cannot_take_friction_refuse_naming_it_and_those_that_can(method, says, cli, tmp_path):
+    result = cli("simulate", SCENARIOS / "coulomb_free_decay.toml", "--method", method, "-o", tmp_path)
+    assert result.exit_code == 2 and says in result.stderr and "'exact'" in result.stderr
+    assert result.stderr.count("\n") == 1 and not list(tmp_path.iterdir())
+
+
+def test_exact_refuses_bouc_wen_and_newmark_takes_it_by_return_mapping():
+    sc, model, grid = bundled("bouc_wen_multisine")
+    with pytest.raises(ScenarioError, match="spring\\[0\\] \\(bouc_wen\\) is nonlinear between events"):
+        solve(model, grid, "exact", Tolerances())
+    grid = grid[grid <= 3.0]
+    fine = solve(model, grid, "Radau", Tolerances(rtol=1e-11, atol=1e-14))
+    peak = np.abs(fine.displacement).max()
+    errors = []
+    for dt in (0.002, 0.001):  # second order: halving the step quarters the error
+        run = solve(model, grid, "newmark", Tolerances(dt=dt))
+        errors.append(np.abs(run.displacement - fine.displacement).max() / peak)
+    assert errors[1] < 1e-3 and 3.0 < errors[0] / errors[1] < 5.0
+
+
+def test_newmark_return_mapping_converges_to_the_exact_elastoplastic_history():
+    text = (SCENARIOS / "elastoplastic_record.toml").read_text().replace(
+        "../records/", str(SCENARIOS.parent / "records") + "/").replace("end = 20.0", "end = 8.0")
+    _, model, grid = model_of(text)
+    exact = solve(model, grid, "exact", Tolerances())
+    peak = np.abs(exact.displacement).max()
+    errors = [np.abs(solve(model, grid, "newmark", Tolerances(dt=dt)).displacement - exact.displacement).max() / peak
+              for dt in (0.002, 0.0005)]
+    assert errors[1] < errors[0] and errors[1] < 2e-3
+
+
+# ----------------------------------------------------------------------------------------- what is written
+
+
+def test_a_nonsmooth_result_file_holds_its_events_forces_internal_variables_and_energy(cli, tmp_path):
+    result = cli("simulate", SCENARIOS / "bouncing_ball.toml", "-o", tmp_path, "--no-plots", "--json")
+    assert result.exit_code == 0, result.output
+    import json
+
+    summary = json.loads(result.stdout)[0]
+    assert summary["event_counts"]["rest"] == 1 and len(summary["events"]) == sum(summary["event_counts"].values())
+    with h5py.File(tmp_path / "bouncing_ball.h5") as f:
+        kinds = [k.decode() for k in f["events/kind"][()]]
+        assert kinds.count("rest") == 1 and f["events/time"].attrs["units"] == "s"
+        assert f["events/element"][0].decode() == "stop[0]"
+        assert f["elements/stop_force"].shape == (len(f["time"]), 1)
+        assert abs(f["energy/impact"][-1] - 0.1 * G) < 1e-12
+        for name in ("hysteretic", "friction", "impact", "contact"):
+            assert name in f["energy"] and "stated_accuracy" in f["energy"][name].attrs
+    result = cli("simulate", SCENARIOS / "elastoplastic_record.toml", "-o", tmp_path, "--no-plots")
+    assert "events   " in result.stdout and "yield" in result.stdout
+    with h5py.File(tmp_path / "elastoplastic_record.h5") as f:
+        dp = f["elements/internal/spring[0].plastic_deformation"]
+        assert dp.attrs["units"] == "m" and dp.shape == (len(f["time"]),)
+
+
+BAD = {
+    'law = "elastoplastic"\nk = 100.0\nfy = -1.0': "spring[0].fy: expected a number > 0",
+    'law = "bilinear"\nk = 100.0\nfy = 1.0\nhardening = 1.0': "spring[0].hardening: expected a post-yield",
+    'law = "elastoplastic"\nk = 100.0\nfy = 1.0\nk3 = 2.0': "spring[0].k3: a elastoplastic spring has no k3",
+    'law = "linear"\nk = 100.0\nfy = 1.0': "spring[0].fy: a linear spring has no fy; it belongs to law = 'elastoplastic'",
+    'law = "bouc_wen"\nk = 100.0\nalpha = 1.5\nbeta = 1.0\ngamma = 1.0': "spring[0].alpha",
+}
+TABLES = {
+    '[[friction]]\nconnects = ["ground", "m"]\nforce = 2.0\nstatic = 1.0': "friction[0].static: expected a breakaway",
+    '[[friction]]\nconnects = ["ground", "m"]\nforce = -2.0': "friction[0].force: expected a number > 0",
+    '[[friction]]\nconnects = ["ground", "m"]\nforce = 2.0\nfriction = 1.0': "friction[0].friction: unknown key",
+    '[[stop]]\nconnects = ["ground", "m"]\nrestitution = 0.5': "stop[0].min: expected min, max or both",
+    '[[stop]]\nconnects = ["ground", "m"]\nmin = 0.1\nmax = 0.0': "stop[0].max: expected max > min",
+    '[[stop]]\nconnects = ["ground", "m"]\nmin = 0.0\nrestitution = 1.5': "stop[0].restitution: expected a coefficient",
+    '[[stop]]\nconnects = ["ground", "m"]\nmin = 0.0\nrestitution = 0.5\nk = 1e6': "stop[0].restitution: a stop is rigid",
+}
+
+
+@pytest.mark.parametrize("table, says", [(f'[[spring]]\nconnects = ["ground", "m"]\n{fields}', says)
+                                         for fields, says in sorted(BAD.items())] + sorted(TABLES.items()))
+def test_bad_hysteretic_springs_friction_and_stops_are_one_line_input_errors(table, says, cli, tmp_path):
+    scene = tmp_path / "bad.toml"
+    scene.write_text(f'[time]\nend = 1.0\n[[mass]]\nname = "m"\nm = 1.0\n{table}\n')
+    result = cli("simulate", scene, "-o", tmp_path / "out")
+    assert result.exit_code == 2 and says in result.stderr and result.stderr.count("\n") == 1, result.stderr
+    assert not (tmp_path / "out").exists()
+
+
+# ------------------------------------------------------------------------------ compare-solvers and phase
+
+
+def test_compare_solvers_on_the_bouncing_ball_charts_which_methods_fail_and_where(cli, tmp_path):
+    import json
+
+    start = time.perf_counter()
+    result = cli("compare-solvers", SCENARIOS / "bouncing_ball.toml", "-o", tmp_path, "--json")
+    assert result.exit_code == 0, result.output
+    assert time.perf_counter() - start < 120
+    data = json.loads(result.stdout)
+    assert data["reference"].startswith("exact (event to event")
+    verdicts = ("missed", "chattered", "energy", "wrong law", "diverged", "failed", "skipped")
+    for run in data["runs"]:
+        if run["success"]:  # a run called good is good: events counted and the error at its tolerance
+            assert run["error"] <= (0.05 if "/" in run["method"] else max(1e3 * run["rtol"], 1e-9)), run
+        else:
+            assert run["message"].startswith(verdicts), run
+    assert any(not run["success"] for run in data["runs"])  # the chart has something to show
+    assert {p.name for p in tmp_path.iterdir()} >= {"bouncing_ball_failures.png", "bouncing_ball_work_precision.png"}
+
+
+def test_a_smoothed_friction_law_is_charted_as_the_wrong_law_not_as_a_solution():
+    from smdcli.commands.compare import compare
+
+    sc, model, grid = bundled("stick_slip_belt")
+    c = compare(sc, model, grid, ["DOP853", "DOP853/tanh"], [(1e-6, 1e-9)], [], repeats=1)
+    event_driven, smoothed = c.runs
+    assert event_driven.success and event_driven.error < 1e-4
+    # tanh friction cannot hold the block at the breakaway force 3 N above the kinetic 2 N: it slips early
+    assert not smoothed.success and smoothed.message.startswith("wrong law") and smoothed.error > 0.1
+    assert set(c.refused) >= {"euler", "rk4", "newmark", "ode113"}
+
+
+def test_phase_hysteresis_draws_force_against_deformation_of_each_hysteretic_spring(cli, tmp_path):
+    result = cli("phase", SCENARIOS / "elastoplastic_record.toml", "--hysteresis", "-o", tmp_path)
+    assert result.exit_code == 0, result.output
+    assert "1 hysteresis loop" in result.stdout
+    sc, model, grid = bundled("elastoplastic_record")
+    run = with_physics(model, solve(model, grid, "auto", Tolerances()))
+    with h5py.File(tmp_path / "elastoplastic_record_hysteresis.h5") as f:
+        loop = f["curves/000"]
+        d, force = loop["deformation"][()], loop["force"][()]
+        assert loop["force"].attrs["units"] == "N" and loop.attrs["label"].startswith("spring[0] (elastoplastic")
+    assert np.array_equal(d, run.displacement[:, 0])  # d = x(m) - x(ground)
+    assert np.abs(force).max() == pytest.approx(1067.0, rel=1e-12)  # capped at the yield force, and reached
+    dp = run.elements.internal["spring[0].plastic_deformation"]
+    assert np.abs(force - 157913.67041742973 * (d - dp)).max() <= 1e-9 * 1067.0  # elastic about the plastic offset
+    assert (tmp_path / "elastoplastic_record_hysteresis.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("args, says", [(("three_dof_forced.toml",), "has no hysteretic spring"),
+                                        (("elastoplastic_record.toml", "--poincare"), "leave out --poincare")])
+def test_phase_hysteresis_refuses_what_it_cannot_draw(args, says, cli, tmp_path):
+    result = cli("phase", SCENARIOS / args[0], *args[1:], "--hysteresis", "-o", tmp_path)
+    assert result.exit_code == 2 and says in result.stderr and result.stderr.count("\n") == 1
+    assert not list(tmp_path.iterdir())
