@@ -57,7 +57,7 @@ def test_a_two_dof_peak_is_the_zero_of_the_slope_found_in_40_digits(tmp_path, cl
                "-q").exit_code == 0
     sc, model, _ = bundled("two_dof_frequency_response")
     with h5py.File(tmp_path / "two_dof_frequency_response_sweep.h5") as f:
-        omegas, dofs = f["peaks/omega"][()], [d.decode() for d in f["peaks/dof"][()]]
+        omegas, dofs = f["peaks/omega"][()], [d.decode() for d in f["peaks/dof_name"][()]]
         stated = f["peaks/omega"].attrs["stated_accuracy"]
         top = float(np.abs(omegas).max())
         source = f.attrs["input_dof"]

@@ -298,7 +298,7 @@ def write_hdf5(path: Path, c: Comparison) -> None:
     import h5py
 
     from smdcli.io.atomic import atomic_path
-    from smdcli.io.hdf5 import write_header
+    from smdcli.io.hdf5 import with_scales, axis, write_header
 
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
         write_header(f, c.scenario, "compare")
@@ -329,9 +329,10 @@ def write_hdf5(path: Path, c: Comparison) -> None:
         ref.attrs["method"] = c.reference_method
         ref.attrs["wall_time_s"] = c.reference.stats.wall_time_s
         ref.attrs["stated_accuracy"] = c.reference.stats.stated_accuracy
-        t = ref.create_dataset("time", data=c.grid)
+        t = axis(ref, "time", c.grid)
         t.attrs["units"] = "s"
-        x = ref.create_dataset("displacement", data=c.reference.displacement)
+        x = with_scales(ref.create_dataset("displacement", data=c.reference.displacement), t,
+                         axis(ref, "dof", c.reference.dofs))
         x.attrs["units"] = "m"
 
 

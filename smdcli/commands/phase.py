@@ -203,7 +203,7 @@ def _write(path: Path, sc: Scenario, run: PhaseRun) -> None:
     import h5py
 
     from smdcli.io.atomic import atomic_path
-    from smdcli.io.hdf5 import write_header
+    from smdcli.io.hdf5 import with_scales, axis, write_header
 
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
         write_header(f, sc, "phase")
@@ -218,5 +218,7 @@ def _write(path: Path, sc: Scenario, run: PhaseRun) -> None:
                 g.attrs["label"] = c.label
                 columns = (("deformation", "m"), ("force", "N")) if run.hysteresis else \
                     (("displacement", "m"), ("velocity", "m/s"))
-                for (name, units), data in zip((("time", "s"),) + columns, (c.time, c.x, c.v)):
-                    g.create_dataset(name, data=data).attrs["units"] = units
+                time = axis(g, "time", c.time)
+                time.attrs["units"] = "s"
+                for (name, units), data in zip(columns, (c.x, c.v)):
+                    with_scales(g.create_dataset(name, data=data), time).attrs["units"] = units

@@ -76,21 +76,30 @@ def write_spectrum(path: Path, record, spectrum) -> None:
                 ("Sd", spectrum.Sd, "m", "peak relative displacement"),
                 ("Sv", spectrum.Sv, "m/s", "pseudo-spectral velocity, (2 pi / T) Sd"),
                 ("Sa", spectrum.Sa, "m/s^2", "pseudo-spectral acceleration, (2 pi / T)^2 Sd")):
-            ds = _with_scales(f.create_dataset(name, data=data), damping, period)
+            ds = with_scales(f.create_dataset(name, data=data), damping, period)
             ds.attrs["units"] = units
             ds.attrs["description"] = meaning
         group = f.create_group("record")
         time = group.create_dataset("time", data=record.time)
         time.make_scale("time")
         time.attrs["units"] = "s"
-        acc = _with_scales(group.create_dataset("acceleration", data=record.acceleration), time)
+        acc = with_scales(group.create_dataset("acceleration", data=record.acceleration), time)
         acc.attrs["units"] = "m/s^2"
         group.attrs["units_in_file"] = record.units
         group.attrs["file_text"] = record.text
         group.attrs["sha256"] = hashlib.sha256(record.text.encode()).hexdigest()
 
 
-def _with_scales(ds, *scales):
+def axis(group, name: str, values):
+    """A dimension scale named `name` in group: strings (DOF or element names) or numbers, one per position."""
+    values = list(values) if not isinstance(values, np.ndarray) else values
+    ds = _strings(group, name, values) if len(values) and isinstance(values[0], str) else \
+        group.create_dataset(name, data=np.asarray(values))
+    ds.make_scale(name)
+    return ds
+
+
+def with_scales(ds, *scales):
     """Attach one dimension scale per axis (None leaves an axis bare); returns the data set."""
     for axis, scale in enumerate(scales):
         if scale is not None:
@@ -168,14 +177,17 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
         mode.make_scale("mode")
         for name, data, units in (("natural_frequencies_rad_s", m.natural_frequencies, "rad/s"),
                                   ("damping_ratios", m.damping_ratios, "1")):
-            ds = _with_scales(modes.create_dataset(name, data=data), mode)
+            ds = with_scales(modes.create_dataset(name, data=data), mode)
             ds.attrs["units"] = units
             stated(ds, modes_stated[name])
-        shapes = _with_scales(modes.create_dataset("shapes", data=m.shapes), dof, mode)
+        shapes = with_scales(modes.create_dataset("shapes", data=m.shapes), dof, mode)
         shapes.attrs["units"] = "1"
         shapes.attrs["normalization"] = "mass-normalized (shapes^T M shapes = I), largest entry of each column positive"
         stated(shapes, modes_stated["shapes"])
-        eigen = modes.create_dataset("eigenvalues", data=np.stack([m.eigenvalues.real, m.eigenvalues.imag], axis=1))
+        eigen = with_scales(modes.create_dataset("eigenvalues", data=np.stack([m.eigenvalues.real, m.eigenvalues.imag],
+                                                                               axis=1)),
+                             axis(modes, "eigenvalue", np.arange(1, len(m.eigenvalues) + 1)),
+                             axis(modes, "part", ["real", "imag"]))
         eigen.attrs["units"] = "1/s"
         eigen.attrs["columns"] = ["real", "imag"]
         stated(eigen, modes_stated["eigenvalues"])
@@ -190,7 +202,7 @@ def _write_ground(f, scenario: Scenario, model: Model, result: Result, time, dof
     ground = _ground_accuracy(model, result)
     for name, units in (("displacement", "m"), ("velocity", "m/s"), ("acceleration", "m/s^2")):
         absolute = result.absolute(name)
-        ds = _with_scales(f.create_dataset(f"absolute_{name}", data=absolute), time, dof)
+        ds = with_scales(f.create_dataset(f"absolute_{name}", data=absolute), time, dof)
         ds.attrs["units"] = units
         ds.attrs["description"] = f"{name} in the fixed frame: the relative {name} plus the ground's"
         f[name].attrs["description"] = f"{name} relative to the moving ground"
@@ -203,7 +215,7 @@ def _write_ground(f, scenario: Scenario, model: Model, result: Result, time, dof
     group.attrs["units_given"] = spec.units
     group.attrs["jumps"] = len(model.ground.jumps)
     for name, units in (("displacement", "m"), ("velocity", "m/s"), ("acceleration", "m/s^2")):
-        ds = _with_scales(group.create_dataset(name, data=getattr(result.ground, name)), time)
+        ds = with_scales(group.create_dataset(name, data=getattr(result.ground, name)), time)
         ds.attrs["units"] = units
         stated(ds, ground[name])
         ds.attrs["description"] = ("as given" if name == spec.quantity else
@@ -245,12 +257,12 @@ def _write_events(f, history) -> None:
     group.attrs["kinds"] = "yield, unload, stick, slip, contact, impact, separation, rest"
     event = group.create_dataset("event", data=np.arange(len(history.events)))
     event.make_scale("event")
-    times = _with_scales(group.create_dataset("time", data=np.array([t for t, _, _ in history.events], dtype=float)),
+    times = with_scales(group.create_dataset("time", data=np.array([t for t, _, _ in history.events], dtype=float)),
                          event)
     times.attrs["units"] = "s"
     stated(times, 4 * float(np.finfo(float).eps))  # located to rounding on the flow (the exact path)
     for name, index in (("element", 1), ("kind", 2)):
-        _with_scales(_strings(group, name, [e[index] for e in history.events]), event)
+        with_scales(_strings(group, name, [e[index] for e in history.events]), event)
 
 
 def _write_elements(f, elements, time, dof) -> None:
@@ -262,9 +274,9 @@ def _write_elements(f, elements, time, dof) -> None:
     for kind, forces, names, connects in tables if elements.element_form else ():
         scale = _strings(group, kind, names)
         scale.make_scale(kind)
-        ds = _with_scales(group.create_dataset(f"{kind}_force", data=forces), time, scale)
+        ds = with_scales(group.create_dataset(f"{kind}_force", data=forces), time, scale)
         ds.attrs["units"] = "N"
-        _strings(group, f"{kind}_connects", [f"{a} {b}" for a, b in connects])
+        with_scales(_strings(group, f"{kind}_connects", [f"{a} {b}" for a, b in connects]), scale)
     if not elements.element_form:
         group.attrs["note"] = "a [system] scene has no elements: only the reaction is given"
     for kind, forces, names, connects in (("friction", elements.friction, elements.friction_names,
@@ -274,24 +286,25 @@ def _write_elements(f, elements, time, dof) -> None:
             continue
         scale = _strings(group, kind, names)
         scale.make_scale(kind)
-        ds = _with_scales(group.create_dataset(f"{kind}_force", data=forces), time, scale)
+        ds = with_scales(group.create_dataset(f"{kind}_force", data=forces), time, scale)
         ds.attrs["units"] = "N"
         ds.attrs["description"] = ("the contact's friction force, tension positive (stuck: the force that holds it)"
                                    if kind == "friction" else "the stop's contact force (0 while free), tension "
                                    "positive: a stop pushing its ends apart is negative")
-        _strings(group, f"{kind}_connects", [f"{a} {b}" for a, b in connects])
+        with_scales(_strings(group, f"{kind}_connects", [f"{a} {b}" for a, b in connects]), scale)
     if elements.internal:
         internal = group.create_group("internal")
         internal.attrs["description"] = ("each hysteretic spring's internal variable: plastic_deformation (m) of an "
                                          "elastoplastic or bilinear spring, z (m) of a Bouc-Wen one")
         for name, values in elements.internal.items():
-            ds = _with_scales(internal.create_dataset(name, data=values), time)
+            ds = with_scales(internal.create_dataset(name, data=values), time)
             ds.attrs["units"] = "m"
-    reaction = _with_scales(group.create_dataset("reaction", data=elements.reaction[:, None]), time)
+    support = axis(group, "support", ["ground"])  # (time, 1): the one support the reaction acts on
+    reaction = with_scales(group.create_dataset("reaction", data=elements.reaction[:, None]), time, support)
     reaction.attrs["units"] = "N"
     reaction.attrs["description"] = elements.reaction_meaning
     if elements.added_damping is not None:
-        ds = _with_scales(group.create_dataset("added_damping_force", data=elements.added_damping), time, dof)
+        ds = with_scales(group.create_dataset("added_damping_force", data=elements.added_damping), time, dof)
         ds.attrs["units"] = "N"
         ds.attrs["description"] = "-C_damping x' on each DOF: the force of the [damping] table, not an element's"
 
@@ -304,7 +317,7 @@ def _write_energy(f, energy, time) -> None:
     group.attrs["quadrature"] = energy.quadrature
     group.attrs["balance"] = "residual = kinetic + strain - (kinetic + strain)[0] + dissipated - input"
     for name in energy.terms:
-        ds = _with_scales(group.create_dataset(name, data=getattr(energy, name)), time)
+        ds = with_scales(group.create_dataset(name, data=getattr(energy, name)), time)
         ds.attrs["units"] = "J"
 
 
@@ -324,11 +337,13 @@ def write_matrices(group, model_or_family, dof, member=None) -> None:
     """M, C, K with units and stated accuracies, their axes named by the DOF scale (and the member scale for a
     family)."""
     accuracy = matrix_accuracy(model_or_family if member is None else model_or_family.base)
+    names = list(dof.asstr()[()])  # rows and columns need their own names: a dimension appears once per array
+    rows, columns = axis(group, "dof_row", names), axis(group, "dof_col", names)
     for name, units in (("M", "kg"), ("C", "N s/m"), ("K", "N/m")):
         ds = group.create_dataset(name, data=getattr(model_or_family, name))
         ds.attrs["units"] = units
-        axes = (dof, dof) if member is None else (member, dof, dof)
-        _with_scales(ds, *axes)
+        axes = (rows, columns) if member is None else (member, rows, columns)
+        with_scales(ds, *axes)
         stated(ds, accuracy[name])
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from smdcli.io.atomic import atomic_path
-from smdcli.io.hdf5 import TIME_ACCURACY, _strings, _with_scales, stated, write_header, write_matrices
+from smdcli.io.hdf5 import TIME_ACCURACY, _strings, with_scales, axis, stated, write_header, write_matrices
 from smdcli.model.accuracy import EPS, evaluation_accuracy
 from smdcli.sweep.spec import METRIC_UNITS, SETTLING_BAND, parameter_units
 
@@ -106,18 +106,20 @@ class SweepFile:
             f.attrs["members_done"] = 0
             f.attrs["complete"] = False
             n = family.base.n
+            sample = None
             if grid is not None:
                 time = f.create_dataset("time", data=grid)
                 time.make_scale("time")
-            else:
-                time = _growing(f, "time", (length,), float)
+            else:  # each member's own times: (member, sample)
+                sample = axis(f, "sample", np.arange(length))
+                time = with_scales(_growing(f, "time", (length,), float), member, sample)
             time.attrs["units"] = "s"
             stated(time, TIME_ACCURACY)
             if keep == "full":
                 for name, units in HISTORY_UNITS.items():
                     ds = _growing(f, name, (length, n), float)
                     ds.attrs["units"] = units
-                    _with_scales(ds, member, time if grid is not None else None, dof)
+                    with_scales(ds, member, time if grid is not None else sample, dof)
                 base = family.base
                 if grid is not None:  # the applied force is evaluated; members differ in it only by its numbers
                     stated(f["force"], evaluation_accuracy(base.applied_force, grid) if base.is_forced else 0.0)
@@ -134,7 +136,7 @@ class SweepFile:
             for name, units in METRIC_UNITS.items():
                 ds = _growing(group, name, (n,), float, compressed=True)
                 ds.attrs["units"] = units
-                _with_scales(ds, member, dof)
+                with_scales(ds, member, dof)
             f.flush()
         except BaseException:  # cut before it could record any member: nothing to resume
             if f is not None:
@@ -281,12 +283,18 @@ def _write_response(f, response, member, dof, family, normalized: bool) -> None:
     if response.difference is not None:
         f["measured"].attrs["max_difference_from_exact"] = response.difference
     peaks = f.create_group("peaks")
-    peaks.create_dataset("member", data=np.array([p["member"] for p in response.peaks], dtype=int))
-    _strings(peaks, "dof", [p["dof"] for p in response.peaks])
-    peaks.create_dataset("omega", data=np.array([p["omega"] for p in response.peaks], dtype=float))
-    peaks.create_dataset("amplitude", data=np.array([p["amplitude"] for p in response.peaks], dtype=float))
+    peak = axis(peaks, "peak", np.arange(len(response.peaks)))
+    # member_index and dof_name, not member and dof: a variable named as a dimension would be read as its coordinate
+    with_scales(peaks.create_dataset("member_index", data=np.array([p["member"] for p in response.peaks],
+                                                                    dtype=int)), peak)
+    with_scales(_strings(peaks, "dof_name", [p["dof"] for p in response.peaks]), peak)
+    ds = with_scales(peaks.create_dataset("omega", data=np.array([p["omega"] for p in response.peaks], dtype=float)),
+                      peak)
+    ds.attrs["units"] = "rad/s"
+    with_scales(peaks.create_dataset("amplitude", data=np.array([p["amplitude"] for p in response.peaks],
+                                                                 dtype=float)), peak)
     for name, value in response.accuracy.items():  # the exact data sets': amplitudes, phases, peaks
         if name in f:
             stated(f[name], value)
-    _strings(peaks, "source", [f"measured, sweep {p['direction']}" if "direction" in p else "exact"
-                               for p in response.peaks])
+    with_scales(_strings(peaks, "source", [f"measured, sweep {p['direction']}" if "direction" in p else "exact"
+                                            for p in response.peaks]), peak)
