@@ -201,3 +201,49 @@ def test_compare_records_failures_without_hiding_the_runs_that_worked(chain):
     direct = solve(model, grid, "ode45", Tolerances(1e-4, 1e-7)).displacement
     assert ode45[0].error == pytest.approx(np.abs(direct - exact).max() / np.abs(exact).max(), rel=1e-12)
     assert c.reference_method.startswith("exact")
+
+
+def _crosses(fig) -> list[int]:
+    """How many runs each panel of a chart crosses out (its 'x' markers with data)."""
+    return [sum(len(line.get_xdata()) for line in ax.get_lines() if line.get_marker() == "x")
+            for ax in fig.axes]
+
+
+def test_diverged_runs_are_failures_in_the_table_json_file_and_every_chart(tmp_path, cli):
+    """two_dof_forced (omega_max 8.3 rad/s): central difference past h w = 2 and explicit Euler at large steps
+    blow up; each such run is a failure, with its reason, in every place compare-solvers reports it."""
+    import json
+
+    import h5py
+
+    from smdcli.plots.compare import energy_precision_figure, stability_figure, work_precision_figure
+
+    ran = cli("compare-solvers", SCENARIOS / "two_dof_forced.toml", "--methods", "central_difference,euler,newmark",
+              "--repeats", "1", "-o", tmp_path, "--json")
+    assert ran.exit_code == 0, ran.output
+    runs = json.loads(ran.stdout)["runs"]
+    by = {(r["method"], round(r["h_omega"], 6)): r for r in runs}
+    for h in (2.1, 2.6, 3.0):  # past central difference's limit of 2: grows without bound
+        r = by[("central_difference", h)]
+        assert not r["success"] and r["message"].startswith(("diverged", "failed")), r
+    assert by[("central_difference", 1.9)]["success"]
+    assert not by[("euler", 3.0)]["success"] and "diverged" in by[("euler", 3.0)]["message"]
+    assert all(r["success"] for r in runs if r["method"] == "newmark")  # unconditionally stable: never crossed out
+    failed = [r for r in runs if not r["success"]]
+    with h5py.File(tmp_path / "two_dof_forced_compare.h5") as f:
+        assert list(f["runs/success"][()]) == [r["success"] for r in runs]
+        assert [m.decode() for m in f["runs/message"][()]] == [r["message"] for r in runs]
+    table = cli("compare-solvers", SCENARIOS / "two_dof_forced.toml", "--methods", "central_difference,euler,newmark",
+                "--repeats", "1", "-o", tmp_path, "--no-plots").stdout
+    assert table.count("FAILED: diverged") + table.count("FAILED: failed") >= 3 + 1
+    assert sum("FAILED" in line for line in table.splitlines()) == len(failed)
+
+    sc = scenario.load(SCENARIOS / "two_dof_forced.toml")
+    model, grid = build(sc), time_grid(sc.time)
+    steps = parse_steps("", model.omega_max, float(grid[-1] - grid[0]))
+    c = compare(sc, model, grid, ["central_difference", "euler", "newmark"], [], steps, repeats=1)
+    bad = [r for r in c.runs if not r.success]
+    assert {(r.method, round(r.h_omega, 6)) for r in bad} == {(r["method"], round(r["h_omega"], 6)) for r in failed}
+    assert _crosses(work_precision_figure(c, "t")) == [len(bad), len(bad)]
+    assert _crosses(energy_precision_figure(c, "t"))[0] == len(bad)
+    assert _crosses(stability_figure(c, "t", {}))[0] == len(bad)

@@ -8,7 +8,6 @@ import math
 
 from smdcli.plots.common import _figure, _wrap
 
-FAILED_LEVEL = 3.0  # failed runs are drawn as crosses on a band above error = 1
 
 
 def _method_styles(methods: list[str]) -> dict[str, dict]:
@@ -38,15 +37,34 @@ def _span_decades(ax, decades: float = 1.5) -> None:
     ax.xaxis.set_minor_formatter(NullFormatter())
 
 
+def _in_band(low: float, index: int, count: int) -> float:
+    """Where method `index` of `count` draws its failed runs in a failure band from low to 10 low (log axis): each
+    method at its own height, so that crosses of two methods at one cost do not hide each other."""
+    return low * 10 ** ((index + 1) / (count + 1))
+
+
+def _band(ax, low: float) -> None:
+    """The grey failure band from low to 10 low, and its legend entry (no text in the plot: crosses go anywhere)."""
+    ax.axhspan(low, 10 * low, color="0.9", zorder=0)
+    ax.plot([], [], "x", color="0.3", ms=8, mew=2, label="failed run (grey band);\nthe reason in the table")
+
+
+def _failed(run) -> bool:
+    """A run the charts cross out: it failed (diverged, energy created, a solver error), and was not skipped."""
+    return not run.success and not run.message.startswith("skipped")
+
+
 def work_precision_figure(comparison, title: str):
     """Error against wall time and against RHS evaluations, log-log, one line per method; failures as crosses."""
     runs = comparison.runs
     methods, styles, fig, axes = _two_panels(runs)
+    worst = max((r.error for r in runs if r.success and math.isfinite(r.error)), default=1.0)
+    band = 10 ** math.ceil(math.log10(max(worst, 1.0) * 1.5))  # above every good run: failures only
     costs = (("wall_time_s", "Wall time [s] (median of repeats)"), ("nfev", "Right-hand-side evaluations"))
     for ax, (cost, label) in zip(axes, costs):
-        for m in methods:
+        for i, m in enumerate(methods):
             mine = [r for r in runs if r.method == m]
-            ok = [r for r in mine if r.success and r.error < 1.0 and getattr(r, cost) > 0]
+            ok = [r for r in mine if r.success and getattr(r, cost) > 0]
             fixed = not mine[0].adaptive
             style = styles[m]
             if ok:
@@ -54,9 +72,10 @@ def work_precision_figure(comparison, title: str):
                         lw=1.2, ms=5, label=m + (" (fixed step)" if fixed else ""), **style)
             else:
                 ax.plot([], [], ls="--" if fixed else "-", label=f"{m} (all failed)", **style)
-            bad = [r for r in mine if (not r.success or r.error >= 1.0) and getattr(r, cost) > 0]
+            bad = [r for r in mine if _failed(r) and getattr(r, cost) > 0]
             if bad:
-                ax.plot([getattr(r, cost) for r in bad], [FAILED_LEVEL] * len(bad), "x", color=style["color"], ms=8)
+                ax.plot([getattr(r, cost) for r in bad], [_in_band(band, i, len(methods))] * len(bad), "x",
+                        color=style["color"], ms=8, mew=2)
         exact = comparison.exact_point
         if exact is not None and cost == "wall_time_s":
             how = "matrix exponential" if comparison.model.is_linear else "event to event"
@@ -65,13 +84,11 @@ def work_precision_figure(comparison, title: str):
         ax.set_xscale("log")
         _span_decades(ax)
         ax.set_yscale("log")
-        ax.axhspan(1.0, 10.0, color="0.9", zorder=0)
-        ax.text(0.99, 1.15, "band: failed, or error >= 1 (x)", transform=ax.get_yaxis_transform(), ha="right",
-                va="bottom", fontsize=7, color="0.35")
+        _band(ax, band)
         ax.set_xlabel(label)
         ax.grid(True, which="major", alpha=0.4)
     axes[0].set_ylabel("Error: max |x - x_ref| / peak |x_ref|")
-    axes[0].set_ylim(top=10.0)
+    axes[0].set_ylim(top=10 * band)
     handles, labels = axes[0].get_legend_handles_labels()
     axes[1].legend(handles, labels, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, frameon=False)
     ref = f"reference: {comparison.reference_method}"
@@ -85,21 +102,31 @@ def work_precision_figure(comparison, title: str):
 
 def energy_precision_figure(comparison, title: str):
     """Each run's energy balance residual against its wall time, and against its true error: the check a run
-    can make on itself, beside what only a reference can tell."""
+    can make on itself, beside what only a reference can tell. Failed runs are crosses in a band, as on the
+    work-precision chart."""
     runs = [r for r in comparison.runs if r.success and math.isfinite(r.energy_residual)]
     methods, styles, fig, axes = _two_panels(comparison.runs)
+    worst = max((r.energy_residual for r in runs), default=1.0)
+    band = 10 ** math.ceil(math.log10(max(worst, 1.0) * 1.5))
     for ax, (cost, label) in zip(axes, (("wall_time_s", "Wall time [s] (median of repeats)"),
                                         ("error", "Error: max |x - x_ref| / peak |x_ref|"))):
-        for m in methods:
+        for i, m in enumerate(methods):
             mine = [r for r in runs if r.method == m and getattr(r, cost) > 0]
-            fixed = bool(mine) and not mine[0].adaptive
+            fixed = not next(r for r in comparison.runs if r.method == m).adaptive
             ax.plot([getattr(r, cost) for r in mine], [max(r.energy_residual, 1e-17) for r in mine],
                     ls="--" if fixed else "-", lw=1.2, ms=5, label=m + (" (fixed step)" if fixed else ""), **styles[m])
+            bad = [r for r in comparison.runs if r.method == m and _failed(r)
+                   and math.isfinite(getattr(r, cost)) and getattr(r, cost) > 0]
+            if bad:
+                ax.plot([getattr(r, cost) for r in bad], [_in_band(band, i, len(methods))] * len(bad), "x",
+                        color=styles[m]["color"], ms=8, mew=2)
         ax.set_xscale("log")
         ax.set_yscale("log")
         _span_decades(ax)
+        _band(ax, band)
         ax.set_xlabel(label)
         ax.grid(True, which="major", alpha=0.4)
+    axes[0].set_ylim(top=10 * band)
     low, high = axes[1].get_xlim()
     axes[1].plot([low, high], [low, high], color="0.5", lw=0.8, ls=":", label="residual = error")
     axes[1].set_xlim(low, high)
@@ -112,7 +139,7 @@ def energy_precision_figure(comparison, title: str):
     return fig
 
 
-GROWTH_FAILED = 3e9  # diverged runs (stopped past 1e8 times their scale) are crosses in a band up here
+GROWTH_BAND = 1e9  # diverged runs (stopped past 1e8 times their scale) are crosses in a band from here to 1e10
 
 
 def stability_figure(comparison, title: str, limits: dict[str, float]):
@@ -123,14 +150,16 @@ def stability_figure(comparison, title: str, limits: dict[str, float]):
     fig = _figure(figsize=(10, 6))
     ax = fig.subplots()
     fig.subplots_adjust(left=0.09, right=0.72, top=0.86, bottom=0.1)
-    for m in dict.fromkeys(r.method for r in runs):
+    fixed_methods = list(dict.fromkeys(r.method for r in runs))
+    for i, m in enumerate(fixed_methods):
         mine = sorted((r for r in runs if r.method == m), key=lambda r: r.h_omega)
         style = styles[m]
         ok = [r for r in mine if r.success]
         ax.plot([r.h_omega for r in ok], [r.growth for r in ok], "-", lw=1.2, ms=5, label=m, **style)
-        bad = [r for r in mine if not r.success and not r.message.startswith("skipped")]
+        bad = [r for r in mine if _failed(r)]
         if bad:
-            ax.plot([r.h_omega for r in bad], [GROWTH_FAILED] * len(bad), "x", color=style["color"], ms=9, mew=2)
+            ax.plot([r.h_omega for r in bad], [_in_band(GROWTH_BAND, i, len(fixed_methods))] * len(bad), "x",
+                    color=style["color"], ms=9, mew=2)
         limit = limits.get(m, math.inf)
         if 0 < limit < math.inf:
             ax.axvline(limit, color=style["color"], ls=":", lw=1.5)
@@ -144,11 +173,9 @@ def stability_figure(comparison, title: str, limits: dict[str, float]):
     grown = [r.growth for r in runs if r.success and r.growth > 0]
     ax.set_ylim(min(0.1, min(grown, default=0.1) / 2), 1e10)  # limits first: a scene at rest has no positive growth
     ax.set_yscale("log")
-    ax.axhspan(1e9, 1e10, color="0.9", zorder=0)
+    _band(ax, GROWTH_BAND)
     ax.axhline(1.0, color="k", lw=0.8, alpha=0.5)
     ax.set_ylim(top=1e13)  # room above the band for the limits' labels
-    ax.text(0.01, 1.1e9, "band: diverged or failed (x)", transform=ax.get_yaxis_transform(), ha="left",
-            va="bottom", fontsize=7, color="0.35")
     ax.set_xlabel(f"Step times highest natural frequency, h·ω_max [1]  (ω_max = {comparison.omega_max:.4g} rad/s)")
     ax.set_ylabel("Growth: peak |x| of the run / peak |x| of the reference [1]")
     ax.grid(True, which="major", alpha=0.4)
