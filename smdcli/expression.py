@@ -157,16 +157,18 @@ def program_size(node: ast.AST) -> tuple[int, int]:
     """(operations, depth) of the postfix program of a tree whose subtrees may be shared, counted without
     expanding it: a derivative's program can be far larger than its tree."""
     sizes: dict[int, tuple[int, int]] = {}
-    order, stack = [], [node]
-    while stack:  # post-order without recursion
-        n = stack.pop()
+    stack = [(node, False)]
+    while stack:  # post-order without recursion, each shared subtree sized once
+        n, expanded = stack.pop()
         if id(n) in sizes:
             continue
-        order.append(n)
-        stack.extend(_operands(n))
-    for n in reversed(order):
-        children = [sizes.get(id(c), (0, 0)) for c in _operands(n)]
-        sizes[id(n)] = (1 + sum(c[0] for c in children), 1 + max((c[1] for c in children), default=0))
+        children = _operands(n)
+        if not expanded:
+            stack.append((n, True))
+            stack.extend((c, False) for c in children if id(c) not in sizes)
+            continue
+        counted = [sizes[id(c)] for c in children]
+        sizes[id(n)] = (1 + sum(c[0] for c in counted), 1 + max((c[1] for c in counted), default=0))
     return sizes[id(node)]
 
 

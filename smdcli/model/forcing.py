@@ -130,8 +130,9 @@ class Harmonic(Signal):
         self.amplitude, self.omega, self.phase, self.cosine = amplitude, omega, phase, cosine
 
     def value(self, t):
-        arg = self.omega * np.asarray(t, dtype=float) + self.phase
-        return self.amplitude * (np.cos(arg) if self.cosine else np.sin(arg))
+        with np.errstate(over="ignore", invalid="ignore"):  # a phase past 1e308 is NaN, which the caller refuses
+            arg = self.omega * np.asarray(t, dtype=float) + self.phase
+            return self.amplitude * (np.cos(arg) if self.cosine else np.sin(arg))
 
     def exo(self):
         w = self.omega

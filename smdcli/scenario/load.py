@@ -46,6 +46,11 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
     if not text.strip():
         raise ScenarioError(file, None, "is empty; a scenario needs at least [time] and one [[mass]] or [system]")
     text = text.removeprefix("\ufeff")  # a byte-order mark, as Windows editors save UTF-8
+    # A scene too large for memory is refused before the TOML parser reads it (tomllib takes 2 s on 60,000 masses):
+    # its [[mass]] headers counted in the text (a header in a multi-line string would count too; none is that long).
+    headers = len(re.findall(r"^[ \t]*\[\[[ \t]*mass[ \t]*\]\]", text, flags=re.M))
+    if headers > 1000:
+        _check_size(file, headers, matrix_form=False)
     try:
         doc = tomllib.loads(text)
     except RecursionError:
