@@ -1,18 +1,17 @@
-"""What a user sees: progress bars under a real pseudo-terminal, strict JSON from every --json, and every `smd`
-command the README shows, run as written."""
+"""What a user sees: progress bars under a real pseudo-terminal and strict JSON from every --json (the commands
+the README and docs/ show are run by test_docs.py)."""
 
 import json
 import os
 import re
 import select
-import shlex
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 import pytest
-from conftest import ROOT, SCENARIOS
+from conftest import SCENARIOS
 
 SMD = [sys.executable, "-m", "smdcli"]
 
@@ -130,40 +129,3 @@ def test_every_json_output_is_strict_json_and_lists_every_file(cli, tmp_path):
     assert missing.exit_code == 2 and strict(missing.stdout)["status"] == "unusable"
 
 
-def readme_commands() -> list[str]:
-    """Every `smd ...` command the README shows, inline or in a code block, that is runnable as written
-    (synopses with placeholders such as SCENARIO or [--option] are forms, not commands)."""
-    text = (ROOT / "README.md").read_text()
-    found = re.findall(r"`(smd [^`]+)`", text)
-    found += [m.strip() for m in re.findall(r"^(?: {4}|\$ )\$? ?(smd .+)$", text, flags=re.M)]
-    found += [m for m in re.findall(r"&& (smd .+)$", text, flags=re.M)]
-    commands = []
-    for command in found:
-        command = command.strip()
-        placeholder = any(re.fullmatch(r"[A-Z]+(\.[a-z0-9]+)?", word) for word in shlex.split(command))
-        names_a_file = any(re.search(r"\.(toml|h5)$", word) for word in shlex.split(command))
-        if placeholder or not names_a_file or re.search(r"\[|\.\.\.|<", command):
-            continue
-        if command not in commands:
-            commands.append(command)
-    return commands
-
-
-def test_the_readme_shows_runnable_commands():
-    commands = readme_commands()
-    assert len(commands) >= 10, commands
-    assert any(c.startswith("smd diff") for c in commands)
-
-
-def test_every_readme_command_runs(tmp_path):
-    """Each command in the README's order, in one folder that holds the repository's scenarios and tests, as a
-    user at the repository root would: later commands read what earlier ones wrote."""
-    for name in ("scenarios", "tests", "benchmarks"):
-        (tmp_path / name).symlink_to(ROOT / name)
-    failures = []
-    for command in readme_commands():
-        result = subprocess.run([*SMD, *shlex.split(command)[1:]], cwd=tmp_path, capture_output=True, text=True,
-                                timeout=600)
-        if result.returncode != 0 or "Traceback" in result.stderr:
-            failures.append(f"{command}: exit {result.returncode}: {result.stderr[-500:]}")
-    assert not failures, "\n".join(failures)
