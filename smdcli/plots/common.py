@@ -19,6 +19,16 @@ def _figure(**kwargs):
     return fig
 
 
+def legend_beside(fig, ax, **kwargs):
+    """A legend to the right of the axes, the axes' right edge moved so that the legend ends inside the figure
+    however long its labels (a fixed margin cut long ones off, and left short ones a third of the width)."""
+    legend = ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), **kwargs)
+    width = legend.get_window_extent(fig.canvas.get_renderer()).width / fig.bbox.width
+    left = ax.get_position().x0
+    fig.subplots_adjust(right=min(0.97, (0.98 - width + 0.01 * left) / 1.01))
+    return legend
+
+
 MAX_DRAWN = 2000  # points per line: about two per pixel column of the axes
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from smdcli.plots.common import MAX_DRAWN, _figure, _wrap, envelope
+from smdcli.plots.common import MAX_DRAWN, _figure, _wrap, envelope, legend_beside
 from smdcli.plots.sweep import _STYLES
 from smdcli.result import Result
 
@@ -185,8 +185,8 @@ def _portrait_frame(fig, ax, title: str, xlabel: str, ylabel: str):
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.grid(True, alpha=0.4)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     ax.set_title(_wrap(title, 80), fontsize=10)
+    legend_beside(fig, ax, fontsize=8, frameon=False)
     return fig
 
 

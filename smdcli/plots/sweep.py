@@ -75,7 +75,7 @@ def _colorbar(fig, axes, cmap, family):
     values = family.values[:, 0] if family.values.shape[1] else np.arange(len(family))
     mappable = ScalarMappable(norm=Normalize(values.min(), values.max()), cmap=cmap)
     bar = fig.colorbar(mappable, ax=list(axes), fraction=0.04, pad=0.02)
-    bar.set_label(parameter_label(family.spec.parameters[0]) if family.spec.parameters else "member")
+    bar.set_label(parameter_label(family.spec.parameters[0], family.scenario) if family.spec.parameters else "member")
 
 
 def metric_figure(family, values: np.ndarray, metric: str, dofs, title: str):
@@ -83,17 +83,17 @@ def metric_figure(family, values: np.ndarray, metric: str, dofs, title: str):
     n = values.shape[1]
     params = family.spec.parameters
     if len(params) == 2:
-        fig = _figure(figsize=(5.2 * min(n, 3), 4.6 * math.ceil(n / 3)))
+        # constrained layout: the labels of the grid's axes and colour bars get the room they take
+        fig = _figure(figsize=(5.2 * min(n, 3), 4.6 * math.ceil(n / 3)), layout="constrained")
         axes = np.atleast_1d(fig.subplots(math.ceil(n / 3), min(n, 3), squeeze=False).ravel())
-        fig.subplots_adjust(left=0.1, right=0.95, top=0.8, bottom=0.12, wspace=0.35, hspace=0.35)
         a, b = family.spec.values
         for j in range(n):
             ax = axes[j]
             grid = values[:, j].reshape(len(a), len(b)).T
             mesh = ax.pcolormesh(a, b, grid, shading="nearest", cmap="viridis")
             fig.colorbar(mesh, ax=ax).set_label(METRIC_LABELS[metric])
-            ax.set_xlabel(parameter_label(params[0]))
-            ax.set_ylabel(parameter_label(params[1]))
+            ax.set_xlabel(parameter_label(params[0], family.scenario))
+            ax.set_ylabel(parameter_label(params[1], family.scenario))
             ax.set_title(str(dofs[j]), fontsize=9)
         for ax in axes[n:]:
             ax.set_visible(False)
@@ -113,7 +113,7 @@ def metric_figure(family, values: np.ndarray, metric: str, dofs, title: str):
         if (~np.isfinite(values)).any():  # its own legend entry: not a value, a verdict
             ax.plot([], [], "x", ms=8, mew=2, color="0.3",
                     label="not settled by the end of the run" if metric == "settling_time" else "no value")
-        ax.set_xlabel(parameter_label(params[0]) if params else "member")
+        ax.set_xlabel(parameter_label(params[0], family.scenario) if params else "member")
         ax.set_ylabel(METRIC_LABELS[metric])
         ax.grid(True, alpha=0.4)
         ax.legend(fontsize=8, loc="best")
