@@ -14,10 +14,11 @@ import typer
 
 from smdcli import __version__, interrupts
 from smdcli.cli_files import diff_files, export
-from smdcli.cli_support import _carried_out, _fail, _interrupted, _message, _print_json, _report
+from smdcli.cli_support import _carried_out, _fail, _interrupted, _message, _print_json, _report, plain_help
 from smdcli.progress import wanted as progress_wanted
 from smdcli.text import plural
 
+plain_help()
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Simulate spring-mass-damper systems from TOML scenarios: exact where linear, measured where not.")
 
@@ -51,7 +52,7 @@ def simulate(
     junit: Optional[Path] = typer.Option(None, "--junit", help="Write the scenarios' \\[\\[expect]] checks as a JUnit "
                                          "XML report, a test case per check."),
 ):
-    """Solve each scenario; write OUT/<stem>.h5 and OUT/<stem>_response.png, _phase.png."""
+    """Solve each scenario; write OUT/<stem>.h5 and OUT/<stem>_response.png, _phase.png, _energy.png."""
     from smdcli.commands.simulate import Options, failed_summary, format_summary
     from smdcli.commands.simulate import simulate as run_one
     from smdcli.commands.simulate import summary
@@ -70,9 +71,10 @@ def simulate(
     options = Options(method=method, rtol=rtol, atol=atol, plots=not no_plots, save_partial=save_partial)
     worst = 0
     summaries, suites = [], []
-    with bar("simulating", len(scenarios), len(scenarios) > 1 and progress_wanted(quiet, as_json)) as advance:
+    with bar("simulating", len(scenarios), len(scenarios) > 1 and progress_wanted(quiet, as_json),
+             transient=True) as advance:
         for index, path in enumerate(scenarios):
-            advance(0, str(path))
+            advance(0, Path(path).name)  # the file's name: a whole path collapses the bar at 80 columns
             try:
                 run = run_one(path, out, options)
             except (SmdError, OSError) as exc:
@@ -92,7 +94,7 @@ def simulate(
             worst = max(worst, data["exit_code"])
             suites.append((str(path), run.result.stats.wall_time_s, run.checks, None))
             if not quiet and not as_json:
-                typer.echo(format_summary(data))
+                advance.above(format_summary(data))
             advance(1)
     if junit is not None:
         from smdcli.commands.expect import write_junit
@@ -128,7 +130,7 @@ def compare_solvers(
     tolerances: Optional[str] = typer.Option(None, "--tolerances",
                                              help="Comma list of rtol or rtol/atol; default 1e-3..1e-10, atol = rtol/1000."),
     steps: Optional[str] = typer.Option(None, "--steps", help="Comma list of fixed steps in s; default h*omega_max 3..0.02."),
-    repeats: int = typer.Option(3, "--repeats", help="Timings per run; the median is kept (runs over 2 s: once)."),
+    repeats: int = typer.Option(3, "--repeats", help="Timings per run; the median is kept (runs over 0.2 s: once)."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
     no_breakpoints: bool = typer.Option(False, "--no-breakpoints",
                                         help="Do not restart adaptive methods at force discontinuities (for study)."),

@@ -83,3 +83,35 @@ def _carried_out(work, about: dict, as_json: bool, quiet: bool, summarize, descr
     return run
 
 
+
+
+# --help in plain words: typer 0.29 shows each option's Python type (`--json <bool>`, `<list[Path]>`) and a
+# required argument as `{scenario}`; smd shows what to type instead: nothing after a flag, NUMBER, TEXT, PATH.
+_WORDS = {"float": "NUMBER", "int": "INTEGER", "str": "TEXT", "path": "PATH", "Path": "PATH", "file": "PATH",
+          "directory": "PATH"}
+
+
+def _plain_type(self, ctx) -> str | None:
+    """The value an option or argument takes, in --help: a word, `...` where it repeats; nothing for a flag."""
+    if getattr(self, "is_flag", False) or getattr(self, "count", False):
+        return None
+    if self.metavar is not None:
+        return self.metavar
+    shown = typer.core._TyperParameter.display_type(self, ctx).strip("<>")
+    repeated = shown.startswith("list[")
+    shown = shown.removeprefix("list[").removesuffix("]")
+    word = "|".join(_WORDS.get(part, part) for part in shown.split("|"))
+    return word + ("..." if repeated or self.nargs != 1 else "")
+
+
+def _usage_name(self) -> str:
+    """An argument in the usage line: SCENARIO, SCENARIO... (optional ones in brackets)."""
+    name = self.display_name_raw.upper() + ("..." if self.nargs != 1 else "")
+    return name if self.required else f"[{name}]"
+
+
+def plain_help() -> None:
+    """Make every command's --help show values in plain words (see _WORDS)."""
+    typer.core.TyperOption.display_type_rich = _plain_type
+    typer.core.TyperArgument.display_type_rich = _plain_type
+    typer.core.TyperArgument._usage_display_name = _usage_name

@@ -20,14 +20,22 @@ def silent(count: int = 1, note: str | None = None) -> None:
     """An advance that draws nothing (piped output, --quiet, --json, library use)."""
 
 
+def _print(text: str) -> None:
+    print(text, flush=True)
+
+
+silent.above = _print  # type: ignore[attr-defined]  # where no bar is drawn, text is just printed
+
 def wanted(quiet: bool = False, as_json: bool = False) -> bool:
     """Whether a bar should be drawn: stderr is a terminal and the user asked for text."""
     return not (quiet or as_json) and sys.stderr.isatty()
 
 
 @contextmanager
-def bar(label: str, total: int, enabled: bool = True) -> Iterator[Advance]:
-    """A bar of `total` steps labelled `label`; yields advance(count=1, note=None), where `note` names the work now running."""
+def bar(label: str, total: int, enabled: bool = True, transient: bool = False) -> Iterator[Advance]:
+    """A bar of `total` steps labelled `label`; yields advance(count=1, note=None), where `note` names the work now
+    running. A transient bar is erased when done, and its advance.above(text) prints text on stdout above it: the bar
+    is erased first and drawn again below (a bar glued to the text it shares a terminal with reads as garbage)."""
     if not enabled:
         yield silent
         return
@@ -40,7 +48,7 @@ def bar(label: str, total: int, enabled: bool = True) -> Iterator[Advance]:
     console = Console(file=sys.stderr)
     columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                TextColumn("eta"), TimeRemainingColumn(), TextColumn("{task.fields[note]}", style="dim"))
-    progress = Progress(*columns, console=console, transient=False, refresh_per_second=8)
+    progress = Progress(*columns, console=console, transient=transient, refresh_per_second=8)
     with deferred():  # its refresh thread starts and stops under locks that an interrupt must not cut
         progress.start()
     try:
@@ -50,6 +58,15 @@ def bar(label: str, total: int, enabled: bool = True) -> Iterator[Advance]:
             fields = {} if note is None else {"note": note}
             progress.update(task, advance=count, **fields)
 
+        def above(text: str) -> None:
+            if not transient:
+                raise ValueError("above() needs a transient bar: a stopped one stays on screen")
+            with deferred():
+                progress.stop()  # transient: the bar's line is cleared
+                _print(text)
+                progress.start()
+
+        advance.above = above  # type: ignore[attr-defined]
         yield advance
     finally:
         with deferred(raise_after=False):

@@ -129,3 +129,19 @@ def test_every_json_output_is_strict_json_and_lists_every_file(cli, tmp_path):
     assert missing.exit_code == 2 and strict(missing.stdout)["status"] == "unusable"
 
 
+
+
+def test_a_batch_prints_each_summary_on_clean_lines_with_the_bar_below(tmp_path):
+    """Several files at a terminal: the bar is erased before each summary and drawn again under it, labelled with
+    the file's name (not its whole path), and gone when the batch is done."""
+    (tmp_path / "scenarios").symlink_to(SCENARIOS)
+    code, screen = run_in_pty(["simulate", "scenarios/one_dof_underdamped.toml", "scenarios/one_dof_harmonic.toml",
+                               "--no-plots"], tmp_path)
+    assert code == 0, screen[-2000:]
+    lines = plain(screen).splitlines()
+    for stem in ("one_dof_underdamped", "one_dof_harmonic"):
+        first = [line for line in lines if f"{stem}.toml:" in line]
+        assert first and first[0].lstrip().startswith(f"scenarios/{stem}.toml:"), first  # nothing glued before it
+    notes = [line for line in lines if "simulating" in line]
+    assert notes and not any("scenarios/" in line for line in notes), notes  # the name, not the path
+    assert "\x1b[2K" in screen  # the bar's line erased (Rich clears it before each summary and at the end)

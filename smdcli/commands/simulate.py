@@ -258,7 +258,7 @@ def format_info(d: dict) -> str:
 
     dofs = d["dofs"] if len(d["dofs"]) <= SHOWN else d["dofs"][:SHOWN // 2] + ["..."] + d["dofs"][-2:]
     lines = [f"{d['scenario']}: {d['title']}" if d["title"] else d["scenario"],
-             f"  DOFs     {', '.join(dofs)} ({len(d['dofs'])} DOFs, {d['form']} form, "
+             f"  DOFs     {', '.join(dofs)} ({len(d['dofs'])} DOF{'s' if len(d['dofs']) != 1 else ''}, {d['form']} form, "
              f"{'linear' if d['linear'] else 'nonlinear: ' + ', '.join(d['nonlinear_elements'])})",
              f"  time     {d['time']['start']:g} .. {d['time']['end']:g} s, {d['time']['points']} points"]
     ground = d.get("ground_motion")
@@ -277,7 +277,8 @@ def format_info(d: dict) -> str:
                 lines.append(f"    ... {len(d['modes']) - 2 * (SHOWN // 2)} more modes (--json lists them all)")
             continue
         lines.append(f"    {i:<5}  {mode['natural_frequency_rad_s']:14.6g} {mode['natural_frequency_hz']:10.4g}"
-                     f"   {mode['damping_ratio']:<10.5g}  {mode['regime']}")
+                     f"   {'-' if mode['regime'] == 'rigid-body' else format(mode['damping_ratio'], '<10.5g'):<10}"
+                     f"  {mode['regime']}")
     lines.append(f"  stiffness ratio {d['stiffness_ratio']:.4g} ({'stiff' if d['stiff'] else 'not stiff'}"
                  f"{' in its linear part' if not d['linear'] else ''})")
     if "linearized_at_start" in d:

@@ -44,12 +44,12 @@ def _write_family(f, family):
         grid.attrs["order"] = "C: the last parameter varies fastest along member"
     for i, name in enumerate(spec.parameters):
         ds = params.create_dataset(name, data=family.values[:, i])
-        ds.attrs["units"] = parameter_units(name)
+        ds.attrs["units"] = parameter_units(name, family.scenario)
         ds.dims[0].attach_scale(member)
         stated(ds, INPUT_ACCURACY * len(family))
         # The grid's own axis: member reshapes to grid_shape, and these are its coordinates.
         axis = grid.create_dataset(name, data=np.asarray(spec.values[i], dtype=float))
-        axis.attrs["units"] = parameter_units(name)
+        axis.attrs["units"] = parameter_units(name, family.scenario)
         axis.attrs["axis"] = i
         axis.make_scale(name)
         stated(axis, INPUT_ACCURACY * len(family))

@@ -28,6 +28,7 @@ from smdcli.model.mass import mass_solve
 from smdcli.model.nonsmooth import NonsmoothElement, initial_stiffness, nonsmooth_elements
 from smdcli.scenario import Scenario
 
+RIGID_BODY = 1e-6  # a natural frequency below this fraction of the largest is a rigid-body mode's zero
 # Relative width around zeta = 1 inside which a mode is called critically damped.
 CRITICAL_BAND = 1e-8
 # A linear model whose decaying eigenvalues spread wider than this is stiff.
@@ -51,8 +52,11 @@ class Modes:
     shapes: np.ndarray  # (n, n) undamped mass-normalized mode shapes, columns
 
 
-def regime(zeta: float) -> str:
-    """The damping regime's name for a damping ratio."""
+def regime(zeta: float, omega: float = 1.0) -> str:
+    """The damping regime's name for a damping ratio; a mode of zero natural frequency is a rigid-body one (it has
+    no restoring stiffness, and its damping ratio is not defined)."""
+    if omega == 0.0:
+        return "rigid-body"
     if zeta == 0.0:
         return "undamped"
     if abs(zeta - 1.0) <= CRITICAL_BAND:
@@ -239,7 +243,7 @@ class Model:
             wn = math.sqrt(k / m)
             zeta = c / (2 * math.sqrt(k * m)) if k > 0 else math.inf
             eig = np.roots([m, c, k]).astype(complex)
-            return Modes(eig, np.array([wn]), np.array([zeta]), (regime(zeta),), np.array([[1 / math.sqrt(m)]]))
+            return Modes(eig, np.array([wn]), np.array([zeta]), (regime(zeta, wn),), np.array([[1 / math.sqrt(m)]]))
         from scipy.linalg import eigh
 
         masses = np.diag(self.M)
@@ -275,7 +279,9 @@ class Model:
         size = np.abs(shapes)
         lead = np.argmax(size >= (1 - 1e-6) * size.max(axis=0), axis=0)
         shapes = shapes * np.where(shapes[lead, np.arange(n)] < 0, -1.0, 1.0)
-        return Modes(eig, wn, zeta, tuple(regime(z) for z in zeta), shapes)
+        # A rigid-body mode's frequency is a rounding of zero: sqrt(eps) of the largest, from its squared value
+        rigid = wn <= RIGID_BODY * wn.max()
+        return Modes(eig, wn, zeta, tuple(regime(z, 0.0 if r else w) for z, w, r in zip(zeta, wn, rigid)), shapes)
 
     @cached_property
     def proportional_damping(self) -> bool:

@@ -208,21 +208,27 @@ class Record:
         return float(self.time[1] - self.time[0])
 
     def drift_warning(self) -> str | None:
-        """A line when the velocity integrated from the record ends far from rest: a baseline left uncorrected."""
+        """A line when the velocity or displacement integrated from the record ends far from rest: a baseline left
+        uncorrected."""
         from scipy.integrate import cumulative_trapezoid
 
-        return velocity_drift(self.path, cumulative_trapezoid(self.acceleration, self.time, initial=0.0))
+        velocity = cumulative_trapezoid(self.acceleration, self.time, initial=0.0)
+        return velocity_drift(self.path, velocity, cumulative_trapezoid(velocity, self.time, initial=0.0))
 
 
-def velocity_drift(where: str, velocity: np.ndarray) -> str | None:
-    """A warning line where a velocity integrated from a record ends beyond DRIFT_BOUND of its peak: a baseline
-    left uncorrected; None otherwise."""
-    peak = float(np.abs(velocity).max(initial=0.0))
-    end = float(velocity[-1])
-    if peak > 0 and abs(end) > DRIFT_BOUND * peak:
-        return (f"warning: {where}: the velocity integrated from the record ends at {end:.4g} m/s, "
-                f"{abs(end) / peak:.0%} of its peak {peak:.4g} m/s (bound {DRIFT_BOUND:.0%}): "
-                "a baseline correction may be missing")
+def velocity_drift(where: str, velocity: np.ndarray, displacement: np.ndarray | None = None) -> str | None:
+    """A warning line where a velocity integrated from a record ends beyond DRIFT_BOUND of its peak, or the
+    displacement integrated again does (a velocity may end near zero while the displacement has drifted all the
+    way): a baseline left uncorrected; None otherwise."""
+    for name, values, units in (("velocity", velocity, "m/s"), ("displacement", displacement, "m")):
+        if values is None or not len(values):
+            continue
+        peak = float(np.abs(values).max(initial=0.0))
+        end = float(values[-1])
+        if peak > 0 and abs(end) > DRIFT_BOUND * peak:
+            return (f"warning: {where}: the {name} integrated from the record ends at {end:.4g} {units}, "
+                    f"{abs(end) / peak:.0%} of its peak {peak:.4g} {units} (bound {DRIFT_BOUND:.0%}): "
+                    "a baseline correction may be missing")
     return None
 
 

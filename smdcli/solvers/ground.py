@@ -102,9 +102,10 @@ def ground_history(model: Model, grid: np.ndarray, solve: Callable[..., Result])
 
 
 def drift_note(model: Model, history: GroundHistory) -> str | None:
-    """A warning where a record's integrated velocity ends far from rest (a baseline left uncorrected)."""
+    """A warning where a record's integrated velocity or displacement ends far from rest (a baseline left
+    uncorrected)."""
     from smdcli.scenario.records import velocity_drift
 
     if model.ground is None or not model.ground.record:
         return None
-    return velocity_drift("ground_motion", history.velocity)
+    return velocity_drift("ground_motion", history.velocity, history.displacement)

@@ -35,13 +35,19 @@ def _path_steps(path: str) -> list[str | int]:
         tokens = _STEP.findall(part)
         if not part or "".join(tokens) != part or isinstance(tokens[0], str) and tokens[0].startswith("["):
             raise UsageError(f"--param {path}: cannot read {part!r}; expected a path such as "
-                             "damper[0].c, mass.m1.m, force[1].omega, time.end or system.K[0][0]")
+                             "damper[0].c, mass.m1.m or mass[0].m, force[1].omega, time.end or system.K[0][0]")
         steps.extend(int(t[1:-1]) if t.startswith("[") else t for t in tokens)
     return steps
 
 
 def set_parameter(doc: dict, path: str, value: float) -> None:
     """Write one number into a decoded scenario document at a path like damper[0].c or mass.m1.m."""
+    named = re.fullmatch(r"mass\.(.+)\.(\w+)", path)
+    if named and not _STEP.fullmatch(named.group(1)):  # a name a path cannot hold: 'Floor 1', '2'
+        names = [t.get("name") for t in doc.get("mass", []) if isinstance(t, dict)]
+        index = f"[{names.index(named.group(1))}]" if named.group(1) in names else "[i]"
+        raise UsageError(f"--param {path}: the name {named.group(1)!r} cannot be written in a path; use the mass's "
+                         f"index: mass{index}.{named.group(2)}")
     steps = _path_steps(path)
     node: Any = doc
     walked = ""
@@ -146,7 +152,7 @@ class Family:
         if not self.spec.parameters:
             return [self.scenario.title or self.scenario.stem]
         names = [{"zeta": "ζ"}.get(p, p.replace(".omega", ".ω")) for p in self.spec.parameters]
-        units = [parameter_units(p) for p in self.spec.parameters]
+        units = [parameter_units(p, self.scenario) for p in self.spec.parameters]
         return [", ".join(f"{name} = {v:.4g}" + (f" {unit}" if unit not in ("", "1") else "")
                           for name, unit, v in zip(names, units, combo)) for combo in self.values]
 

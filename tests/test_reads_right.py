@@ -1,0 +1,102 @@
+"""Numbers and words that read right: units that follow an element's law, rigid-body modes named so, a record's
+drifted displacement warned of, names a path cannot hold answered with the path that works, --help in plain words."""
+
+from __future__ import annotations
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+from conftest import SCENARIOS, one_dof
+
+FREE_FREE = """
+[time]
+end = 1.0
+step = 0.01
+[[mass]]
+name = "a"
+m = 1.3
+v0 = 1.0
+[[mass]]
+name = "b"
+m = 1.7
+[[mass]]
+name = "c"
+m = 0.3
+[[spring]]
+connects = ["a", "b"]
+k = 4.1
+[[spring]]
+connects = ["c", "b"]
+k = 7.3
+[[damper]]
+connects = ["c", "b"]
+c = 0.3
+"""
+
+
+def test_a_quadratic_dampers_coefficient_is_in_its_own_units(tmp_path, cli):
+    scene = tmp_path / "quadratic.toml"
+    scene.write_text(one_dof(c=0.5, law="quadratic", end=1.0, step=0.1))
+    assert cli("sweep", scene, "--param", "damper[0].c", "--values", "0.5,1", "-o", tmp_path, "--no-plots",
+               "--quiet").exit_code == 0
+    with h5py.File(tmp_path / "quadratic_sweep.h5") as f:
+        assert f["parameters/damper[0].c"].attrs["units"] == "N s^2/m^2"  # force c |v| v: N over (m/s)^2
+        assert f["grid/damper[0].c"].attrs["units"] == "N s^2/m^2"
+    linear = tmp_path / "linear.toml"
+    linear.write_text(one_dof(c=0.5, end=1.0, step=0.1))
+    assert cli("sweep", linear, "--param", "damper[0].c", "--values", "0.5,1", "-o", tmp_path, "--no-plots",
+               "--quiet").exit_code == 0
+    with h5py.File(tmp_path / "linear_sweep.h5") as f:
+        assert f["parameters/damper[0].c"].attrs["units"] == "N s/m"
+
+
+def test_a_free_free_chain_has_a_rigid_body_mode_named_so(tmp_path, cli):
+    scene = tmp_path / "free.toml"
+    scene.write_text(FREE_FREE)
+    data = json.loads(cli("info", scene, "--json").stdout)
+    regimes = [m["regime"] for m in data["modes"]]
+    assert regimes[0] == "rigid-body" and "rigid-body" not in regimes[1:]
+    # the two elastic modes: |lambda| of the state matrix's complex pairs (wn = sqrt(l1 l2))
+    M, C, K = np.diag([1.3, 1.7, 0.3]), np.array(data["C"]), np.array(data["K"])
+    A = np.block([[np.zeros((3, 3)), np.eye(3)], [-np.linalg.solve(M, K), -np.linalg.solve(M, C)]])
+    eig = np.linalg.eigvals(A)
+    w = np.sort(np.abs(eig[eig.imag > 1e-9]))
+    np.testing.assert_allclose([m["natural_frequency_rad_s"] for m in data["modes"][1:]], w, rtol=1e-10)
+    text = cli("info", scene).stdout
+    assert "rigid-body" in text and "inf" not in text and "overdamped" not in text
+
+
+def test_a_record_whose_displacement_drifts_is_warned_of_though_its_velocity_ends_near_rest():
+    from smdcli.scenario.records import velocity_drift
+
+    t = np.linspace(0.0, 10.0, 1001)
+    velocity = np.sin(np.pi * t / 10.0) * 0.2  # ends at rest
+    displacement = np.concatenate([[0.0], np.cumsum((velocity[1:] + velocity[:-1]) / 2 * np.diff(t))])
+    assert abs(velocity[-1]) < 1e-12
+    warning = velocity_drift("record.csv", velocity, displacement)
+    assert warning is not None and "displacement" in warning and f"{displacement[-1]:.4g} m" in warning
+    assert velocity_drift("record.csv", velocity) is None  # the velocity alone says nothing
+    wave = 0.2 * np.sin(2 * np.pi * t)  # a zero-mean motion: neither drifts
+    assert velocity_drift("record.csv", wave, 0.2 / (2 * np.pi) * (1 - np.cos(2 * np.pi * t))) is None
+
+
+@pytest.mark.parametrize("name", ["Floor 1", "2"])
+def test_a_mass_name_a_path_cannot_hold_is_answered_with_its_index(tmp_path, cli, name):
+    scene = tmp_path / "named.toml"
+    scene.write_text(one_dof(c=0.5, end=1.0, step=0.1).replace('name = "m"', f'name = "{name}"').replace(
+        '"ground", "m"]', f'"ground", "{name}"]'))
+    result = cli("sweep", scene, "--param", f"mass.{name}.m", "--values", "1,2", "-o", tmp_path / "out")
+    assert result.exit_code == 2
+    assert "mass[0].m" in result.stderr, result.stderr
+    assert cli("sweep", scene, "--param", "mass[0].m", "--values", "1,2", "-o", tmp_path / "out", "--no-plots",
+               "--quiet").exit_code == 0
+
+
+@pytest.mark.parametrize("command", ["simulate", "compare-solvers", "sweep", "spectrum", "phase", "info", "diff",
+                                     "export", "draw", "animate"])
+def test_help_shows_values_in_plain_words(cli, command):
+    text = cli(command, "--help").stdout
+    assert "<bool>" not in text and "<str>" not in text and "list[" not in text and "{" not in text, text
+    assert "Usage: smd " + command in " ".join(text.split())
