@@ -278,6 +278,16 @@ def draw(
 
 
 @app.command()
+def schema():
+    """Print a JSON Schema of the scenario format, for an editor's TOML extension (completion and checking)."""
+    import json
+
+    from smdcli.scenario.schema import scenario_schema
+
+    typer.echo(json.dumps(scenario_schema(), indent=2))
+
+
+@app.command()
 def animate(
     scenario: Path = typer.Argument(..., help="Scenario TOML file."),
     fps: int = typer.Option(20, "--fps", help="Frames per second of the GIF."),

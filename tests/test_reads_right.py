@@ -100,3 +100,23 @@ def test_help_shows_values_in_plain_words(cli, command):
     text = cli(command, "--help").stdout
     assert "<bool>" not in text and "<str>" not in text and "list[" not in text and "{" not in text, text
     assert "Usage: smd " + command in " ".join(text.split())
+
+
+def test_a_fixed_step_run_states_its_step_not_a_tolerance_it_never_used(tmp_path, cli):
+    fixed = cli("simulate", SCENARIOS / "two_dof_forced.toml", "--method", "rk4", "-o", tmp_path, "--no-plots").stdout
+    assert "dt = 0.005 s, fixed" in fixed and "rtol=" not in fixed
+    adaptive = cli("simulate", SCENARIOS / "two_dof_forced.toml", "--method", "ode45", "-o", tmp_path,
+                   "--no-plots").stdout
+    assert "rtol=1e-06 atol=1e-09" in adaptive and "dt = " not in adaptive
+
+
+def test_a_schematic_gives_units_and_says_what_it_cannot_draw():
+    from smdcli import scenario
+    from smdcli.plots.schematic import layout, schematic_figure
+
+    car = scenario.load(SCENARIOS / "quarter_car_bump.toml")
+    assert {e.label.split(" = ")[1].split(" ", 1)[1] for e in layout(car).elements} == {"N/m", "N s/m"}
+    texts = [t.get_text() for t in schematic_figure(car).texts]
+    assert any("the wall moves: [ground_motion] displacement" in t for t in texts), texts
+    quadratic = scenario.load(SCENARIOS / "one_dof_nonlinear_stiff.toml")
+    assert any("N s²/m²" in e.label for e in layout(quadratic).elements)

@@ -87,7 +87,8 @@ def test_schematic_elements_from_element_and_matrix_forms():
     assert springs == [("0", "1"), ("1", "2"), ("2", "right"), ("left", "0")]
     labels = {(str(e.a), str(e.b)): e.label for e in matrix.elements if e.kind == "spring"}
     # The book's K of three_MASS.m: k1 = 25, k2 = 5, k3 = k4 = 30, so m3 to the wall is k3 + k4 - k3 = 30 + 30.
-    assert labels[("left", "0")] == "k = 25" and labels[("0", "1")] == "k = 5" and labels[("1", "2")] == "k = 30"
+    assert labels[("left", "0")] == "k = 25 N/m" and labels[("0", "1")] == "k = 5 N/m"
+    assert labels[("1", "2")] == "k = 30 N/m"
     nonlinear = layout(scenario.load(SCENARIOS / "duffing_frequency_response.toml"))
     assert [e.nonlinear for e in nonlinear.elements] == [True, False]
 

@@ -116,7 +116,7 @@ def summary(run: Run) -> dict:
         "method": s.method,
         "requested_method": s.requested_method,
         "reason": s.reason,
-        "rtol": s.rtol, "atol": s.atol,
+        "rtol": s.rtol, "atol": s.atol, "dt": s.dt,
         "steps_accepted": s.steps_accepted, "steps_rejected": s.steps_rejected,
         "nfev": s.nfev, "njev": s.njev, "nlu": s.nlu,
         "wall_time_s": s.wall_time_s,
@@ -151,7 +151,9 @@ def format_summary(data: dict) -> str:
     """Terminal text for a run summary."""
     lines = [f"{data['scenario']}: {data['title']}" if data["title"] else data["scenario"],
              f"  method   {data['method']} ({data['reason']})"]
-    if data["rtol"] is not None:
+    if data.get("dt") is not None and data["dt"] == data["dt"]:  # a fixed step: no tolerance was used
+        lines.append(f"  step     dt = {data['dt']:g} s, fixed (rtol and atol do not apply)")
+    elif data["rtol"] is not None:
         lines.append(f"  tolerance rtol={data['rtol']:g} atol={data['atol']:g}")
     rejected = "not reported" if data["steps_rejected"] < 0 else data["steps_rejected"]
     lines.append(f"  cost     {data['steps_accepted']} steps ({rejected} rejected), {data['nfev']} f evals, "

@@ -87,24 +87,28 @@ def response_figure(result: Result, title: str):
             _draw(ax, result.time, getattr(ground, ground.given), "k", "ground")
             ax.set_ylabel(label)
             ax.grid(True, alpha=0.4)
-            shaded[name] = False
+            shaded[name] = None
             continue
         data = result.absolute(name[len("absolute_"):]) if name.startswith("absolute_") else getattr(result, name)
-        shaded[name] = False
+        shaded[name] = None
         for j, dof in enumerate(result.dofs):
             if name == "force" and not np.any(data[:, j] != 0):
                 continue
             style = FORCE_STYLES[len(ax.get_lines()) % len(FORCE_STYLES)] if name == "force" else "-"
-            shaded[name] |= _draw(ax, result.time, data[:, j], f"C{j}", f"F on {dof}" if name == "force" else dof,
-                                  style)
+            if _draw(ax, result.time, data[:, j], f"C{j}", f"F on {dof}" if name == "force" else dof, style):
+                shaded[name] = shaded[name] or f"C{j}"  # the first shaded series' colour, for the legend's swatch
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.4)
         if window is not None and name.endswith("acceleration"):
             _zoom_inset(ax, result, data, window)
     if forced:
         _legend(axes[0], shaded["force"])
-    _legend(axes[1 if forced or ground is not None else 0],
-            any(shaded[name] for name, _ in rows if name not in ("force", "ground")))  # the DOFs' once
+    _legend(axes[1 if forced or ground is not None else 0],  # the DOFs' legend once, with the first shading's colour
+            next((shaded[name] for name, _ in rows if name not in ("force", "ground") and shaded[name]), None))
+    if not (np.any(result.displacement) or np.any(result.velocity) or np.any(result.force)) and ground is None:
+        axes[0].text(0.5, 0.5, "at rest for the whole run: zero initial conditions and no force\n(a [sweep] table's "
+                     "initial conditions run with smd sweep)", transform=axes[0].transAxes, ha="center",
+                     va="center", fontsize=9, bbox={"facecolor": "white", "edgecolor": "0.6"})
     axes[-1].set_xlabel("Time t [s]")
     axes[0].set_xlim(result.time[0], result.time[-1])
     fig.suptitle(title, fontsize=11)
@@ -123,13 +127,13 @@ def _draw(ax, t: np.ndarray, y: np.ndarray, color, label: str, style: str = "-")
     return True
 
 
-def _legend(ax, banded: bool) -> None:
-    """The axes' legend, with what the shading means where a series was shaded."""
+def _legend(ax, banded: str | None) -> None:
+    """The axes' legend, with what the shading means where a series was shaded (`banded`: its colour)."""
     handles, labels = ax.get_legend_handles_labels()
     if banded:
         from matplotlib.patches import Patch
 
-        handles.append(Patch(color="0.6", alpha=0.35, lw=0))
+        handles.append(Patch(color=banded, alpha=0.22, lw=0))  # as _draw shades
         labels.append("shaded: range of an oscillation too fast to draw (line: its running mean)")
     ax.legend(handles, labels, loc="upper right", fontsize=8, framealpha=0.85)
 
@@ -144,7 +148,7 @@ def _zoom_inset(ax, result: Result, data: np.ndarray, window: tuple[float, float
 
     inset.set_xlim(*window)
     inset.tick_params(labelsize=7)
-    inset.xaxis.set_major_locator(MaxNLocator(3))
+    inset.xaxis.set_major_locator(MaxNLocator(3, prune="upper"))  # a label at the right edge ran past it
     inset.ticklabel_format(axis="x", useOffset=False)
     inset.yaxis.set_major_locator(MaxNLocator(3))
     inset.text(0.02, 0.96, f"zoom on the last {window[1] - window[0]:.3g} s, every sample", transform=inset.transAxes,

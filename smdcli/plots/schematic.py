@@ -8,6 +8,7 @@ Plot functions return a Figure; only save_figure touches disk. Must not import: 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -17,6 +18,7 @@ from smdcli.scenario import GROUND, Scenario
 SPACING = 1.0  # between mass centres at rest
 BLOCK = 0.34  # block width and height
 WALL_GAP = 0.9  # wall to the nearest mass centre
+UNITS = {"k": "N/m", "c": "N s/m"}
 @dataclass(frozen=True)
 class Element:
     """A spring or damper between two nodes (a DOF index or "left"/"right" wall), labelled."""
@@ -60,9 +62,12 @@ def layout(sc: Scenario) -> Layout:
             else:
                 a, b = sorted(ends)
             symbol = "k" if e.kind == "spring" else "c"
-            label = f"{symbol}{e.index + 1} = {e.coef:g}"
+            units = "N/m" if e.kind == "spring" else "N s²/m²" if e.law == "quadratic" else "N s/m"
+            label = f"{symbol}{e.index + 1} = {e.coef:g} {units}"
             if e.law == "cubic":
-                label += f", k3 = {e.k3:g} (cubic)"
+                label += f", k3 = {e.k3:g} N/m³"
+            elif e.law not in ("linear", "quadratic"):
+                label += f" ({e.law.replace('_', '-')})"
             elif e.law == "quadratic":
                 label += " (quadratic)"
             elements.append(Element(e.kind, a, b, label, e.law != "linear"))
@@ -73,12 +78,12 @@ def layout(sc: Scenario) -> Layout:
             for i in range(n):
                 for j in range(i + 1, n):
                     if matrix[i, j] != 0:
-                        elements.append(Element(kind, i, j, f"{symbol} = {-matrix[i, j]:g}"))
+                        elements.append(Element(kind, i, j, f"{symbol} = {-matrix[i, j]:g} {UNITS[symbol]}"))
                 to_ground = matrix[i].sum()
                 if abs(to_ground) > 1e-12 * max(np.abs(matrix).max(), 1.0):
                     wall = _wall(i, n)
                     a, b = (wall, i) if wall == "left" else (i, wall)
-                    elements.append(Element(kind, a, b, f"{symbol} = {to_ground:g}"))
+                    elements.append(Element(kind, a, b, f"{symbol} = {to_ground:g} {UNITS[symbol]}"))
     forces = tuple((index[f.on], _force_label(f)) for f in sc.forces)
     walls = {e.a for e in elements} | {e.b for e in elements}
     return Layout(names, masses, tuple(elements), forces, "left" in walls, "right" in walls)
@@ -191,4 +196,17 @@ def schematic_figure(sc: Scenario):
     legend = "red: nonlinear element" if any(e.nonlinear for e in plan.elements) else ""
     form = "element form" if sc.system is None else "matrix form (elements read back from K and C)"
     fig.suptitle(_wrap(f"{sc.title or sc.stem}\n{form}" + (f"; {legend}" if legend else ""), 70), fontsize=9)
+    notes = []
+    if sc.ground_motion is not None:  # the wall is the support that moves
+        g = sc.ground_motion
+        notes.append(f"the wall moves: [ground_motion] {g.quantity} ({g.shape.type}"
+                     + (f", {Path(g.shape.file).name}" if g.shape.file else "") + ")")
+    if sc.damping is not None:
+        d = sc.damping
+        notes.append("plus [damping]: " + (f"modal ratios {', '.join(f'{z:g}' for z in d.modal)}" if d.modal else
+                                           f"Rayleigh C = {d.alpha:g} M + {d.beta:g} K"))
+    if sc.frictions or sc.stops:
+        notes.append(f"not drawn: {len(sc.frictions)} friction contact(s), {len(sc.stops)} stop(s)")
+    if notes:
+        fig.text(0.5, 0.03, "\n".join(notes), ha="center", va="bottom", fontsize=8, color="0.25")
     return fig

@@ -46,12 +46,20 @@ def spectrum_figure(spectrum, record, title: str):
         (x0, y0), (x1, y1) = ax.transData.transform([(t_low, v_low), (t_low * 10, v_low * 10.0**slope)])
         return math.degrees(math.atan2(y1 - y0, x1 - x0))
 
+    placed = []  # the guide labels' boxes so far
+
     def label(text: str, exit_t: float, entry_t: float, v_at, slope: int) -> None:
         """Inside the frame where the line leaves it through the bottom (Sd) or top (Sa), else where it enters."""
         t = exit_t / 1.4 if exit_t < t_high else entry_t * 1.4
         if t_low < t < t_high:
-            ax.text(t, v_at(t), text, fontsize=7, color="0.35", rotation=angle(slope), rotation_mode="anchor",
-                    ha="center", va="bottom", clip_on=True)
+            shown = ax.text(t, v_at(t), text, fontsize=7, color="0.35", rotation=angle(slope), rotation_mode="anchor",
+                            ha="center", va="bottom", clip_on=True)
+            box = shown.get_window_extent(fig.canvas.get_renderer())
+            inside = ax.get_window_extent().padded(-2)
+            if not (inside.contains(*box.p0) and inside.contains(*box.p1)) or any(box.overlaps(b) for b in placed):
+                shown.remove()  # a label the frame would cut, or on another label, is none: the line speaks for itself
+            else:
+                placed.append(box)
 
     for sd in sd_values:
         ax.plot(span, 2 * math.pi * sd / span, color="0.6", lw=0.6, ls="--", zorder=1)
