@@ -43,8 +43,11 @@ def _in_band(low: float, index: int, count: int) -> float:
     return low * 10 ** ((index + 1) / (count + 1))
 
 
-def _band(ax, low: float) -> None:
-    """The grey failure band from low to 10 low, and its legend entry (no text in the plot: crosses go anywhere)."""
+def _band(ax, low: float, runs) -> None:
+    """The grey failure band from low to 10 low, and its legend entry (no text in the plot: crosses go anywhere);
+    nothing where no run failed."""
+    if not any(_failed(r) for r in runs):
+        return
     ax.axhspan(low, 10 * low, color="0.9", zorder=0)
     ax.plot([], [], "x", color="0.3", ms=8, mew=2, label="failed run (grey band);\nthe reason in the table")
 
@@ -84,11 +87,12 @@ def work_precision_figure(comparison, title: str):
         ax.set_xscale("log")
         _span_decades(ax)
         ax.set_yscale("log")
-        _band(ax, band)
+        _band(ax, band, runs)
         ax.set_xlabel(label)
         ax.grid(True, which="major", alpha=0.4)
     axes[0].set_ylabel("Error: max |x - x_ref| / peak |x_ref|")
-    axes[0].set_ylim(top=10 * band)
+    if any(_failed(r) for r in runs):
+        axes[0].set_ylim(top=10 * band)
     handles, labels = axes[0].get_legend_handles_labels()
     axes[1].legend(handles, labels, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, frameon=False)
     ref = f"reference: {comparison.reference_method}"
@@ -123,10 +127,11 @@ def energy_precision_figure(comparison, title: str):
         ax.set_xscale("log")
         ax.set_yscale("log")
         _span_decades(ax)
-        _band(ax, band)
+        _band(ax, band, comparison.runs)
         ax.set_xlabel(label)
         ax.grid(True, which="major", alpha=0.4)
-    axes[0].set_ylim(top=10 * band)
+    if any(_failed(r) for r in comparison.runs):
+        axes[0].set_ylim(top=10 * band)
     low, high = axes[1].get_xlim()
     axes[1].plot([low, high], [low, high], color="0.5", lw=0.8, ls=":", label="residual = error")
     axes[1].set_xlim(low, high)
@@ -173,7 +178,7 @@ def stability_figure(comparison, title: str, limits: dict[str, float]):
     grown = [r.growth for r in runs if r.success and r.growth > 0]
     ax.set_ylim(min(0.1, min(grown, default=0.1) / 2), 1e10)  # limits first: a scene at rest has no positive growth
     ax.set_yscale("log")
-    _band(ax, GROWTH_BAND)
+    _band(ax, GROWTH_BAND, runs)
     ax.axhline(1.0, color="k", lw=0.8, alpha=0.5)
     ax.set_ylim(top=1e13)  # room above the band for the limits' labels
     ax.set_xlabel(f"Step times highest natural frequency, h·ω_max [1]  (ω_max = {comparison.omega_max:.4g} rad/s)")

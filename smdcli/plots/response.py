@@ -185,7 +185,10 @@ def portrait_figure(curves, title: str, poincare=None):
 
 def _portrait_frame(fig, ax, title: str, xlabel: str, ylabel: str):
     """A portrait's legend (with the start marker's entry) beside it, its axis labels, grid and title."""
+    from matplotlib.ticker import MaxNLocator
+
     ax.plot([], [], "o", color="k", mfc="white", label="start")
+    ax.xaxis.set_major_locator(MaxNLocator(nbins=6))  # labels like -0.075 ran into each other at the default
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.grid(True, alpha=0.4)
@@ -207,9 +210,6 @@ def hysteresis_figure(loops, title: str):
         _direction_arrows(ax, d, force, color)
     ax.axhline(0.0, color="k", lw=0.5)
     ax.axvline(0.0, color="k", lw=0.5)
-    from matplotlib.ticker import MaxNLocator
-
-    ax.xaxis.set_major_locator(MaxNLocator(nbins=6))
     return _portrait_frame(fig, ax, title, "Deformation d = x_b - x_a [m]", "Spring force (tension) [N]")
 
 
