@@ -320,6 +320,11 @@ def _usage_line(exc) -> str:
     """click's usage error as one line: the command, what is wrong, where to read more."""
     context = getattr(exc, "ctx", None)
     command = context.command_path if context is not None else "smd"
+    if getattr(exc, "possibilities", None):  # click compares with the dashes: --bogus came out "like" --out
+        import difflib
+
+        words = {option.lstrip("-"): option for option in exc.possibilities}
+        exc.possibilities = [words[w] for w in difflib.get_close_matches(exc.option_name.lstrip("-"), list(words))]
     return f"{exc.format_message()} (see '{command} --help')"
 
 

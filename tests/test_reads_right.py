@@ -120,3 +120,10 @@ def test_a_schematic_gives_units_and_says_what_it_cannot_draw():
     assert any("the wall moves: [ground_motion] displacement" in t for t in texts), texts
     quadratic = scenario.load(SCENARIOS / "one_dof_nonlinear_stiff.toml")
     assert any("N s²/m²" in e.label for e in layout(quadratic).elements)
+
+
+def test_a_mistyped_option_is_matched_by_its_name_not_its_dashes(cli):
+    bogus = cli("simulate", SCENARIOS / "one_dof_underdamped.toml", "--bogus")
+    assert bogus.exit_code == 2 and "No such option: --bogus" in bogus.stderr and "--out" not in bogus.stderr
+    typo = cli("simulate", SCENARIOS / "one_dof_underdamped.toml", "--metod", "x")
+    assert typo.exit_code == 2 and "Possible options: --method" in typo.stderr
