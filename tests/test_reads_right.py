@@ -127,3 +127,18 @@ def test_a_mistyped_option_is_matched_by_its_name_not_its_dashes(cli):
     assert bogus.exit_code == 2 and "No such option: --bogus" in bogus.stderr and "--out" not in bogus.stderr
     typo = cli("simulate", SCENARIOS / "one_dof_underdamped.toml", "--metod", "x")
     assert typo.exit_code == 2 and "Possible options: --method" in typo.stderr
+
+
+def test_an_animation_frame_moves_the_wall_with_the_ground():
+    from smdcli import scenario
+    from smdcli.plots.common import _figure
+    from smdcli.plots.schematic import WALL_GAP, SPACING, draw, layout
+
+    plan = layout(scenario.load(SCENARIOS / "quarter_car_bump.toml"))
+    walls = []
+    for ground in (0.0, 0.05):
+        ax = _figure().add_subplot()
+        draw(ax, plan, [0.0, 0.0], scale=2.0, labels=False, ground=ground)
+        thick = [line for line in ax.get_lines() if line.get_linewidth() == 2.5]  # the wall's post
+        walls.append(thick[0].get_xdata()[0])
+    assert walls[0] == pytest.approx(SPACING + WALL_GAP) and walls[1] - walls[0] == pytest.approx(2.0 * 0.05)

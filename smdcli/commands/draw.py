@@ -55,7 +55,11 @@ def animate(path: str | Path, out: str | Path, fps: int = 20, seconds: float | N
     out_dir = output_folder(out)
     result = solve_checked(dataclasses.replace(sc, time=grid), method)
     t, x = result.time[skip:], result.displacement[skip:]
-    peak = np.abs(x).max()
+    # Under support motion the masses are drawn where they are (absolute) and the walls move with the ground.
+    ground = np.zeros(len(t)) if result.ground is None else result.ground.displacement[skip:]
+    if result.ground is not None:
+        x = result.absolute("displacement")[skip:]
+    peak = max(np.abs(x).max(), np.abs(ground).max())
     if scale is None:
         scale = 0.3 * SPACING / peak if peak > 0 else 1.0
     plan = layout(sc)
@@ -68,7 +72,7 @@ def animate(path: str | Path, out: str | Path, fps: int = 20, seconds: float | N
     with bar("drawing frames", len(t), progress) as advance:
         for k in range(len(t)):
             ax.clear()
-            draw(ax, plan, x[k], scale, labels=False)
+            draw(ax, plan, x[k], scale, labels=False, ground=ground[k])
             fig.texts.clear()
             fig.text(0.02, 0.93, f"t = {t[k]:7.2f} s", fontsize=9, family="monospace")
             fig.text(0.98, 0.93, f"displacements x {scale:.3g}", fontsize=8, ha="right", color="0.35")

@@ -98,11 +98,11 @@ def _force_label(f) -> str:
     return f"F: {f.type.replace('_', ' ')} {amplitude}".strip()
 
 
-def _node_x(node: int | str, positions: np.ndarray) -> float:
+def _node_x(node: int | str, positions: np.ndarray, wall_shift: float = 0.0) -> float:
     if node == "left":
-        return -WALL_GAP
+        return -WALL_GAP + wall_shift
     if node == "right":
-        return (len(positions) - 1) * SPACING + WALL_GAP
+        return (len(positions) - 1) * SPACING + WALL_GAP + wall_shift
     return positions[node]
 
 
@@ -130,8 +130,10 @@ def _dashpot(ax, x0: float, x1: float, y: float, color) -> None:
     ax.plot([piston, x1], [y, y], color=color, lw=1.4)
 
 
-def draw(ax, plan: Layout, displacement: np.ndarray | None = None, scale: float = 1.0, labels: bool = True) -> None:
-    """Draw the system on an axes, masses moved by scale * displacement."""
+def draw(ax, plan: Layout, displacement: np.ndarray | None = None, scale: float = 1.0, labels: bool = True,
+         ground: float = 0.0) -> None:
+    """Draw the system on an axes, masses moved by scale * displacement (absolute) and the walls by scale * ground
+    (a support that moves)."""
     from matplotlib.patches import Rectangle
 
     n = len(plan.names)
@@ -142,7 +144,8 @@ def draw(ax, plan: Layout, displacement: np.ndarray | None = None, scale: float 
     ax.set_ylim(-0.75, 0.75)
     ax.set_aspect("equal")
     ax.axis("off")
-    for wall, x in (("left", -WALL_GAP), ("right", (n - 1) * SPACING + WALL_GAP)):
+    shift = scale * ground
+    for wall, x in (("left", -WALL_GAP + shift), ("right", (n - 1) * SPACING + WALL_GAP + shift)):
         if getattr(plan, f"{wall}_wall"):
             ax.plot([x, x], [-0.42, 0.42], color="k", lw=2.5)
             sign = -1 if wall == "left" else 1
@@ -157,8 +160,8 @@ def draw(ax, plan: Layout, displacement: np.ndarray | None = None, scale: float 
         lane = lanes.get(key, 0)
         lanes[key] = lane + 1
         skips = isinstance(e.a, int) and isinstance(e.b, int) and abs(e.b - e.a) > 1
-        x0 = _node_x(e.a, positions) + (half if isinstance(e.a, int) else 0.0)
-        x1 = _node_x(e.b, positions) - (half if isinstance(e.b, int) else 0.0)
+        x0 = _node_x(e.a, positions, shift) + (half if isinstance(e.a, int) else 0.0)
+        x1 = _node_x(e.b, positions, shift) - (half if isinstance(e.b, int) else 0.0)
         color = "tab:red" if e.nonlinear else "k"
         y = 0.3 + 0.1 * lane if skips else offsets[lane % len(offsets)]
         if skips:  # over the masses in between: rise from the blocks' tops
