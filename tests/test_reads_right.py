@@ -142,3 +142,25 @@ def test_an_animation_frame_moves_the_wall_with_the_ground():
         thick = [line for line in ax.get_lines() if line.get_linewidth() == 2.5]  # the wall's post
         walls.append(thick[0].get_xdata()[0])
     assert walls[0] == pytest.approx(SPACING + WALL_GAP) and walls[1] - walls[0] == pytest.approx(2.0 * 0.05)
+
+
+def test_a_two_parameter_overlay_tells_both_parameters_apart(tmp_path, cli, monkeypatch):
+    """Many members under a colour map: colour is the first parameter, line style the second (two values)."""
+    from matplotlib.figure import Figure
+
+    seen = []
+    original = Figure.savefig
+
+    def keep(fig, *args, **kwargs):
+        seen.append(fig)
+        return original(fig, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", keep)
+    assert cli("sweep", SCENARIOS / "one_dof_underdamped.toml", "--param", "damper[0].c", "--values",
+               "linspace(0.5, 4, 8)", "--param", "spring[0].k", "--values", "10,40", "-o", tmp_path,
+               "--quiet").exit_code == 0
+    overlay = next(f for f in seen if f.axes[0].get_legend() is not None)
+    legend = overlay.axes[0].get_legend()
+    assert [t.get_text() for t in legend.get_texts()] == ["spring[0].k = 10 N/m", "spring[0].k = 40 N/m"]
+    styles = {line.get_linestyle() for line in overlay.axes[0].get_lines() if len(line.get_xdata())}
+    assert styles == {"-", "-."}

@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from smdcli.plots.common import _figure, _wrap, envelope
-from smdcli.sweep.spec import parameter_label
+from smdcli.sweep.spec import parameter_label, parameter_units
 
 # ------------------------------------------------------------------ sweeps
 
@@ -47,11 +47,16 @@ def overlay_figure(family, traces: dict, dofs, quantity: str, title: str, how: s
     fig.subplots_adjust(left=0.9 / width, right=1 - legend / width, top=1 - 0.75 / height, bottom=0.55 / height,
                         hspace=0.12)
     drawn = sorted(traces)
+    # Two parameters under a colour map: colour is the first; the second, where it takes few values, the line style
+    second = family.values[:, 1] if cmap is not None and family.values.shape[1] == 2 else None
+    levels = sorted(set(second.tolist())) if second is not None else []
+    styled = 0 < len(levels) <= len(_STYLES)
     for j, ax in enumerate(axes):
         for s in drawn:
             t, data, success = traces[s]
             ok = np.isfinite(t)
-            style = _STYLES[s % len(_STYLES)] if cmap is None else "-"
+            style = _STYLES[s % len(_STYLES)] if cmap is None else \
+                _STYLES[levels.index(second[s])] if styled else "-"
             ax.plot(*envelope(t[ok], data[ok, j]), style, lw=1.4 if cmap is None else 0.8, color=colors[s],
                     label=family.labels[s])
             if not success:
@@ -63,6 +68,17 @@ def overlay_figure(family, traces: dict, dofs, quantity: str, title: str, how: s
         axes[0].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     else:
         _colorbar(fig, axes, cmap, family)
+        if styled:
+            from matplotlib.lines import Line2D
+
+            name = family.spec.parameters[1]
+            keys = [Line2D([], [], ls=style, color="0.3", lw=1.0) for style in _STYLES[:len(levels)]]
+            units = parameter_units(name, family.scenario)
+            axes[0].legend(keys, [f"{name} = {level:g} {units}".strip() for level in levels], loc="upper right",
+                           fontsize=7, framealpha=0.85, title="line style", title_fontsize=7)
+        elif second is not None:
+            how += f"; colour: {family.spec.parameters[0]} ({family.spec.parameters[1]}, {len(levels)} values, " \
+                   "is not told apart: see the heat map)"
     shown = f" ({len(drawn)} of them drawn, evenly spaced)" if len(drawn) < S else ""
     fig.suptitle(_wrap(f"{title}\n{S} runs{shown}: {how}", 100), fontsize=10)
     return fig
