@@ -29,6 +29,17 @@ def _band(t: np.ndarray, y: np.ndarray, max_points: int = MAX_DRAWN):
     return t[edges[:-1]], low, high, mean[centres]
 
 
+DENSE_TURNS = 200  # an orbit turning more often than this is drawn thin and see-through
+
+
+def _visible_turns(x: np.ndarray) -> int:
+    """How often a curve turns back by more than 2 % of its range: the turns that draw ink (a ripple does not)."""
+    dx = np.diff(x)
+    turning = np.flatnonzero(np.sign(dx[1:]) * np.sign(dx[:-1]) < 0) + 1
+    swings = np.abs(np.diff(x[turning]))
+    return int(np.count_nonzero(swings > 0.02 * (x.max() - x.min()))) if len(x) else 0
+
+
 def _turns(y: np.ndarray) -> int:
     """How often a series changes direction (twice a period for an oscillation); the most over its columns."""
     dy = np.diff(y, axis=0)
@@ -171,9 +182,11 @@ def portrait_figure(curves, title: str, poincare=None):
     fig.subplots_adjust(left=0.13, right=0.72, top=0.88, bottom=0.1)
     for i, (label, x, v) in enumerate(curves):
         color = f"C{i % 10}"
-        faint = poincare is not None
-        ax.plot(x, v, _STYLES[i % len(_STYLES)] if len(curves) <= 4 else "-", lw=0.6 if faint else 1.3, color=color,
-                alpha=0.35 if faint else 1.0, label=_wrap(label, 26))
+        # Behind Poincare points, or an orbit of hundreds of turns (a fast forced mass): thin and see-through, so
+        # that its shape shows instead of a solid blob.
+        faint = poincare is not None or max(_visible_turns(np.asarray(x)), _visible_turns(np.asarray(v))) > DENSE_TURNS
+        ax.plot(x, v, _STYLES[i % len(_STYLES)] if len(curves) <= 4 and not faint else "-", lw=0.4 if faint else 1.3,
+                color=color, alpha=0.35 if faint else 1.0, label=_wrap(label, 26))
         ax.plot(x[0], v[0], "o", color=color, ms=7, mfc="white", mew=1.5)
         _direction_arrows(ax, x, v, color)
     if poincare is not None:
