@@ -151,6 +151,8 @@ def _legend(ax, banded: str | None) -> None:
 
 def _zoom_inset(ax, result: Result, data: np.ndarray, window: tuple[float, float]) -> None:
     """The last few periods of the fastest oscillation, drawn in full, in an inset of `ax`."""
+    low, high = ax.get_ylim()  # the data moved into the lower 54 %: the inset above them hides none
+    ax.set_ylim(low, low + (high - low) / 0.54)
     inset = ax.inset_axes((0.56, 0.56, 0.42, 0.4))
     keep = (result.time >= window[0]) & (result.time <= window[1])
     for j, dof in enumerate(result.dofs):
