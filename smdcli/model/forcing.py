@@ -191,7 +191,8 @@ class FourierSquare(Signal):
     def __init__(self, amplitude: float, omega: float, terms: int, t0: float):
         self.omega, self.t0, self.phase = omega, t0, 0.0
         n = np.arange(1, terms + 1)
-        coef = 2 * amplitude / (n * math.pi) * (1 - np.cos(n * math.pi))
+        with np.errstate(over="ignore", invalid="ignore"):  # an amplitude near 1e308: NaN, which the caller refuses
+            coef = 2 * amplitude / (n * math.pi) * (1 - np.cos(n * math.pi))
         keep = np.abs(coef) > 1e-14 * abs(amplitude)  # even harmonics vanish
         self.harmonics = n[keep].astype(float)
         self.coefs = coef[keep]
@@ -209,9 +210,10 @@ class FourierSquare(Signal):
         flat = t.ravel()
         out = np.empty(flat.shape)
         block = max(1, 2**21 // max(len(self.harmonics), 1))  # times x harmonics held at once: 16 MB at most
-        for lo in range(0, len(flat), block):
-            arg = np.multiply.outer(flat[lo:lo + block] - self.t0, self.harmonics * self.omega) + self.phase
-            out[lo:lo + block] = np.sin(arg) @ self.coefs
+        with np.errstate(over="ignore", invalid="ignore"):  # non-finite values are refused by the caller, silently
+            for lo in range(0, len(flat), block):
+                arg = np.multiply.outer(flat[lo:lo + block] - self.t0, self.harmonics * self.omega) + self.phase
+                out[lo:lo + block] = np.sin(arg) @ self.coefs
         return out.reshape(t.shape)
 
     def exo(self):
