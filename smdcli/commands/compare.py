@@ -298,7 +298,7 @@ def write_hdf5(path: Path, c: Comparison) -> None:
     import h5py
 
     from smdcli.io.atomic import atomic_path
-    from smdcli.io.hdf5 import with_scales, axis, write_header
+    from smdcli.io.hdf5 import axis, with_scales, write_header
 
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
         write_header(f, c.scenario, "compare")
@@ -308,8 +308,7 @@ def write_hdf5(path: Path, c: Comparison) -> None:
         f.attrs["breakpoints"] = c.breakpoints
         runs = f.create_group("runs")
         n = len(c.runs)
-        index = runs.create_dataset("run", data=np.arange(n))
-        index.make_scale("run")
+        index = axis(runs, "run", np.arange(n))
         string = h5py.string_dtype("utf-8")
         for name in ("method", "message"):
             runs.create_dataset(name, data=np.array([getattr(r, name) for r in c.runs], dtype=object), dtype=string)

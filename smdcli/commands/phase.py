@@ -203,7 +203,7 @@ def _write(path: Path, sc: Scenario, run: PhaseRun) -> None:
     import h5py
 
     from smdcli.io.atomic import atomic_path
-    from smdcli.io.hdf5 import with_scales, axis, write_header
+    from smdcli.io.hdf5 import axis, with_scales, write_header
 
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
         write_header(f, sc, "phase")

@@ -118,8 +118,7 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
         time.attrs["units"] = "s"
         time.make_scale("time")
         stated(time, TIME_ACCURACY)
-        dof = _strings(f, "dof", result.dofs)
-        dof.make_scale("dof")
+        dof = axis(f, "dof", result.dofs)
         accuracy = {"displacement": result.stats.stated_accuracy, "velocity": result.stats.stated_accuracy,
                     "acceleration": float(acceleration_accuracy(
                         model.M, model.C, model.K, result.stats.stated_accuracy, result.displacement,
@@ -173,8 +172,7 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
         modes.attrs["damping_ratios"] = m.damping_ratios
         modes.attrs["regimes"] = np.array(m.regimes, dtype=object).astype(str).tolist()
         modes.attrs["stiffness_ratio"] = model.stiffness_ratio
-        mode = modes.create_dataset("mode", data=np.arange(1, model.n + 1))
-        mode.make_scale("mode")
+        mode = axis(modes, "mode", np.arange(1, model.n + 1))
         for name, data, units in (("natural_frequencies_rad_s", m.natural_frequencies, "rad/s"),
                                   ("damping_ratios", m.damping_ratios, "1")):
             ds = with_scales(modes.create_dataset(name, data=data), mode)
@@ -255,8 +253,7 @@ def _write_events(f, history) -> None:
     """/events: time (s), element and kind of every event, on an `event` axis."""
     group = f.create_group("events")
     group.attrs["kinds"] = "yield, unload, stick, slip, contact, impact, separation, rest"
-    event = group.create_dataset("event", data=np.arange(len(history.events)))
-    event.make_scale("event")
+    event = axis(group, "event", np.arange(len(history.events)))
     times = with_scales(group.create_dataset("time", data=np.array([t for t, _, _ in history.events], dtype=float)),
                          event)
     times.attrs["units"] = "s"

@@ -34,8 +34,7 @@ def _write_family(f, family):
     f.attrs["parameters"] = list(spec.parameters)
     f.attrs["grid_shape"] = list(family.shape)
     S = len(family)
-    member = f.create_dataset("member", data=np.arange(S))
-    member.make_scale("member")
+    member = axis(f, "member", np.arange(S))
     _strings(f, "label", family.labels).dims[0].attach_scale(member)
     params = f.create_group("parameters")
     grid = f.create_group("grid") if spec.parameters else None
@@ -48,13 +47,11 @@ def _write_family(f, family):
         ds.dims[0].attach_scale(member)
         stated(ds, INPUT_ACCURACY * len(family))
         # The grid's own axis: member reshapes to grid_shape, and these are its coordinates.
-        axis = grid.create_dataset(name, data=np.asarray(spec.values[i], dtype=float))
-        axis.attrs["units"] = parameter_units(name, family.scenario)
-        axis.attrs["axis"] = i
-        axis.make_scale(name)
-        stated(axis, INPUT_ACCURACY * len(family))
-    dof = _strings(f, "dof", family.base.dofs)
-    dof.make_scale("dof")
+        coordinates = axis(grid, name, np.asarray(spec.values[i], dtype=float))
+        coordinates.attrs["units"] = parameter_units(name, family.scenario)
+        coordinates.attrs["axis"] = i
+        stated(coordinates, INPUT_ACCURACY * len(family))
+    dof = axis(f, "dof", family.base.dofs)
     initial = f.create_group("initial_conditions")
     for name in ("x0", "v0"):
         ds = initial.create_dataset(name, data=getattr(family, name))
