@@ -30,7 +30,8 @@ def shown_commands(path) -> list[str]:
         words = shlex.split(command)
         placeholder = any(re.fullmatch(r"[A-Z_]+(\.[a-z0-9]+)?", word) for word in words)
         names_a_file = any(re.search(r"\.(toml|h5|csv|txt)$", word) for word in words)
-        if placeholder or not names_a_file or re.search(r"\[|\.\.\.|<", command):
+        measured = "{out}" in command  # a measured block's command, which benchmarks/docs_figures.py runs
+        if placeholder or measured or not names_a_file or re.search(r"\[|\.\.\.|<", command):
             continue
         if command not in commands:
             commands.append(command)
@@ -121,3 +122,32 @@ def test_every_toml_block_shown_is_read_by_smd(page, tmp_path):
         code = smd(["simulate", str(path), "-o", str(tmp_path / "out"), "--no-plots", "--quiet"])
         allowed = (0, 1) if "expect" in document else (0,)  # 1: an [[expect]] shown of another scene fails
         assert code in allowed, f"{page.name} block {i}: exit {code}\n{block}"
+
+
+MEASURED = re.compile(r"<!-- measured: (?P<command>.+?) -->\n(?P<body>.*?)<!-- /measured -->", re.S)
+# A timing quoted in prose: a figure that belongs in a measured block.
+TIMING = re.compile(r"\b\d[\d,.]*\s?(?:ms|us)\b|\d\s?x (?:faster|slower)|\d times (?:faster|slower)|\bs wall\b"
+                    r"|\b(?:about|takes?|took|in) \d[\d,.]* (?:s|seconds|minutes)\b")
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: p.name)
+def test_timings_are_quoted_from_the_script_that_measures_them(page):
+    """Every time the docs quote is printed by the command of a measured block (benchmarks/docs_figures.py reruns
+    them and names the machine), never typed by hand."""
+    text = page.read_text()
+    by_hand = [line for line in MEASURED.sub("", text).splitlines() if TIMING.search(line)]
+    assert not by_hand, by_hand
+    for found in MEASURED.finditer(text):
+        words = shlex.split(found["command"])
+        assert words[0] in ("python", "smd"), found["command"]
+        if words[0] == "python":
+            assert (ROOT / words[1]).is_file(), found["command"]
+        assert found["body"].startswith("Measured ") and f"$ {found['command']}\n" in found["body"], \
+            f"{page.name}: `{found['command']}` has not been measured (python benchmarks/docs_figures.py)"
+
+
+def test_the_performance_page_is_measured():
+    text = (ROOT / "docs" / "performance.md").read_text()
+    commands = [m["command"] for m in MEASURED.finditer(text)]
+    assert any("exact_vs_rk45" in c for c in commands) and any("compiled_vs_solve_ivp" in c for c in commands)
+    assert any("sweep_vs_rk45" in c for c in commands)

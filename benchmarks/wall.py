@@ -1,0 +1,77 @@
+"""Time a whole smd command as a user runs it: median, fastest and slowest wall time of a few runs, and the peak
+memory of the slowest-memory run, after one untimed run (unless --repeats 1). `{out}` in the command is a fresh temporary folder for each run; `{chain}` a
+scenario of an n-mass chain written for the run (`--chain n`, see chain()).
+
+    python benchmarks/wall.py [--repeats 3] -- smd sweep scenarios/x.toml --no-plots -o {out}
+    python benchmarks/wall.py --chain 1000 --damper end -- smd simulate {chain} --no-plots -o {out}
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+
+def chain(n: int, cubic: bool, damper: str) -> str:
+    """An n-mass chain fixed at one end (1 kg, 100 N/m each), 10 s on 1,001 points, a harmonic force on the first
+    mass; the first spring cubic with `cubic`; a 0.5 N s/m damper on every spring (`every`, classical damping) or
+    at the free end only (`end`)."""
+    lines = ["[time]", "end = 10.0", "step = 0.01"]
+    for i in range(n):
+        lines += ["[[mass]]", f'name = "m{i}"', "m = 1.0"]
+    for i in range(n):
+        left = "ground" if i == 0 else f"m{i - 1}"
+        lines += ["[[spring]]", f'connects = ["{left}", "m{i}"]', "k = 100.0"]
+        if i == 0 and cubic:
+            lines += ['law = "cubic"', "k3 = 1000.0"]
+        if damper == "every" or (damper == "end" and i == n - 1):
+            lines += ["[[damper]]", f'connects = ["{left}", "m{i}"]', "c = 0.5"]
+    lines += ["[[force]]", 'on = "m0"', 'type = "sine"', "amplitude = 10.0", "omega = 5.0"]
+    return "\n".join(lines) + "\n"
+
+
+def run_once(words: list[str], scene: str | None) -> tuple[float, float]:
+    """(wall seconds, peak resident MB) of one run; exits with the command's code where it fails."""
+    with tempfile.TemporaryDirectory() as out:
+        command = [w.replace("{out}", out) for w in words]
+        if scene is not None:
+            path = os.path.join(out, "chain.toml")
+            with open(path, "w") as f:
+                f.write(scene)
+            command = [w.replace("{chain}", path) for w in command]
+        if command[0] == "smd":
+            command = [sys.executable, "-m", "smdcli", *command[1:]]
+        start = time.perf_counter()
+        child = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        _, status, usage = os.wait4(child.pid, 0)
+        seconds = time.perf_counter() - start
+        code = os.waitstatus_to_exitcode(status)
+        if code != 0:
+            sys.exit(f"{' '.join(command)} exited {code}: {child.stderr.read().decode()[-400:]}")
+        return seconds, usage.ru_maxrss / 1024
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--chain", type=int, default=0, help="write an n-mass chain for {chain}")
+    parser.add_argument("--cubic", action="store_true", help="the chain's first spring cubic")
+    parser.add_argument("--damper", choices=["every", "end"], default="every", help="the chain's dampers")
+    parser.add_argument("command", nargs="+")
+    args = parser.parse_args()
+    scene = chain(args.chain, args.cubic, args.damper) if args.chain else None
+    if args.repeats > 1:  # a first run untimed: kernels compiled into numba's cache, files in the page cache
+        run_once(args.command, scene)
+    runs = [run_once(args.command, scene) for _ in range(args.repeats)]
+    walls = [w for w, _ in runs]
+    print(f"wall {statistics.median(walls):.2f} s median of {args.repeats} (fastest {min(walls):.2f} s, slowest "
+          f"{max(walls):.2f} s), peak memory {max(m for _, m in runs):.0f} MB")
+
+
+if __name__ == "__main__":
+    main()
