@@ -18,6 +18,7 @@ LAYERS = [
     ("kernels", ["smdcli.kernels"]),
     ("solvers", ["smdcli.solvers"]),
     ("sweep", ["smdcli.sweep"]),
+    ("analysis", ["smdcli.analysis"]),
     ("writers", ["smdcli.io", "smdcli.plots"]),
     ("commands", ["smdcli.commands"]),
     ("cli", ["smdcli.cli", "smdcli.cli_support", "smdcli.cli_files", "smdcli.api", "smdcli.__main__"]),

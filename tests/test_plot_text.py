@@ -23,6 +23,7 @@ RUNS = {
     "sweep, frequency response": ["sweep", SCENARIOS / "frequency_response_zeta.toml"],
     "sweep, transmissibility": ["sweep", SCENARIOS / "transmissibility_1dof.toml"],
     "spectrum": ["spectrum", RECORD, "--damping", "0.02,0.05"],
+    "shock spectrum": ["spectrum", ROOT / "records" / "half_sine_11ms_50g.csv", "--kind", "srs", "--q", "10,50"],
     "compare-solvers": ["compare-solvers", SCENARIOS / "two_dof_forced.toml", "--methods", "ode45,euler,newmark",
                         "--repeats", "1"],
     "phase, several scenarios": ["phase", SCENARIOS / "one_dof_underdamped.toml", SCENARIOS / "one_dof_overdamped.toml",

@@ -5,6 +5,7 @@ Must not import: cli.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -14,11 +15,16 @@ from smdcli.errors import UsageError
 from smdcli.io.folders import output_folder
 from smdcli.scenario.records import Record, read_record
 from smdcli.scenario.spec import STANDARD_GRAVITY
+from smdcli.analysis.shock import ShockSpectrum
 from smdcli.solvers.spectrum import Spectrum, response_spectrum
 
 DEFAULT_PERIODS = "logspace(-2,1,200)"
 DEFAULT_DAMPING = "0.05"
+DEFAULT_Q = "10"
+KINDS = ("pseudo", "srs")
+MIN_DEFAULT_HZ, MAX_DEFAULT_HZ = 10.0, 10_000.0
 MAX_OSCILLATORS = 100_000  # periods x damping ratios in one run
+MAX_PIECES = 2e9  # pieces of closed-form response in a shock spectrum run (about 10 s on 2 cores)
 
 
 @dataclass
@@ -26,7 +32,7 @@ class SpectrumRun:
     """A record's spectra and the files written."""
 
     record: Record
-    spectrum: Spectrum
+    spectrum: Spectrum | ShockSpectrum
     wall_time_s: float
     warnings: list[str] = field(default_factory=list)
     outputs: list[Path] = field(default_factory=list)
@@ -41,13 +47,26 @@ def _numbers(option: str, spec: str) -> np.ndarray:
         raise UsageError(f"{option}: {exc}") from None
 
 
-def spectrum(path: str | Path, out: str | Path, periods: str = DEFAULT_PERIODS, damping: str = DEFAULT_DAMPING,
+def spectrum(path: str | Path, out: str | Path, periods: str | None = None, damping: str | None = None,
              units: str = "g", scale: float = 1.0, shift: float = 0.0, plots: bool = True,
-             progress: bool = False) -> SpectrumRun:
-    """Read the record, compute Sd, Sv, Sa for every damping ratio and period, write OUT/<stem>_spectrum.*."""
+             progress: bool = False, kind: str = "pseudo", q: str | None = None,
+             frequencies: str | None = None) -> SpectrumRun:
+    """Read the record, compute Sd, Sv, Sa for every damping ratio and period, write OUT/<stem>_spectrum.*; or with
+    kind "srs" the shock response spectrum over natural frequency per Q, OUT/<stem>_srs.*."""
     import time
 
     path = Path(path)
+    if kind not in KINDS:
+        raise UsageError(f"--kind: expected one of {', '.join(KINDS)}, found {kind!r}")
+    if kind == "srs":
+        if periods is not None or damping is not None:
+            raise UsageError("--periods and --damping belong to --kind pseudo; a shock spectrum takes "
+                             "--frequencies (Hz) and --q")
+        return _shock(path, out, units, scale, shift, plots, q or DEFAULT_Q, frequencies)
+    if q is not None or frequencies is not None:
+        raise UsageError("--q and --frequencies belong to --kind srs; a pseudo spectrum takes --periods and --damping")
+    periods = periods or DEFAULT_PERIODS
+    damping = damping or DEFAULT_DAMPING
     T = _numbers("--periods", periods)
     zeta = _numbers("--damping", damping)
     if not (np.isfinite(T).all() and (T > 0).all()):
@@ -57,13 +76,7 @@ def spectrum(path: str | Path, out: str | Path, periods: str = DEFAULT_PERIODS, 
     if len(T) * len(zeta) > MAX_OSCILLATORS:
         raise UsageError(f"--periods x --damping: expected at most {MAX_OSCILLATORS} oscillators, found "
                          f"{len(T)} x {len(zeta)}")
-    if path.suffix.lower() == ".toml":
-        if (units, scale, shift) != ("g", 1.0, 0.0):
-            raise UsageError(f"{path}: --units, --scale and --shift apply to a record file; a scenario's record "
-                             "takes them from its [ground_motion] table")
-        record = scenario_record(path)
-    else:
-        record = read_record(path, units, scale, shift)
+    record = _record(path, units, scale, shift)
     _check_cost(record, T, len(zeta))
     out_dir = output_folder(out)
     from smdcli.progress import bar
@@ -92,6 +105,72 @@ def spectrum(path: str | Path, out: str | Path, periods: str = DEFAULT_PERIODS, 
 
             png = out_dir / f"{path.stem}_spectrum.png"
             save_figure(spectrum_figure(result, record, f"Response spectrum of {path.name}"), png)
+            run.outputs.append(png)
+    return run
+
+
+def _record(path: Path, units: str, scale: float, shift: float) -> Record:
+    """The record of a record file, or of a scenario's [ground_motion]."""
+    if path.suffix.lower() == ".toml":
+        if (units, scale, shift) != ("g", 1.0, 0.0):
+            raise UsageError(f"{path}: --units, --scale and --shift apply to a record file; a scenario's record "
+                             "takes them from its [ground_motion] table")
+        return scenario_record(path)
+    return read_record(path, units, scale, shift)
+
+
+def default_frequencies(step: float) -> np.ndarray:
+    """1/12-octave natural frequencies from 10 Hz to 10 kHz, the top kept below a quarter of the sampling rate
+    (the bottom then two decades below it)."""
+    top = min(MAX_DEFAULT_HZ, 0.25 / step)
+    bottom = min(MIN_DEFAULT_HZ, top / 100)
+    bands = int(math.floor(12 * math.log2(top / bottom) + 1e-9))
+    return bottom * 2.0 ** (np.arange(bands + 1) / 12)
+
+
+def _shock(path: Path, out, units: str, scale: float, shift: float, plots: bool, q: str,
+           frequencies: str | None) -> SpectrumRun:
+    """The shock response spectrum run: OUT/<stem>_srs.h5 and .png."""
+    import time
+
+    from smdcli.analysis.shock import shock_response_spectrum
+
+    Q = _numbers("--q", q)
+    if not (np.isfinite(Q).all() and (Q > 0).all()):
+        raise UsageError(f"--q: expected quality factors > 0 (Q = 1 / (2 zeta)), found {Q[~(np.isfinite(Q) & (Q > 0))][0]:g}")
+    F = _numbers("--frequencies", frequencies) if frequencies is not None else None
+    if F is not None and not (np.isfinite(F).all() and (F > 0).all()):
+        raise UsageError(f"--frequencies: expected natural frequencies in Hz > 0, found {F[~(np.isfinite(F) & (F > 0))][0]:g}")
+    if F is not None and len(F) * len(Q) > MAX_OSCILLATORS:
+        raise UsageError(f"--frequencies x --q: expected at most {MAX_OSCILLATORS} oscillators, found "
+                         f"{len(F)} x {len(Q)}")
+    record = _record(path, units, scale, shift)
+    F = default_frequencies(record.step) if F is None else F
+    pieces = np.maximum(1.0, np.ceil(8 * record.step * F)).sum() * len(Q) * len(record.time)
+    if pieces > MAX_PIECES:
+        raise UsageError(f"--frequencies x --q: {pieces:.3g} pieces of response to solve over {len(record.time)} "
+                         f"samples of {record.path} (limit {MAX_PIECES:.0e}); use fewer or lower frequencies, fewer "
+                         "quality factors, or a shorter record")
+    out_dir = output_folder(out)
+    start = time.perf_counter()
+    result = shock_response_spectrum(record.time, record.acceleration, F, Q)
+    if not np.isfinite(result.maximax).all():
+        raise UsageError(f"{record.path}: the shock spectrum overflows double precision; check the record's units "
+                         "and --scale")
+    run = SpectrumRun(record, result, time.perf_counter() - start)
+    from smdcli.io.atomic import together
+    from smdcli.io.hdf5 import write_shock_spectrum
+
+    with together():
+        h5 = out_dir / f"{path.stem}_srs.h5"
+        write_shock_spectrum(h5, record, result)
+        run.outputs.append(h5)
+        if plots:
+            from smdcli.plots.common import save_figure
+            from smdcli.plots.spectrum import shock_spectrum_figure
+
+            png = out_dir / f"{path.stem}_srs.png"
+            save_figure(shock_spectrum_figure(result, record, f"Shock response spectrum of {path.name}"), png)
             run.outputs.append(png)
     return run
 
@@ -131,12 +210,14 @@ def scenario_record(path: Path) -> Record:
 def spectrum_summary(run: SpectrumRun) -> dict:
     """The facts of a spectrum run as plain data: the record, each damping ratio's peak Sa and where."""
     r, s = run.record, run.spectrum
+    if isinstance(s, ShockSpectrum):
+        return _shock_summary(run)
     peaks = []
     for i, zeta in enumerate(s.damping):
         j = int(np.argmax(s.Sa[i]))
         peaks.append({"damping": float(zeta), "peak_Sa_m_s2": float(s.Sa[i, j]), "peak_Sa_g": float(s.Sa[i, j] / STANDARD_GRAVITY),
                       "at_period_s": float(s.period[j]), "peak_Sd_m": float(s.Sd[i].max())})
-    return {"record": r.path, "status": "ok", "exit_code": 0, "samples": len(r.time), "step_s": r.step,
+    return {"record": r.path, "status": "ok", "exit_code": 0, "kind": "pseudo", "samples": len(r.time), "step_s": r.step,
             "duration_s": float(r.time[-1] - r.time[0]), "units_in_file": r.units,
             "pga_m_s2": float(np.abs(r.acceleration).max()), "periods": len(s.period),
             "period_range_s": [float(s.period.min()), float(s.period.max())],
@@ -144,9 +225,39 @@ def spectrum_summary(run: SpectrumRun) -> dict:
             "warnings": run.warnings, "outputs": [str(p) for p in run.outputs]}
 
 
+def _shock_summary(run: SpectrumRun) -> dict:
+    """The facts of a shock spectrum run: the record, each Q's largest maximax and where."""
+    r, s, g = run.record, run.spectrum, STANDARD_GRAVITY
+    peaks = []
+    for i, q in enumerate(s.q):
+        j = int(np.argmax(s.maximax[i]))
+        peaks.append({"q": float(q), "damping": float(1 / (2 * q)), "peak_maximax_g": float(s.maximax[i, j] / g),
+                      "at_frequency_hz": float(s.frequency[j]), "peak_positive_g": float(s.positive[i].max() / g),
+                      "peak_negative_g": float(s.negative[i].min() / g)})
+    return {"record": r.path, "status": "ok", "exit_code": 0, "kind": "srs", "samples": len(r.time), "step_s": r.step,
+            "duration_s": float(r.time[-1] - r.time[0]), "units_in_file": r.units,
+            "pga_m_s2": float(np.abs(r.acceleration).max()), "frequencies": len(s.frequency),
+            "frequency_range_hz": [float(s.frequency.min()), float(s.frequency.max())], "q": [float(q) for q in s.q],
+            "peaks": peaks, "wall_time_s": run.wall_time_s, "warnings": run.warnings,
+            "outputs": [str(p) for p in run.outputs]}
+
+
 def format_spectrum(data: dict) -> str:
     """Terminal text for a spectrum run."""
     g = STANDARD_GRAVITY
+    if data.get("kind") == "srs":
+        lines = [f"{data['record']}: {data['samples']} samples every {data['step_s']:g} s ({data['duration_s']:g} s), "
+                 f"peak {data['pga_m_s2'] / g:.4g} g",
+                 f"  shock spectrum  {data['frequencies']} natural frequencies {data['frequency_range_hz'][0]:.4g}.."
+                 f"{data['frequency_range_hz'][1]:.4g} Hz x {len(data['q'])} Q, absolute acceleration, exact between "
+                 f"samples and over the residual; {data['wall_time_s'] * 1e3:.0f} ms"]
+        for p in data["peaks"]:
+            lines.append(f"  Q {p['q']:<6g} maximax {p['peak_maximax_g']:.4g} g at {p['at_frequency_hz']:.4g} Hz "
+                         f"(positive {p['peak_positive_g']:.4g} g, negative {p['peak_negative_g']:.4g} g)")
+        lines += [f"  {w}" for w in data["warnings"]]
+        if data["outputs"]:
+            lines.append(f"  wrote    {', '.join(data['outputs'])}")
+        return "\n".join(lines)
     lines = [f"{data['record']}: {data['samples']} samples every {data['step_s']:g} s ({data['duration_s']:g} s), "
              f"PGA {data['pga_m_s2'] / g:.4g} g",
              f"  spectra  {data['periods']} periods {data['period_range_s'][0]:g}..{data['period_range_s'][1]:g} s x "

@@ -83,3 +83,29 @@ def spectrum_figure(spectrum, record, title: str):
     rec.grid(True, alpha=0.35)
     fig.suptitle(title, fontsize=11)
     return fig
+
+
+def shock_spectrum_figure(srs, record, title: str):
+    """Maximax, positive and negative absolute acceleration in g against natural frequency (log-log) per Q, the
+    record beneath."""
+    fig = _figure(figsize=(8.0, 7.6))
+    ax, rec = fig.subplots(2, 1, height_ratios=[3.0, 1.0])
+    fig.subplots_adjust(left=0.11, right=0.97, top=0.92, bottom=0.08, hspace=0.32)
+    f = srs.frequency
+    for i, q in enumerate(srs.q):
+        color = f"C{i % 10}"
+        ax.plot(f, srs.maximax[i] / G, lw=1.8, color=color, label=f"Q = {q:g}: maximax")
+        ax.plot(f, srs.positive[i] / G, lw=0.9, ls="--", color=color, label="positive")
+        ax.plot(f, -srs.negative[i] / G, lw=0.9, ls=":", color=color, label="negative (magnitude)")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("Natural frequency [Hz]")
+    ax.set_ylabel("Peak absolute acceleration [g]")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8, loc="lower left", framealpha=0.9)
+    rec.plot(*envelope(record.time, record.acceleration / G), lw=0.8, color="0.2")
+    rec.set_xlabel("Time t [s]")
+    rec.set_ylabel("Base acc. [g]")
+    rec.grid(True, alpha=0.35)
+    fig.suptitle(title, fontsize=11)
+    return fig
