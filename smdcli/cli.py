@@ -210,9 +210,16 @@ def sweep(
 def spectrum(
     record: Path = typer.Argument(..., help="Ground acceleration record: two columns (time s, acceleration), "
                                   "CSV or whitespace, header optional."),
-    periods: str = typer.Option("logspace(-2,1,200)", "--periods", help="Periods in s: a, b, c | start:stop:step "
-                                "| linspace(a,b,n) | logspace(a,b,n)."),
-    damping: str = typer.Option("0.05", "--damping", help="Damping ratios: 0.02,0.05,0.1 or linspace(a,b,n)."),
+    kind: str = typer.Option("pseudo", "--kind", help="pseudo: Sd, Sv, Sa over period; srs: shock response "
+                             "spectrum, peak absolute acceleration over natural frequency."),
+    periods: Optional[str] = typer.Option(None, "--periods", help="pseudo: periods in s, a, b, c | start:stop:step "
+                                          "| linspace(a,b,n) | logspace(a,b,n) (default logspace(-2,1,200))."),
+    damping: Optional[str] = typer.Option(None, "--damping", help="pseudo: damping ratios, 0.02,0.05,0.1 or "
+                                          "linspace(a,b,n) (default 0.05)."),
+    q: Optional[str] = typer.Option(None, "--q", help="srs: quality factors Q = 1/(2 zeta), e.g. 10 or 10,25 "
+                                    "(default 10)."),
+    frequencies: Optional[str] = typer.Option(None, "--frequencies", help="srs: natural frequencies in Hz, as "
+                                              "--periods (default 1/12 octave, 10 Hz to 10 kHz)."),
     units: str = typer.Option("g", "--units", help="The record's units: g or m/s^2."),
     scale: float = typer.Option(1.0, "--scale", help="Multiply the record's values by this."),
     shift: float = typer.Option(0.0, "--shift", help="Then add this (in the record's units)."),
@@ -222,13 +229,37 @@ def spectrum(
     as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
 ):
     """Response spectra of a record: peak relative displacement Sd of 1-DOF oscillators, exact between samples,
-    and Sv, Sa; writes OUT/<stem>_spectrum.h5 and a tripartite OUT/<stem>_spectrum.png."""
+    and Sv, Sa; writes OUT/<stem>_spectrum.h5 and a tripartite OUT/<stem>_spectrum.png. --kind srs: the shock
+    response spectrum, OUT/<stem>_srs.h5 and OUT/<stem>_srs.png."""
     from smdcli.commands.spectrum import format_spectrum, spectrum_summary
     from smdcli.commands.spectrum import spectrum as run_spectrum
 
     _carried_out(lambda: run_spectrum(record, out, periods, damping, units, scale, shift, plots=not no_plots,
-                                      progress=progress_wanted(quiet, as_json)),
+                                      progress=progress_wanted(quiet, as_json), kind=kind, q=q,
+                                      frequencies=frequencies),
                  {"record": str(record)}, as_json, quiet, spectrum_summary, lambda _, data: format_spectrum(data))
+
+
+@app.command()
+def rsa(
+    scenario: Path = typer.Argument(..., help="Scenario TOML file of a linear scene."),
+    spectrum_file: Path = typer.Option(..., "--spectrum", help="A spectrum file of smd spectrum (.h5), or a design "
+                                       "spectrum: two columns, period s and Sa in g."),
+    combination: str = typer.Option("cqc", "--combination", help="cqc, srss or abssum (the file holds all three)."),
+    modes: str = typer.Option("all", "--modes", help="The lowest N modes, or all."),
+    out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
+    no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
+    as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+):
+    """Response-spectrum analysis: modal periods, participation factors, effective masses, and the peak
+    displacements, element forces and base shear combined by CQC, SRSS and ABSSUM; writes OUT/<stem>_rsa.h5 and
+    OUT/<stem>_rsa.png."""
+    from smdcli.commands.rsa import format_rsa, rsa_summary
+    from smdcli.commands.rsa import rsa as run_rsa
+
+    _carried_out(lambda: run_rsa(scenario, spectrum_file, out, combination, modes, plots=not no_plots),
+                 {"scenario": str(scenario)}, as_json, quiet, rsa_summary, lambda _, data: format_rsa(data))
 
 
 @app.command()

@@ -41,6 +41,8 @@ def _runs():
         ("sweep, transmissibility", ["sweep", SCENARIOS / "transmissibility_1dof.toml"],
          "transmissibility_1dof_sweep.h5"),
         ("spectrum", ["spectrum", RECORD, "--periods", "0.1:2:5"], "synthetic_20s_100hz_spectrum.h5"),
+        ("shock spectrum", ["spectrum", RECORD, "--kind", "srs", "--frequencies", "1,5,10", "--q", "10,20"],
+         "synthetic_20s_100hz_srs.h5"),
         ("compare-solvers", ["compare-solvers", SCENARIOS / "one_dof_underdamped.toml", "--methods", "RK45,rk4",
                              "--tolerances", "1e-4,1e-6", "--steps", "0.05,0.01", "--repeats", "1"],
          "one_dof_underdamped_compare.h5"),

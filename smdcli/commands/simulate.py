@@ -203,6 +203,10 @@ def info(path: str | Path, state_space: Path | None = None) -> dict:
     from smdcli.solvers.auto import Auto
 
     solver, reason = Auto().choose(model, grid)
+    # participation in a ground motion moving every DOF alike (r = ones): Gamma = phi^T M r of the mass-normalised
+    # undamped shapes, effective mass Gamma^2, which sum to the total mass
+    gamma = m.shapes.T @ (model.M @ np.ones(model.n))
+    total_mass = float(model.M.sum())
     data = {
         "scenario": sc.path, "title": sc.title, "dofs": list(model.dofs),
         "form": "element" if model.element_form else "matrix",
@@ -214,8 +218,9 @@ def info(path: str | Path, state_space: Path | None = None) -> dict:
                    for p, kind, d in zip(model.force_paths, model.force_types, model.force_dofs) if d != GROUND_DOF],
         "modes": [
             {"natural_frequency_rad_s": float(w), "natural_frequency_hz": float(w / (2 * math.pi)),
-             "damping_ratio": float(z), "regime": r}
-            for w, z, r in zip(m.natural_frequencies, m.damping_ratios, m.regimes)
+             "damping_ratio": float(z), "regime": r, "participation": float(g), "effective_mass": float(g * g),
+             "effective_mass_ratio": float(g * g / total_mass)}
+            for w, z, r, g in zip(m.natural_frequencies, m.damping_ratios, m.regimes, gamma)
         ],
         "eigenvalues": [[float(e.real), float(e.imag)] for e in m.eigenvalues],
         "stiffness_ratio": model.stiffness_ratio,
@@ -272,7 +277,7 @@ def format_info(d: dict) -> str:
     lines += [matrix("M", d["M"]), matrix("C", d["C"]),
               matrix("K (at rest, the hysteretic springs elastic: the modes')", d["K_initial"]) if "K_initial" in d
               else matrix("K", d["K"])]
-    lines.append("  modes    omega_n [rad/s]   f_n [Hz]   zeta        regime")
+    lines.append("  modes    omega_n [rad/s]   f_n [Hz]   zeta        regime           Gamma   M_eff/M")
     for i, mode in enumerate(d["modes"], 1):
         if SHOWN // 2 < i <= len(d["modes"]) - SHOWN // 2:
             if i == SHOWN // 2 + 1:
@@ -280,7 +285,7 @@ def format_info(d: dict) -> str:
             continue
         lines.append(f"    {i:<5}  {mode['natural_frequency_rad_s']:14.6g} {mode['natural_frequency_hz']:10.4g}"
                      f"   {'-' if mode['regime'] == 'rigid-body' else format(mode['damping_ratio'], '<10.5g'):<10}"
-                     f"  {mode['regime']}")
+                     f"  {mode['regime']:<17}{mode['participation']:9.4g}  {mode['effective_mass_ratio']:6.1%}")
     lines.append(f"  stiffness ratio {d['stiffness_ratio']:.4g} ({'stiff' if d['stiff'] else 'not stiff'}"
                  f"{' in its linear part' if not d['linear'] else ''})")
     if "linearized_at_start" in d:

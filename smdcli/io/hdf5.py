@@ -79,15 +79,100 @@ def write_spectrum(path: Path, record, spectrum) -> None:
             ds = with_scales(f.create_dataset(name, data=data), damping, period)
             ds.attrs["units"] = units
             ds.attrs["description"] = meaning
-        group = f.create_group("record")
-        time = group.create_dataset("time", data=record.time)
-        time.make_scale("time")
-        time.attrs["units"] = "s"
-        acc = with_scales(group.create_dataset("acceleration", data=record.acceleration), time)
-        acc.attrs["units"] = "m/s^2"
-        group.attrs["units_in_file"] = record.units
-        group.attrs["file_text"] = record.text
-        group.attrs["sha256"] = hashlib.sha256(record.text.encode()).hexdigest()
+        _write_record(f, record)
+
+
+def write_shock_spectrum(path: Path, record, srs) -> None:
+    """A shock response spectrum file: q and frequency scales, positive, negative, maximax (Q, F) in g and the
+    times of the extremes, the record it came from."""
+    import h5py
+
+    from smdcli.scenario.spec import STANDARD_GRAVITY
+
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        write_provenance(f, "spectrum")
+        f.attrs["title"] = f"Shock response spectrum of {Path(record.path).name}"
+        f.attrs["record_path"] = record.path
+        f.attrs["kind"] = "srs"
+        f.attrs["method"] = ("exact for the record linear between samples; every extreme of the absolute acceleration "
+                             "located between samples, over the record and 1.25 periods of residual free motion")
+        q = axis(f, "q", srs.q)
+        q.attrs["units"] = "1"
+        q.attrs["description"] = "quality factor Q = 1 / (2 zeta)"
+        frequency = axis(f, "frequency", srs.frequency)
+        frequency.attrs["units"] = "Hz"
+        for name, data, units, meaning in (
+                ("positive", srs.positive / STANDARD_GRAVITY, "g", "largest absolute acceleration of the mass"),
+                ("negative", srs.negative / STANDARD_GRAVITY, "g", "most negative absolute acceleration of the mass"),
+                ("maximax", srs.maximax / STANDARD_GRAVITY, "g", "largest magnitude of either sign"),
+                ("positive_time", srs.positive_time, "s", "when the positive extreme occurs"),
+                ("negative_time", srs.negative_time, "s", "when the negative extreme occurs")):
+            ds = with_scales(f.create_dataset(name, data=data), q, frequency)
+            ds.attrs["units"] = units
+            ds.attrs["description"] = meaning
+        _write_record(f, record)
+
+
+def write_rsa(path: Path, run) -> None:
+    """A response-spectrum analysis file: /modes per mode, /modal peaks per mode, /combined/<rule> peaks."""
+    import h5py
+
+    from smdcli.analysis.rsa import COMBINATIONS
+
+    a, m = run.analysis, run.analysis.modes
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        write_provenance(f, "rsa")
+        f.attrs["title"] = f"Response-spectrum analysis of {Path(run.scenario).name}"
+        f.attrs["scenario_path"] = run.scenario
+        f.attrs["spectrum_path"] = run.source.path
+        f.attrs["spectrum_kind"] = run.source.kind
+        f.attrs["combination"] = run.combination
+        f.attrs["modes_used"] = a.used
+        f.attrs["total_mass"] = m.total_mass
+        f.attrs["influence"] = "ones: every DOF moves with the ground"
+        modes = f.create_group("modes")
+        mode = axis(modes, "mode", np.arange(1, len(m.period) + 1))
+        dof = axis(modes, "dof", list(run.dofs))
+        for name, data, units in (("period", m.period, "s"), ("omega", m.omega, "rad/s"), ("damping", m.damping, "1"),
+                                  ("participation", m.participation, "kg^0.5"),
+                                  ("effective_mass", m.effective_mass, "kg"), ("cumulative_ratio", m.cumulative_ratio, "1")):
+            with_scales(modes.create_dataset(name, data=data), mode).attrs["units"] = units
+        shapes = with_scales(modes.create_dataset("shapes", data=m.shapes), dof, mode)
+        shapes.attrs["units"] = "kg^-0.5"
+        shapes.attrs["description"] = "mass-normalised mode shapes, one column per mode"
+        modal = f.create_group("modal")
+        used = axis(modal, "mode", np.arange(1, a.used + 1))
+        modal_dof = axis(modal, "dof", list(run.dofs))
+        element = axis(modal, "element", list(run.elements)) if run.elements else None
+        with_scales(modal.create_dataset("Sa", data=a.Sa), used).attrs["units"] = "m/s^2"
+        with_scales(modal.create_dataset("displacement", data=a.displacement), used, modal_dof).attrs["units"] = "m"
+        if element is not None:
+            with_scales(modal.create_dataset("deformation", data=a.deformation), used, element).attrs["units"] = "m"
+            with_scales(modal.create_dataset("force", data=a.force), used, element).attrs["units"] = "N"
+        with_scales(modal.create_dataset("base_shear", data=a.base_shear), used).attrs["units"] = "N"
+        for rule in COMBINATIONS:
+            c = a.combined(rule)
+            group = f.create_group(f"combined/{rule}")
+            group_dof = axis(group, "dof", list(run.dofs))
+            with_scales(group.create_dataset("displacement", data=c["displacement"]), group_dof).attrs["units"] = "m"
+            if run.elements:
+                group_element = axis(group, "element", list(run.elements))
+                with_scales(group.create_dataset("deformation", data=c["deformation"]), group_element).attrs["units"] = "m"
+                with_scales(group.create_dataset("force", data=c["force"]), group_element).attrs["units"] = "N"
+            group.create_dataset("base_shear", data=c["base_shear"]).attrs["units"] = "N"
+
+
+def _write_record(f, record) -> None:
+    """The /record group: the acceleration as used (m/s^2) on its time scale, and the file it came from."""
+    group = f.create_group("record")
+    time = group.create_dataset("time", data=record.time)
+    time.make_scale("time")
+    time.attrs["units"] = "s"
+    acc = with_scales(group.create_dataset("acceleration", data=record.acceleration), time)
+    acc.attrs["units"] = "m/s^2"
+    group.attrs["units_in_file"] = record.units
+    group.attrs["file_text"] = record.text
+    group.attrs["sha256"] = hashlib.sha256(record.text.encode()).hexdigest()
 
 
 def axis(group, name: str, values):
