@@ -149,7 +149,7 @@ def opensees(t, a, k, c, fy, b):
 
 
 def main() -> None:
-    from smdcli.solvers.spectrum import response_spectrum
+    from smdcli.analysis.spectrum import response_spectrum
 
     t, a = record()
     w = 2 * np.pi / T_N

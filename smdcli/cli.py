@@ -220,6 +220,13 @@ def spectrum(
                                     "(default 10)."),
     frequencies: Optional[str] = typer.Option(None, "--frequencies", help="srs: natural frequencies in Hz, as "
                                               "--periods (default 1/12 octave, 10 Hz to 10 kHz)."),
+    ductility: Optional[str] = typer.Option(None, "--ductility", help="Also constant-ductility spectra for these "
+                                            "ductility factors, e.g. 1,2,4,8 (the largest strength giving each)."),
+    strength: Optional[str] = typer.Option(None, "--strength", help="Or constant-strength spectra (ductility "
+                                           "demand) for these yield strength coefficients Cy = fy/(m g)."),
+    law: Optional[str] = typer.Option(None, "--law", help="Inelastic spectra: elastoplastic (default) or bilinear."),
+    hardening: Optional[float] = typer.Option(None, "--hardening", help="Bilinear: post-yield stiffness ratio b, "
+                                              "0 <= b < 1."),
     units: str = typer.Option("g", "--units", help="The record's units: g or m/s^2."),
     scale: float = typer.Option(1.0, "--scale", help="Multiply the record's values by this."),
     shift: float = typer.Option(0.0, "--shift", help="Then add this (in the record's units)."),
@@ -230,13 +237,15 @@ def spectrum(
 ):
     """Response spectra of a record: peak relative displacement Sd of 1-DOF oscillators, exact between samples,
     and Sv, Sa; writes OUT/<stem>_spectrum.h5 and a tripartite OUT/<stem>_spectrum.png. --kind srs: the shock
-    response spectrum, OUT/<stem>_srs.h5 and OUT/<stem>_srs.png."""
+    response spectrum, OUT/<stem>_srs.h5 and OUT/<stem>_srs.png. --ductility or --strength: inelastic spectra
+    too, in the spectrum file's /inelastic and OUT/<stem>_inelastic.png."""
     from smdcli.commands.spectrum import format_spectrum, spectrum_summary
     from smdcli.commands.spectrum import spectrum as run_spectrum
 
     _carried_out(lambda: run_spectrum(record, out, periods, damping, units, scale, shift, plots=not no_plots,
                                       progress=progress_wanted(quiet, as_json), kind=kind, q=q,
-                                      frequencies=frequencies),
+                                      frequencies=frequencies, ductility=ductility, strength=strength, law=law,
+                                      hardening=hardening),
                  {"record": str(record)}, as_json, quiet, spectrum_summary, lambda _, data: format_spectrum(data))
 
 

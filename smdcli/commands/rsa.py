@@ -125,7 +125,7 @@ def rsa(path: str | Path, spectrum: str | Path, out: str | Path, combination: st
     run = RsaRun(str(path), model.dofs, tuple(e.name for e in springs), source, analysis, combination)
     out_dir = output_folder(out)
     from smdcli.io.atomic import together
-    from smdcli.io.hdf5 import write_rsa
+    from smdcli.io.analysis_hdf5 import write_rsa
 
     with together():
         h5 = out_dir / f"{path.stem}_rsa.h5"

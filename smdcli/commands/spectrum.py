@@ -15,8 +15,9 @@ from smdcli.errors import UsageError
 from smdcli.io.folders import output_folder
 from smdcli.scenario.records import Record, read_record
 from smdcli.scenario.spec import STANDARD_GRAVITY
+from smdcli.analysis.inelastic import InelasticSpectrum
 from smdcli.analysis.shock import ShockSpectrum
-from smdcli.solvers.spectrum import Spectrum, response_spectrum
+from smdcli.analysis.spectrum import Spectrum, response_spectrum
 
 DEFAULT_PERIODS = "logspace(-2,1,200)"
 DEFAULT_DAMPING = "0.05"
@@ -35,6 +36,7 @@ class SpectrumRun:
     spectrum: Spectrum | ShockSpectrum
     wall_time_s: float
     warnings: list[str] = field(default_factory=list)
+    inelastic: InelasticSpectrum | None = None
     outputs: list[Path] = field(default_factory=list)
 
 
@@ -50,7 +52,8 @@ def _numbers(option: str, spec: str) -> np.ndarray:
 def spectrum(path: str | Path, out: str | Path, periods: str | None = None, damping: str | None = None,
              units: str = "g", scale: float = 1.0, shift: float = 0.0, plots: bool = True,
              progress: bool = False, kind: str = "pseudo", q: str | None = None,
-             frequencies: str | None = None) -> SpectrumRun:
+             frequencies: str | None = None, ductility: str | None = None, strength: str | None = None,
+             law: str | None = None, hardening: float | None = None) -> SpectrumRun:
     """Read the record, compute Sd, Sv, Sa for every damping ratio and period, write OUT/<stem>_spectrum.*; or with
     kind "srs" the shock response spectrum over natural frequency per Q, OUT/<stem>_srs.*."""
     import time
@@ -58,7 +61,10 @@ def spectrum(path: str | Path, out: str | Path, periods: str | None = None, damp
     path = Path(path)
     if kind not in KINDS:
         raise UsageError(f"--kind: expected one of {', '.join(KINDS)}, found {kind!r}")
+    inelastic = _inelastic_options(ductility, strength, law, hardening)
     if kind == "srs":
+        if inelastic is not None:
+            raise UsageError("--ductility and --strength belong to --kind pseudo: inelastic spectra of a record")
         if periods is not None or damping is not None:
             raise UsageError("--periods and --damping belong to --kind pseudo; a shock spectrum takes "
                              "--frequencies (Hz) and --q")
@@ -88,25 +94,76 @@ def spectrum(path: str | Path, out: str | Path, periods: str | None = None, damp
         raise UsageError(f"{record.path}: the spectrum overflows double precision (peak acceleration "
                          f"{np.abs(record.acceleration).max():.3g} m/s^2 over periods up to {T.max():g} s); "
                          "check the record's units and --scale")
-    run = SpectrumRun(record, result, time.perf_counter() - start)
+    inelastic_result = None
+    if inelastic is not None:
+        from smdcli.analysis.inelastic import constant_ductility, constant_strength
+
+        which, targets, b = inelastic
+        with bar(f"constant-{which} spectra", len(T) * len(zeta), progress) as advance:
+            if which == "ductility":
+                inelastic_result = constant_ductility(record.time, record.acceleration, T, zeta, targets, b, advance)
+            else:
+                inelastic_result = constant_strength(record.time, record.acceleration, T, zeta, targets, b)
+                advance(len(T) * len(zeta))
+    run = SpectrumRun(record, result, time.perf_counter() - start, inelastic=inelastic_result)
     warning = record.drift_warning()
     if warning:
         run.warnings.append(warning)
     from smdcli.io.atomic import together
-    from smdcli.io.hdf5 import write_spectrum
+    from smdcli.io.analysis_hdf5 import write_spectrum
 
     with together():
         h5 = out_dir / f"{path.stem}_spectrum.h5"
-        write_spectrum(h5, record, result)
+        write_spectrum(h5, record, result, inelastic_result)
         run.outputs.append(h5)
         if plots:
             from smdcli.plots.common import save_figure
-            from smdcli.plots.spectrum import spectrum_figure
+            from smdcli.plots.spectrum import inelastic_figure, spectrum_figure
 
             png = out_dir / f"{path.stem}_spectrum.png"
             save_figure(spectrum_figure(result, record, f"Response spectrum of {path.name}"), png)
             run.outputs.append(png)
+            if inelastic_result is not None:
+                png = out_dir / f"{path.stem}_inelastic.png"
+                save_figure(inelastic_figure(inelastic_result, f"Inelastic spectra of {path.name}"), png)
+                run.outputs.append(png)
     return run
+
+
+def _inelastic_options(ductility: str | None, strength: str | None, law: str | None,
+                       hardening: float | None) -> tuple[str, np.ndarray, float] | None:
+    """("ductility" or "strength", the targets, the hardening ratio b), or None when no inelastic spectrum is
+    asked for; refused with one line where the options do not fit together."""
+    from smdcli.analysis.inelastic import LAWS
+
+    if ductility is None and strength is None:
+        if law is not None or hardening is not None:
+            raise UsageError("--law and --hardening need --ductility or --strength (an inelastic spectrum)")
+        return None
+    if ductility is not None and strength is not None:
+        raise UsageError("--ductility and --strength: expected one of them (constant ductility or constant strength)")
+    law = law or ("bilinear" if hardening is not None else "elastoplastic")
+    if law not in LAWS:
+        raise UsageError(f"--law: expected one of {', '.join(LAWS)}, found {law!r}")
+    if law == "elastoplastic" and hardening not in (None, 0.0):
+        raise UsageError(f"--hardening: an elastoplastic spring has none; use --law bilinear (found {hardening:g})")
+    if law == "bilinear" and hardening is None:
+        raise UsageError("--law bilinear: expected --hardening b (post-yield stiffness b k, 0 <= b < 1)")
+    b = 0.0 if hardening is None else float(hardening)
+    if not (0.0 <= b < 1.0):
+        raise UsageError(f"--hardening: expected 0 <= b < 1, found {b:g}")
+    if ductility is not None:
+        targets = _numbers("--ductility", ductility)
+        bad = ~(np.isfinite(targets) & (targets >= 1.0))
+        if bad.any():
+            raise UsageError(f"--ductility: expected ductility factors >= 1, found {targets[bad][0]:g}")
+        return "ductility", targets, b
+    targets = _numbers("--strength", strength)
+    bad = ~(np.isfinite(targets) & (targets > 0.0))
+    if bad.any():
+        raise UsageError(f"--strength: expected yield strength coefficients Cy = fy / (m g) > 0, found "
+                         f"{targets[bad][0]:g}")
+    return "strength", targets, b
 
 
 def _record(path: Path, units: str, scale: float, shift: float) -> Record:
@@ -159,7 +216,7 @@ def _shock(path: Path, out, units: str, scale: float, shift: float, plots: bool,
                          "and --scale")
     run = SpectrumRun(record, result, time.perf_counter() - start)
     from smdcli.io.atomic import together
-    from smdcli.io.hdf5 import write_shock_spectrum
+    from smdcli.io.analysis_hdf5 import write_shock_spectrum
 
     with together():
         h5 = out_dir / f"{path.stem}_srs.h5"
@@ -177,15 +234,15 @@ def _shock(path: Path, out, units: str, scale: float, shift: float, plots: bool,
 
 def _check_cost(record: Record, periods: np.ndarray, dampings: int) -> None:
     """Refuse, before anything is allocated, periods the record cannot resolve and runs too large to finish."""
-    from smdcli.solvers.spectrum import MAX_SUB_POINTS, MAX_WORK, POINTS_PER_PERIOD, spectrum_cost
+    from smdcli.analysis.spectrum import MAX_PIECES_PER_INTERVAL, MAX_WORK, PIECES_PER_PERIOD, spectrum_cost
 
     most, work = spectrum_cost(len(record.time), record.step, periods, dampings)
-    if most > MAX_SUB_POINTS:
-        shortest = record.step * POINTS_PER_PERIOD / MAX_SUB_POINTS
+    if most > MAX_PIECES_PER_INTERVAL:
+        shortest = record.step * PIECES_PER_PERIOD / MAX_PIECES_PER_INTERVAL
         raise UsageError(f"--periods: {periods.min():.3g} s is far below the record's sampling interval "
                          f"{record.step:.3g} s ({record.path}); the shortest period it resolves is {shortest:.3g} s")
     if work > MAX_WORK:
-        raise UsageError(f"--periods x --damping: {work:.3g} response values to evaluate over {len(record.time)} "
+        raise UsageError(f"--periods x --damping: {work:.3g} pieces of closed-form response to solve over {len(record.time)} "
                          f"samples of {record.path} (limit {MAX_WORK:.0e}); use fewer or longer periods, fewer "
                          "damping ratios, or a shorter record")
 
@@ -222,7 +279,23 @@ def spectrum_summary(run: SpectrumRun) -> dict:
             "pga_m_s2": float(np.abs(r.acceleration).max()), "periods": len(s.period),
             "period_range_s": [float(s.period.min()), float(s.period.max())],
             "damping": [float(z) for z in s.damping], "peaks": peaks, "wall_time_s": run.wall_time_s,
+            **({"inelastic": _inelastic_summary(run.inelastic)} if run.inelastic is not None else {}),
             "warnings": run.warnings, "outputs": [str(p) for p in run.outputs]}
+
+
+def _inelastic_summary(x: InelasticSpectrum) -> dict:
+    """Per target at the first damping ratio: the largest Cy and where, Ry at the longest and shortest period."""
+    rows = []
+    for k, target in enumerate(x.targets):
+        cy = x.Cy[k, 0]
+        j = int(np.nanargmax(cy)) if np.isfinite(cy).any() else 0
+        rows.append({x.kind: float(target), "damping": float(x.damping[0]), "peak_Cy": float(cy[j]),
+                     "at_period_s": float(x.period[j]), "found": int(x.found[k].sum()),
+                     "Ry_range": [float(np.nanmin(x.Ry[k])), float(np.nanmax(x.Ry[k]))] if x.found[k].any() else None,
+                     "ductility_range": [float(np.nanmin(x.ductility[k])), float(np.nanmax(x.ductility[k]))]
+                     if x.found[k].any() else None})
+    return {"kind": x.kind, "law": "bilinear" if x.hardening else "elastoplastic", "hardening": x.hardening,
+            "targets": [float(t) for t in x.targets], "oscillators": int(x.found.size), "rows": rows}
 
 
 def _shock_summary(run: SpectrumRun) -> dict:
@@ -265,6 +338,18 @@ def format_spectrum(data: dict) -> str:
     for p in data["peaks"]:
         lines.append(f"  zeta {p['damping']:<6g} peak Sa {p['peak_Sa_g']:.4g} g at T = {p['at_period_s']:.4g} s, "
                      f"peak Sd {p['peak_Sd_m']:.4g} m")
+    if "inelastic" in data:
+        x = data["inelastic"]
+        law = x["law"] + (f" b = {x['hardening']:g}" if x["hardening"] else "")
+        lines.append(f"  inelastic  constant {x['kind']} ({law}), exact event to event; at zeta {x['rows'][0]['damping']:g}:")
+        for r in x["rows"]:
+            if x["kind"] == "ductility":
+                ry = f"Ry {r['Ry_range'][0]:.3g}..{r['Ry_range'][1]:.3g}" if r["Ry_range"] else "no strength found"
+                lines.append(f"    mu {r['ductility']:<5g} peak Cy {r['peak_Cy']:.4g} at T = {r['at_period_s']:.4g} s, "
+                             f"{ry}")
+            else:
+                mu = r["ductility_range"]
+                lines.append(f"    Cy {r['strength']:<7g} ductility demand {mu[0]:.3g}..{mu[1]:.3g}")
     lines += [f"  {w}" for w in data["warnings"]]
     if data["outputs"]:
         lines.append(f"  wrote    {', '.join(data['outputs'])}")

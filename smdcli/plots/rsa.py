@@ -29,7 +29,7 @@ def rsa_figure(run):
     shapes_ax.set_yticks(np.concatenate([[0], level]), ["ground", *run.dofs])
     shapes_ax.set_xlabel("Mode shape (largest entry 1)")
     shapes_ax.set_title("Modes", fontsize=10)
-    shapes_ax.legend(fontsize=7, loc="lower center", bbox_to_anchor=(0.5, 1.07), ncol=2)
+    fig.legend(*shapes_ax.get_legend_handles_labels(), fontsize=8, loc="outside lower center", ncol=3)
     for j, rule in enumerate(COMBINATIONS):
         peaks = a.combined(rule)["displacement"]
         peaks_ax.plot(np.concatenate([[0.0], peaks]), np.concatenate([[0], level]), marker="os^"[j], ms=5,

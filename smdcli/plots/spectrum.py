@@ -109,3 +109,33 @@ def shock_spectrum_figure(srs, record, title: str):
     rec.grid(True, alpha=0.35)
     fig.suptitle(title, fontsize=11)
     return fig
+
+
+def inelastic_figure(x, title: str):
+    """Constant ductility: Cy against T per target beside the elastic Sa / g (mu = 1), and Ry beneath; constant
+    strength: the ductility demand per Cy, and Ry beneath. At the first damping ratio."""
+    fig = _figure(figsize=(8.0, 8.0), layout="constrained")
+    top, bottom = fig.subplots(2, 1, sharex=True)
+    T = x.period
+    for k, target in enumerate(x.targets):
+        color = f"C{k % 10}"
+        if x.kind == "ductility":
+            top.plot(T, x.Cy[k, 0], color=color, lw=1.5, label=f"μ = {target:g}")
+        else:
+            top.plot(T, x.ductility[k, 0], color=color, lw=1.5, label=f"Cy = {target:g}")
+        bottom.plot(T, x.Ry[k, 0], color=color, lw=1.2)
+    if x.kind == "ductility":
+        top.plot(T, x.elastic_Sa[0] / G, color="0.2", lw=0.9, ls="--", label="elastic Sa / g")
+        top.set_ylabel("Yield strength coefficient Cy = fy / (m g)")
+    else:
+        top.set_yscale("log")
+        top.set_ylabel("Ductility demand μ")
+    bottom.set_ylabel("Strength reduction Ry = f0 / fy")
+    bottom.set_xlabel("Period T [s]")
+    for ax in (top, bottom):
+        ax.set_xscale("log")
+        ax.grid(True, which="both", alpha=0.3)
+    law = "bilinear, b = %g" % x.hardening if x.hardening else "elastoplastic"
+    top.legend(fontsize=8, title=f"{law}, ζ = {x.damping[0]:g}", title_fontsize=8)
+    fig.suptitle(title, fontsize=11)
+    return fig
