@@ -250,6 +250,32 @@ def spectrum(
 
 
 @app.command()
+def record(
+    record_file: Path = typer.Argument(..., metavar="RECORD", help="Ground acceleration record: two columns (time s, "
+                                       "acceleration), CSV or whitespace, header optional; or a scenario."),
+    baseline: str = typer.Option("none", "--baseline", help="none, linear or quadratic: the least-squares "
+                                 "polynomial of the acceleration subtracted."),
+    band: Optional[str] = typer.Option(None, "--filter", help="LOW,HIGH in Hz: zero-phase Butterworth band-pass "
+                                       "(0 for an open end: 0,25 low-pass, 0.1,0 high-pass)."),
+    order: int = typer.Option(4, "--order", help="The Butterworth filter's order (applied forwards and backwards)."),
+    units: str = typer.Option("g", "--units", help="The record's units: g or m/s^2."),
+    scale: float = typer.Option(1.0, "--scale", help="Multiply the record's values by this."),
+    shift: float = typer.Option(0.0, "--shift", help="Then add this (in the record's units)."),
+    out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
+    no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
+    as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+):
+    """Process a record (baseline, band-pass) and measure it: PGA, PGV, PGD, Arias intensity, D5-95, D5-75, CAV,
+    Housner intensity; writes OUT/<stem>_record.h5 and OUT/<stem>_record.png (traces and the Husid plot)."""
+    from smdcli.commands.record import format_record, record_command, record_summary
+
+    _carried_out(lambda: record_command(record_file, out, baseline, band, order, units, scale, shift,
+                                        plots=not no_plots),
+                 {"record": str(record_file)}, as_json, quiet, record_summary, lambda _, data: format_record(data))
+
+
+@app.command()
 def rsa(
     scenario: Path = typer.Argument(..., help="Scenario TOML file of a linear scene."),
     spectrum_file: Path = typer.Option(..., "--spectrum", help="A spectrum file of smd spectrum (.h5), or a design "

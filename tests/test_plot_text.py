@@ -25,6 +25,8 @@ RUNS = {
     "spectrum": ["spectrum", RECORD, "--damping", "0.02,0.05"],
     "inelastic spectrum": ["spectrum", RECORD, "--periods", "logspace(-1,0.5,12)", "--ductility", "1,2,4,8"],
     "constant-strength spectrum": ["spectrum", RECORD, "--periods", "logspace(-1,0.5,12)", "--strength", "0.1,0.3"],
+    "record": ["record", RECORD],
+    "record, processed": ["record", RECORD, "--baseline", "quadratic", "--filter", "0.1,20"],
     "response-spectrum analysis": ["rsa", SCENARIOS / "five_storey_building.toml", "--spectrum",
                                    ROOT / "records" / "design_spectrum_sds1_sd06.csv"],
     "shock spectrum": ["spectrum", ROOT / "records" / "half_sine_11ms_50g.csv", "--kind", "srs", "--q", "10,50"],

@@ -45,6 +45,8 @@ def _runs():
          "synthetic_20s_100hz_srs.h5"),
         ("inelastic spectrum", ["spectrum", RECORD, "--periods", "0.2,0.5,1", "--damping", "0.02,0.05",
                                 "--ductility", "1,2,4"], "synthetic_20s_100hz_spectrum.h5"),
+        ("processed record", ["record", RECORD, "--baseline", "linear", "--filter", "0.1,25"],
+         "synthetic_20s_100hz_record.h5"),
         ("response-spectrum analysis", ["rsa", SCENARIOS / "five_storey_building.toml", "--spectrum",
                                         RECORD.parent / "design_spectrum_sds1_sd06.csv"], "five_storey_building_rsa.h5"),
         ("compare-solvers", ["compare-solvers", SCENARIOS / "one_dof_underdamped.toml", "--methods", "RK45,rk4",

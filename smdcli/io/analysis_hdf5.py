@@ -165,3 +165,42 @@ def _write_record(f, record) -> None:
     group.attrs["units_in_file"] = record.units
     group.attrs["file_text"] = record.text
     group.attrs["sha256"] = hashlib.sha256(record.text.encode()).hexdigest()
+
+
+def write_record(path: Path, record, processed) -> None:
+    """A processed record: time scale, raw and processed acceleration, velocity, displacement, running Arias
+    intensity and the Husid curve; the measures as root attributes."""
+    import h5py
+
+    m = processed.measures
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        write_provenance(f, "record")
+        f.attrs["title"] = f"Record {Path(record.path).name}, processed"
+        f.attrs["record_path"] = record.path
+        f.attrs["baseline"] = processed.baseline
+        f.attrs["filter_hz"] = np.array(processed.band if processed.band else [np.nan, np.nan])
+        f.attrs["filter_order"] = processed.order if processed.band else 0
+        for name, value, units in (("pga", m.pga, "m/s^2"), ("pgv", m.pgv, "m/s"), ("pgd", m.pgd, "m"),
+                                   ("arias_intensity", m.arias, "m/s"), ("d5_95", m.d5_95, "s"),
+                                   ("d5_75", m.d5_75, "s"), ("t5", m.t5, "s"), ("t75", m.t75, "s"),
+                                   ("t95", m.t95, "s"), ("cav", m.cav, "m/s"), ("housner_si", m.housner, "m")):
+            f.attrs[name] = value
+            f.attrs[f"{name}_units"] = units
+        time = f.create_dataset("time", data=processed.time)
+        time.make_scale("time")
+        time.attrs["units"] = "s"
+        husid = processed.arias / processed.arias[-1] if processed.arias[-1] > 0 else processed.arias * 0
+        for name, data, units, meaning in (
+                ("raw_acceleration", processed.raw, "m/s^2", "as read (units, scale and shift applied)"),
+                ("acceleration", processed.acceleration, "m/s^2", "baseline-corrected, then filtered"),
+                ("velocity", processed.velocity, "m/s", "exact integral of the straight lines, from rest"),
+                ("displacement", processed.displacement, "m", "exact integral of the velocity, from rest"),
+                ("arias", processed.arias, "m/s", "running Arias intensity pi/(2g) integral of a^2"),
+                ("husid", husid, "1", "running Arias intensity over its total")):
+            ds = with_scales(f.create_dataset(name, data=data), time)
+            ds.attrs["units"] = units
+            ds.attrs["description"] = meaning
+        group = f.create_group("source")
+        group.attrs["units_in_file"] = record.units
+        group.attrs["file_text"] = record.text
+        group.attrs["sha256"] = hashlib.sha256(record.text.encode()).hexdigest()

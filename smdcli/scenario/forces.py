@@ -10,8 +10,11 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from smdcli.scenario.reader import _Table
-from smdcli.scenario.records import ColumnsError, check_scaled, read_text, slope_problem, two_columns
+from smdcli.scenario.records import (BASELINES, ColumnsError, band_passed, baseline_corrected, check_scaled, read_text,
+                                     slope_problem, two_columns)
 from smdcli.scenario.spec import FORCE_TYPES, GROUND, GROUND_QUANTITIES, GROUND_UNITS, ForceSpec, GroundMotionSpec
 
 _FORCE_FIELDS = {
@@ -102,7 +105,8 @@ def _read_shape(t: _Table, index: int, on: str, others: tuple[str, ...]) -> Forc
     return ForceSpec(**spec)
 
 
-GROUND_KEYS = ("quantity", "units", "scale", "shift") + tuple(k for k in _ANY_FORCE_KEYS if k != "on")
+PROCESSING_KEYS = ("baseline", "filter", "filter_order")  # a recorded acceleration's processing (smd record's)
+GROUND_KEYS = ("quantity", "units", "scale", "shift") + PROCESSING_KEYS + tuple(k for k in _ANY_FORCE_KEYS if k != "on")
 
 
 def _read_ground_motion(t: _Table) -> GroundMotionSpec:
@@ -118,10 +122,23 @@ def _read_ground_motion(t: _Table) -> GroundMotionSpec:
             raise t.fail(key, 'only a table ground motion has scale and shift (type = "table"); '
                               "set the amplitude instead")
     scale, shift = t.number("scale", 1.0), t.number("shift", 0.0)
-    shape = _read_shape(t, 0, GROUND, ("quantity", "units", "scale", "shift"))
+    for key in PROCESSING_KEYS:
+        if t.has(key) and not (table and quantity == "acceleration"):
+            raise t.fail(key, 'only a recorded ground acceleration is processed (quantity = "acceleration", '
+                              'type = "table")')
+    baseline = t.string("baseline", "none", choices=tuple(BASELINES))
+    band = t.numbers("filter", length=2) if t.has("filter") else None
+    order = t.integer("filter_order", 4, minimum=1)
+    if t.has("filter_order") and band is None:
+        raise t.fail("filter_order", "expected it with filter = [LOW, HIGH]")
+    if order > 10:
+        raise t.fail("filter_order", f"expected a Butterworth order from 1 to 10, found {order}")
+    shape = _read_shape(t, 0, GROUND, ("quantity", "units", "scale", "shift") + PROCESSING_KEYS)
     factor = allowed[units]
     if shape.type == "table":
         shape = replace(shape, values=tuple((v * scale + shift) * factor for v in shape.values))
+        if baseline != "none" or band is not None:
+            shape = _processed(t, shape, baseline, band, order)
     elif shape.type == "expression":
         if factor != 1.0:
             shape = replace(shape, expr=f"({shape.expr}) * {factor!r}")
@@ -134,6 +151,31 @@ def _read_ground_motion(t: _Table) -> GroundMotionSpec:
         raise t.fail("amplitude", f"the amplitude in {si_units} overflows double precision once converted; "
                                   "expected a finite value")
     return GroundMotionSpec(quantity=quantity, shape=shape, units=units)
+
+
+def _processed(t: _Table, shape: ForceSpec, baseline: str, band, order: int) -> ForceSpec:
+    """A recorded acceleration baseline-corrected and band-passed as `smd record` does (uniform samples needed)."""
+    times = np.asarray(shape.t, dtype=float)
+    values = np.asarray(shape.values, dtype=float)
+    if shape.interpolation != "linear":
+        raise t.fail("interpolation", 'a processed record is linear between samples; expected "linear"')
+    steps = np.diff(times)
+    if len(times) < 3 or np.abs(steps - steps.mean()).max() > 1e-9 * steps.mean():
+        raise t.fail("baseline" if t.has("baseline") else "filter",
+                     "processing needs a uniformly sampled record of at least 3 samples")
+    if baseline != "none":
+        values = baseline_corrected(times, values, BASELINES[baseline])
+    if band is not None:
+        low, high = band
+        nyquist = 0.5 / steps.mean()
+        if not (math.isfinite(low) and math.isfinite(high) and low >= 0 and high >= 0 and (low > 0 or high > 0)
+                and (high == 0 or low < high < nyquist) and low < nyquist):
+            raise t.fail("filter", f"expected [LOW, HIGH] in Hz, 0 for an open end, LOW < HIGH < the Nyquist "
+                                   f"frequency {nyquist:g} Hz, found [{low:g}, {high:g}]")
+        if len(times) < 3 * (2 * order + 1):
+            raise t.fail("filter", f"{len(times)} samples are too few to filter at order {order}")
+        values = band_passed(values, float(steps.mean()), low, high, order)
+    return replace(shape, values=tuple(float(v) for v in values))
 
 
 def _read_table_force(t: _Table) -> dict[str, Any]:

@@ -281,3 +281,32 @@ def sampled_record(file: str, field: str | None, path: str, times, acceleration,
                                          f"{steps.max():.6g} s")
     t = t[0] + steps.mean() * np.arange(len(t))  # the sampling interval the file's rounding of times meant
     return Record(path, t, np.asarray(acceleration, dtype=float), units, text)
+
+
+# Processing a record (smd record, and [ground_motion] with baseline or filter): what the least-squares polynomial
+# subtracted has as its degree, by the name the option and key take.
+BASELINES = {"none": -1, "linear": 1, "quadratic": 2}
+
+
+def baseline_corrected(time: np.ndarray, acceleration: np.ndarray, degree: int) -> np.ndarray:
+    """a minus its least-squares polynomial of this degree (none for degree < 0)."""
+    if degree < 0:
+        return np.asarray(acceleration, dtype=float).copy()
+    x = (time - time[0]) / max(time[-1] - time[0], np.finfo(float).tiny)  # on [0, 1]: a well-conditioned fit
+    basis = np.vander(x, degree + 1)
+    coef, *_ = np.linalg.lstsq(basis, acceleration, rcond=None)
+    return acceleration - basis @ coef
+
+
+def band_passed(acceleration: np.ndarray, step: float, low: float, high: float, order: int) -> np.ndarray:
+    """Zero-phase Butterworth: band-pass LOW..HIGH Hz, low-pass where low = 0, high-pass where high = 0."""
+    from scipy.signal import butter, sosfiltfilt
+
+    fs = 1.0 / step
+    if low > 0 and high > 0:
+        sos = butter(order, [low, high], btype="bandpass", fs=fs, output="sos")
+    elif high > 0:
+        sos = butter(order, high, btype="lowpass", fs=fs, output="sos")
+    else:
+        sos = butter(order, low, btype="highpass", fs=fs, output="sos")
+    return sosfiltfilt(sos, acceleration)

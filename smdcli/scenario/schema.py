@@ -38,7 +38,8 @@ SPECIAL = {
     "direction": {"enum": ["up", "down", "both"]}, "measure": BOOLEAN, "metric": STRING,
     "omega": {"anyOf": [NUMBER, NUMBERS]}, "modal": {"anyOf": [NUMBER, NUMBERS]},
     "units": {"enum": sorted({u for units in GROUND_UNITS.values() for u in units} | {"g"})},
-    "dof": STRING,
+    "dof": STRING, "baseline": {"enum": ["none", "linear", "quadratic"]}, "filter": {**NUMBERS, "minItems": 2, "maxItems": 2},
+    "filter_order": INTEGER,
 }
 
 
