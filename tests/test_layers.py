@@ -21,7 +21,7 @@ LAYERS = [
     ("analysis", ["smdcli.analysis"]),
     ("writers", ["smdcli.io", "smdcli.plots"]),
     ("commands", ["smdcli.commands"]),
-    ("cli", ["smdcli.cli", "smdcli.cli_support", "smdcli.cli_files", "smdcli.api", "smdcli.__main__"]),
+    ("cli", ["smdcli.cli", "smdcli.cli_support", "smdcli.cli_files", "smdcli.cli_analyses", "smdcli.api", "smdcli.__main__"]),
 ]
 # The one import allowed to go up: the package root hands out the Python API (load, simulate, write) on first
 # use (PEP 562 __getattr__), so `import smdcli` stays as light as the version string.

@@ -36,7 +36,7 @@ def direct_measures(t, a):
     d = np.zeros(n)
     for m in range(1, n):
         T = t[m]
-        lo, hi = t[:m], t[1:m + 1]
+        lo = t[:m]
         a0, s = a[:m], slope[:m]
         # integral over [lo, hi] of (T - x)(a0 + s (x - lo)) dx, with u = x - lo in [0, dt]
         c = T - lo

@@ -204,3 +204,52 @@ def write_record(path: Path, record, processed) -> None:
         group.attrs["units_in_file"] = record.units
         group.attrs["file_text"] = record.text
         group.attrs["sha256"] = hashlib.sha256(record.text.encode()).hexdigest()
+
+
+def write_psd(path: Path, run) -> None:
+    """A random-vibration file: /frequency, /input_psd, /response/<quantity> PSDs (frequency, name) and
+    /rms/<quantity> (name), the method and input as attributes."""
+    import h5py
+
+    from smdcli.scenario.spec import STANDARD_GRAVITY
+
+    units = {"displacement": "m", "velocity": "m/s", "acceleration": "m/s^2", "spring_force": "N",
+             "damper_force": "N"}
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        write_provenance(f, "psd")
+        f.attrs["title"] = f"Random vibration of {Path(run.scenario).name}"
+        f.attrs["scenario_path"] = run.scenario
+        f.attrs["input"] = "support acceleration" if run.support else f"force on {run.on}"
+        f.attrs["method"] = run.method
+        f.attrs["white_noise_level"] = run.white if run.white is not None else np.nan
+        frequency = axis(f, "frequency", run.frequency)
+        frequency.attrs["units"] = "Hz"
+        psd_units = "(m/s^2)^2/Hz" if run.support else "N^2/Hz"
+        ds = with_scales(f.create_dataset("input_psd", data=run.input_psd), frequency)
+        ds.attrs["units"] = psd_units
+        if run.profile is not None:
+            group = f.create_group("profile")
+            breakpoint_axis = axis(group, "breakpoint_hz", run.profile.frequency)
+            breakpoint_axis.attrs["units"] = "Hz"
+            with_scales(group.create_dataset("level", data=run.profile.level), breakpoint_axis).attrs["units"] = psd_units
+        groups = np.array(run.groups)
+        names = np.array(run.names)
+        for quantity in dict.fromkeys(run.groups):
+            pick = groups == quantity
+            response = f.require_group("response")
+            rms = f.require_group("rms")
+            name_axis = axis(response, f"{quantity}_name", list(names[pick]))
+            ds = with_scales(response.create_dataset(quantity, data=run.response_psd[:, pick]), frequency, name_axis)
+            ds.attrs["units"] = f"({units[quantity]})^2/Hz"
+            rms_axis = axis(rms, f"{quantity}_name", list(names[pick]))
+            ds = with_scales(rms.create_dataset(quantity, data=run.rms[pick]), rms_axis)
+            ds.attrs["units"] = units[quantity]
+            if quantity == "acceleration" and run.support:
+                ds.attrs["description"] = "absolute acceleration (relative plus the support's)"
+                g = with_scales(rms.create_dataset("acceleration_g", data=run.rms[pick] / STANDARD_GRAVITY),
+                                rms_axis)
+                g.attrs["units"] = "g"
+        modes = f.create_group("modes")
+        mode = axis(modes, "mode", np.arange(1, len(run.natural_hz) + 1))
+        with_scales(modes.create_dataset("natural_frequency", data=run.natural_hz), mode).attrs["units"] = "Hz"
+        with_scales(modes.create_dataset("damping", data=run.damping), mode).attrs["units"] = "1"

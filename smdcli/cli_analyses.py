@@ -1,0 +1,130 @@
+"""Commands that analyse a record or a scene: spectrum (response, inelastic and shock spectra), record
+(processing and intensity measures), psd (random vibration), rsa (response-spectrum analysis).
+
+Must not import: scipy, matplotlib, h5py at module level (the commands import what they need inside).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from smdcli.cli_support import _carried_out
+from smdcli.progress import wanted as progress_wanted
+
+
+def spectrum(
+    record: Path = typer.Argument(..., help="Ground acceleration record: two columns (time s, acceleration), "
+                                  "CSV or whitespace, header optional."),
+    kind: str = typer.Option("pseudo", "--kind", help="pseudo: Sd, Sv, Sa over period; srs: shock response "
+                             "spectrum, peak absolute acceleration over natural frequency."),
+    periods: Optional[str] = typer.Option(None, "--periods", help="pseudo: periods in s, a, b, c | start:stop:step "
+                                          "| linspace(a,b,n) | logspace(a,b,n) (default logspace(-2,1,200))."),
+    damping: Optional[str] = typer.Option(None, "--damping", help="pseudo: damping ratios, 0.02,0.05,0.1 or "
+                                          "linspace(a,b,n) (default 0.05)."),
+    q: Optional[str] = typer.Option(None, "--q", help="srs: quality factors Q = 1/(2 zeta), e.g. 10 or 10,25 "
+                                    "(default 10)."),
+    frequencies: Optional[str] = typer.Option(None, "--frequencies", help="srs: natural frequencies in Hz, as "
+                                              "--periods (default 1/12 octave, 10 Hz to 10 kHz)."),
+    ductility: Optional[str] = typer.Option(None, "--ductility", help="Also constant-ductility spectra for these "
+                                            "ductility factors, e.g. 1,2,4,8 (the largest strength giving each)."),
+    strength: Optional[str] = typer.Option(None, "--strength", help="Or constant-strength spectra (ductility "
+                                           "demand) for these yield strength coefficients Cy = fy/(m g)."),
+    law: Optional[str] = typer.Option(None, "--law", help="Inelastic spectra: elastoplastic (default) or bilinear."),
+    hardening: Optional[float] = typer.Option(None, "--hardening", help="Bilinear: post-yield stiffness ratio b, "
+                                              "0 <= b < 1."),
+    units: str = typer.Option("g", "--units", help="The record's units: g or m/s^2."),
+    scale: float = typer.Option(1.0, "--scale", help="Multiply the record's values by this."),
+    shift: float = typer.Option(0.0, "--shift", help="Then add this (in the record's units)."),
+    out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
+    no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
+    as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+):
+    """Response spectra of a record (elastic, inelastic, shock), exact between samples.
+
+    Pseudo spectra Sd, Sv, Sa: OUT/<stem>_spectrum.h5 and a tripartite OUT/<stem>_spectrum.png. --ductility or
+    --strength: inelastic spectra too, in the file's /inelastic and OUT/<stem>_inelastic.png. --kind srs: the shock
+    response spectrum, OUT/<stem>_srs.h5 and OUT/<stem>_srs.png."""
+    from smdcli.commands.spectrum import format_spectrum, spectrum_summary
+    from smdcli.commands.spectrum import spectrum as run_spectrum
+
+    _carried_out(lambda: run_spectrum(record, out, periods, damping, units, scale, shift, plots=not no_plots,
+                                      progress=progress_wanted(quiet, as_json), kind=kind, q=q,
+                                      frequencies=frequencies, ductility=ductility, strength=strength, law=law,
+                                      hardening=hardening),
+                 {"record": str(record)}, as_json, quiet, spectrum_summary, lambda _, data: format_spectrum(data))
+
+
+def record(
+    record_file: Path = typer.Argument(..., metavar="RECORD", help="Ground acceleration record: two columns (time s, "
+                                       "acceleration), CSV or whitespace, header optional; or a scenario."),
+    baseline: str = typer.Option("none", "--baseline", help="none, linear or quadratic: the least-squares "
+                                 "polynomial of the acceleration subtracted."),
+    band: Optional[str] = typer.Option(None, "--filter", help="LOW,HIGH in Hz: zero-phase Butterworth band-pass "
+                                       "(0 for an open end: 0,25 low-pass, 0.1,0 high-pass)."),
+    order: int = typer.Option(4, "--order", help="The Butterworth filter's order (applied forwards and backwards)."),
+    units: str = typer.Option("g", "--units", help="The record's units: g or m/s^2."),
+    scale: float = typer.Option(1.0, "--scale", help="Multiply the record's values by this."),
+    shift: float = typer.Option(0.0, "--shift", help="Then add this (in the record's units)."),
+    out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
+    no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
+    as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+):
+    """Process a record (baseline, band-pass) and measure it: PGA, PGV, PGD, Arias, D5-95, CAV.
+
+    Also D5-75 and Housner intensity; writes OUT/<stem>_record.h5 and OUT/<stem>_record.png (acceleration,
+    velocity, displacement and the Husid plot)."""
+    from smdcli.commands.record import format_record, record_command, record_summary
+
+    _carried_out(lambda: record_command(record_file, out, baseline, band, order, units, scale, shift,
+                                        plots=not no_plots),
+                 {"record": str(record_file)}, as_json, quiet, record_summary, lambda _, data: format_record(data))
+
+
+def psd(
+    scenario: Path = typer.Argument(..., help="Scenario TOML file of a linear scene."),
+    profile: str = typer.Option(..., "--input", help="The input PSD: a two-column table (Hz, level per Hz, log-log "
+                                "between breakpoints), or white:LEVEL for white noise over all frequencies."),
+    on: Optional[str] = typer.Option(None, "--on", help="A force PSD (N^2/Hz) on this mass; default: a support "
+                                     "acceleration PSD."),
+    units: str = typer.Option("g", "--units", help="A support PSD's units: g (g^2/Hz) or m/s^2 ((m/s^2)^2/Hz)."),
+    out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
+    no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
+    as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+):
+    """Random vibration: response PSDs and RMS of every DOF and element force under a PSD.
+
+    The input is a support acceleration or a force PSD (white noise solved exactly, by the Lyapunov equation);
+    writes OUT/<stem>_psd.h5 and OUT/<stem>_psd.png."""
+    from smdcli.commands.psd import format_psd, psd_summary
+    from smdcli.commands.psd import psd as run_psd
+
+    _carried_out(lambda: run_psd(scenario, profile, out, on, units, plots=not no_plots),
+                 {"scenario": str(scenario)}, as_json, quiet, psd_summary, lambda _, data: format_psd(data))
+
+
+def rsa(
+    scenario: Path = typer.Argument(..., help="Scenario TOML file of a linear scene."),
+    spectrum_file: Path = typer.Option(..., "--spectrum", help="A spectrum file of smd spectrum (.h5), or a design "
+                                       "spectrum: two columns, period s and Sa in g."),
+    combination: str = typer.Option("cqc", "--combination", help="cqc, srss or abssum (the file holds all three)."),
+    modes: str = typer.Option("all", "--modes", help="The lowest N modes, or all."),
+    out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
+    no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
+    as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+):
+    """Response-spectrum analysis: modes, participation, effective masses, CQC/SRSS/ABSSUM peaks.
+
+    Peak displacements, element forces and base shear combined by each rule; writes OUT/<stem>_rsa.h5 and
+    OUT/<stem>_rsa.png."""
+    from smdcli.commands.rsa import format_rsa, rsa_summary
+    from smdcli.commands.rsa import rsa as run_rsa
+
+    _carried_out(lambda: run_rsa(scenario, spectrum_file, out, combination, modes, plots=not no_plots),
+                 {"scenario": str(scenario)}, as_json, quiet, rsa_summary, lambda _, data: format_rsa(data))
