@@ -171,7 +171,7 @@ SPECTRUM_CASES = {
     "step_of_1e300": (_record([(0.0, 0.0), (1e300, 1.0), (2e300, 0.0), (3e300, 0.5)]), [], "--periods:"),
     "step_subnormal": (_record([(0.0, 0.0), (5e-324, 1.0), (1e-323, 0.0)]), [], "a normal double"),
     "values_overflow_in_g": (_record([(0, 0), (0.01, 1e308), (0.02, -1e308), (0.03, 0.5)]), [], "overflows"),
-    "values_overflow_in_the_spectrum": (_record([(0, 1e300), (0.01, 1.000001e300), (0.02, 1e300)]),
+    "values_overflow_in_the_spectrum": (_record([(0, 1.5e308), (0.01, 1.5e308), (0.02, 1.5e308)]),
                                         ["--units", "m/s^2"], "the spectrum overflows double precision"),
     "too_many_rows": ("".join(f"{k * 0.001:.3f},0\n" for k in range(MAX_ROWS + 2000)), [], "rows"),
 }

@@ -135,3 +135,16 @@ def test_bad_psd_options_exit_2(tmp_path, args, message):
                                     "-o", str(tmp_path / "o")])
     assert done.exit_code == 2 and message in done.output and "Traceback" not in done.output
     assert not (tmp_path / "o").exists()
+
+
+def test_a_response_that_overflows_is_refused(tmp_path):
+    profile = tmp_path / "huge.csv"
+    profile.write_text("10,1e307\n1000,1e307\n")  # over double precision once in (m/s^2)^2/Hz
+    done = CliRunner().invoke(app, ["psd", str(SCENARIOS / "component_random_vibration.toml"), "--input",
+                                    str(profile), "-o", str(tmp_path / "o")])
+    assert done.exit_code == 2 and "overflow" in done.output and "Traceback" not in done.output
+    profile.write_text("10,1e306\n1000,1e306\n")  # in range, but not the response
+    done = CliRunner().invoke(app, ["psd", str(SCENARIOS / "component_random_vibration.toml"), "--input",
+                                    str(profile), "-o", str(tmp_path / "o")])
+    assert done.exit_code == 2 and "overflow" in done.output and "Traceback" not in done.output
+    assert not (tmp_path / "o").exists()

@@ -166,3 +166,11 @@ def test_bad_ground_motion_processing_is_one_line(tmp_path, extra, message):
                      f'file = "{RECORD}"\nunits = "g"\n{extra}')
     done = CliRunner().invoke(app, ["simulate", str(scene), "-o", str(tmp_path / "o")])
     assert done.exit_code == 2 and message in done.output and "Traceback" not in done.output
+
+
+def test_a_record_whose_measures_overflow_is_refused(tmp_path):
+    path = tmp_path / "huge.csv"
+    path.write_text("0,1e200\n0.01,-1e200\n0.02,1e200\n0.03,0\n")
+    done = CliRunner().invoke(app, ["record", str(path), "--units", "m/s^2", "-o", str(tmp_path / "o")])
+    assert done.exit_code == 2 and "overflow double precision" in done.output and "Traceback" not in done.output
+    assert not (tmp_path / "o").exists()

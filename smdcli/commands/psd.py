@@ -54,6 +54,8 @@ def read_profile(spec: str, factor: float) -> tuple[Profile | None, float | None
             raise UsageError(f"--input: expected white:LEVEL with a number, found {spec!r}") from None
         if not (math.isfinite(level) and level > 0):
             raise UsageError(f"--input: expected a white-noise level > 0, found {spec!r}")
+        if not math.isfinite(level * factor):
+            raise UsageError(f"--input: {spec}: the level overflows double precision once converted to SI")
         return None, level * factor
     path = Path(spec)
     if not path.is_file():
@@ -77,7 +79,11 @@ def read_profile(spec: str, factor: float) -> tuple[Profile | None, float | None
         raise UsageError(f"{path}: expected at least two breakpoints (Hz, level), found {len(table)}")
     if not (np.diff(table[:, 0]) > 0).all():
         raise UsageError(f"{path}: expected increasing frequencies")
-    return Profile(table[:, 0], table[:, 1] * factor), None
+    with np.errstate(over="ignore"):
+        levels = table[:, 1] * factor
+    if not np.isfinite(levels).all():
+        raise UsageError(f"{path}: a level overflows double precision once converted to SI; check --units")
+    return Profile(table[:, 0], levels), None
 
 
 def psd(path: str | Path, spec: str, out: str | Path, on: str | None = None, units: str = "g",
@@ -110,14 +116,19 @@ def psd(path: str | Path, spec: str, out: str | Path, on: str | None = None, uni
     Q = quantities(M, C, K, model.dofs, springs, dampers)
     A = state_matrix(M, C, K)
     B = input_vector(M, support, None if support else model.dofs.index(on))
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused below, in one line
+        variance = _variance(A, B, Q, profile, white, support, natural_hz)
     if white is not None:
-        variance = white_noise_variance(A, B, Q, white, support)
         method = "white noise over all frequencies: the Lyapunov equation, exact"
         low, high = natural_hz.min() / 20, natural_hz.max() * 20
     else:
-        variance = profile_variance(A, B, Q, profile, support, natural_hz)
         method = "profile: |H|^2 S integrated per segment (quad_vec, relative 1e-12)"
         low, high = profile.frequency[0], profile.frequency[-1]
+    finite = np.isfinite(variance) | np.isposinf(variance) & np.array([g == "acceleration" for g in Q.groups]) \
+        & (not support) & (white is not None)
+    if not finite.all():
+        raise UsageError(f"{path}: the response to {spec} overflows double precision; check the input's levels "
+                         "and --units")
     f = _curve_frequencies(low, high, natural_hz, modes.damping_ratios)
     H = transfer(A, B, Q, f, support)
     S = np.full_like(f, white) if white is not None else profile(f)
@@ -140,6 +151,17 @@ def psd(path: str | Path, spec: str, out: str | Path, on: str | None = None, uni
             save_figure(psd_figure(run), png)
             run.outputs.append(png)
     return run
+
+
+def _variance(A, B, Q, profile, white, support: bool, natural_hz) -> np.ndarray:
+    """Each quantity's variance: exact for white noise, by quadrature for a profile."""
+    if white is not None:
+        return white_noise_variance(A, B, Q, white, support)
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # quad_vec's notices of an overflowing integrand: refused by the caller
+        return profile_variance(A, B, Q, profile, support, natural_hz)
 
 
 def _curve_frequencies(low: float, high: float, natural_hz: np.ndarray, zeta: np.ndarray) -> np.ndarray:
@@ -170,7 +192,7 @@ def psd_summary(run: PsdRun) -> dict:
     if run.support:
         data["rms_acceleration_g"] = {k: v / STANDARD_GRAVITY for k, v in rms["acceleration"].items()}
         level = (run.white if run.white is not None else float(run.profile(np.array([run.natural_hz[0]]))[0]))
-        if len(run.dofs) == 1 and run.damping[0] > 0:
+        if len(run.dofs) == 1 and run.damping[0] > 0 and level > 0:  # Miles needs the input at fn
             data["miles_grms_g"] = miles(float(run.natural_hz[0]), float(run.damping[0]),
                                          level / STANDARD_GRAVITY**2)
         if run.profile is not None:

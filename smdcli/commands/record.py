@@ -66,7 +66,12 @@ def record_command(path: str | Path, out: str | Path, baseline: str = "none", ba
     record = _record(path, units, scale, shift)
     if len(record.time) < 3 * (2 * order + 1) and band is not None:
         raise UsageError(f"{record.path}: {len(record.time)} samples are too few to filter at order {order}")
-    processed = process(record.time, record.acceleration, baseline, parse_band(band, record.step), order)
+    with np.errstate(over="ignore", invalid="ignore"):
+        processed = process(record.time, record.acceleration, baseline, parse_band(band, record.step), order)
+    m = processed.measures
+    if not all(np.isfinite([m.pga, m.pgv, m.pgd, m.arias, m.cav, m.housner, m.d5_95])):
+        raise UsageError(f"{record.path}: the record's measures overflow double precision (peak "
+                         f"{np.abs(record.acceleration).max():.3g} m/s^2); check its units and --scale")
     run = RecordRun(record, processed)
     from smdcli.scenario.records import velocity_drift
 
