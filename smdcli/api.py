@@ -5,6 +5,18 @@
     result.displacement, result.energy.max_relative_residual, result.elements.spring
     smdcli.write(result, "out/two_dof.h5")                          # the file `smd simulate` writes
 
+The analyses (smdcli.analysis) take a record, a Model or a Result and return arrays; these are the ones the
+commands run, exposed here by name:
+
+    smdcli.read_record(path, units="g")                  # a Record: time, acceleration in m/s^2
+    smdcli.response_spectrum(t, a, periods, dampings)     # Sd, Sv, Sa, exact between samples
+    smdcli.constant_ductility(t, a, periods, dampings, ductilities, hardening)   # Cy, Ry, ...
+    smdcli.constant_strength(t, a, periods, dampings, strengths, hardening)
+    smdcli.shock_response_spectrum(t, a, frequencies_hz, q)
+    smdcli.process_record(t, a, baseline, band, order)     # corrected, integrated, measured
+    smdcli.modal_participation(M, K, C) and smdcli.response_spectrum_analysis(M, K, C, Sa_of_T_zeta, ...)
+    smdcli.build(scenario)                                # the Model: M, C, K, dofs, modes
+
 Errors are exceptions: ScenarioError for bad input (the CLI's exit 2), SolverFailed when a method fails (exit 1).
 Must not import: cli.
 """
@@ -51,3 +63,25 @@ def write(result: Result, path: str | Path) -> Path:
     scenario, model = result.origin
     write_simulation(path, scenario, model, result)
     return path
+
+
+# name -> (module, attribute): the analyses and the pieces they take, imported on first use
+ANALYSES = {
+    "read_record": ("smdcli.scenario.records", "read_record"),
+    "build": ("smdcli.model", "build"),
+    "response_spectrum": ("smdcli.analysis.spectrum", "response_spectrum"),
+    "constant_ductility": ("smdcli.analysis.inelastic", "constant_ductility"),
+    "constant_strength": ("smdcli.analysis.inelastic", "constant_strength"),
+    "shock_response_spectrum": ("smdcli.analysis.shock", "shock_response_spectrum"),
+    "process_record": ("smdcli.analysis.record", "process"),
+    "modal_participation": ("smdcli.analysis.rsa", "modal_participation"),
+    "response_spectrum_analysis": ("smdcli.analysis.rsa", "response_spectrum_analysis"),
+}
+
+
+def analysis(name: str):
+    """One of ANALYSES, imported."""
+    import importlib
+
+    module, attribute = ANALYSES[name]
+    return getattr(importlib.import_module(module), attribute)

@@ -152,7 +152,7 @@ class Result:
     t_failed: float | None = None  # where a failed run stopped
     notes: tuple[str, ...] = field(default=())
     ground: GroundHistory | None = None  # with support motion: displacement, velocity, acceleration are relative
-    elements: ElementForces | None = None  # attached after a successful run (solvers.energy.with_physics)
+    elements: ElementForces | None = None  # attached after a successful run (analysis.energy.with_physics)
     energy: Energy | None = None
     nonsmooth: NonsmoothHistory | None = None  # a scene with hysteretic springs, friction or stops: their history
     origin: tuple | None = field(default=None, repr=False, compare=False)  # (Scenario, Model) it was solved from

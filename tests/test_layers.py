@@ -155,3 +155,17 @@ def test_help_and_scenario_loading_import_no_heavy_module():
     result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, cwd=PACKAGE.parent)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip().splitlines()[-1] == "[] []", result.stdout
+
+
+def test_the_api_exposes_every_analysis_by_name():
+    """smdcli.<name> for each analysis the API lists is the analysis module's own function, and analyses import
+    nothing above them (the layers above check that)."""
+    import importlib
+
+    import smdcli
+    from smdcli import api
+
+    assert set(smdcli._ANALYSES) == set(api.ANALYSES)
+    for name, (module, attribute) in api.ANALYSES.items():
+        assert getattr(smdcli, name) is getattr(importlib.import_module(module), attribute), name
+    assert set(smdcli._ANALYSES) <= set(smdcli.__all__)

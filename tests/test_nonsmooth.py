@@ -13,7 +13,7 @@ from conftest import SCENARIOS, bundled, model_of
 from smdcli.errors import ScenarioError
 from smdcli.solvers import solve
 from smdcli.solvers.base import Tolerances
-from smdcli.solvers.energy import with_physics
+from smdcli.analysis.energy import with_physics
 
 G = 9.80665
 

@@ -13,7 +13,7 @@ import pytest
 
 from conftest import ROOT, SCENARIOS, bundled, model_of, one_dof
 from smdcli.solvers.checked import solve_scenario
-from smdcli.solvers.energy import with_physics
+from smdcli.analysis.energy import with_physics
 
 LINEAR = sorted(p.stem for p in SCENARIOS.glob("*.toml") if bundled(p.stem)[1].is_linear)
 
@@ -392,7 +392,7 @@ def test_passing_expects_and_a_golden_check_exit_0(tmp_path, cli):
 
 def test_the_hermite_rule_agrees_with_the_closed_form_where_the_grid_resolves_the_motion():
     """The fallback quadrature (quintic Hermite of x, v, a; 8-point Gauss) against the closed form, O(h^6)."""
-    from smdcli.solvers import energy
+    from smdcli.analysis import energy
 
     sc, model, grid = bundled("two_dof_forced")
     result = solve_scenario(sc, model, grid)

@@ -81,7 +81,7 @@ def _loops(sc: Scenario, method: str | None, label: str | None) -> list[Curve]:
     """Force against deformation d = x_b - x_a of every hysteretic spring (Curve.x = d, Curve.v = tension)."""
     from smdcli.model import build
     from smdcli.solvers.checked import solve_checked
-    from smdcli.solvers.energy import with_physics
+    from smdcli.analysis.energy import with_physics
 
     result = with_physics(build(sc), solve_checked(sc, method))
     forces, index = result.elements, {name: j for j, name in enumerate(sc.dof_names)}

@@ -54,7 +54,7 @@ def solve_run(sc: Scenario, model: Model, grid: np.ndarray, options: Options = O
     """Solve a scenario as `smd simulate` does: with its element forces and energy balance where it succeeded."""
     result = solve_scenario(sc, model, grid, options.method, options.rtol, options.atol)
     if result.success:
-        from smdcli.solvers.energy import with_physics
+        from smdcli.analysis.energy import with_physics
 
         result = with_physics(model, result)
     return dataclasses.replace(result, origin=(sc, model))

@@ -18,7 +18,7 @@ The integrals are taken so that they add no error of their own where the run has
   error O(h^6); the steps a force discontinuity or a ground jump interrupts are re-integrated from the run's
   state at their start, across what happens inside them.
 
-Must not import: sweep, io, plots, commands, cli.
+Must not import: commands, io, plots, cli.
 """
 
 from __future__ import annotations
@@ -30,7 +30,8 @@ from typing import Callable
 import numpy as np
 
 from smdcli.model import Model
-from smdcli.model.elements import element_forces, incidence_row
+from smdcli.analysis.forces import element_forces
+from smdcli.model.elements import incidence_row
 from smdcli.result import Energy, Result, largest_energy
 from smdcli.solvers.base import Tolerances
 
