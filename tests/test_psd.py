@@ -148,3 +148,32 @@ def test_a_response_that_overflows_is_refused(tmp_path):
                                     str(profile), "-o", str(tmp_path / "o")])
     assert done.exit_code == 2 and "overflow" in done.output and "Traceback" not in done.output
     assert not (tmp_path / "o").exists()
+
+
+def test_white_force_on_one_mass_of_two_against_quadrature(tmp_path):
+    """The mass the force reaches directly has a white acceleration (infinite RMS, reported as null in JSON); the
+    other's acceleration and both displacements are finite and equal the integral over all frequencies."""
+    text = ('[time]\nend = 1.0\n[[mass]]\nname = "a"\nm = 2.0\n[[mass]]\nname = "b"\nm = 0.3\n[[spring]]\n'
+            'connects = ["ground", "a"]\nk = 400.0\n[[spring]]\nconnects = ["a", "b"]\nk = 90.0\n[[damper]]\n'
+            'connects = ["ground", "a"]\nc = 3.0\n[[damper]]\nconnects = ["a", "b"]\nc = 0.4\n')
+    level = 2.0
+    data = run(scene(tmp_path, text), "--input", f"white:{level}", "--on", "a", "-o", tmp_path)
+    M = np.diag([2.0, 0.3])
+    K = np.array([[490.0, -90.0], [-90.0, 90.0]])
+    C = np.array([[3.4, -0.4], [-0.4, 0.4]])
+
+    def x(f):
+        w = 2 * math.pi * f
+        return np.linalg.solve(K - w * w * M + 1j * w * C, np.array([1.0, 0.0]))
+
+    natural = np.sqrt(np.sort(np.linalg.eigvals(np.linalg.solve(M, K)).real)) / (2 * math.pi)
+    edges = [0.0, *natural, 10 * natural[-1], np.inf]
+
+    def total(g):
+        return sum(quad(g, lo, hi, epsabs=0, epsrel=1e-11, limit=2000)[0] for lo, hi in zip(edges[:-1], edges[1:]))
+
+    assert data["rms"]["acceleration"]["a"] is None
+    assert data["rms"]["displacement"]["a"] == pytest.approx(math.sqrt(level * total(lambda f: abs(x(f)[0]) ** 2)),
+                                                             rel=1e-8)
+    acc_b = total(lambda f: abs((2 * math.pi * f) ** 2 * x(f)[1]) ** 2)
+    assert data["rms"]["acceleration"]["b"] == pytest.approx(math.sqrt(level * acc_b), rel=1e-8)

@@ -106,9 +106,12 @@ def white_noise_variance(A: np.ndarray, B: np.ndarray, Q: Quantities, level: flo
 
     P = solve_continuous_lyapunov(A, -np.outer(B, B) * (level / 2.0))
     variance = np.einsum("qi,ij,qj->q", Q.L, P, Q.L)
-    if not support:  # a force's own share of the acceleration is white: its variance is infinite
-        accel = np.array([g == "acceleration" for g in Q.groups])
-        variance[accel] = np.inf
+    if not support:  # a DOF the force reaches directly (M^-1 F) has a white acceleration: infinite variance
+        n = len(B) // 2
+        rows = [i for i, g in enumerate(Q.groups) if g == "acceleration"]
+        for j, row in enumerate(rows):
+            if B[n + j] != 0.0:
+                variance[row] = np.inf
     return variance
 
 

@@ -124,8 +124,11 @@ def psd(path: str | Path, spec: str, out: str | Path, on: str | None = None, uni
     else:
         method = "profile: |H|^2 S integrated per segment (quad_vec, relative 1e-12)"
         low, high = profile.frequency[0], profile.frequency[-1]
-    finite = np.isfinite(variance) | np.isposinf(variance) & np.array([g == "acceleration" for g in Q.groups]) \
-        & (not support) & (white is not None)
+    direct = np.zeros(len(variance), dtype=bool)  # a force's own mass under white noise: infinite by right
+    if not support and white is not None:
+        accel = [i for i, g in enumerate(Q.groups) if g == "acceleration"]
+        direct[[accel[j] for j in np.flatnonzero(B[len(M):])]] = True
+    finite = np.isfinite(variance) | (np.isposinf(variance) & direct)
     if not finite.all():
         raise UsageError(f"{path}: the response to {spec} overflows double precision; check the input's levels "
                          "and --units")
