@@ -1,0 +1,196 @@
+"""The peers a user would pick instead, on the same inputs as smd, in one process where they run in Python: time
+(median of repeats) and error of each, in one table. Peers that are not installed are skipped with a line
+(pip install -e '.[peers]': openseespy, eqsig, pyrotd, python-control; scipy is always there).
+
+    python benchmarks/peers.py [--repeats 7]
+
+Work compared:
+- response spectrum, 200 periods (0.02 to 10 s), 5 %, of a 4,001-sample record (the synthetic recipe, 40 s at
+  100 Hz): smd (exact, peaks located between samples) against eqsig's Nigam-Jennings pseudo spectra and pyrotd;
+  error: the largest |Sa - Sa_ref| over the periods from 6 dt up (eqsig gives the PGA below), over the largest
+  Sa_ref, the reference being scipy's lsim (exact for the linearly interpolated record) sampled 50 times finer
+  than the record, each peak polished by a parabola (smd's own error is within that reference's);
+- a linear 3-DOF forced response (three_dof_forced, 0..120 s, 12,001 points): smd exact against
+  python-control's forced_response and scipy's solve_ivp RK45 (rtol 1e-6); error: largest displacement
+  difference from DOP853 at rtol 1e-12, over the peak;
+- an elastoplastic 1-DOF under the record: smd exact against OpenSees ElasticPP at dt / 16 (from
+  benchmarks/elastoplastic_vs_opensees.py); error against smd's event-driven Radau at rtol 1e-11.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import math
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "records"))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+G = 9.80665
+
+
+def timed(fn, repeats: int):
+    """(median seconds, last result)."""
+    times, out = [], None
+    for _ in range(repeats):
+        start = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times), out
+
+
+def installed(name: str) -> bool:
+    return importlib.util.find_spec(name) is not None
+
+
+def lsim_reference(t, a, periods, zeta, finer=50):
+    """Sa by scipy's lsim on a grid `finer` times finer, each peak polished by the parabola through its samples."""
+    from scipy.signal import lsim
+
+    fine = np.linspace(t[0], t[-1], (len(t) - 1) * finer + 1)
+    u = np.interp(fine, t, a)
+    out = []
+    for T in periods:
+        w = 2 * math.pi / T
+        _, y, _ = lsim(([-1.0], [1.0, 2 * zeta * w, w * w]), u, fine)
+        y = np.abs(y)
+        i = int(np.clip(np.argmax(y), 1, len(y) - 2))
+        y0, y1, y2 = y[i - 1], y[i], y[i + 1]
+        curvature = y0 - 2 * y1 + y2
+        peak = y1 - (y0 - y2) ** 2 / (8 * curvature) if curvature < 0 else y1
+        out.append(w * w * peak)
+    return np.array(out)
+
+
+def spectrum_rows(repeats):
+    import make_synthetic
+
+    from smdcli.analysis.spectrum import response_spectrum
+
+    make_synthetic.DURATION_S = 40.0
+    t, a_g = make_synthetic.synthetic_record()
+    a = a_g * G
+    dt = float(t[1] - t[0])
+    periods = np.logspace(math.log10(0.02), 1, 200)
+    reference = lsim_reference(t, a, periods, 0.05)
+    response_spectrum(t, a, periods[:2], [0.05])  # kernels loaded
+    seconds, found = timed(lambda: response_spectrum(t, a, periods, [0.05]), repeats)
+    # eqsig returns the PGA for periods below 6 dt (its convention): errors are taken over the others
+    kept = periods >= 6 * dt
+
+    def error(sa):
+        return np.abs(np.asarray(sa)[kept] - reference[kept]).max() / reference.max()
+
+    smd = (seconds, error(found.Sa[0]))
+    work = f"response spectrum, {len(t)} samples, 200 periods, 5 %"
+    rows = []
+    if installed("eqsig"):
+        import eqsig
+
+        eqsig.sdof.pseudo_response_spectra(a, dt, periods[:2], 0.05)
+        s, (_, _, sa) = timed(lambda: eqsig.sdof.pseudo_response_spectra(a, dt, periods, 0.05), repeats)
+        rows.append((work, smd, "eqsig 1.2 (Nigam-Jennings)", (s, error(sa))))
+    else:
+        rows.append((work, smd, "eqsig: not installed", None))
+    if installed("pyrotd"):
+        import pyrotd
+
+        freqs = 1 / periods
+        s, sa = timed(lambda: pyrotd.calc_spec_accels(dt, a, freqs, 0.05), repeats)
+        sa = np.asarray(sa.spec_accel if hasattr(sa, "spec_accel") else sa)
+        rows.append((work, smd, "pyrotd 0.6 (frequency domain)", (s, error(sa))))
+    else:
+        rows.append((work, smd, "pyrotd: not installed", None))
+    return rows
+
+
+def linear_rows(repeats):
+    from scipy.integrate import solve_ivp
+
+    from smdcli import scenario
+    from smdcli.model import build, time_grid
+    from smdcli.solvers import solve
+    from smdcli.solvers.base import Tolerances
+
+    sc = scenario.load(ROOT / "scenarios" / "three_dof_forced.toml")
+    model = build(sc)
+    grid = time_grid(sc.time)
+    y0 = np.concatenate([model.x0, model.v0])
+
+    def rhs(t, y):
+        return model.state_matrix @ y + model.input_matrix @ model.forces(t)
+
+    ref = solve_ivp(rhs, (grid[0], grid[-1]), y0, method="DOP853", t_eval=grid, rtol=1e-12, atol=1e-14).y[:3].T
+    peak = np.abs(ref).max()
+    seconds, found = timed(lambda: solve(model, grid, "exact", Tolerances()).displacement, repeats)
+    smd = (seconds, np.abs(found - ref).max() / peak)
+    work = "linear 3-DOF forced response, 12,001 points"
+    rows = []
+    s, y = timed(lambda: solve_ivp(rhs, (grid[0], grid[-1]), y0, method="RK45", t_eval=grid, rtol=1e-6,
+                                   atol=1e-9).y[:3].T, 1)
+    rows.append((work, smd, "scipy solve_ivp RK45, rtol 1e-6", (s, np.abs(y - ref).max() / peak)))
+    if installed("control"):
+        import control
+
+        n = model.n
+        system = control.ss(model.state_matrix, model.input_matrix, np.hstack([np.eye(n), np.zeros((n, n))]),
+                            np.zeros((n, model.input_matrix.shape[1])))
+        U = np.array([model.forces(t) for t in grid]).T
+        s, response = timed(lambda: control.forced_response(system, grid, U, X0=y0), repeats)
+        rows.append((work, smd, "python-control forced_response", (s, np.abs(response.outputs.T - ref).max() / peak)))
+    else:
+        rows.append((work, smd, "python-control: not installed", None))
+    return rows
+
+
+def opensees_rows():
+    import elastoplastic_vs_opensees as ep
+
+    t, a = ep.record()
+    w = 2 * np.pi / ep.T_N
+    k, c = ep.M * w * w, 2 * ep.ZETA * ep.M * w
+    from smdcli.analysis.spectrum import response_spectrum
+
+    elastic = response_spectrum(t, a * G, np.array([ep.T_N]), np.array([ep.ZETA])).Sd[0, 0]
+    fy = 0.25 * k * elastic
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        csv = Path(tmp) / "record.csv"
+        csv.write_text("".join(f"{float(ti)!r},{float(ai)!r}\n" for ti, ai in zip(t, a)))
+        seconds, result, reference, _ = ep.smd_runs(ep.scenario_text(csv, fy, 0.0))
+    peak = np.abs(reference).max()
+    smd = (seconds, np.abs(result.displacement[:, 0] - reference).max() / peak)
+    work = f"elastoplastic 1-DOF, {len(t)}-sample record"
+    found = ep.opensees(t, a, k, c, fy, 0.0)
+    if found is None:
+        return [(work, smd, "OpenSees: not installed", None)]
+    substeps, s, x = found[-1]
+    return [(work, smd, f"OpenSees ElasticPP, Newmark dt {0.01 / substeps:g}", (s, np.abs(x - reference).max() / peak))]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=7)
+    args = parser.parse_args()
+    rows = spectrum_rows(args.repeats) + linear_rows(args.repeats) + opensees_rows()
+    print(f"{'work':<46} {'smd time':>10} {'smd error':>10}   {'peer':<38} {'peer time':>10} {'peer error':>10} "
+          f"{'time ratio':>10}")
+    for work, (s_time, s_err), peer, found in rows:
+        if found is None:
+            print(f"{work:<46} {s_time * 1e3:8.1f} ms {s_err:10.1e}   {peer:<38}")
+            continue
+        p_time, p_err = found
+        print(f"{work:<46} {s_time * 1e3:8.1f} ms {s_err:10.1e}   {peer:<38} {p_time * 1e3:8.1f} ms {p_err:10.1e} "
+              f"{p_time / s_time:9.2f}x")
+    print("time ratio: peer time / smd time (above 1: smd is faster)")
+
+
+if __name__ == "__main__":
+    main()
