@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from smdcli.kernels.compiler import kernel
+from smdcli.kernels.compiler import inlined, kernel
 
 DISPLACEMENT, ABSOLUTE_ACCELERATION = 0, 1  # the quantity whose extremes are measured
 PIECES_PER_PERIOD = 8
@@ -38,7 +38,7 @@ def _cs(omega, zeta, tau):
     return decay, decay * tau
 
 
-@kernel
+@inlined
 def _quantity(kind, omega, zeta, y, v, a, slope):
     """(q, dq/dt) of the measured quantity from the relative state and the input's value and slope."""
     if kind == DISPLACEMENT:
@@ -90,14 +90,15 @@ def _piece_propagator(w, z, h):
     return c + s * z * w, s, -s * w * w, c - s * z * w
 
 
-@kernel
+@inlined
 def _propagate(kind, w, z, h, e, pieces, t0, y, v, a0, slope, best):
     """Advance (y, v) over `pieces` pieces of length h (transition e) of an interval starting at t0 with input
     a0 + slope tau, updating best = [largest q, its time, smallest q, its time] with every extremum; returns the
     new (y, v)."""
     e11, e12, e21, e22 = e
-    P1 = -slope / (w * w)
-    P0 = (-a0 - 2.0 * z * w * P1) / (w * w)
+    inv_w2 = 1.0 / (w * w)  # hoisted by the compiler out of the caller's loop once inlined
+    P1 = -slope * inv_w2
+    P0 = (-a0 - 2.0 * z * w * P1) * inv_w2
     zy, zv = y - P0, v - P1
     q0, d0 = _quantity(kind, w, z, y, v, a0, slope)
     for j in range(pieces):
