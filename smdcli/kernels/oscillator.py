@@ -91,10 +91,10 @@ def _piece_propagator(w, z, h):
 
 
 @inlined
-def _propagate(kind, w, z, h, e, pieces, t0, y, v, a0, slope, best):
+def _propagate(kind, w, z, h, e, pieces, t0, y, v, a0, slope, q_max, t_max, q_min, t_min):
     """Advance (y, v) over `pieces` pieces of length h (transition e) of an interval starting at t0 with input
-    a0 + slope tau, updating best = [largest q, its time, smallest q, its time] with every extremum; returns the
-    new (y, v)."""
+    a0 + slope tau; returns the new (y, v) and the extremes so far (largest q, its time, smallest q, its time),
+    every extremum inside the interval counted."""
     e11, e12, e21, e22 = e
     inv_w2 = 1.0 / (w * w)  # hoisted by the compiler out of the caller's loop once inlined
     P1 = -slope * inv_w2
@@ -107,23 +107,23 @@ def _propagate(kind, w, z, h, e, pieces, t0, y, v, a0, slope, best):
         tau1 = tau0 + h
         y, v = ny + P0 + P1 * tau1, nv + P1
         q1, d1 = _quantity(kind, w, z, y, v, a0 + slope * tau1, slope)
-        if q1 > best[0]:
-            best[0], best[1] = q1, t0 + tau1
-        if q1 < best[2]:
-            best[2], best[3] = q1, t0 + tau1
+        if q1 > q_max:
+            q_max, t_max = q1, t0 + tau1
+        if q1 < q_min:
+            q_min, t_min = q1, t0 + tau1
         # an extremum inside the piece exceeds its ends by less than h max |dq/dt| at the ends: refine it only
         # where it could pass the extreme found so far
         reach = h * max(abs(d0), abs(d1))
-        if d0 > 0.0 and d1 < 0.0 and max(q0, q1) + reach > best[0]:
+        if d0 > 0.0 and d1 < 0.0 and max(q0, q1) + reach > q_max:
             q, theta = _extremum(kind, w, z, zy, zv, P0, P1, a0, slope, tau0, h, d0, d1)
-            if q > best[0]:
-                best[0], best[1] = q, t0 + tau0 + theta
-        elif d0 < 0.0 and d1 > 0.0 and min(q0, q1) - reach < best[2]:
+            if q > q_max:
+                q_max, t_max = q, t0 + tau0 + theta
+        elif d0 < 0.0 and d1 > 0.0 and min(q0, q1) - reach < q_min:
             q, theta = _extremum(kind, w, z, zy, zv, P0, P1, a0, slope, tau0, h, d0, d1)
-            if q < best[2]:
-                best[2], best[3] = q, t0 + tau0 + theta
+            if q < q_min:
+                q_min, t_min = q, t0 + tau0 + theta
         zy, zv, q0, d0 = ny, nv, q1, d1
-    return y, v
+    return y, v, q_max, t_max, q_min, t_min
 
 
 @kernel
@@ -131,23 +131,25 @@ def oscillator_extremes(acceleration, dt, omega, zeta, kind, tail_periods, out):
     """For each oscillator i from rest: out[i] = (largest q, its time, smallest q, its time) over the record and
     `tail_periods` of its own periods of free motion after the record's end (the residual response)."""
     n = acceleration.shape[0]
-    best = np.zeros(4)
+    inv_dt = 1.0 / dt
     for i in range(omega.shape[0]):
         w, z = omega[i], zeta[i]
         period = 2.0 * math.pi / w
         pieces = max(1, int(math.ceil(PIECES_PER_PERIOD * dt / period)))
-        best[:] = 0.0
+        q_max = t_max = q_min = t_min = 0.0
         y = v = 0.0
         h = dt / pieces
         e = _piece_propagator(w, z, h)
         for k in range(n - 1):
-            slope = (acceleration[k + 1] - acceleration[k]) / dt
-            y, v = _propagate(kind, w, z, h, e, pieces, k * dt, y, v, acceleration[k], slope, best)
+            slope = (acceleration[k + 1] - acceleration[k]) * inv_dt
+            y, v, q_max, t_max, q_min, t_min = _propagate(kind, w, z, h, e, pieces, k * dt, y, v, acceleration[k],
+                                                          slope, q_max, t_max, q_min, t_min)
         if tail_periods > 0.0:  # free motion: no input, so pieces of an eighth of the period whatever dt
             h = period / PIECES_PER_PERIOD
-            _propagate(kind, w, z, h, _piece_propagator(w, z, h), int(math.ceil(tail_periods * PIECES_PER_PERIOD)),
-                       (n - 1) * dt, y, v, 0.0, 0.0, best)
-        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = best[0], best[1], best[2], best[3]
+            y, v, q_max, t_max, q_min, t_min = _propagate(
+                kind, w, z, h, _piece_propagator(w, z, h), int(math.ceil(tail_periods * PIECES_PER_PERIOD)),
+                (n - 1) * dt, y, v, 0.0, 0.0, q_max, t_max, q_min, t_min)
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = q_max, t_max, q_min, t_min
 
 
 def extremes(acceleration: np.ndarray, dt: float, omega: np.ndarray, zeta: np.ndarray, kind: int,
