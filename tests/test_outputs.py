@@ -442,3 +442,23 @@ def test_a_fixed_step_run_of_a_nonlinear_scene_is_judged_across_jumps_inside_out
     residual = result.energy.max_relative_residual
     assert reference.energy.max_relative_residual < 1e-9
     assert error / 10 < residual < 10 * error, (residual, error)
+
+
+def test_a_large_model_keeps_its_modes_in_data_sets_not_attributes(tmp_path, cli):
+    """HDF5 caps an object's header (its attributes) at 64 KB: beyond 256 modes the per-mode arrays are data sets
+    only, so a file holds a model of any size (10,000 masses overflowed it before)."""
+    n = 300
+    lines = ["[time]", "end = 0.1", "step = 0.01"]
+    for i in range(n):
+        lines += ["[[mass]]", f'name = "m{i}"', "m = 1.0"]
+    for i in range(n):
+        lines += ["[[spring]]", f'connects = ["{"ground" if i == 0 else f"m{i - 1}"}", "m{i}"]', "k = 100.0"]
+    lines += ["[[force]]", 'on = "m0"', 'type = "sine"', "amplitude = 1.0", "omega = 3.0"]
+    scene = tmp_path / "chain.toml"
+    scene.write_text("\n".join(lines) + "\n")
+    assert cli("simulate", scene, "-o", tmp_path, "--no-plots", "-q").exit_code == 0
+    with h5py.File(tmp_path / "chain.h5") as f:
+        modes = f["model/modes"]
+        assert all(np.size(value) <= 256 for value in modes.attrs.values())
+        assert modes["natural_frequencies_rad_s"].shape == (n,) and modes["regimes"].shape == (n,)
+        assert modes["regimes"][0].decode() == "undamped"

@@ -22,6 +22,9 @@ SCHEMA_VERSION = 1
 TIME_ACCURACY = float(np.finfo(float).eps)  # each output time is a decimal start + k*step rounded once
 
 
+ATTRIBUTE_MODES = 256  # the most modes (or nonlinear elements) also listed as attributes: beyond, data sets only
+
+
 def write_header(f, scenario: Scenario, kind: str) -> None:
     """The root attributes every smd file carries, and the provenance to run it again from the file alone."""
     write_provenance(f, kind)
@@ -134,11 +137,13 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
         modes_stated = modes_accuracy(model)
         modes = group.create_group("modes")
         m = model.modes
-        modes.attrs["natural_frequencies_rad_s"] = m.natural_frequencies
-        modes.attrs["damping_ratios"] = m.damping_ratios
-        modes.attrs["regimes"] = np.array(m.regimes, dtype=object).astype(str).tolist()
+        if model.n <= ATTRIBUTE_MODES:  # as attributes too for small models (HDF5 caps an object's header at 64 KB)
+            modes.attrs["natural_frequencies_rad_s"] = m.natural_frequencies
+            modes.attrs["damping_ratios"] = m.damping_ratios
+            modes.attrs["regimes"] = np.array(m.regimes, dtype=object).astype(str).tolist()
         modes.attrs["stiffness_ratio"] = model.stiffness_ratio
         mode = axis(modes, "mode", np.arange(1, model.n + 1))
+        with_scales(_strings(modes, "regimes", [str(r) for r in m.regimes]), mode)
         for name, data, units in (("natural_frequencies_rad_s", m.natural_frequencies, "rad/s"),
                                   ("damping_ratios", m.damping_ratios, "1")):
             ds = with_scales(modes.create_dataset(name, data=data), mode)
@@ -156,7 +161,10 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
         eigen.attrs["columns"] = ["real", "imag"]
         stated(eigen, modes_stated["eigenvalues"])
         if model.nonlinear_paths:
-            group.attrs["nonlinear_elements"] = list(model.nonlinear_paths)
+            if len(model.nonlinear_paths) <= ATTRIBUTE_MODES:
+                group.attrs["nonlinear_elements"] = list(model.nonlinear_paths)
+            with_scales(_strings(group, "nonlinear_elements", list(model.nonlinear_paths)),
+                        axis(group, "nonlinear_element", np.arange(1, len(model.nonlinear_paths) + 1)))
 
 
 def _write_ground(f, scenario: Scenario, model: Model, result: Result, time, dof, accuracy: dict) -> None:
