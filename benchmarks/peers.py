@@ -13,6 +13,8 @@ Work compared:
 - a linear 3-DOF forced response (three_dof_forced, 0..120 s, 12,001 points): smd exact against
   python-control's forced_response and scipy's solve_ivp RK45 (rtol 1e-6); error: largest displacement
   difference from DOP853 at rtol 1e-12, over the peak;
+- a linear chain of 1,000 masses, 1,001 output points: smd exact against OpenSees (Newmark, banded); error
+  against smd's exact solution (whose own error is rounding: its column shows nan);
 - an elastoplastic 1-DOF under the record: smd exact against OpenSees ElasticPP at dt / 16 (from
   benchmarks/elastoplastic_vs_opensees.py); error against smd's event-driven Radau at rtol 1e-11.
 """
@@ -175,11 +177,88 @@ def opensees_rows():
     return [(work, smd, f"OpenSees ElasticPP, Newmark dt {0.01 / substeps:g}", (s, np.abs(x - reference).max() / peak))]
 
 
+CHAIN_OPENSEES = """
+import json, statistics, sys, time
+import numpy as np
+import openseespy.opensees as ops
+n, k, c, m, dt, steps, repeats = json.loads(sys.stdin.read())
+def run():
+    ops.wipe()
+    ops.model("basic", "-ndm", 1, "-ndf", 1)
+    for i in range(n + 1):
+        ops.node(i, 0.0)
+    ops.fix(0, 1)
+    for i in range(1, n + 1):
+        ops.mass(i, m)
+    ops.uniaxialMaterial("Elastic", 1, k, c)   # spring k and damper c on every link
+    for i in range(1, n + 1):
+        ops.element("zeroLength", i, i - 1, i, "-mat", 1, "-dir", 1)
+    ops.timeSeries("Trig", 1, 0.0, 1e9, 2 * np.pi / 5.0, "-factor", 10.0)
+    ops.pattern("Plain", 1, 1)
+    ops.load(1, 1.0)
+    ops.constraints("Plain"); ops.numberer("RCM"); ops.system("BandGeneral")
+    ops.algorithm("Linear"); ops.integrator("Newmark", 0.5, 0.25); ops.analysis("Transient")
+    x = [0.0]
+    for _ in range(steps):
+        ops.analyze(1, dt)
+        x.append(ops.nodeDisp(1, 1))
+    return x
+times = []
+for _ in range(repeats):
+    start = time.perf_counter(); x = run(); times.append(time.perf_counter() - start)
+print(json.dumps({"seconds": statistics.median(times), "x": x}))
+"""
+
+
+def chain_rows(repeats):
+    """A linear chain of 1,000 masses (1 kg, 100 N/m and 0.5 N s/m on every link), a sine force on the first,
+    0..10 s on 1,001 points: smd exact against OpenSees (Newmark average acceleration, banded solver, the
+    output step); error: the first mass's displacement against smd's, over its peak."""
+    import json
+    import os
+    import subprocess
+    import tempfile
+
+    import wall
+
+    from smdcli import scenario
+    from smdcli.model import build, time_grid
+    from smdcli.solvers import solve
+    from smdcli.solvers.base import Tolerances
+
+    n = 1000
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "chain.toml"
+        path.write_text(wall.chain(n, False, "every"))
+        sc = scenario.load(path)
+    model = build(sc)
+    grid = time_grid(sc.time)
+    seconds, result = timed(lambda: solve(model, grid, "exact", Tolerances()), max(1, repeats // 3))
+    x = result.displacement[:, 0]
+    work = f"linear chain of {n} masses, {len(grid)} points"
+    smd = (seconds, 0.0)
+    spec = importlib.util.find_spec("openseespylinux")
+    env = dict(os.environ)
+    if spec is not None and spec.submodule_search_locations:
+        lib = Path(list(spec.submodule_search_locations)[0]) / "lib"
+        env["LD_LIBRARY_PATH"] = f"{lib}:{env.get('LD_LIBRARY_PATH', '')}"
+    elif not installed("openseespy"):
+        return [(work, smd, "OpenSees: not installed", None)]
+    done = subprocess.run([sys.executable, "-c", CHAIN_OPENSEES], capture_output=True, text=True, env=env,
+                          input=json.dumps([n, 100.0, 0.5, 1.0, float(grid[1] - grid[0]), len(grid) - 1, 3]))
+    if done.returncode != 0:
+        return [(work, smd, "OpenSees did not run", None)]
+    found = json.loads(done.stdout.strip().splitlines()[-1])
+    ops_x = np.array(found["x"])
+    return [(work, (seconds, float("nan")), "OpenSees Newmark, dt = output step",
+             (found["seconds"], np.abs(ops_x - x).max() / np.abs(x).max()))]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=7)
     args = parser.parse_args()
-    rows = spectrum_rows(args.repeats) + linear_rows(args.repeats) + opensees_rows()
+    rows = spectrum_rows(args.repeats) + linear_rows(args.repeats) + chain_rows(args.repeats) + opensees_rows()
     print(f"{'work':<46} {'smd time':>10} {'smd error':>10}   {'peer':<38} {'peer time':>10} {'peer error':>10} "
           f"{'time ratio':>10}")
     for work, (s_time, s_err), peer, found in rows:
