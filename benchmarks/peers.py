@@ -24,9 +24,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import math
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -38,13 +36,10 @@ G = 9.80665
 
 
 def timed(fn, repeats: int):
-    """(median seconds, last result)."""
-    times, out = [], None
-    for _ in range(repeats):
-        start = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times), out
+    """(median seconds, last result): compiled_vs_solve_ivp's median_time."""
+    from compiled_vs_solve_ivp import median_time
+
+    return median_time(fn, repeats)
 
 
 def installed(name: str) -> bool:

@@ -57,28 +57,19 @@ def read_profile(spec: str, factor: float) -> tuple[Profile | None, float | None
         if not math.isfinite(level * factor):
             raise UsageError(f"--input: {spec}: the level overflows double precision once converted to SI")
         return None, level * factor
+    from smdcli.scenario.records import ColumnsError, read_columns
+
     path = Path(spec)
-    if not path.is_file():
+    if not path.exists():
         raise UsageError(f"--input: {spec}: no such PSD profile (a two-column table of Hz and level, or white:LEVEL)")
-    rows = []
-    for number, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
-        text = line.split("#")[0].strip()
-        if not text:
-            continue
-        try:
-            values = [float(p) for p in text.replace(",", " ").split()]
-        except ValueError:
-            if not rows:
-                continue  # a header
-            raise UsageError(f"{path}: line {number}: expected two numbers (Hz, level), found {text!r}") from None
-        if len(values) != 2 or not all(math.isfinite(v) for v in values) or values[0] <= 0 or values[1] <= 0:
-            raise UsageError(f"{path}: line {number}: expected a frequency > 0 Hz and a level > 0, found {text!r}")
-        rows.append(values)
-    table = np.array(rows) if rows else np.zeros((0, 2))
-    if len(table) < 2:
-        raise UsageError(f"{path}: expected at least two breakpoints (Hz, level), found {len(table)}")
-    if not (np.diff(table[:, 0]) > 0).all():
-        raise UsageError(f"{path}: expected increasing frequencies")
+    try:
+        frequency, level = read_columns(path)
+    except ColumnsError as exc:
+        raise UsageError(f"{path}: {exc}") from None
+    if len(frequency) < 2 or frequency[0] <= 0 or (level <= 0).any():
+        raise UsageError(f"{path}: expected at least two breakpoints of a frequency > 0 Hz and a level > 0, found "
+                         f"{len(frequency)} from {frequency[0]:g} Hz, smallest level {level.min():g}")
+    table = np.column_stack([frequency, level])
     with np.errstate(over="ignore"):
         levels = table[:, 1] * factor
     if not np.isfinite(levels).all():

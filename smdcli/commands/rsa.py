@@ -6,7 +6,6 @@ Must not import: cli.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -58,26 +57,16 @@ def read_spectrum_source(path: Path) -> SpectrumSource:
                 return SpectrumSource(str(path), "smd spectrum file", f["period"][:], f["damping"][:], f["Sa"][:])
         except OSError as exc:
             raise UsageError(f"{path}: cannot read as HDF5: {exc}") from None
-    rows = []
-    for number, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
-        text = line.split("#")[0].strip()
-        if not text:
-            continue
-        parts = text.replace(",", " ").split()
-        try:
-            values = [float(p) for p in parts]
-        except ValueError:
-            if not rows:
-                continue  # a header
-            raise UsageError(f"{path}: line {number}: expected two numbers (period s, Sa g), found {text!r}") from None
-        if len(values) != 2 or not all(math.isfinite(v) for v in values) or values[0] <= 0 or values[1] < 0:
-            raise UsageError(f"{path}: line {number}: expected a period > 0 s and Sa >= 0 g, found {text!r}")
-        rows.append(values)
-    if len(rows) < 2:
-        raise UsageError(f"{path}: expected a table of at least two rows (period s, Sa g), found {len(rows)}")
-    table = np.array(rows)
-    if not (np.diff(table[:, 0]) > 0).all():
-        raise UsageError(f"{path}: expected increasing periods, found {table[:, 0].tolist()[:6]}...")
+    from smdcli.scenario.records import ColumnsError, read_columns
+
+    try:
+        period, sa = read_columns(path)
+    except ColumnsError as exc:
+        raise UsageError(f"{path}: {exc}") from None
+    if len(period) < 2 or period[0] <= 0 or (sa < 0).any():
+        raise UsageError(f"{path}: expected at least two rows of a period > 0 s and Sa >= 0 g, found {len(period)} "
+                         f"from {period[0]:g} s, smallest Sa {sa.min():g}")
+    table = np.column_stack([period, sa])
     return SpectrumSource(str(path), "design spectrum table", table[:, 0], np.array([0.05]),
                           table[None, :, 1] * STANDARD_GRAVITY)
 

@@ -192,6 +192,13 @@ def read_text(path: Path) -> str:
                            "cannot be read as UTF-8 text") from None
 
 
+def read_columns(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """The two columns of a table file (a PSD profile, a design spectrum), read and checked as a record's are;
+    ColumnsError names what is wrong."""
+    first, second = two_columns(read_text(path))
+    return np.asarray(first, dtype=float), np.asarray(second, dtype=float)
+
+
 @dataclass(frozen=True)
 class Record:
     """A ground acceleration record in m/s^2."""
