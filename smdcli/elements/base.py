@@ -26,6 +26,8 @@ D, RATE, TENSION = "d", "rate", "tension"
 KINK = "kink"  # not an event: where a smooth law's right-hand side has a kink, an integrator restarts
 # Event kinds, as /events/kind names them.
 EVENT_KINDS = ("yield", "unload", "stick", "slip", "contact", "impact", "separation", "rest")
+# The smooth tensions compiled kernels evaluate (smdcli.kernels.rhs): a law's kernel_piece names one of them.
+SMOOTH_NONE, SMOOTH_BOUC_WEN, SMOOTH_STRIBECK, SMOOTH_TANH = range(4)
 
 
 @dataclass(frozen=True)
@@ -48,6 +50,18 @@ class Piece:
     held: bool = False  # d' = 0 (relative to a belt): the tension is the constraint's force
     nonlinear: Callable[[float, float, np.ndarray], float] | None = None  # T(d, d', internal) added, if smooth
     guards: tuple[Guard, ...] = ()
+
+
+@dataclass(frozen=True)
+class KernelPiece:
+    """What a compiled kernel evaluates of a mode beyond its Piece: the smooth tension's code (SMOOTH_*) and
+    parameters, and the power dissipated into energy `term`: pd d'^2 + pc d' (+ the smooth tension's share)."""
+
+    law: int = SMOOTH_NONE
+    parameters: tuple[float, ...] = ()
+    term: str = ""
+    pd: float = 0.0
+    pc: float = 0.0
 
 
 @dataclass
@@ -104,6 +118,10 @@ class Law:
     def dissipation(self, state: State, d: float, rate: float, tension: float) -> tuple[str, float]:
         """(energy term, power) this element dissipates: hysteretic, friction, impact; ('', 0) if none."""
         return "", 0.0
+
+    def kernel_piece(self, state: State) -> KernelPiece:
+        """The mode's smooth tension and dissipated power as compiled kernels take them (none by default)."""
+        return KernelPiece()
 
     def stored(self, state: State, d: float) -> tuple[str, float]:
         """(energy term, energy) this element stores: strain for springs, contact for compliant stops."""

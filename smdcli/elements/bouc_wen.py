@@ -22,7 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-from smdcli.elements.base import KINK, RATE, Guard, Law, Piece, State
+from smdcli.elements.base import KINK, RATE, SMOOTH_BOUC_WEN, Guard, KernelPiece, Law, Piece, State
 
 SMOOTH = "smooth"
 
@@ -93,6 +93,10 @@ class BoucWen(Law):
     def dissipation(self, state: State, d: float, rate: float, tension: float) -> tuple[str, float]:
         z = state.internal["z"]
         return "hysteretic", (1 - self.alpha) * self.k * z * (rate - self.z_rate(z, rate))
+
+    def kernel_piece(self, state: State) -> KernelPiece:
+        return KernelPiece(SMOOTH_BOUC_WEN, ((1 - self.alpha) * self.k, self.A, self.beta, self.gamma, self.n),
+                           "hysteretic")
 
     def stored(self, state: State, d: float) -> tuple[str, float]:
         z = state.internal["z"]

@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-from smdcli.elements.base import D, RATE, Guard, Law, Piece, State
+from smdcli.elements.base import D, RATE, Guard, KernelPiece, Law, Piece, State
 
 ELASTIC, PLUS, MINUS = "elastic", "plastic+", "plastic-"
 
@@ -93,6 +93,11 @@ class Elastoplastic(Law):
     def dissipation(self, state: State, d: float, rate: float, tension: float) -> tuple[str, float]:
         core = self.core
         return "hysteretic", (core.fy * abs(rate) if state.mode != ELASTIC else 0.0)
+
+    def kernel_piece(self, state: State) -> KernelPiece:
+        if state.mode == ELASTIC:
+            return KernelPiece()
+        return KernelPiece(term="hysteretic", pc=(self.core.fy if state.mode == PLUS else -self.core.fy))
 
     def stored(self, state: State, d: float) -> tuple[str, float]:
         core = self.core

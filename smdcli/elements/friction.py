@@ -23,7 +23,8 @@ import math
 from dataclasses import dataclass
 from typing import ClassVar
 
-from smdcli.elements.base import RATE, TENSION, Guard, Law, Piece, State
+from smdcli.elements.base import (RATE, SMOOTH_STRIBECK, SMOOTH_TANH, TENSION, Guard, KernelPiece, Law, Piece,
+                                  State)
 
 STICK, PLUS, MINUS, SMOOTH = "stick", "slip+", "slip-", "smooth"
 
@@ -109,3 +110,14 @@ class Friction(Law):
 
     def dissipation(self, state: State, d: float, rate: float, tension: float) -> tuple[str, float]:
         return "friction", (tension * rate if state.mode != STICK else 0.0)
+
+    def kernel_piece(self, state: State) -> KernelPiece:
+        if state.mode == STICK:
+            return KernelPiece()
+        if state.mode == SMOOTH:
+            return KernelPiece(SMOOTH_TANH, (self.force, self.regularization), "friction", self.viscous)
+        sign = 1.0 if state.mode == PLUS else -1.0
+        if self.stribeck_velocity is None:
+            return KernelPiece(term="friction", pd=self.viscous, pc=sign * self.force)
+        return KernelPiece(SMOOTH_STRIBECK, (sign, self.force, self.static, self.stribeck_velocity), "friction",
+                           self.viscous)

@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-from smdcli.elements.base import D, TENSION, Guard, Law, Piece, State
+from smdcli.elements.base import D, TENSION, Guard, KernelPiece, Law, Piece, State
 
 FREE, AT_MIN, AT_MAX = "free", "contact-min", "contact-max"
 
@@ -100,6 +100,11 @@ class Stop(Law):
         if state.mode == FREE or self.rigid:
             return "", 0.0
         return "impact", self.c * rate * rate
+
+    def kernel_piece(self, state: State) -> KernelPiece:
+        if state.mode == FREE or self.rigid:
+            return KernelPiece()
+        return KernelPiece(term="impact", pd=self.c)
 
     def stored(self, state: State, d: float) -> tuple[str, float]:
         if state.mode == FREE or self.rigid:

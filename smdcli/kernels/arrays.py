@@ -24,6 +24,8 @@ CUBIC_SPRING, QUADRATIC_DAMPER = 0, 1
 (CONSTANT, STEP, PULSE, SINE, COSINE, SQUARE, FOURIER_SQUARE, CHIRP, TABLE_LINEAR, TABLE_PREVIOUS,
  EXPRESSION) = range(11)
 FORCE_PARAMETERS = 4
+LAW_PARAMETERS = 6
+GUARD_D, GUARD_RATE, GUARD_TENSION, GUARD_INTERNAL = range(4)
 
 
 class ModelArrays(NamedTuple):
@@ -48,9 +50,36 @@ class ModelArrays(NamedTuple):
     f_data: np.ndarray  # tables (times then values), Fourier terms (harmonics then coefficients), constants
     f_cptr: np.ndarray  # (F + 1,) int: each expression's slice of f_code
     f_code: np.ndarray  # postfix opcodes of expression forces
+    # A nonsmooth scene in one mode (smdcli.solvers.modes): empty for smooth models. The state is then
+    # [x, v, q, energy]: q the laws' internal variables, energy the ACCUMULATED powers' integrals; a_* and mi_*
+    # hold the mode's P M^-1 [-Kt, -Ct] and P M^-1 (P projects out the held rows' accelerations).
+    ns_q: int  # internal variables (0 for smooth models)
+    ns_acc: int  # accumulated energy terms (0 for smooth models)
+    f_const: np.ndarray  # (n,) the mode's constant forces g
+    ground_row: np.ndarray  # (n,) P 1: how the ground's acceleration reaches each DOF
+    mass_row: np.ndarray  # (n,) M 1: the ground's effective force per unit acceleration, for the input power
+    c_dense: np.ndarray  # (n, n) the dampers' C, for their power
+    ns_R: np.ndarray  # (E, n) element rows: d = R x
+    ns_belt: np.ndarray  # (E,) belt speeds: d' = R v + belt
+    ns_held: np.ndarray  # (E,) int: 1 where the element is held (its tension the constraint's force)
+    ns_stiff: np.ndarray  # (E,) the mode's piece: tension = stiff d + damp d' + const (+ the smooth law)
+    ns_damp: np.ndarray
+    ns_const: np.ndarray
+    ns_law: np.ndarray  # (E,) int: smdcli.elements.base's SMOOTH_LAWS code of the smooth part, 0 if none
+    ns_par: np.ndarray  # (E, LAW_PARAMETERS) its parameters
+    ns_term: np.ndarray  # (E,) int: the energy term it dissipates into (ACCUMULATED index), -1 if none
+    ns_pd: np.ndarray  # (E,) dissipated power = pd d'^2 + pc d' (+ the smooth law's)
+    ns_pc: np.ndarray
+    h_lin: np.ndarray  # (E, 2n) held tensions = h_lin [x, v] + h_f F - h_g a_g
+    h_f: np.ndarray  # (E, n)
+    h_g: np.ndarray  # (E,)
+    gd_el: np.ndarray  # (G,) int: the element each guard watches
+    gd_qty: np.ndarray  # (G,) int: GUARD_D, GUARD_RATE, GUARD_TENSION or GUARD_INTERNAL
+    gd_level: np.ndarray  # (G,)
+    gd_dir: np.ndarray  # (G,) +1 or -1: the direction that ends the mode
 
 
-def _csr(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def csr(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Row pointers, column indices and values of a dense matrix's nonzero entries."""
     rows, cols = np.nonzero(matrix)
     ptr = np.zeros(matrix.shape[0] + 1, dtype=np.int64)
@@ -101,8 +130,8 @@ def _force_row(signal: Signal) -> tuple[int, list[float], list[float], list[int]
 def model_arrays(model: Model) -> ModelArrays:
     """The arrays of a model, for the compiled kernels."""
     n = model.n
-    a_ptr, a_idx, a_val = _csr(model.state_matrix[n:])
-    mi_ptr, mi_idx, mi_val = _csr(model.Minv)
+    a_ptr, a_idx, a_val = csr(model.state_matrix[n:])
+    mi_ptr, mi_idx, mi_val = csr(model.Minv)
     rows = [_force_row(s) for s in model.signals]
     par = np.zeros((len(rows), FORCE_PARAMETERS))
     for j, (_, values, _, _) in enumerate(rows):
@@ -119,4 +148,15 @@ def model_arrays(model: Model) -> ModelArrays:
         f_data=np.array([x for _, _, data, _ in rows for x in data], dtype=float),
         f_cptr=np.concatenate([[0], np.cumsum(code_sizes)]).astype(np.int64),
         f_code=np.array([c for _, _, _, codes in rows for c in codes], dtype=np.int64),
+        **_smooth_scene(n),
     )
+
+
+def _smooth_scene(n: int) -> dict:
+    """The nonsmooth fields of a model without nonsmooth elements: all empty."""
+    none, ints = np.zeros(0), np.zeros(0, dtype=np.int64)
+    return dict(ns_q=0, ns_acc=0, f_const=none, ground_row=none, mass_row=none, c_dense=np.zeros((0, 0)),
+                ns_R=np.zeros((0, n)), ns_belt=none, ns_held=ints, ns_stiff=none, ns_damp=none, ns_const=none,
+                ns_law=ints, ns_par=np.zeros((0, LAW_PARAMETERS)), ns_term=ints, ns_pd=none, ns_pc=none,
+                h_lin=np.zeros((0, 2 * n)), h_f=np.zeros((0, n)), h_g=none, gd_el=ints, gd_qty=ints, gd_level=none,
+                gd_dir=ints)

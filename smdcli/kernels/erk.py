@@ -201,6 +201,47 @@ def _dense(m, method, t_old, h, y_old, y_new, K, grid, k, j, out, mid, work, jwo
                     axpy(h * P[s, q] * power, K[s], out[row])
 
 
+@no_alloc
+def attempt(m, method, t, y, h_abs, t_bound, mid, rtol, atol, fixed_h, K, y_new, scale, err, err3, arg, work, jwork,
+            counts):
+    """One accepted step from (t, y) with scipy's error control, from a first try of h_abs: (status, t_new, h,
+    the next step's h_abs); y_new and K (K[S] = f(t_new, y_new)) hold the step; status TOO_SMALL_STEP where the
+    step shrank below rounding. fixed_h > 0 takes that step without error control."""
+    S = STAGES[method]
+    B = _B[method]
+    exponent = -1.0 / (ERROR_ORDER[method] + 1)
+    min_step = 10 * abs(np.nextafter(t, np.inf) - t)
+    if h_abs < min_step:
+        h_abs = min_step
+    rejected = False
+    while True:
+        if h_abs < min_step:
+            return TOO_SMALL_STEP, t, 0.0, h_abs
+        t_new = min(t + h_abs, t_bound)
+        h = t_new - t
+        h_abs = abs(h)
+        _stages(m, method, t, y, h, K, S, mid, work, jwork, arg)
+        assign(y_new, y)
+        for s in range(S):
+            if B[s] != 0.0:
+                axpy(h * B[s], K[s], y_new)
+        state_rhs(m, t_new, y_new, t_new >= mid, K[S], work, jwork)
+        counts[NFEV] += S
+        for i in range(len(y)):
+            scale[i] = atol[i] + max(abs(y[i]), abs(y_new[i])) * rtol
+        error = _error_norm(method, K, h, scale, err, err3)
+        if fixed_h > 0:
+            return OK, t_new, h, fixed_h
+        if error < 1:
+            factor = MAX_FACTOR if error == 0 else min(MAX_FACTOR, SAFETY * error ** exponent)
+            if rejected:
+                factor = min(1.0, factor)
+            return OK, t_new, h, h_abs * factor
+        h_abs *= max(MIN_FACTOR, SAFETY * error ** exponent)
+        rejected = True
+        counts[REJECTED] += 1
+
+
 @kernel
 def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out, counts, floats, work, fixed_h):
     """Integrate from y0 = out[0] over the grid, restarting at each cut; returns a status (OK, ...).
@@ -211,8 +252,6 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, boundary,
     (for measuring a formula's order)."""
     size = len(y0)
     S = STAGES[method]
-    B = _B[method]
-    exponent = -1.0 / (ERROR_ORDER[method] + 1)
     K = np.zeros((16, size))
     F = np.zeros((7, size))
     jwork = np.zeros((2 * m.n, 2 * m.n)) if size > 2 * m.n else np.zeros((1, 1))
@@ -231,40 +270,12 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, boundary,
                                                          mid, work, jwork, K[1], arg, scale)
         counts[NFEV] += 2
         while t < t_bound:
-            min_step = 10 * abs(np.nextafter(t, np.inf) - t)
-            if h_abs < min_step:
-                h_abs = min_step
-            rejected = False
-            while True:
-                if h_abs < min_step:
-                    floats[T_REACHED] = t
-                    out[k:] = np.nan
-                    return TOO_SMALL_STEP
-                t_new = min(t + h_abs, t_bound)
-                h = t_new - t
-                h_abs = abs(h)
-                _stages(m, method, t, y, h, K, S, mid, work, jwork, arg)
-                y_new[:] = y
-                for s in range(S):
-                    if B[s] != 0.0:
-                        axpy(h * B[s], K[s], y_new)
-                state_rhs(m, t_new, y_new, t_new >= mid, K[S], work, jwork)
-                counts[NFEV] += S
-                for i in range(size):
-                    scale[i] = atol[i] + max(abs(y[i]), abs(y_new[i])) * rtol
-                error = _error_norm(method, K, h, scale, err, err3)
-                if fixed_h > 0:
-                    h_abs = fixed_h
-                    break
-                if error < 1:
-                    factor = MAX_FACTOR if error == 0 else min(MAX_FACTOR, SAFETY * error ** exponent)
-                    if rejected:
-                        factor = min(1.0, factor)
-                    h_abs *= factor
-                    break
-                h_abs *= max(MIN_FACTOR, SAFETY * error ** exponent)
-                rejected = True
-                counts[REJECTED] += 1
+            status, t_new, h, h_abs = attempt(m, method, t, y, h_abs, t_bound, mid, rtol, atol, fixed_h, K, y_new,
+                                              scale, err, err3, arg, work, jwork, counts)
+            if status != OK:
+                floats[T_REACHED] = t
+                out[k:] = np.nan
+                return status
             counts[ACCEPTED] += 1
             if counts[ACCEPTED] > max_steps:
                 out[k:] = np.nan

@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from smdcli.elements.base import SMOOTH_BOUC_WEN, SMOOTH_NONE, SMOOTH_STRIBECK, SMOOTH_TANH
 from smdcli.expression import OP_ADD, OP_CONST, OP_DIV, OP_FUNCTION, OP_MUL, OP_NEG, OP_POW, OP_SUB, OP_T
 from smdcli.kernels.arrays import (CHIRP, CONSTANT, COSINE, CUBIC_SPRING, EXPRESSION, FOURIER_SQUARE, PULSE, SINE,
                                    SQUARE, STEP, TABLE_LINEAR, TABLE_PREVIOUS)
@@ -172,30 +173,137 @@ def element_force(m, e, y):
 
 @inlined
 def rhs(m, t, y, left, dy, work):
-    """dy = [v; M^-1 (B u(t) - C v - K x - f_nl)] for y = [x; v]; work is scratch of length work_size(m)."""
+    """dy = [v; M^-1 (B u(t) - C v - K x - f_nl)] for y = [x; v]; work is scratch of length work_size(m). A
+    nonsmooth scene in one mode (m.ns_belt not empty) has y = [x, v, q, energy]: the mode's projected motion,
+    the laws' internal rates and the energy terms' powers, its elements' tensions left in work[n:n + E]."""
     n = m.n
+    E = len(m.ns_belt)
     for i in range(n):
         dy[i] = y[n + i]
         work[i] = 0.0
+    stack = work[n + E:]
     ground = 0.0  # relative coordinates: M^-1 (-M 1 a_g) is -a_g on every DOF
+    power = 0.0  # what the applied forces put in
     for j in range(len(m.f_kind)):
+        value = force_value(m, j, t, left, stack)
         if m.f_dof[j] >= 0:
-            work[m.f_dof[j]] += force_value(m, j, t, left, work[n:])
+            work[m.f_dof[j]] += value
+            power += value * y[n + m.f_dof[j]]
         else:
-            ground += force_value(m, j, t, left, work[n:])
+            ground += value
     for e in range(len(m.el_law)):
         g = element_force(m, e, y)
         if m.el_a[e] >= 0:
             work[m.el_a[e]] -= g
         if m.el_b[e] >= 0:
             work[m.el_b[e]] += g
+    if E > 0:
+        _mode_forces(m, y, work)
     for i in range(n):
         s = 0.0
         for k in range(m.a_ptr[i], m.a_ptr[i + 1]):
             s += m.a_val[k] * y[m.a_idx[k]]
         for k in range(m.mi_ptr[i], m.mi_ptr[i + 1]):
             s += m.mi_val[k] * work[m.mi_idx[k]]
-        dy[n + i] = s - ground
+        dy[n + i] = s - ground * (m.ground_row[i] if E > 0 else 1.0)
+    if E > 0:
+        _mode_rates(m, y, ground, power, dy, work)
+
+
+@inlined
+def _element_motion(m, e, y):
+    """(d, d') of nonsmooth element e at y."""
+    n = m.n
+    d = 0.0
+    rate = m.ns_belt[e]
+    for i in range(n):
+        r = m.ns_R[e, i]
+        if r != 0.0:
+            d += r * y[i]
+            rate += r * y[n + i]
+    return d, rate
+
+
+@inlined
+def _smooth_tension(m, e, rate, y):
+    """The smooth part of element e's tension (Bouc-Wen's (1 - alpha) k z, Stribeck's or tanh's friction)."""
+    law = m.ns_law[e]
+    p = m.ns_par[e]
+    if law == SMOOTH_BOUC_WEN:
+        return p[0] * y[2 * m.n + int(p[5])]
+    if law == SMOOTH_STRIBECK:
+        return p[0] * (p[1] + (p[2] - p[1]) * math.exp(-(rate / p[3]) ** 2))
+    if law == SMOOTH_TANH:
+        return p[0] * math.tanh(rate / p[1])
+    return 0.0
+
+
+@inlined
+def _mode_forces(m, y, work):
+    """The mode's constant forces and its free elements' smooth tensions into the force work[:n]; every free
+    element's tension into work[n + e]."""
+    n = m.n
+    for i in range(n):
+        work[i] += m.f_const[i]
+    for e in range(len(m.ns_belt)):
+        if m.ns_held[e]:
+            continue
+        d, rate = _element_motion(m, e, y)
+        extra = _smooth_tension(m, e, rate, y)
+        if extra != 0.0:
+            for i in range(n):
+                work[i] -= extra * m.ns_R[e, i]
+        work[n + e] = m.ns_stiff[e] * d + m.ns_damp[e] * rate + m.ns_const[e] + extra
+
+
+@inlined
+def _mode_rates(m, y, ground, power, dy, work):
+    """The held elements' tensions (the constraints' forces), the laws' internal rates, the energy powers."""
+    n = m.n
+    E = len(m.ns_belt)
+    acc = 2 * n + m.ns_q
+    for e in range(E):
+        if m.ns_held[e]:
+            T = -m.h_g[e] * ground
+            for c in range(2 * n):
+                T += m.h_lin[e, c] * y[c]
+            for i in range(n):
+                T += m.h_f[e, i] * work[i]
+            work[n + e] = T
+    for k in range(m.ns_acc):
+        dy[acc + k] = 0.0
+    dissipated = 0.0
+    for i in range(n):
+        row = 0.0
+        for j in range(n):
+            row += m.c_dense[i, j] * y[n + j]
+        dissipated += y[n + i] * row
+        power -= ground * m.mass_row[i] * y[n + i]
+    for e in range(len(m.el_law)):
+        if m.el_law[e] != CUBIC_SPRING:
+            a, b = m.el_a[e], m.el_b[e]
+            d = (y[n + a] if a >= 0 else 0.0) - (y[n + b] if b >= 0 else 0.0)
+            dissipated += m.el_coef[e] * abs(d) * d * d
+    for e in range(E):
+        d, rate = _element_motion(m, e, y)
+        power += work[n + e] * m.ns_belt[e]  # a belt's work on its contact
+        term = m.ns_term[e]
+        if term < 0:
+            continue
+        p = m.ns_par[e]
+        loss = (m.ns_pd[e] * rate + m.ns_pc[e]) * rate
+        law = m.ns_law[e]
+        if law == SMOOTH_BOUC_WEN:
+            z = y[2 * n + int(p[5])]
+            size = abs(z)
+            z_rate = p[1] * rate - p[2] * abs(rate) * size ** (p[4] - 1) * z - p[3] * rate * size ** p[4]
+            dy[2 * n + int(p[5])] = z_rate
+            loss += p[0] * z * (rate - z_rate)
+        elif law != SMOOTH_NONE:
+            loss += _smooth_tension(m, e, rate, y) * rate
+        dy[acc + term] += loss
+    dy[acc] += dissipated
+    dy[acc + 1] += power
 
 
 @kernel
@@ -221,9 +329,9 @@ def jacobian(m, y, J):
 
 
 def work_size(m) -> int:
-    """Scratch a right-hand side needs: n, and the deepest expression's stack."""
+    """Scratch a right-hand side needs: n forces, E tensions, and the deepest expression's stack."""
     depths = [int(p[0]) for kind, p in zip(m.f_kind, m.f_par) if kind == EXPRESSION]
-    return m.n + max(depths, default=0) + 1
+    return m.n + len(m.ns_belt) + max(depths, default=0) + 1
 
 
 @inlined
@@ -231,7 +339,7 @@ def state_rhs_inlined(m, t, y, left, dy, work, J):
     """rhs for y = [x; v] (length 2n), or with the variational equation Phi' = J Phi appended (length
     2n + (2n)^2, Phi row-major) for a monodromy matrix; J is scratch of (2n, 2n). Inlined where it is called
     per stage (a call costs ~35 ns, three times the 1-DOF arithmetic); state_rhs is the same as a call."""
-    size = 2 * m.n
+    size = 2 * m.n + m.ns_q + m.ns_acc
     rhs(m, t, y[:size], left, dy[:size], work)  # one inlined copy of rhs serves both cases
     if len(y) > size:
         _variational(m, y, dy, J)

@@ -70,6 +70,14 @@ def _tiny_run(family: str) -> None:
     if family == "erk":
         run_kernel(tiny, tableaus.RK45, grid, y0, 1e-3, np.full(2, 1e-6), 10, 1e8)
         return
+    if family == "events":
+        from smdcli.kernels.rhs import work_size
+
+        arrays = model_arrays(tiny)
+        entry(arrays, tableaus.RK45, y0.copy(), 0.0, np.array([1e-3]), np.array([5e-4]), grid, 1, 1e-3, np.full(2, 1e-6), 10, 1e8, -np.inf, -1,
+              np.zeros((2, 2)), np.zeros((2, 1)), np.zeros((2, 0)), np.zeros(5, dtype=np.int64), np.zeros(5),
+              np.zeros(work_size(arrays)))
+        return
     arrays, out = model_arrays(tiny), np.zeros((2, 2))
     if family == "fixed":
         entry(arrays, sys.modules[entry.__module__].GENERALIZED_ALPHA, np.zeros(4), y0, grid, grid, 1e-3, 10, 1e8, out, np.zeros(4, dtype=np.int64), np.zeros(2),
@@ -87,11 +95,12 @@ def _entry(family: str):
     import importlib
 
     module, name = {"erk": ("erk", "integrate"), "fixed": ("fixed", "march"), "stiff": ("stiff", "integrate"),
-                    "radau": ("radau", "integrate"), "bdf": ("bdf", "integrate"), "rhs": ("rhs", "state_rhs")}[family]
+                    "radau": ("radau", "integrate"), "bdf": ("bdf", "integrate"), "rhs": ("rhs", "state_rhs"),
+                    "events": ("events", "integrate_mode")}[family]
     return getattr(importlib.import_module(f"smdcli.kernels.{module}"), name)
 
 
-KERNEL_FAMILIES = ("erk", "fixed", "stiff", "radau", "bdf", "rhs")
+KERNEL_FAMILIES = ("erk", "fixed", "stiff", "radau", "bdf", "rhs", "events")
 _warmed: set[str] = set()
 
 

@@ -7,11 +7,13 @@ decisions as the exact event-driven solver (modes.py): its state y = [x, v, q] c
 variables q (Bouc-Wen's z) with their differential equations. After every accepted step each guard is looked at
 on the step's dense output (its ends and four interior points, so that a touch within a step is seen), a
 crossing located by Brent's method on that interpolant, the step cut back there, the event decided, and the
-method started afresh from the event. The energy terms are integrated on the same dense output (8-point
-Gauss-Legendre a step).
+method started afresh from the event. The energy terms' powers are integrated with the motion, under the
+method's own error control.
 
-Every OdeSolver of the ODE family takes part: scipy's RK45, RK23, DOP853, Radau, BDF and LSODA (under their own
-names, MATLAB's and scipy:'s) and smd's own ode23s, ode23t and ode23tb.
+Every method of the ODE family takes part. smd's compiled RK23, RK45 and DOP853 (ode23, ode45) run each mode in
+the compiled kernel (compiled_events.py), guards watched and events located there, Python back only at an event;
+scipy's OdeSolvers (scipy:RK45 ..., Radau, BDF, LSODA) and smd's ode23s, ode23t and ode23tb are stepped from
+Python, a step at a time.
 
 Must not import: sweep, io, plots, commands, cli.
 """
@@ -25,7 +27,8 @@ import numpy as np
 from smdcli.elements import State
 from smdcli.model import Model
 from smdcli.result import NonsmoothHistory, Result, SolverStats
-from smdcli.solvers.base import Tolerances, divergence_bound, diverged, force_function
+from smdcli.solvers.base import MAX_STEPS, Tolerances, divergence_bound, diverged, force_function
+from smdcli.solvers.compiled_events import ACCUMULATED, COMPILED_EVENT_METHODS, CompiledModes
 from smdcli.solvers.modes import Scene
 from smdcli.solvers.piecewise import MAX_EVENTS_AT_ONE_TIME, PiecewiseRun, event_root
 
@@ -37,7 +40,6 @@ EVENT_METHODS = {"RK45": "RK45", "ode45": "RK45", "scipy:RK45": "RK45", "RK23": 
                  "scipy:ode23t": "Trapezoid", "ode23tb": "TRBDF2", "scipy:ode23tb": "TRBDF2"}
 INTERIOR = 4  # interior points of each step where guards are looked at too
 PYTHON_STEPS = 200_000  # steps a run may take, driven from Python (about 300 us each)
-ACCUMULATED = ("dissipated", "input", "hysteretic", "friction", "impact")  # energy terms integrated with y
 
 
 def solver_class(name: str):
@@ -135,10 +137,13 @@ class EventDriver(PiecewiseRun):
         self.counts = {"nfev": 0, "njev": 0, "nlu": 0, "steps_accepted": 0, "steps_rejected": -1}
         self.max_steps = tol.max_steps or PYTHON_STEPS
         self.fired = None  # (time, element, guard) of the last event
+        self.kernel_method = COMPILED_EVENT_METHODS.get(name)
+        if self.kernel_method is not None:
+            self.max_steps = tol.max_steps or MAX_STEPS
 
     def run(self):
         """x, v, a (N, n), the history, and why it stopped (None: it reached the end) with where."""
-        scene, n, grid, model = self.scene, self.n, self.grid, self.model
+        scene, grid, model = self.scene, self.grid, self.model
         y = np.concatenate([model.x0, model.v0, np.zeros(scene.q_size), np.zeros(len(ACCUMULATED))])
         for element, part in zip(scene.elements, scene.q_slices):
             start = element.law.start(0.0, 0.0)
@@ -151,44 +156,18 @@ class EventDriver(PiecewiseRun):
         states, y = self.start(states, y, t)
         outputs = _Outputs(self, grid)
         outputs.store(0, t, y, states)
-        bound = divergence_bound(model, grid)
+        self.bound = divergence_bound(model, grid)
+        if self.kernel_method is not None:
+            self.compiled = CompiledModes(self, len(y))
         k, segment = 1, 0
         failure, t_reached = None, t
         same, last = 0, None
         while k < len(grid) and failure is None:
             while segment + 1 < len(cuts) and cuts[segment + 1][0] <= t:
                 segment += 1
-            t_end = cuts[segment + 1][0] if segment + 1 < len(cuts) else float(grid[-1])
             scene.force = self.force_on(cuts, segment)
-            fun = self.rhs(states)
-            options = {"jac": _numeric_jacobian(fun)} if self.own else {}
-            solver = self.cls(fun, t, y, t_end, rtol=self.tol.rtol, atol=self.tol.atol, **options)
-            event = None
-            while solver.status == "running":
-                t_old = solver.t
-                message = solver.step()
-                if solver.status == "failed":
-                    failure = message or "step failed"
-                    break
-                self.counts["steps_accepted"] += 1
-                if self.counts["steps_accepted"] > self.max_steps:
-                    failure = f"more than {self.max_steps} steps"
-                    break
-                dense = solver.dense_output()
-                event = self.first_crossing_on(dense, states, t_old, solver.t)
-                t_stop = solver.t if event is None else event[0]
-                while k < len(grid) and grid[k] <= t_stop and (event is None or grid[k] < t_stop):
-                    outputs.store(k, float(grid[k]), dense(grid[k]), states)
-                    k += 1
-                t_reached = t_stop
-                failure = diverged(dense(t_stop)[:2 * n], bound)
-                if event is not None or failure:
-                    y = dense(t_stop)
-                    break
-                y = solver.y
-            self.counts["nfev"] += solver.nfev
-            self.counts["njev"] += solver.njev
-            self.counts["nlu"] += solver.nlu
+            advance = self.compiled.advance if self.kernel_method is not None else self.advance
+            y, t_reached, event, failure, k = advance(states, t, y, cuts, segment, k, outputs)
             if failure:
                 break
             if event is not None:
@@ -206,7 +185,9 @@ class EventDriver(PiecewiseRun):
                     outputs.store(k, float(grid[k]), y, states)
                     k += 1
                 continue
-            t = t_end
+            t = t_reached  # a restart (a force's discontinuity, the ground's jump) or the end
+            while segment + 1 < len(cuts) and cuts[segment + 1][0] < t:
+                segment += 1
             if segment + 1 < len(cuts) and t == cuts[segment + 1][0]:
                 jump = cuts[segment + 1][1]
                 if jump is not None:
@@ -219,6 +200,43 @@ class EventDriver(PiecewiseRun):
         return outputs.finish(), failure, t_reached
 
     # ----------------------------------------------------------------------------------- the steps
+    def advance(self, states, t: float, y: np.ndarray, cuts, segment: int, k: int, outputs):
+        """The mode integrated by the OdeSolver from (t, y) to the segment's end or its first event, the grid's rows
+        stored on the way: (y, time reached, the event (t, element, guard) or None, why it failed or None, next row)."""
+        n, grid, bound = self.n, self.grid, self.bound
+        t_end = cuts[segment + 1][0] if segment + 1 < len(cuts) else float(grid[-1])
+        fun = self.rhs(states)
+        options = {"jac": _numeric_jacobian(fun)} if self.own else {}
+        solver = self.cls(fun, t, y, t_end, rtol=self.tol.rtol, atol=self.tol.atol, **options)
+        event = failure = None
+        t_reached = t
+        while solver.status == "running":
+            t_old = solver.t
+            message = solver.step()
+            if solver.status == "failed":
+                failure = message or "step failed"
+                break
+            self.counts["steps_accepted"] += 1
+            if self.counts["steps_accepted"] > self.max_steps:
+                failure = f"more than {self.max_steps} steps"
+                break
+            dense = solver.dense_output()
+            event = self.first_crossing_on(dense, states, t_old, solver.t)
+            t_stop = solver.t if event is None else event[0]
+            while k < len(grid) and grid[k] <= t_stop and (event is None or grid[k] < t_stop):
+                outputs.store(k, float(grid[k]), dense(grid[k]), states)
+                k += 1
+            t_reached = t_stop
+            failure = diverged(dense(t_stop)[:2 * n], bound)
+            if event is not None or failure:
+                y = dense(t_stop)
+                break
+            y = solver.y
+        self.counts["nfev"] += solver.nfev
+        self.counts["njev"] += solver.njev
+        self.counts["nlu"] += solver.nlu
+        return y, t_reached, event, failure, k
+
     def cut_times(self) -> list[tuple[float, object]]:
         """Where the method restarts: the start, force discontinuities, the ground's jumps, the end."""
         t0, t1 = float(self.grid[0]), float(self.grid[-1])
@@ -368,7 +386,11 @@ class _Outputs:
 
 def solve_events(model: Model, grid: np.ndarray, tol: Tolerances, name: str) -> Result:
     """A nonsmooth scene integrated by method `name` (an EVENT_METHODS key), event to event."""
-    solver_class(name)  # imported before the clock
+    solver_class(name)  # imported (and the compiled kernel loaded) before the clock
+    if name in COMPILED_EVENT_METHODS:
+        from smdcli.solvers.compiled import warm
+
+        warm("events")
     start = time.perf_counter()
     driver = EventDriver(model, grid, tol, name)
     (x, v, a, history), failure, t_reached = driver.run()
@@ -376,6 +398,7 @@ def solve_events(model: Model, grid: np.ndarray, tol: Tolerances, name: str) -> 
     stats = SolverStats(method=name, requested_method=name, reason="", rtol=tol.rtol, atol=tol.atol,
                         wall_time_s=time.perf_counter() - start, success=failure is None,
                         message=(f"ok: {events} events located on the method's interpolant, a restart at each"
+                                 + (" (compiled)" if name in COMPILED_EVENT_METHODS else "")
                                  if failure is None else f"failed at t = {t_reached:.6g} s: {failure}"),
                         **driver.counts)
     force = model.applied_force(grid) if model.is_forced else np.zeros_like(x)
