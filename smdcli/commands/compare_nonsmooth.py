@@ -18,7 +18,7 @@ from smdcli.result import Result
 
 NONSMOOTH_METHODS = ("ode45", "ode23", "ode15s", "ode23s", "ode23t", "ode23tb", "DOP853", "Radau", "LSODA",
                      "newmark", "hht", "generalized_alpha", "central_difference")
-NONSMOOTH_RTOLS = (1e-3, 1e-5, 1e-7, 1e-9)  # a shorter ladder: these runs are driven from Python, event by event
+NONSMOOTH_RTOLS = (1e-3, 1e-5, 1e-7, 1e-9)  # a shorter ladder, as charted in the docs (LSODA steps from Python)
 
 
 def nonsmooth_defaults(model: Model) -> tuple[str, ...]:

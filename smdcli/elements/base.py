@@ -119,6 +119,11 @@ class Law:
         """(energy term, power) this element dissipates: hysteretic, friction, impact; ('', 0) if none."""
         return "", 0.0
 
+    def jump(self, state: State, d_old: float, d_new: float) -> tuple[State, float]:
+        """The state after d jumps from d_old to d_new at once (the ground's jump), and the energy dissipated on
+        the way (none by default: the mode's decisions follow from the new state)."""
+        return state, 0.0
+
     def kernel_piece(self, state: State) -> KernelPiece:
         """The mode's smooth tension and dissipated power as compiled kernels take them (none by default)."""
         return KernelPiece()

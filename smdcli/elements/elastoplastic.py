@@ -104,6 +104,13 @@ class Elastoplastic(Law):
         elastic = d - self.plastic_deformation(state, d)
         return "strain", 0.5 * core.k * elastic * elastic
 
+    def jump(self, state: State, d_old: float, d_new: float) -> tuple[State, float]:
+        # the straight path from d_old to d_new return-mapped: the core yields on the way where the trial force
+        # passes fy, dissipating fy |change of d_p|; the mode is then decided by the motion (solvers.modes)
+        dp = self.plastic_deformation(state, d_old)
+        _, _, dp_new = self.return_map(d_new, dp)
+        return State(ELASTIC, {**state.internal, "dp": dp_new}), self.core.fy * abs(dp_new - dp)
+
     def return_map(self, d: float, dp: float) -> tuple[float, float, float]:
         """(tension, tangent, d_p) of a trial deformation d from the committed d_p: a step's return mapping."""
         core = self.core

@@ -16,11 +16,12 @@ import math
 import numpy as np
 
 from smdcli.kernels.compiler import kernel, no_alloc
-from smdcli.kernels.erk import OK, STEP_BUDGET, TOO_SMALL_STEP, initial_step, rows_through, scaled_rms, state_status
+from smdcli.kernels.erk import OK, STEP_BUDGET, TOO_SMALL_STEP, initial_step, scaled_rms, state_status
+from smdcli.kernels.guards import BDF, INTERIOR, stop_at, watch_step
 from smdcli.kernels.linalg import factor_shifted, lu_solve
 from smdcli.kernels.radau import (ACCEPTED, EPS, NFEV, NJEV, NLU, REJECTED, T_REACHED,  # the same statistics
                                   newton_hopeless, newton_settled, newton_tolerance)
-from smdcli.kernels.rhs import jacobian, state_rhs
+from smdcli.kernels.rhs import state_jacobian, state_rhs
 
 MAX_ORDER = 5
 NEWTON_MAXITER = 4
@@ -109,7 +110,32 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
     """Integrate from y0 = out[0] over the grid with variable-order NDF, restarting at each cut; a status (erk's
     codes). counts and floats receive radau's statistics; work is the right-hand side's scratch. fixed_h is not
     supported (the order varies) and must be 0."""
-    size = len(y0)
+    y = y0.copy()
+    floats[T_REACHED] = grid[0]
+    none = np.zeros((0, 0))
+    status, k, _ = _run(m, y, grid[0], cuts[1:], 0.5 * (cuts[:-1] + cuts[1:]), grid, 1, rtol, atol, max_steps, bound,
+                        -np.inf, -1, out, none, none, counts, floats, work)
+    if status != OK:
+        out[k:] = np.nan
+    return status
+
+
+@kernel
+def integrate_mode(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out,
+                   out_a, out_t, counts, floats, work):
+    """events.integrate_mode with variable-order NDF (method is unused): a nonsmooth scene's mode from (t0, y)
+    through the stretches ending at bounds, stopping at its first guard crossing on the difference polynomial."""
+    floats[T_REACHED] = t0
+    return _run(m, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out, out_a, out_t,
+                counts, floats, work)
+
+
+@kernel
+def _run(m, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out, out_a, out_t,
+         counts, floats, work):
+    """NDF from (t0, y) through the stretches ending at bounds (restarting at each), rows written from k, the
+    mode's guards (if any) watched: (status, next row, guard fired or -1); y ends where it stopped."""
+    size = len(y)
     rtol = max(rtol, 100 * EPS)
     newton_tol = newton_tolerance(rtol)
     J, Jscratch, LU = np.zeros((size, size)), np.zeros((1, 1)), np.zeros((size, size))
@@ -117,21 +143,24 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
     D, scratch = np.zeros((MAX_ORDER + 3, size)), np.zeros((MAX_ORDER + 3, size))
     R, U, RU = np.zeros((MAX_ORDER + 1, MAX_ORDER + 1)), np.zeros((MAX_ORDER + 1, MAX_ORDER + 1)), \
         np.zeros((MAX_ORDER + 1, MAX_ORDER + 1))
-    y, f, y_new, d = y0.copy(), np.zeros(size), np.zeros(size), np.zeros(size)
+    f, y_new, d = np.zeros(size), np.zeros(size), np.zeros(size)
     y_predict, psi, dy, scale, arg = np.zeros(size), np.zeros(size), np.zeros(size), np.zeros(size), np.zeros(size)
+    y_old, f1 = np.zeros(size), np.zeros(size)
     newton = np.zeros(2)
     factors = np.zeros(3)
-    k = 1
-    floats[T_REACHED] = grid[0]
-    for seg in range(len(cuts) - 1):
-        ta, t_bound = cuts[seg], cuts[seg + 1]
-        mid = 0.5 * (ta + t_bound)
-        t = ta
+    G = len(m.gd_el)
+    samples, rows, values = np.zeros(INTERIOR + 2), np.zeros((INTERIOR + 2, size)), np.zeros((INTERIOR + 2, max(G, 1)))
+    when, row, dense, Q = np.zeros(1), np.zeros((1, size)), np.zeros((1, 3)), np.zeros((1, 1))
+    t = t0
+    for stretch in range(len(bounds)):
+        t_bound, mid = bounds[stretch], mids[stretch]
+        if t >= t_bound:
+            continue
         state_rhs(m, t, y, t >= mid, f, work, Jscratch)
         counts[NFEV] += 1
         self_h_abs = initial_step(m, t, y, f, t_bound, 1, rtol, atol, mid, work, Jscratch, arg, y_new, scale)
         counts[NFEV] += 1
-        jacobian(m, y, J)
+        counts[NFEV] += state_jacobian(m, t, y, mid, rtol, atol, J, work, Jscratch, dy, arg, f1)
         counts[NJEV] += 1
         D[:, :] = 0.0
         for i in range(size):
@@ -154,8 +183,7 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
             while True:
                 if h_abs < min_step:
                     floats[T_REACHED] = t
-                    out[k:] = np.nan
-                    return TOO_SMALL_STEP
+                    return TOO_SMALL_STEP, k, -1
                 t_new = t + h_abs
                 if t_new > t_bound:
                     t_new = t_bound
@@ -186,7 +214,8 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
                                         arg, work, Jscratch, counts, newton)
                     if converged or current_jac:
                         break
-                    jacobian(m, y_predict, J)
+                    counts[NFEV] += state_jacobian(m, t_new, y_predict, mid, rtol, atol, J, work, Jscratch, dy, arg,
+                                                   f1)
                     counts[NJEV] += 1
                     factored = False
                     current_jac = True
@@ -212,10 +241,10 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
                     break
             counts[ACCEPTED] += 1
             if counts[ACCEPTED] > max_steps:
-                out[k:] = np.nan
-                return STEP_BUDGET
+                return STEP_BUDGET, k, -1
             n_equal_steps += 1
             t_old = t
+            y_old[:] = y
             t = t_new
             y[:] = y_new
             self_h_abs = h_abs
@@ -252,23 +281,17 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
                 n_equal_steps = 0
                 factored = False
             # Dense output: the difference polynomial at the step's end, in units of the next step (scipy's).
-            j = rows_through(grid, k, t)
-            for row in range(k, j):
-                for i in range(size):
-                    value = D[0, i]
-                    p = 1.0
-                    for q in range(order):
-                        p *= (grid[row] - (t - self_h_abs * q)) / (self_h_abs * (1 + q))
-                        value += D[q + 1, i] * p
-                    out[row, i] = value
-            k = j
+            dense[0, 0], dense[0, 1], dense[0, 2] = t, self_h_abs, order
+            k, t_stop, fired = watch_step(m, BDF, t_old, t, t - t_old, y_old, y, D, dense, Q, grid, k, mid, work,
+                                          Jscratch, arg, skip_t, skip_guard, samples, rows, values, when, row, dy, out,
+                                          out_a, out_t)
+            if fired >= 0:
+                return stop_at(m, y, row, t_stop, bound, floats), k, fired
             floats[T_REACHED] = t
             status = state_status(y, bound)
             if status != OK:
-                out[k:] = np.nan
-                return status
+                return status, k, -1
             if t_old == t:  # no progress is possible: a step below rounding
                 floats[T_REACHED] = t
-                out[k:] = np.nan
-                return TOO_SMALL_STEP
-    return OK
+                return TOO_SMALL_STEP, k, -1
+    return OK, k, -1

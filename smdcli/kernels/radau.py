@@ -16,9 +16,10 @@ import math
 import numpy as np
 
 from smdcli.kernels.compiler import kernel, no_alloc
-from smdcli.kernels.erk import OK, STEP_BUDGET, TOO_SMALL_STEP, initial_step, rows_through, state_status
+from smdcli.kernels.erk import OK, STEP_BUDGET, TOO_SMALL_STEP, initial_step, state_status
+from smdcli.kernels.guards import INTERIOR, RADAU, stop_at, watch_step
 from smdcli.kernels.linalg import factor_shifted, lu_solve
-from smdcli.kernels.rhs import jacobian, state_rhs
+from smdcli.kernels.rhs import state_jacobian, state_rhs
 
 # Counters (ints): right-hand sides, accepted, rejected, Jacobians, factorizations.
 NFEV, ACCEPTED, REJECTED, NJEV, NLU = range(5)
@@ -152,27 +153,54 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
     """Integrate from y0 = out[0] over the grid with Radau IIA 5, restarting at each cut; a status (erk's codes).
     counts and floats receive the statistics named above; work is the right-hand side's scratch. fixed_h > 0
     takes steps of that size with no error control (for measuring the formula's order)."""
-    size = len(y0)
+    y = y0.copy()
+    floats[T_REACHED] = grid[0]
+    none = np.zeros((0, 0))
+    status, k, _ = _run(m, y, grid[0], cuts[1:], 0.5 * (cuts[:-1] + cuts[1:]), grid, 1, rtol, atol, max_steps, bound,
+                        -np.inf, -1, out, none, none, counts, floats, work, fixed_h)
+    if status != OK:
+        out[k:] = np.nan
+    return status
+
+
+@kernel
+def integrate_mode(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out,
+                   out_a, out_t, counts, floats, work):
+    """events.integrate_mode with Radau IIA 5 (method is unused): a nonsmooth scene's mode from (t0, y) through
+    the stretches ending at bounds, stopping at its first guard crossing located on the collocation polynomial."""
+    floats[T_REACHED] = t0
+    return _run(m, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out, out_a, out_t,
+                counts, floats, work, 0.0)
+
+
+@kernel
+def _run(m, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out, out_a, out_t,
+         counts, floats, work, fixed_h):
+    """Radau from (t0, y) through the stretches ending at bounds (restarting at each), rows written from k, the
+    mode's guards (if any) watched: (status, next row, guard fired or -1); y ends where it stopped."""
+    size = len(y)
     rtol = max(rtol, 100 * EPS)
     newton_tol = newton_tolerance(rtol)
     J, Jscratch = np.zeros((size, size)), np.zeros((1, 1))
     LU_real = np.zeros((size, size))
     LU_complex = np.zeros((size, size), dtype=np.complex128)
     piv_real, piv_complex = np.zeros(size, dtype=np.int64), np.zeros(size, dtype=np.int64)
-    y, f, y_new = y0.copy(), np.zeros(size), np.zeros(size)
+    f, y_new = np.zeros(size), np.zeros(size)
     Z0, Z, W, dW, F = np.zeros((3, size)), np.zeros((3, size)), np.zeros((3, size)), np.zeros((3, size)), \
         np.zeros((3, size))
     Q = np.zeros((size, 3))
     arg, scale, error, ZE = np.zeros(size), np.zeros(size), np.zeros(size), np.zeros(size)
     b_real, b_complex = np.zeros(size), np.zeros(size, dtype=np.complex128)
     newton = np.zeros(2)
-    y_old = np.zeros(size)
-    k = 1
-    floats[T_REACHED] = grid[0]
-    for seg in range(len(cuts) - 1):
-        ta, t_bound = cuts[seg], cuts[seg + 1]
-        mid = 0.5 * (ta + t_bound)
-        t = ta
+    y_old, dy, f1 = np.zeros(size), np.zeros(size), np.zeros(size)
+    G = len(m.gd_el)
+    samples, rows, values = np.zeros(INTERIOR + 2), np.zeros((INTERIOR + 2, size)), np.zeros((INTERIOR + 2, max(G, 1)))
+    when, row, K = np.zeros(1), np.zeros((1, size)), np.zeros((1, 1))
+    t = t0
+    for stretch in range(len(bounds)):
+        t_bound, mid = bounds[stretch], mids[stretch]
+        if t >= t_bound:
+            continue
         state_rhs(m, t, y, t >= mid, f, work, Jscratch)
         counts[NFEV] += 1
         if fixed_h > 0:
@@ -181,7 +209,7 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
             self_h_abs = initial_step(m, t, y, f, t_bound, 3, rtol, atol, mid, work, Jscratch, arg, y_new, scale)
             counts[NFEV] += 1
         self_h_abs_old, self_error_norm_old = -1.0, -1.0
-        jacobian(m, y, J)
+        counts[NFEV] += state_jacobian(m, t, y, mid, rtol, atol, J, work, Jscratch, dy, arg, f1)
         counts[NJEV] += 1
         current_jac = True
         factored = False
@@ -199,8 +227,7 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
             while True:
                 if h_abs < min_step:
                     floats[T_REACHED] = t
-                    out[k:] = np.nan
-                    return TOO_SMALL_STEP
+                    return TOO_SMALL_STEP, k, -1
                 t_new = min(t + h_abs, t_bound)
                 h = t_new - t
                 h_abs = abs(h)
@@ -227,7 +254,7 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
                                              counts, newton)
                     if converged or current_jac:
                         break
-                    jacobian(m, y, J)
+                    counts[NFEV] += state_jacobian(m, t, y, mid, rtol, atol, J, work, Jscratch, dy, arg, f1)
                     counts[NJEV] += 1
                     current_jac = True
                     factored = False
@@ -271,14 +298,7 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
                 factored = False
             counts[ACCEPTED] += 1
             if counts[ACCEPTED] > max_steps:
-                out[k:] = np.nan
-                return STEP_BUDGET
-            if recompute_jac:
-                jacobian(m, y_new, J)
-                counts[NJEV] += 1
-                current_jac = True
-            else:
-                current_jac = False
+                return STEP_BUDGET, k, -1
             self_h_abs_old = self_h_abs
             self_error_norm_old = error_norm
             self_h_abs = h_abs * factor
@@ -289,19 +309,23 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
             y_old[:] = y
             t_old, h_dense = t, h
             have_dense = True
-            j = rows_through(grid, k, t_new)
-            for row in range(k, j):
-                x = (grid[row] - t_old) / h_dense
-                for i in range(size):
-                    out[row, i] = y_old[i] + Q[i, 0] * x + Q[i, 1] * x * x + Q[i, 2] * x * x * x
-            k = j
+            k, t_stop, fired = watch_step(m, RADAU, t, t_new, h, y, y_new, K, F, Q, grid, k, mid, work,
+                                          Jscratch, arg, skip_t, skip_guard, samples, rows, values, when, row, dy, out,
+                                          out_a, out_t)
+            if fired >= 0:
+                return stop_at(m, y, row, t_stop, bound, floats), k, fired
             floats[T_REACHED] = t_new
             status = state_status(y_new, bound)
             if status != OK:
-                out[k:] = np.nan
-                return status
+                return status, k, -1
+            if recompute_jac:
+                counts[NFEV] += state_jacobian(m, t_new, y_new, mid, rtol, atol, J, work, Jscratch, dy, arg, f1)
+                counts[NJEV] += 1
+                current_jac = True
+            else:
+                current_jac = False
             t = t_new
             y[:] = y_new
             state_rhs(m, t, y, t >= mid, f, work, Jscratch)
             counts[NFEV] += 1
-    return OK
+    return OK, k, -1

@@ -328,6 +328,27 @@ def jacobian(m, y, J):
                 J[n + r, offset + b] += w
 
 
+@no_alloc
+def state_jacobian(m, t, y, mid, rtol, atol, J, work, Jscratch, f0, arg, f1):
+    """The Jacobian at (t, y) into J: the model's analytic one, or forward differences of a nonsmooth mode's
+    right-hand side (its laws' internal variables and energy powers included); returns the right-hand sides it
+    took."""
+    if len(m.ns_belt) == 0:
+        jacobian(m, y, J)
+        return 0
+    size = len(y)
+    state_rhs(m, t, y, t >= mid, f0, work, Jscratch)
+    for j in range(size):
+        for i in range(size):
+            arg[i] = y[i]
+        step = 1.5e-8 * max(abs(y[j]), atol[j] / rtol)
+        arg[j] += step
+        state_rhs(m, t, arg, t >= mid, f1, work, Jscratch)
+        for i in range(size):
+            J[i, j] = (f1[i] - f0[i]) / step
+    return size + 1
+
+
 def work_size(m) -> int:
     """Scratch a right-hand side needs: n forces, E tensions, and the deepest expression's stack."""
     depths = [int(p[0]) for kind, p in zip(m.f_kind, m.f_par) if kind == EXPRESSION]

@@ -21,10 +21,11 @@ import math
 import numpy as np
 
 from smdcli.kernels.compiler import kernel, no_alloc
-from smdcli.kernels.erk import OK, STEP_BUDGET, TOO_SMALL_STEP, initial_step, rows_through, scaled_rms, state_status
+from smdcli.kernels.erk import OK, STEP_BUDGET, TOO_SMALL_STEP, initial_step, scaled_rms, state_status
+from smdcli.kernels.guards import HERMITE, INTERIOR, ROSENBROCK, stop_at, watch_step
 from smdcli.kernels.linalg import factor_shifted, lu_solve
 from smdcli.kernels.radau import EPS, newton_settled, newton_tolerance
-from smdcli.kernels.rhs import jacobian, state_rhs
+from smdcli.kernels.rhs import state_jacobian, state_rhs
 
 ROSENBROCK23, TRAPEZOID, TRBDF2 = range(3)
 # Counters (ints): right-hand sides, accepted, rejected, Jacobians, factorizations.
@@ -95,25 +96,54 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, out, coun
     """Integrate from y0 = out[0] over the grid with ode23s, ode23t or ode23tb, restarting at each cut; a status.
     counts and floats receive the statistics named above; work is the right-hand side's scratch. fixed_h > 0
     takes steps of that size with no error control (for measuring a formula's order)."""
-    size = len(y0)
+    y = y0.copy()
+    floats[T_REACHED] = grid[0]
+    none = np.zeros((0, 0))
+    status, k, _ = _run(m, method, y, grid[0], cuts[1:], 0.5 * (cuts[:-1] + cuts[1:]), grid, 1, rtol, atol,
+                        max_steps, bound, -np.inf, -1, out, none, none, counts, floats, work, fixed_h)
+    if status != OK:
+        out[k:] = np.nan
+    return status
+
+
+@kernel
+def integrate_mode(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out,
+                   out_a, out_t, counts, floats, work):
+    """events.integrate_mode with ode23s, ode23t or ode23tb: a nonsmooth scene's mode from (t0, y) through the
+    stretches ending at bounds, stopping at its first guard crossing located on the method's interpolant."""
+    floats[T_REACHED] = t0
+    return _run(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out, out_a,
+                out_t, counts, floats, work, 0.0)
+
+
+@kernel
+def _run(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out, out_a, out_t,
+         counts, floats, work, fixed_h):
+    """The method from (t0, y) through the stretches ending at bounds (restarting at each), rows written from k,
+    the mode's guards (if any) watched: (status, next row, guard fired or -1); y ends where it stopped."""
+    size = len(y)
     rtol = max(rtol, 100 * EPS)
     newton_tol = newton_tolerance(rtol)
-    linear = len(m.el_law) == 0
+    linear = len(m.el_law) == 0 and len(m.ns_belt) == 0  # a mode's Jacobian (its energy powers) varies
     J, J_new, W = np.zeros((size, size)), np.zeros((size, size)), np.zeros((size, size))
     piv = np.zeros(size, dtype=np.int64)
-    y, f, y_new, f_new = y0.copy(), np.zeros(size), np.zeros(size), np.zeros(size)
+    f, y_new, f_new = np.zeros(size), np.zeros(size), np.zeros(size)
     k1, k2, k3, T = np.zeros(size), np.zeros(size), np.zeros(size), np.zeros(size)
     z1, f1, base, dz, fz = np.zeros(size), np.zeros(size), np.zeros(size), np.zeros(size), np.zeros(size)
     scale, err = np.zeros(size), np.zeros(size)
     second, second_new = np.zeros(size), np.zeros(size)
-    k = 1
-    floats[T_REACHED] = grid[0]
-    for seg in range(len(cuts) - 1):
-        ta, t_bound = cuts[seg], cuts[seg + 1]
-        mid = 0.5 * (ta + t_bound)
-        t = ta
+    G = len(m.gd_el)
+    samples, rows, values = np.zeros(INTERIOR + 2), np.zeros((INTERIOR + 2, size)), np.zeros((INTERIOR + 2, max(G, 1)))
+    when, row, dy, arg = np.zeros(1), np.zeros((1, size)), np.zeros(size), np.zeros(size)
+    stages, Q, F = np.zeros((2, size)), np.zeros((1, 1)), np.zeros((1, 1))
+    kind = ROSENBROCK if method == ROSENBROCK23 else HERMITE
+    t = t0
+    for stretch in range(len(bounds)):
+        t_bound, mid = bounds[stretch], mids[stretch]
+        if t >= t_bound:
+            continue
         _f(m, t, y, mid, f, work, J, counts)
-        jacobian(m, y, J)
+        counts[NFEV] += state_jacobian(m, t, y, mid, rtol, atol, J, work, J_new, dy, arg, fz)
         counts[NJEV] += 1
         jacobian_current = True  # J belongs to (t, y)
         second_t = math.nan  # the time at which `second` (y'') holds, for ode23t
@@ -129,15 +159,14 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, out, coun
             if span - h < min_step:  # do not leave a sliver before the bound
                 h = span
             if not jacobian_current and not linear:
-                jacobian(m, y, J)
+                counts[NFEV] += state_jacobian(m, t, y, mid, rtol, atol, J, work, J_new, dy, arg, fz)
                 counts[NJEV] += 1
             jacobian_current = True
             rejected = False
             while True:
                 if h < min_step:
                     floats[T_REACHED] = t
-                    out[k:] = np.nan
-                    return TOO_SMALL_STEP
+                    return TOO_SMALL_STEP, k, -1
                 for i in range(size):
                     scale[i] = atol[i] + rtol * abs(y[i])
                 converged = True
@@ -188,7 +217,8 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, out, coun
                         if linear:
                             J_new[:, :] = J
                         else:
-                            jacobian(m, y_new, J_new)
+                            counts[NFEV] += state_jacobian(m, t + h, y_new, mid, rtol, atol, J_new, work, J, dy, arg,
+                                                           fz)
                             counts[NJEV] += 1
                         _time_derivative(m, t + h, y_new, f_new, mid, T, fz, work, J, counts)
                         for r in range(size):
@@ -245,29 +275,19 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, out, coun
             t_new = t + h
             counts[ACCEPTED] += 1
             if counts[ACCEPTED] > max_steps:
-                out[k:] = np.nan
-                return STEP_BUDGET
-            j = rows_through(grid, k, t_new)
-            for row in range(k, j):
-                s = (grid[row] - t) / h
-                if method == ROSENBROCK23:
-                    a = s * (1 - s) / (1 - 2 * ROS_D)
-                    b = s * (s - 2 * ROS_D) / (1 - 2 * ROS_D)
-                    for i in range(size):
-                        out[row, i] = y[i] + h * (a * k1[i] + b * k2[i])
-                else:
-                    h00 = (1 + 2 * s) * (1 - s) ** 2
-                    h10 = s * (1 - s) ** 2 * h
-                    h01 = s * s * (3 - 2 * s)
-                    h11 = s * s * (s - 1) * h
-                    for i in range(size):
-                        out[row, i] = h00 * y[i] + h10 * f[i] + h01 * y_new[i] + h11 * f_new[i]
-            k = j
+                return STEP_BUDGET, k, -1
+            for i in range(size):
+                stages[0, i] = k1[i] if kind == ROSENBROCK else f[i]
+                stages[1, i] = k2[i] if kind == ROSENBROCK else f_new[i]
+            k, t_stop, fired = watch_step(m, kind, t, t_new, h, y, y_new, stages, F, Q, grid, k, mid, work,
+                                          J_new, arg, skip_t, skip_guard, samples, rows, values, when, row, dy, out,
+                                          out_a, out_t)
+            if fired >= 0:
+                return stop_at(m, y, row, t_stop, bound, floats), k, fired
             floats[T_REACHED] = t_new
             status = state_status(y_new, bound)
             if status != OK:
-                out[k:] = np.nan
-                return status
+                return status, k, -1
             if method == TRAPEZOID:  # the new end's Jacobian and y'' start the next step
                 J[:, :] = J_new
                 second[:] = second_new
@@ -278,4 +298,4 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, out, coun
             y[:] = y_new
             f[:] = f_new
             h *= factor
-    return OK
+    return OK, k, -1

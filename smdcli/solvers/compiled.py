@@ -70,7 +70,17 @@ def _tiny_run(family: str) -> None:
     if family == "erk":
         run_kernel(tiny, tableaus.RK45, grid, y0, 1e-3, np.full(2, 1e-6), 10, 1e8)
         return
-    if family == "events":
+    if family == "return_mapping":
+        from smdcli.kernels.rhs import work_size
+
+        arrays, one = model_arrays(tiny), np.ones((1, 1))
+        entry(arrays, one, one, one, one, np.zeros(1, dtype=np.int64), np.array([[1.0, 1.0, 0.0, 0.0, 0.0]]),
+              np.array([0.0, 0.0, 0.25, 0.5]), np.ones(1), np.zeros(1), np.zeros(1), grid, np.zeros((2, 1)),
+              np.zeros((2, 1)), 1e-3, 10, 1e8, np.zeros(4), np.zeros((4, 1)), np.zeros((4, 1)), np.zeros((4, 1)),
+              np.zeros((4, 1)), np.zeros((4, 1)), np.zeros((4, 4)), np.zeros(2, dtype=np.int64), np.zeros(1),
+              np.zeros(work_size(arrays)))
+        return
+    if family.startswith("modes:"):
         from smdcli.kernels.rhs import work_size
 
         arrays = model_arrays(tiny)
@@ -96,16 +106,18 @@ def _entry(family: str):
 
     module, name = {"erk": ("erk", "integrate"), "fixed": ("fixed", "march"), "stiff": ("stiff", "integrate"),
                     "radau": ("radau", "integrate"), "bdf": ("bdf", "integrate"), "rhs": ("rhs", "state_rhs"),
-                    "events": ("events", "integrate_mode")}[family]
+                    "return_mapping": ("return_mapping", "march")}.get(family, (family.removeprefix("modes:"), "integrate_mode"))  # modes:MODULE: its mode kernel
     return getattr(importlib.import_module(f"smdcli.kernels.{module}"), name)
 
 
-KERNEL_FAMILIES = ("erk", "fixed", "stiff", "radau", "bdf", "rhs", "events")
+KERNEL_FAMILIES = ("erk", "fixed", "stiff", "radau", "bdf", "rhs", "modes:events", "modes:radau", "modes:bdf",
+                   "modes:stiff", "return_mapping")
 _warmed: set[str] = set()
 
 
 def warm(*families: str) -> None:
-    """Compile kernel families (erk, fixed, stiff, radau, bdf, rhs; default erk) or load them from numba's cache
+    """Compile kernel families (erk, fixed, stiff, radau, bdf, rhs, and modes:events, modes:radau ... for nonsmooth
+    scenes' modes; default erk) or load them from numba's cache
     before any clock starts, saying so once if compiling."""
     for family in families or ("erk",):
         if family in _warmed:

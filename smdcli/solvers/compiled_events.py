@@ -13,9 +13,14 @@ from smdcli.kernels.arrays import (GUARD_D, GUARD_INTERNAL, GUARD_RATE, GUARD_TE
                                    csr)
 from smdcli.kernels.tableaus import DOP853, RK23, RK45
 
-# The method names whose events the compiled kernel runs (scipy's own, scipy:*, and the implicit methods are
-# driven from Python by smdcli.solvers.nonsmooth_ivp), and the kernel's method ids.
-COMPILED_EVENT_METHODS = {"RK45": RK45, "ode45": RK45, "RK23": RK23, "ode23": RK23, "DOP853": DOP853}
+# The method names whose modes a compiled kernel runs, as (kernel module, method id); scipy's classes (scipy:*) and
+# LSODA are stepped from Python by smdcli.solvers.nonsmooth_ivp. (The ids are smdcli.kernels.tableaus' and
+# smdcli.kernels.stiff's; that module imports numba.)
+ROSENBROCK23, TRAPEZOID, TRBDF2 = range(3)
+COMPILED_EVENT_METHODS = {"RK45": ("events", RK45), "ode45": ("events", RK45), "RK23": ("events", RK23),
+                          "ode23": ("events", RK23), "DOP853": ("events", DOP853), "Radau": ("radau", 0),
+                          "BDF": ("bdf", 0), "ode15s": ("bdf", 0), "ode23s": ("stiff", ROSENBROCK23),
+                          "ode23t": ("stiff", TRAPEZOID), "ode23tb": ("stiff", TRBDF2)}
 ACCUMULATED = ("dissipated", "input", "hysteretic", "friction", "impact")  # energy terms integrated with the motion
 QUANTITIES = {"d": GUARD_D, "rate": GUARD_RATE, "tension": GUARD_TENSION}
 
@@ -94,8 +99,10 @@ class CompiledModes:
         """EventDriver.advance by the compiled kernel: the mode integrated from (t, y) to the next jump of the
         ground (or the end) or its first event, rows stored: (y, time reached, the event (t, element, guard) or
         None, why it failed or None, next row)."""
-        from smdcli.kernels import erk
-        from smdcli.kernels.events import EVENT, integrate_mode
+        import importlib
+
+        from smdcli.kernels import erk, radau
+        from smdcli.kernels.guards import EVENT
         from smdcli.solvers.compiled import failure_text
 
         driver = self.driver
@@ -117,7 +124,9 @@ class CompiledModes:
         times = np.array([c[0] for c in cuts[segment:last + 1]] or [t, t], dtype=float)
         y = np.array(y, dtype=float)
         k0 = k
-        status, k, fired = integrate_mode(arrays, driver.kernel_method, y, float(t), times[1:],
+        module, method = driver.kernel_method
+        kernel = importlib.import_module(f"smdcli.kernels.{module}").integrate_mode
+        status, k, fired = kernel(arrays, method, y, float(t), times[1:],
                                           0.5 * (times[:-1] + times[1:]),
                                           driver.grid, k, driver.tol.rtol, np.full(len(y), driver.tol.atol),
                                           driver.max_steps, driver.bound, float(skip_t), skip_guard, self.rows,
@@ -126,6 +135,8 @@ class CompiledModes:
         t_reached = float(self.floats[erk.T_REACHED])
         driver.counts.update(nfev=int(self.counts[erk.NFEV]), steps_accepted=int(self.counts[erk.ACCEPTED]),
                              steps_rejected=int(self.counts[erk.REJECTED]))
+        if module != "events":  # the implicit kernels' counters (radau's layout, which bdf and stiff share)
+            driver.counts.update(njev=int(self.counts[radau.NJEV]), nlu=int(self.counts[radau.NLU]))
         if status == EVENT:
             e, guard, _, _ = mode.guards[fired]
             return y, t_reached, (t_reached, e, guard), None, k

@@ -10,10 +10,10 @@ crossing located by Brent's method on that interpolant, the step cut back there,
 method started afresh from the event. The energy terms' powers are integrated with the motion, under the
 method's own error control.
 
-Every method of the ODE family takes part. smd's compiled RK23, RK45 and DOP853 (ode23, ode45) run each mode in
-the compiled kernel (compiled_events.py), guards watched and events located there, Python back only at an event;
-scipy's OdeSolvers (scipy:RK45 ..., Radau, BDF, LSODA) and smd's ode23s, ode23t and ode23tb are stepped from
-Python, a step at a time.
+Every method of the ODE family takes part. smd's compiled ones (RK23, RK45, DOP853, Radau, BDF, ode15s, ode23s,
+ode23t, ode23tb) run each mode in a compiled kernel (compiled_events.py), guards watched and events located there,
+Python back only at an event; scipy's OdeSolvers (scipy:RK45 ..., LSODA) are stepped from Python, a step at a
+time, with the same modes and decisions: the compiled kernels' cross-check.
 
 Must not import: sweep, io, plots, commands, cli.
 """
@@ -390,7 +390,7 @@ def solve_events(model: Model, grid: np.ndarray, tol: Tolerances, name: str) -> 
     if name in COMPILED_EVENT_METHODS:
         from smdcli.solvers.compiled import warm
 
-        warm("events")
+        warm(f"modes:{COMPILED_EVENT_METHODS[name][0]}")
     start = time.perf_counter()
     driver = EventDriver(model, grid, tol, name)
     (x, v, a, history), failure, t_reached = driver.run()

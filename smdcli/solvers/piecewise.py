@@ -368,9 +368,17 @@ class PiecewiseRun:
         if jump is not None:  # the wall ends of the elements to ground jump: the ground does that work
             dx, dv = jump
             before = sum(self.stored(states, z))
+            d_old = self.scene.R @ z[:self.n]
             z[:self.n] += dx
             z[self.n:2 * self.n] += dv
-            self.cumulative["input"] += sum(self.stored(states, z)) - before
+            d_new = self.scene.R @ z[:self.n]
+            lost = 0.0  # what the elements dissipate on the way (a spring yielding through the jump)
+            states = list(states)
+            for e, element in enumerate(self.scene.elements):
+                states[e], loss = element.law.jump(states[e], float(d_old[e]), float(d_new[e]))
+                lost += loss
+            self.cumulative["hysteretic"] += lost
+            self.cumulative["input"] += sum(self.stored(states, z)) - before + lost
             states = self.settle(states, z, t)
             z = self.project(states, z)
         return states, z
