@@ -28,9 +28,10 @@ def integrate_mode(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_step
     """Integrate the mode m from (t0, y) through the stretches between force discontinuities that end at bounds
     (mids: their midpoints, where forces turn to their left limits), restarting at each, and stopping at the
     mode's first guard crossing; y ends as the state where it stopped. Grid rows k.. before the stop (at it, where
-    no event ends the run) are written: the state to out, the acceleration to out_a, the elements' tensions to out_t. skip_guard crossing again within 16 ulps
-    of skip_t is the event just taken, read on the far side of its own rounding: not an event. Returns (status,
-    the next row, the guard that fired or -1); floats[T_REACHED] is where it stopped."""
+    no event ends the run) are written: the state to out, the acceleration to out_a, the elements' tensions to
+    out_t. skip_guard crossing again within 16 ulps of skip_t is the event just taken, read on the far side of its
+    own rounding: not an event. Returns (status, the next row, the guard that fired or -1); floats[T_REACHED] is
+    where it stopped."""
     size = len(y)
     G = len(m.gd_el)
     K = np.zeros((16, size))

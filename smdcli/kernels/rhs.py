@@ -175,7 +175,8 @@ def element_force(m, e, y):
 def rhs(m, t, y, left, dy, work):
     """dy = [v; M^-1 (B u(t) - C v - K x - f_nl)] for y = [x; v]; work is scratch of length work_size(m). A
     nonsmooth scene in one mode (m.ns_belt not empty) has y = [x, v, q, energy]: the mode's projected motion,
-    the laws' internal rates and the energy terms' powers, its elements' tensions left in work[n:n + E]."""
+    the laws' internal rates and the energy terms' powers, its elements' tensions left in work[n:n + E]. (The
+    mode's parts are calls, not inlined: inlined into every stage of every integrator they doubled the compile.)"""
     n = m.n
     E = len(m.ns_belt)
     for i in range(n):
@@ -238,7 +239,7 @@ def _smooth_tension(m, e, rate, y):
     return 0.0
 
 
-@inlined
+@no_alloc
 def _mode_forces(m, y, work):
     """The mode's constant forces and its free elements' smooth tensions into the force work[:n]; every free
     element's tension into work[n + e]."""
@@ -256,7 +257,7 @@ def _mode_forces(m, y, work):
         work[n + e] = m.ns_stiff[e] * d + m.ns_damp[e] * rate + m.ns_const[e] + extra
 
 
-@inlined
+@no_alloc
 def _mode_rates(m, y, ground, power, dy, work):
     """The held elements' tensions (the constraints' forces), the laws' internal rates, the energy powers."""
     n = m.n

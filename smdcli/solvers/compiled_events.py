@@ -91,7 +91,8 @@ class CompiledModes:
         N, n, E = len(driver.grid), driver.n, driver.scene.E
         self.base = model_arrays(driver.model)
         self.modes: dict = {}
-        self.rows, self.rows_a, self.rows_t = np.full((N, size), np.nan), np.full((N, n), np.nan), np.full((N, E), np.nan)
+        self.rows, self.rows_a = np.full((N, size), np.nan), np.full((N, n), np.nan)
+        self.rows_t = np.full((N, E), np.nan)
         self.counts, self.floats = np.zeros(5, dtype=np.int64), np.zeros(5)
         self.work = np.zeros(work_size(self.base) + E)
 
@@ -164,7 +165,8 @@ def store_rows(outputs, k0: int, k1: int, Y: np.ndarray, A: np.ndarray, T: np.nd
     contact = np.zeros(k1 - k0)
     for e, (element, state, part) in enumerate(zip(scene.elements, states, scene.q_slices)):
         law = element.law
-        live = State(state.mode, {**state.internal, **{name: Y[:, part.start + i] for i, name in enumerate(law.ode_states)}})
+        variables = {name: Y[:, part.start + i] for i, name in enumerate(law.ode_states)}
+        live = State(state.mode, {**state.internal, **variables})
         outputs.tension[k0:k1, e] = T[:, e] + law.linear_stiffness * d[:, e]
         for name, value in zip(law.internal_names, law.internal_values(live, d[:, e])):
             outputs.internal[f"{element.path}.{name}"][k0:k1] = value

@@ -102,7 +102,8 @@ def solve_return_mapping(model: Model, grid: np.ndarray, tol: Tolerances, solver
         jump_dx, jump_dv, float(dt), int(max_steps), float(bound), t_out, x_out, v_out, a_out, T_out, q_out, e_out,
         counts, floats, np.zeros(work_size(arrays)))
     t = float(floats[0])
-    failure = {kernel.OK: None, kernel.NEWTON_FAILED: f"Newton did not converge in {kernel.NEWTON_ITERATIONS} iterations",
+    failure = {kernel.OK: None,
+               kernel.NEWTON_FAILED: f"Newton did not converge in {kernel.NEWTON_ITERATIONS} iterations",
                kernel.STEP_BUDGET: f"more than {max_steps} steps",
                kernel.DIVERGED: f"the solution grew past {bound:.3g}: unstable at this step"}[status]
     stats = SolverStats(method=solver.name, requested_method=solver.name, reason="", rtol=tol.rtol, atol=tol.atol,
