@@ -378,8 +378,8 @@ class _Outputs:
         run = self.run
         paths = tuple(e.path for e in run.scene.elements)
         kinds = tuple(e.kind for e in run.scene.elements)
-        energy = dict(self.energy, quadrature="8-point Gauss-Legendre a step on the method's dense output, split at "
-                                             "events")
+        energy = dict(self.energy, quadrature="the powers integrated with the motion under the method's own error "
+                                             "control, restarted at events")
         return self.x, self.v, self.a, NonsmoothHistory(paths, kinds, self.tension, self.internal,
                                                          tuple(run.events), energy)
 
