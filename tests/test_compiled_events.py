@@ -133,7 +133,11 @@ restitution = 0.7
 
 
 def test_the_compiled_return_mapping_is_the_laws_own():
-    # the kernel's copy of each law's state update against the law's (smdcli.elements): the same numbers
+    # the kernel's state updates against the laws (smdcli.elements): the elastic-plastic return map is the law's
+    # own; Bouc-Wen's trapezoidal step solves z - z0 = h/2 (z'(z0) + z'(z)) of the law's z', its tangent is that
+    # root's derivative in the new deformation
+    from scipy.optimize import brentq
+
     from smdcli.elements.bouc_wen import BoucWen
     from smdcli.elements.elastoplastic import Bilinear
     from smdcli.kernels import return_mapping as kernel
@@ -143,12 +147,22 @@ def test_the_compiled_return_mapping_is_the_laws_own():
     p = np.array([(1 - bw.alpha) * bw.k, bw.A, bw.beta, bw.gamma, bw.n])
     bilinear = Bilinear(k=400.0, fy=4.0, hardening=0.1)
     q = np.array([bilinear.core.k, bilinear.core.fy, 0.0, 0.0, 0.0])
+
+    def trapezoid(z0, d0, d1, h):
+        rate = (d1 - d0) / h
+        return brentq(lambda z: z - z0 - 0.5 * h * (bw.z_rate(z0, rate) + bw.z_rate(z, rate)), -1.0, 1.0, xtol=1e-15,
+                      rtol=1e-15)
+
     for _ in range(200):
         z0, d0, d1, h = rng.normal(0, 0.1), rng.normal(0, 0.2), rng.normal(0, 0.2), rng.uniform(1e-4, 1e-2)
-        assert kernel.z_step(p, z0, d0, d1, h) == pytest.approx(bw.z_step(z0, d0, d1, h), rel=1e-13, abs=1e-15)
+        z, tangent = kernel.z_step(p, z0, d0, d1, h)
+        assert z == pytest.approx(trapezoid(z0, d0, d1, h), rel=1e-12, abs=1e-14)
+        step = 1e-6 * max(abs(d1), 1e-3)
+        slope = (trapezoid(z0, d0, d1 + step, h) - trapezoid(z0, d0, d1 - step, h)) / (2 * step)
+        assert tangent == pytest.approx(slope, rel=1e-5, abs=1e-8)
         dp = rng.normal(0, 0.01)
-        T, tangent, dp_new = kernel.spring(kernel.ELASTOPLASTIC, q, dp, d0, d1, h)
-        assert (T, tangent, dp_new) == pytest.approx(bilinear.return_map(d1, dp), rel=1e-14, abs=1e-16)
+        T, stiffness, dp_new = kernel.spring(kernel.ELASTOPLASTIC, q, dp, d0, d1, h)
+        assert (T, stiffness, dp_new) == pytest.approx(bilinear.return_map(d1, dp), rel=1e-14, abs=1e-16)
 
 
 JUMPING = ONE_MASS.replace("x0 = 0.05\n", "") + """

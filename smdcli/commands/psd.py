@@ -63,18 +63,17 @@ def read_profile(spec: str, factor: float) -> tuple[Profile | None, float | None
     if not path.exists():
         raise UsageError(f"--input: {spec}: no such PSD profile (a two-column table of Hz and level, or white:LEVEL)")
     try:
-        frequency, level = read_columns(path)
+        frequency, level = read_columns(path, ("frequency Hz", "level", "frequencies"))
     except ColumnsError as exc:
         raise UsageError(f"{path}: {exc}") from None
     if len(frequency) < 2 or frequency[0] <= 0 or (level <= 0).any():
         raise UsageError(f"{path}: expected at least two breakpoints of a frequency > 0 Hz and a level > 0, found "
                          f"{len(frequency)} from {frequency[0]:g} Hz, smallest level {level.min():g}")
-    table = np.column_stack([frequency, level])
     with np.errstate(over="ignore"):
-        levels = table[:, 1] * factor
+        levels = level * factor
     if not np.isfinite(levels).all():
         raise UsageError(f"{path}: a level overflows double precision once converted to SI; check --units")
-    return Profile(table[:, 0], levels), None
+    return Profile(frequency, levels), None
 
 
 def psd(path: str | Path, spec: str, out: str | Path, on: str | None = None, units: str = "g",

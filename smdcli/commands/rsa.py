@@ -60,15 +60,13 @@ def read_spectrum_source(path: Path) -> SpectrumSource:
     from smdcli.scenario.records import ColumnsError, read_columns
 
     try:
-        period, sa = read_columns(path)
+        period, sa = read_columns(path, ("period s", "Sa g", "periods"))
     except ColumnsError as exc:
         raise UsageError(f"{path}: {exc}") from None
     if len(period) < 2 or period[0] <= 0 or (sa < 0).any():
         raise UsageError(f"{path}: expected at least two rows of a period > 0 s and Sa >= 0 g, found {len(period)} "
                          f"from {period[0]:g} s, smallest Sa {sa.min():g}")
-    table = np.column_stack([period, sa])
-    return SpectrumSource(str(path), "design spectrum table", table[:, 0], np.array([0.05]),
-                          table[None, :, 1] * STANDARD_GRAVITY)
+    return SpectrumSource(str(path), "design spectrum table", period, np.array([0.05]), sa[None, :] * STANDARD_GRAVITY)
 
 
 @dataclass

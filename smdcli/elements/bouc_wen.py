@@ -13,7 +13,7 @@
 
 T = alpha k d + (1 - alpha) k z with dz/dt = A d' - beta |d'| |z|^(n-1) z - gamma d' |z|^n. Smooth, with the
 hysteretic variable z as an internal state: integrators take it (the ODE family and the Newmark family, the
-latter by a trapezoidal update of z inside each step's Newton iteration). The energy (1 - alpha) k z z' is
+latter by a trapezoidal update of z inside each step's Newton iteration: smdcli.kernels.return_mapping.z_step). The energy (1 - alpha) k z z' is
 stored, the rest of (1 - alpha) k z d' dissipated: hysteretic.
 """
 
@@ -101,33 +101,3 @@ class BoucWen(Law):
     def stored(self, state: State, d: float) -> tuple[str, float]:
         z = state.internal["z"]
         return "strain", 0.5 * (1 - self.alpha) * self.k * z * z
-
-    def _partials(self, z: float, rate: float) -> tuple[float, float]:
-        """(d z_rate / d z, d z_rate / d d') at z and d'."""
-        size = abs(z)
-        sign_z = 1.0 if z >= 0 else -1.0
-        sign_rate = 1.0 if rate >= 0 else -1.0
-        power = size ** (self.n - 1)
-        by_z = -self.beta * abs(rate) * self.n * power - self.gamma * rate * self.n * power * sign_z
-        by_rate = self.A - self.beta * sign_rate * power * z - self.gamma * size ** self.n
-        return by_z, by_rate
-
-    def z_step(self, z_old: float, d_old: float, d_new: float, h: float) -> tuple[float, float]:
-        """(z, dz/dd_new) after a step from d_old to d_new over h, by the trapezoidal rule at the step's mean rate
-        (second order, as the Newmark family), z solved by Newton: the family's update and the derivative its
-        consistent tangent needs."""
-        if h <= 0:
-            return z_old, 0.0
-        rate = (d_new - d_old) / h
-        start = self.z_rate(z_old, rate)
-        z = z_old + h * start
-        for _ in range(50):
-            by_z, _ = self._partials(z, rate)
-            f = z - z_old - 0.5 * h * (start + self.z_rate(z, rate))
-            step = f / (1.0 - 0.5 * h * by_z)
-            z -= step
-            if abs(step) <= 1e-15 * max(abs(z), abs(z_old), 1e-300):
-                break
-        by_z, by_rate = self._partials(z, rate)
-        _, by_rate_old = self._partials(z_old, rate)
-        return z, 0.5 * (by_rate_old + by_rate) / (1.0 - 0.5 * h * by_z)

@@ -26,6 +26,7 @@ CUBIC_SPRING, QUADRATIC_DAMPER = 0, 1
 FORCE_PARAMETERS = 4
 LAW_PARAMETERS = 6
 GUARD_D, GUARD_RATE, GUARD_TENSION, GUARD_INTERNAL = range(4)
+INTERIOR = 4  # interior points of each step where an integrator looks at the guards too: a touch within a step is seen
 
 
 class ModelArrays(NamedTuple):

@@ -17,7 +17,7 @@ import numpy as np
 
 from smdcli.kernels.compiler import kernel, no_alloc
 from smdcli.kernels.erk import OK, STEP_BUDGET, TOO_SMALL_STEP, initial_step, scaled_rms, state_status
-from smdcli.kernels.guards import BDF, INTERIOR, stop_at, watch_step
+from smdcli.kernels.guards import BDF, stop_at, watch_scratch, watch_step
 from smdcli.kernels.linalg import factor_shifted, lu_solve
 from smdcli.kernels.radau import (ACCEPTED, EPS, NFEV, NJEV, NLU, REJECTED, T_REACHED,  # the same statistics
                                   newton_hopeless, newton_settled, newton_tolerance)
@@ -111,10 +111,9 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
     codes). counts and floats receive radau's statistics; work is the right-hand side's scratch. fixed_h is not
     supported (the order varies) and must be 0."""
     y = y0.copy()
-    floats[T_REACHED] = grid[0]
     none = np.zeros((0, 0))
-    status, k, _ = _run(m, y, grid[0], cuts[1:], 0.5 * (cuts[:-1] + cuts[1:]), grid, 1, rtol, atol, max_steps, bound,
-                        -np.inf, -1, out, none, none, counts, floats, work)
+    status, k, _ = integrate_mode(m, 0, y, grid[0], cuts[1:], 0.5 * (cuts[:-1] + cuts[1:]), grid, 1, rtol, atol,
+                                  max_steps, bound, -np.inf, -1, out, none, none, counts, floats, work, 0.0)
     if status != OK:
         out[k:] = np.nan
     return status
@@ -122,19 +121,11 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
 
 @kernel
 def integrate_mode(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out,
-                   out_a, out_t, counts, floats, work):
-    """events.integrate_mode with variable-order NDF (method is unused): a nonsmooth scene's mode from (t0, y)
-    through the stretches ending at bounds, stopping at its first guard crossing on the difference polynomial."""
+                   out_a, out_t, counts, floats, work, fixed_h):
+    """events.integrate_mode with variable-order NDF (method and fixed_h are unused): from (t0, y) through the
+    stretches ending at bounds (restarting at each), rows written from k, the mode's guards (if any) watched on the
+    difference polynomial: (status, next row, guard fired or -1); y ends where it stopped."""
     floats[T_REACHED] = t0
-    return _run(m, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out, out_a, out_t,
-                counts, floats, work)
-
-
-@kernel
-def _run(m, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out, out_a, out_t,
-         counts, floats, work):
-    """NDF from (t0, y) through the stretches ending at bounds (restarting at each), rows written from k, the
-    mode's guards (if any) watched: (status, next row, guard fired or -1); y ends where it stopped."""
     size = len(y)
     rtol = max(rtol, 100 * EPS)
     newton_tol = newton_tolerance(rtol)
@@ -148,9 +139,8 @@ def _run(m, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, 
     y_old, f1 = np.zeros(size), np.zeros(size)
     newton = np.zeros(2)
     factors = np.zeros(3)
-    G = len(m.gd_el)
-    samples, rows, values = np.zeros(INTERIOR + 2), np.zeros((INTERIOR + 2, size)), np.zeros((INTERIOR + 2, max(G, 1)))
-    when, row, dense, Q = np.zeros(1), np.zeros((1, size)), np.zeros((1, 3)), np.zeros((1, 1))
+    samples, rows, values, when, row = watch_scratch(m, size)
+    dense, Q = np.zeros((1, 3)), np.zeros((1, 1))
     t = t0
     for stretch in range(len(bounds)):
         t_bound, mid = bounds[stretch], mids[stretch]

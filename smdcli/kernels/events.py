@@ -18,31 +18,27 @@ import numpy as np
 from smdcli.kernels.compiler import kernel, no_alloc
 from smdcli.kernels.erk import (ACCEPTED, DOP853, ERROR_ORDER, NFEV, OK, STAGES, STEP_BUDGET, T_REACHED, assign,
                                 attempt, initial_step, state_status)
-from smdcli.kernels.guards import INTERIOR, stop_at, watch_step
+from smdcli.kernels.guards import stop_at, watch_scratch, watch_step
 from smdcli.kernels.rhs import state_rhs
 
 
 @kernel
 def integrate_mode(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out,
-                   out_a, out_t, counts, floats, work):
+                   out_a, out_t, counts, floats, work, fixed_h):
     """Integrate the mode m from (t0, y) through the stretches between force discontinuities that end at bounds
     (mids: their midpoints, where forces turn to their left limits), restarting at each, and stopping at the
     mode's first guard crossing; y ends as the state where it stopped. Grid rows k.. before the stop (at it, where
     no event ends the run) are written: the state to out, the acceleration to out_a, the elements' tensions to
     out_t. skip_guard crossing again within 16 ulps of skip_t is the event just taken, read on the far side of its
     own rounding: not an event. Returns (status, the next row, the guard that fired or -1); floats[T_REACHED] is
-    where it stopped."""
+    where it stopped. fixed_h > 0 takes steps of that size with no error control."""
     size = len(y)
-    G = len(m.gd_el)
     K = np.zeros((16, size))
     F = np.zeros((7, size))
     jwork = np.zeros((1, 1))
     arg, err, err3 = np.zeros(size), np.zeros(size), np.zeros(size)
     y_new, scale, dy = np.zeros(size), np.zeros(size), np.zeros(size)
-    samples = np.zeros(INTERIOR + 2)
-    rows = np.zeros((INTERIOR + 2, size))
-    values = np.zeros((INTERIOR + 2, max(G, 1)))
-    when, row = np.zeros(1), np.zeros((1, size))
+    samples, rows, values, when, row = watch_scratch(m, size)
     Q = np.zeros((1, 1))  # Radau's interpolant: not this kernel's
     t = t0
     floats[T_REACHED] = t
@@ -51,8 +47,8 @@ def integrate_mode(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_step
         if t >= t_bound:
             continue
         status, k, fired = _stretch(m, method, y, t, t_bound, mid, grid, k, rtol, atol, max_steps, bound, skip_t,
-                                    skip_guard, out, out_a, out_t, counts, floats, work, K, F, Q, jwork, arg, err, err3,
-                                    y_new, scale, dy, samples, rows, values, when, row)
+                                    skip_guard, out, out_a, out_t, counts, floats, work, fixed_h, K, F, Q, jwork, arg,
+                                    err, err3, y_new, scale, dy, samples, rows, values, when, row)
         if status != OK:
             return status, k, fired
         t = t_bound
@@ -61,18 +57,19 @@ def integrate_mode(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_step
 
 @no_alloc
 def _stretch(m, method, y, t, t_bound, mid, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out, out_a,
-             out_t, counts, floats, work, K, F, Q, jwork, arg, err, err3, y_new, scale, dy, samples, rows, values,
-             when, row):
+             out_t, counts, floats, work, fixed_h, K, F, Q, jwork, arg, err, err3, y_new, scale, dy, samples, rows,
+             values, when, row):
     """integrate_mode over one stretch between force discontinuities, from a fresh start at t."""
     n = m.n
     G = len(m.gd_el)
     S = STAGES[method]
     state_rhs(m, t, y, t >= mid, K[0], work, jwork)
-    h_abs = initial_step(m, t, y, K[0], t_bound, ERROR_ORDER[method], rtol, atol, mid, work, jwork, K[1], arg, scale)
+    h_abs = fixed_h if fixed_h > 0 else initial_step(m, t, y, K[0], t_bound, ERROR_ORDER[method], rtol, atol, mid, work,
+                                                     jwork, K[1], arg, scale)
     counts[NFEV] += 2
     while t < t_bound:
-        status, t_new, h, h_abs = attempt(m, method, t, y, h_abs, t_bound, mid, rtol, atol, 0.0, K, y_new, scale, err,
-                                          err3, arg, work, jwork, counts)
+        status, t_new, h, h_abs = attempt(m, method, t, y, h_abs, t_bound, mid, rtol, atol, fixed_h, K, y_new, scale,
+                                          err, err3, arg, work, jwork, counts)
         if status != OK:
             return status, k, -1
         counts[ACCEPTED] += 1

@@ -17,16 +17,25 @@ from __future__ import annotations
 
 import numpy as np
 
-from smdcli.kernels.arrays import GUARD_D, GUARD_INTERNAL, GUARD_RATE
-from smdcli.kernels.compiler import no_alloc
+from smdcli.kernels.arrays import GUARD_D, GUARD_INTERNAL, GUARD_RATE, INTERIOR
+from smdcli.kernels.compiler import kernel, no_alloc
 from smdcli.kernels.erk import _dense, state_status
+from smdcli.kernels.fixed import _hermite
 from smdcli.kernels.rhs import state_rhs
+from smdcli.kernels.tableaus import ROS_D
 
 RADAU, BDF, ROSENBROCK, HERMITE = 3, 4, 5, 6  # interpolants beyond erk's method ids (RK23, RK45, DOP853)
-ROS_D = 1 / (2 + 2 ** 0.5)  # as smdcli.kernels.stiff
-INTERIOR = 4  # interior points of each step where guards are looked at too (as smdcli.solvers.nonsmooth_ivp)
 EVENT = 6  # a status beyond erk's: the run stopped at a guard's crossing
 EPS = 2.220446049250313e-16
+
+
+@kernel
+def watch_scratch(m, size):
+    """What watch_step needs beside a state of `size`: the sample times, their states, the guards' values there,
+    and one time and state for Brent's method."""
+    G = len(m.gd_el)
+    return (np.zeros(INTERIOR + 2), np.zeros((INTERIOR + 2, size)), np.zeros((INTERIOR + 2, max(G, 1))), np.zeros(1),
+            np.zeros((1, size)))
 
 
 @no_alloc
@@ -59,14 +68,7 @@ def interpolate(m, method, t_old, h, y_old, y_new, K, F, Q, times, k, j, out, mi
                 out[row, i] = y_old[i] + h * (a * K[0, i] + b * K[1, i])
         return
     if method == HERMITE:
-        for row in range(k, j):
-            s = (times[row] - t_old) / h
-            h00 = (1 + 2 * s) * (1 - s) ** 2
-            h10 = s * (1 - s) ** 2 * h
-            h01 = s * s * (3 - 2 * s)
-            h11 = s * s * (s - 1) * h
-            for i in range(size):
-                out[row, i] = h00 * y_old[i] + h10 * K[0, i] + h01 * y_new[i] + h11 * K[1, i]
+        _hermite(t_old, h, y_old, K[0], y_new, K[1], times, k, j, out)
         return
     _dense(m, method, t_old, h, y_old, y_new, K, times, k, j, out, mid, work, jwork, arg, F)
 

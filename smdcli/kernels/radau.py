@@ -17,7 +17,7 @@ import numpy as np
 
 from smdcli.kernels.compiler import kernel, no_alloc
 from smdcli.kernels.erk import OK, STEP_BUDGET, TOO_SMALL_STEP, initial_step, state_status
-from smdcli.kernels.guards import INTERIOR, RADAU, stop_at, watch_step
+from smdcli.kernels.guards import RADAU, stop_at, watch_scratch, watch_step
 from smdcli.kernels.linalg import factor_shifted, lu_solve
 from smdcli.kernels.rhs import state_jacobian, state_rhs
 
@@ -154,10 +154,9 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
     counts and floats receive the statistics named above; work is the right-hand side's scratch. fixed_h > 0
     takes steps of that size with no error control (for measuring the formula's order)."""
     y = y0.copy()
-    floats[T_REACHED] = grid[0]
     none = np.zeros((0, 0))
-    status, k, _ = _run(m, y, grid[0], cuts[1:], 0.5 * (cuts[:-1] + cuts[1:]), grid, 1, rtol, atol, max_steps, bound,
-                        -np.inf, -1, out, none, none, counts, floats, work, fixed_h)
+    status, k, _ = integrate_mode(m, 0, y, grid[0], cuts[1:], 0.5 * (cuts[:-1] + cuts[1:]), grid, 1, rtol, atol,
+                                  max_steps, bound, -np.inf, -1, out, none, none, counts, floats, work, fixed_h)
     if status != OK:
         out[k:] = np.nan
     return status
@@ -165,19 +164,11 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
 
 @kernel
 def integrate_mode(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out,
-                   out_a, out_t, counts, floats, work):
-    """events.integrate_mode with Radau IIA 5 (method is unused): a nonsmooth scene's mode from (t0, y) through
-    the stretches ending at bounds, stopping at its first guard crossing located on the collocation polynomial."""
+                   out_a, out_t, counts, floats, work, fixed_h):
+    """events.integrate_mode with Radau IIA 5 (method is unused): from (t0, y) through the stretches ending at
+    bounds (restarting at each), rows written from k, the mode's guards (if any) watched on the collocation
+    polynomial: (status, next row, guard fired or -1); y ends where it stopped."""
     floats[T_REACHED] = t0
-    return _run(m, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out, out_a, out_t,
-                counts, floats, work, 0.0)
-
-
-@kernel
-def _run(m, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out, out_a, out_t,
-         counts, floats, work, fixed_h):
-    """Radau from (t0, y) through the stretches ending at bounds (restarting at each), rows written from k, the
-    mode's guards (if any) watched: (status, next row, guard fired or -1); y ends where it stopped."""
     size = len(y)
     rtol = max(rtol, 100 * EPS)
     newton_tol = newton_tolerance(rtol)
@@ -193,9 +184,8 @@ def _run(m, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, 
     b_real, b_complex = np.zeros(size), np.zeros(size, dtype=np.complex128)
     newton = np.zeros(2)
     y_old, dy, f1 = np.zeros(size), np.zeros(size), np.zeros(size)
-    G = len(m.gd_el)
-    samples, rows, values = np.zeros(INTERIOR + 2), np.zeros((INTERIOR + 2, size)), np.zeros((INTERIOR + 2, max(G, 1)))
-    when, row, K = np.zeros(1), np.zeros((1, size)), np.zeros((1, 1))
+    samples, rows, values, when, row = watch_scratch(m, size)
+    K = np.zeros((1, 1))
     t = t0
     for stretch in range(len(bounds)):
         t_bound, mid = bounds[stretch], mids[stretch]

@@ -8,8 +8,9 @@ iteration matrix, and commits the state only when the step has converged, as str
     x1 = x0 + h v0 + h^2 ((1/2 - beta) a0 + beta a1),   v1 = v0 + h ((1 - gamma) a0 + gamma a1).
 
 Every step's state, the springs' tensions and internal variables and the energy terms (trapezoid rule a step,
-the method's order) are written out; smdcli.solvers.return_mapping puts them on the output grid. The laws'
-formulas are those of smdcli.elements.elastoplastic.return_map and bouc_wen.z_step (tests hold them equal).
+the method's order) are written out; smdcli.solvers.return_mapping puts them on the output grid. The elastic-
+plastic return map is smdcli.elements.elastoplastic.return_map's, Bouc-Wen's step the trapezoidal rule on its
+z' (tests hold them equal).
 
 Must not import: solvers, sweep, io, plots, commands, cli.
 """
@@ -23,22 +24,17 @@ import numpy as np
 from smdcli.kernels.arrays import CUBIC_SPRING
 from smdcli.kernels.compiler import kernel, no_alloc
 from smdcli.kernels.linalg import lu_factor, lu_solve
-from smdcli.kernels.rhs import element_force, force_value
+from smdcli.kernels.rhs import bouc_wen_rate, element_force, force_value
 
 ELASTOPLASTIC, BOUC_WEN = 0, 1  # spring laws: parameters (k, fy) of the elastic-plastic core, or ((1-alpha) k, A,
 #                                 beta, gamma, n)
 NEWTON_ITERATIONS = 50
 NEWTON_TOLERANCE = 1e-12  # of the residual, relative to the forces' scale
 OK, NEWTON_FAILED, STEP_BUDGET, DIVERGED = range(4)
+STEPS, FACTORIZATIONS = range(2)  # counters (ints); floats[T_REACHED]: the time the run reached
+T_REACHED = 0
 # Energy terms written per step: input work, dissipated by dampers, hysteretic, strain (stored).
 WORK, DISSIPATED, HYSTERETIC, STRAIN = range(4)
-
-
-@no_alloc
-def z_rate(p, z, rate):
-    """Bouc-Wen's dz/dt at z and d'."""
-    size = abs(z)
-    return p[1] * rate - p[2] * abs(rate) * size ** (p[4] - 1) * z - p[3] * rate * size ** p[4]
 
 
 @no_alloc
@@ -59,11 +55,11 @@ def z_step(p, z_old, d_old, d_new, h):
     if h <= 0:
         return z_old, 0.0
     rate = (d_new - d_old) / h
-    start = z_rate(p, z_old, rate)
+    start = bouc_wen_rate(p, z_old, rate)
     z = z_old + h * start
     for _ in range(50):
         by_z, _ = _partials(p, z, rate)
-        f = z - z_old - 0.5 * h * (start + z_rate(p, z, rate))
+        f = z - z_old - 0.5 * h * (start + bouc_wen_rate(p, z, rate))
         step = f / (1.0 - 0.5 * h * by_z)
         z -= step
         if abs(step) <= 1e-15 * max(abs(z), abs(z_old), 1e-300):
@@ -193,7 +189,7 @@ def march(m, M, C, K, R, laws, par, coefficients, x, v, committed, edges, jump_d
           t_out, x_out, v_out, a_out, T_out, q_out, e_out, counts, floats, stack):
     """Step from (x, v) at edges[0] through edges (restarting from equilibrium at each ground jump: jump_dx/dv
     rows, zero elsewhere), writing every step's time, state, tensions, internal variables and energies into the
-    *_out rows from 0; returns (status, rows written). counts: steps, factorizations; floats: time reached; stack:
+    *_out rows from 0; returns (status, rows written). counts: STEPS, FACTORIZATIONS; floats: T_REACHED; stack:
     the forces' scratch (rhs.work_size)."""
     n = m.n
     E = len(laws)
@@ -271,14 +267,14 @@ def march(m, M, C, K, R, laws, par, coefficients, x, v, committed, edges, jump_d
                                                                      + beta * h * h * Kt[i, j])
                 lu_factor(J, piv)
                 lu_solve(J, piv, r)
-                counts[1] += 1
+                counts[FACTORIZATIONS] += 1
                 for i in range(n):
                     a1[i] -= r[i]
-            counts[0] += 1
-            floats[0] = t
+            counts[STEPS] += 1
+            floats[T_REACHED] = t
             if not converged:
                 return NEWTON_FAILED, row
-            if counts[0] > max_steps:
+            if counts[STEPS] > max_steps:
                 return STEP_BUDGET, row
             for i in range(n):
                 if not math.isfinite(x1[i]) or abs(x1[i]) > bound:
@@ -304,7 +300,7 @@ def march(m, M, C, K, R, laws, par, coefficients, x, v, committed, edges, jump_d
             for i in range(n):
                 x[i], v[i], a[i], f_prev[i], F_end[i] = x1[i], v1[i], a1[i], f[i], F_step[i]
             t = t1
-            floats[0] = t
+            floats[T_REACHED] = t
             row = _write(row, t, x, v, a, T, committed, acc, stored0, stored, strain, t_out, x_out, v_out, a_out, T_out,
                          q_out, e_out)
     return OK, row

@@ -226,6 +226,13 @@ def _element_motion(m, e, y):
 
 
 @inlined
+def bouc_wen_rate(p, z, rate):
+    """Bouc-Wen's dz/dt at z and d' for parameters p = ((1 - alpha) k, A, beta, gamma, n, ...)."""
+    size = abs(z)
+    return p[1] * rate - p[2] * abs(rate) * size ** (p[4] - 1) * z - p[3] * rate * size ** p[4]
+
+
+@inlined
 def _smooth_tension(m, e, rate, y):
     """The smooth part of element e's tension (Bouc-Wen's (1 - alpha) k z, Stribeck's or tanh's friction)."""
     law = m.ns_law[e]
@@ -296,8 +303,7 @@ def _mode_rates(m, y, ground, power, dy, work):
         law = m.ns_law[e]
         if law == SMOOTH_BOUC_WEN:
             z = y[2 * n + int(p[5])]
-            size = abs(z)
-            z_rate = p[1] * rate - p[2] * abs(rate) * size ** (p[4] - 1) * z - p[3] * rate * size ** p[4]
+            z_rate = bouc_wen_rate(p, z, rate)
             dy[2 * n + int(p[5])] = z_rate
             loss += p[0] * z * (rate - z_rate)
         elif law != SMOOTH_NONE:

@@ -22,12 +22,12 @@ import numpy as np
 
 from smdcli.kernels.compiler import kernel, no_alloc
 from smdcli.kernels.erk import OK, STEP_BUDGET, TOO_SMALL_STEP, initial_step, scaled_rms, state_status
-from smdcli.kernels.guards import HERMITE, INTERIOR, ROSENBROCK, stop_at, watch_step
+from smdcli.kernels.guards import HERMITE, ROSENBROCK, stop_at, watch_scratch, watch_step
 from smdcli.kernels.linalg import factor_shifted, lu_solve
 from smdcli.kernels.radau import EPS, newton_settled, newton_tolerance
 from smdcli.kernels.rhs import state_jacobian, state_rhs
+from smdcli.kernels.tableaus import ROS_D, ROSENBROCK23, TRAPEZOID
 
-ROSENBROCK23, TRAPEZOID, TRBDF2 = range(3)
 # Counters (ints): right-hand sides, accepted, rejected, Jacobians, factorizations.
 NFEV, ACCEPTED, REJECTED, NJEV, NLU = range(5)
 # Floats: time reached.
@@ -37,7 +37,6 @@ SAFETY, MIN_FACTOR, MAX_FACTOR = 0.8, 0.2, 5.0
 NEWTON_MAXITER = 5
 ERROR_ORDER = 3  # every estimate here is O(h^3)
 
-ROS_D = 1 / (2 + math.sqrt(2))
 ROS_E32 = 6 + math.sqrt(2)
 TR_GAMMA = 2 - math.sqrt(2)
 TR_D = TR_GAMMA / 2
@@ -97,10 +96,9 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, out, coun
     counts and floats receive the statistics named above; work is the right-hand side's scratch. fixed_h > 0
     takes steps of that size with no error control (for measuring a formula's order)."""
     y = y0.copy()
-    floats[T_REACHED] = grid[0]
     none = np.zeros((0, 0))
-    status, k, _ = _run(m, method, y, grid[0], cuts[1:], 0.5 * (cuts[:-1] + cuts[1:]), grid, 1, rtol, atol,
-                        max_steps, bound, -np.inf, -1, out, none, none, counts, floats, work, fixed_h)
+    status, k, _ = integrate_mode(m, method, y, grid[0], cuts[1:], 0.5 * (cuts[:-1] + cuts[1:]), grid, 1, rtol,
+                                  atol, max_steps, bound, -np.inf, -1, out, none, none, counts, floats, work, fixed_h)
     if status != OK:
         out[k:] = np.nan
     return status
@@ -108,19 +106,11 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, out, coun
 
 @kernel
 def integrate_mode(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out,
-                   out_a, out_t, counts, floats, work):
-    """events.integrate_mode with ode23s, ode23t or ode23tb: a nonsmooth scene's mode from (t0, y) through the
-    stretches ending at bounds, stopping at its first guard crossing located on the method's interpolant."""
+                   out_a, out_t, counts, floats, work, fixed_h):
+    """events.integrate_mode with ode23s, ode23t or ode23tb: from (t0, y) through the stretches ending at bounds
+    (restarting at each), rows written from k, the mode's guards (if any) watched on the method's interpolant:
+    (status, next row, guard fired or -1); y ends where it stopped."""
     floats[T_REACHED] = t0
-    return _run(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out, out_a,
-                out_t, counts, floats, work, 0.0)
-
-
-@kernel
-def _run(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, skip_t, skip_guard, out, out_a, out_t,
-         counts, floats, work, fixed_h):
-    """The method from (t0, y) through the stretches ending at bounds (restarting at each), rows written from k,
-    the mode's guards (if any) watched: (status, next row, guard fired or -1); y ends where it stopped."""
     size = len(y)
     rtol = max(rtol, 100 * EPS)
     newton_tol = newton_tolerance(rtol)
@@ -132,9 +122,8 @@ def _run(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_steps, bound, 
     z1, f1, base, dz, fz = np.zeros(size), np.zeros(size), np.zeros(size), np.zeros(size), np.zeros(size)
     scale, err = np.zeros(size), np.zeros(size)
     second, second_new = np.zeros(size), np.zeros(size)
-    G = len(m.gd_el)
-    samples, rows, values = np.zeros(INTERIOR + 2), np.zeros((INTERIOR + 2, size)), np.zeros((INTERIOR + 2, max(G, 1)))
-    when, row, dy, arg = np.zeros(1), np.zeros((1, size)), np.zeros(size), np.zeros(size)
+    samples, rows, values, when, row = watch_scratch(m, size)
+    dy, arg = np.zeros(size), np.zeros(size)
     stages, Q, F = np.zeros((2, size)), np.zeros((1, 1)), np.zeros((1, 1))
     kind = ROSENBROCK if method == ROSENBROCK23 else HERMITE
     t = t0

@@ -1,4 +1,5 @@
-"""Butcher tableaus of the explicit Runge-Kutta pairs: Bogacki-Shampine 3(2), Dormand-Prince 5(4) and 8(5,3).
+"""Butcher tableaus of the explicit Runge-Kutta pairs: Bogacki-Shampine 3(2), Dormand-Prince 5(4) and 8(5,3); the
+ids of the low-order stiff formulas and the Rosenbrock pair's constant (stiff.py, and its interpolant in guards.py).
 
 The numbers are those of scipy.integrate (rk.py, dop853_coefficients.py, BSD licence), written out so that
 a compiled solve does not import scipy.integrate, and so that smd's compiled pairs and scipy's take the same
@@ -9,6 +10,9 @@ import numpy as np
 
 # The pairs, as the compiled kernel's method argument.
 RK23, RK45, DOP853 = 0, 1, 2
+# ode23s, ode23t, ode23tb, as smdcli.kernels.stiff's method argument; d = 1 / (2 + sqrt 2) of the Rosenbrock pair.
+ROSENBROCK23, TRAPEZOID, TRBDF2 = 0, 1, 2
+ROS_D = 1 / (2 + 2 ** 0.5)
 
 RK23_A = np.array([
     [0.0, 0.0, 0.0],

@@ -31,10 +31,14 @@ MAX_ROWS = 1_000_000  # rows of a table or record file: 16 min at 1 kHz, 10 s at
 _SEPARATORS = str.maketrans({",": " ", ";": " ", "\t": " "})
 
 
-def two_columns(text: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
+RECORD_COLUMNS = ("time", "value", "times")  # what a message calls the columns: first, second, the first's plural
+
+
+def two_columns(text: str, columns: tuple[str, str, str] = RECORD_COLUMNS) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """(times, values) of two-column text: separated by commas, semicolons, tabs or spaces; blank lines and lines
     starting with # skipped; a first row that does not start with a number is a header, whatever its separators;
-    a byte-order mark is ignored. Checked: finite numbers, strictly increasing times, slopes that stay finite."""
+    a byte-order mark is ignored. Checked: finite numbers, strictly increasing times, slopes that stay finite.
+    Messages name the columns as `columns` do."""
     import io
 
     text = text.replace("\ufeff", "")
@@ -48,7 +52,7 @@ def two_columns(text: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
     except ValueError:
         table = None
     if table is None or table.shape[1] != 2 or not len(table):
-        return _slow_two_columns(text)  # says which line is wrong
+        return _slow_two_columns(text, columns)  # says which line is wrong
     if len(table) > MAX_ROWS:
         raise ColumnsError(f"has {len(table)} rows, more than the {MAX_ROWS} a table or record may have")
     times, values = table[:, 0], table[:, 1]
@@ -60,7 +64,7 @@ def two_columns(text: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
     steps = np.diff(times)
     if (steps <= 0).any():
         row = int(np.argmax(steps <= 0)) + 1
-        raise ColumnsError(f"line {_line_of_row(text, row)}: expected strictly increasing times, found "
+        raise ColumnsError(f"line {_line_of_row(text, row)}: expected strictly increasing {columns[2]}, found "
                            f"{times[row]:g} after {times[row - 1]:g}")
     problem = slope_problem(times, values)
     if problem is not None:
@@ -144,7 +148,7 @@ def _line_text(text: str, number: int) -> str:
     return text.split("\n")[number - 1].strip()[:40]
 
 
-def _slow_two_columns(text: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
+def _slow_two_columns(text: str, columns: tuple[str, str, str]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Line by line, to name the first line that is not two finite numbers."""
     times: list[float] = []
     values: list[float] = []
@@ -161,14 +165,15 @@ def _slow_two_columns(text: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
         try:
             numbers = [float(c) for c in cells]
         except ValueError:
-            raise ColumnsError(f"line {number}: expected two numbers (time, value), found {stripped[:40]!r}") from None
+            raise ColumnsError(f"line {number}: expected two numbers ({columns[0]}, {columns[1]}), found "
+                               f"{stripped[:40]!r}") from None
         if len(numbers) != 2:
-            raise ColumnsError(f"line {number}: expected two columns (time, value), found {len(numbers)}")
+            raise ColumnsError(f"line {number}: expected two columns ({columns[0]}, {columns[1]}), found {len(numbers)}")
         if not all(math.isfinite(x) for x in numbers):
             raise ColumnsError(f"line {number}: expected finite numbers, found {stripped[:40]!r}")
         if times and numbers[0] <= times[-1]:
-            raise ColumnsError(f"line {number}: expected strictly increasing times, found {numbers[0]:g} after "
-                               f"{times[-1]:g}")
+            raise ColumnsError(f"line {number}: expected strictly increasing {columns[2]}, found {numbers[0]:g} "
+                               f"after {times[-1]:g}")
         times.append(numbers[0])
         values.append(numbers[1])
     if not times:
@@ -192,10 +197,10 @@ def read_text(path: Path) -> str:
                            "cannot be read as UTF-8 text") from None
 
 
-def read_columns(path: Path) -> tuple[np.ndarray, np.ndarray]:
+def read_columns(path: Path, columns: tuple[str, str, str]) -> tuple[np.ndarray, np.ndarray]:
     """The two columns of a table file (a PSD profile, a design spectrum), read and checked as a record's are;
-    ColumnsError names what is wrong."""
-    first, second = two_columns(read_text(path))
+    ColumnsError names what is wrong, calling the columns as `columns` do (first, second, the first's plural)."""
+    first, second = two_columns(read_text(path), columns)
     return np.asarray(first, dtype=float), np.asarray(second, dtype=float)
 
 

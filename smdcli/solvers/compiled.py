@@ -85,16 +85,16 @@ def _tiny_run(family: str) -> None:
         from smdcli.kernels.rhs import work_size
 
         arrays = model_arrays(tiny)
-        entry(arrays, tableaus.RK45, y0.copy(), 0.0, np.array([1e-3]), np.array([5e-4]), grid, 1, 1e-3, np.full(2, 1e-6), 10, 1e8, -np.inf, -1,
-              np.zeros((2, 2)), np.zeros((2, 1)), np.zeros((2, 0)), np.zeros(5, dtype=np.int64), np.zeros(5),
-              np.zeros(work_size(arrays)))
+        entry(arrays, tableaus.RK45, y0.copy(), 0.0, np.array([1e-3]), np.array([5e-4]), grid, 1, 1e-3,
+              np.full(2, 1e-6), 10, 1e8, -np.inf, -1, np.zeros((2, 2)), np.zeros((2, 1)), np.zeros((2, 0)),
+              np.zeros(5, dtype=np.int64), np.zeros(5), np.zeros(work_size(arrays)), 0.0)
         return
     arrays, out = model_arrays(tiny), np.zeros((2, 2))
     if family == "fixed":
         entry(arrays, sys.modules[entry.__module__].GENERALIZED_ALPHA, np.zeros(4), y0, grid, grid, 1e-3, 10, 1e8, out, np.zeros(4, dtype=np.int64), np.zeros(2),
               np.zeros(2))
     elif family == "stiff":
-        entry(arrays, sys.modules[entry.__module__].TRBDF2, y0, grid, grid, 1e-3, np.full(2, 1e-6), 10, 1e8, out, np.zeros(5, dtype=np.int64),
+        entry(arrays, tableaus.TRBDF2, y0, grid, grid, 1e-3, np.full(2, 1e-6), 10, 1e8, out, np.zeros(5, dtype=np.int64),
               np.zeros(1), np.zeros(2), 0.0)
     else:
         entry(arrays, y0, grid, grid, 1e-3, np.full(2, 1e-6), 10, 1e8, out, np.zeros(5, dtype=np.int64), np.zeros(1),
@@ -248,7 +248,7 @@ class CompiledStiff(Solver):
             return radau.integrate(arrays, *args)
         if self.kernel_method == "NDF":
             return bdf.integrate(arrays, *args)
-        return stiff.integrate(arrays, getattr(stiff, self.kernel_method), *args)
+        return stiff.integrate(arrays, getattr(tableaus, self.kernel_method), *args)
 
     def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
         from smdcli.kernels import stiff

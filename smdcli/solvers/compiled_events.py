@@ -1,6 +1,6 @@
-"""The compiled explicit pairs (RK23, RK45, DOP853) on nonsmooth scenes: each mode handed to the compiled kernel
-(smdcli.kernels.events) as arrays, integrated there step by step with its guards watched on the interpolant,
-and back in Python only at an event, where the decisions of smdcli.solvers.modes are taken.
+"""smd's compiled ODE methods on nonsmooth scenes: each mode handed to a compiled kernel (smdcli.kernels.events for
+the explicit pairs; radau, bdf, stiff) as arrays, integrated there step by step with its guards watched on the
+method's interpolant, and back in Python only at an event, where the decisions of smdcli.solvers.modes are taken.
 
 Must not import: sweep, io, plots, commands, cli.
 """
@@ -11,12 +11,10 @@ import numpy as np
 
 from smdcli.kernels.arrays import (GUARD_D, GUARD_INTERNAL, GUARD_RATE, GUARD_TENSION, LAW_PARAMETERS, ModelArrays,
                                    csr)
-from smdcli.kernels.tableaus import DOP853, RK23, RK45
+from smdcli.kernels.tableaus import DOP853, RK23, RK45, ROSENBROCK23, TRAPEZOID, TRBDF2
 
 # The method names whose modes a compiled kernel runs, as (kernel module, method id); scipy's classes (scipy:*) and
-# LSODA are stepped from Python by smdcli.solvers.nonsmooth_ivp. (The ids are smdcli.kernels.tableaus' and
-# smdcli.kernels.stiff's; that module imports numba.)
-ROSENBROCK23, TRAPEZOID, TRBDF2 = range(3)
+# LSODA are stepped from Python by smdcli.solvers.nonsmooth_ivp.
 COMPILED_EVENT_METHODS = {"RK45": ("events", RK45), "ode45": ("events", RK45), "RK23": ("events", RK23),
                           "ode23": ("events", RK23), "DOP853": ("events", DOP853), "Radau": ("radau", 0),
                           "BDF": ("bdf", 0), "ode15s": ("bdf", 0), "ode23s": ("stiff", ROSENBROCK23),
@@ -25,14 +23,25 @@ ACCUMULATED = ("dissipated", "input", "hysteretic", "friction", "impact")  # ene
 QUANTITIES = {"d": GUARD_D, "rate": GUARD_RATE, "tension": GUARD_TENSION}
 
 
-def mode_arrays(base: ModelArrays, scene, mode, states, accumulated: tuple[str, ...]) -> ModelArrays:
-    """The kernel's arrays of one mode of a SmoothScene (smdcli.solvers.nonsmooth_ivp): its projected linear part,
-    constant forces, the elements' pieces and smooth laws, the held tensions' rows and the guards."""
-    model, n, E = scene.model, scene.n, scene.E
+def scene_arrays(scene) -> ModelArrays:
+    """The kernels' arrays of a SmoothScene (smdcli.solvers.nonsmooth_ivp) with what every mode shares: the state's
+    internal variables and energy terms, the elements' rows and belts, M 1 and the dampers' C."""
+    from smdcli.kernels.arrays import model_arrays
+
+    model = scene.model
+    return model_arrays(model)._replace(
+        ns_q=int(scene.q_size), ns_acc=len(ACCUMULATED), mass_row=np.ascontiguousarray(model.M.sum(axis=1), dtype=float),
+        c_dense=np.ascontiguousarray(model.C, dtype=float), ns_R=np.ascontiguousarray(scene.R, dtype=float),
+        ns_belt=np.ascontiguousarray(scene.belts, dtype=float))
+
+
+def mode_arrays(base: ModelArrays, scene, mode, states) -> ModelArrays:
+    """The kernels' arrays of one mode of a SmoothScene, from its scene_arrays: the projected linear part, constant
+    forces, the elements' pieces and smooth laws, the held tensions' rows and the guards."""
+    n, E = scene.n, scene.E
     Minv = scene.Minv
     P = np.eye(n)
     lin = np.hstack([-mode.Kt, -mode.Ct])
-    mass_row = model.M.sum(axis=1)
     h_lin, h_f, h_g = np.zeros((E, 2 * n)), np.zeros((E, n)), np.zeros(E)
     held = np.zeros(E, dtype=np.int64)
     if mode.hold is not None:
@@ -40,7 +49,7 @@ def mode_arrays(base: ModelArrays, scene, mode, states, accumulated: tuple[str, 
         P = P - MG @ S_pinv @ G
         H = S_pinv @ G @ Minv
         for i, e in enumerate(mode.held):
-            h_lin[e], h_f[e], h_g[e] = H[i] @ lin, H[i], H[i] @ mass_row
+            h_lin[e], h_f[e], h_g[e] = H[i] @ lin, H[i], H[i] @ base.mass_row
             held[e] = 1
     PM = P @ Minv
     a_ptr, a_idx, a_val = csr(PM @ lin)
@@ -54,7 +63,7 @@ def mode_arrays(base: ModelArrays, scene, mode, states, accumulated: tuple[str, 
         law[e] = compiled.law
         par[e, :len(compiled.parameters)] = compiled.parameters
         par[e, LAW_PARAMETERS - 1] = part.start - 2 * n  # the first internal variable's place in q
-        term[e] = accumulated.index(compiled.term) if compiled.term else -1
+        term[e] = ACCUMULATED.index(compiled.term) if compiled.term else -1
         pd[e], pc[e] = compiled.pd, compiled.pc
     el, qty, level, direction = [], [], [], []
     for e, guard, _, _ in mode.guards:
@@ -71,10 +80,8 @@ def mode_arrays(base: ModelArrays, scene, mode, states, accumulated: tuple[str, 
     ints = lambda values: np.array(values, dtype=np.int64)  # noqa: E731
     return base._replace(
         a_ptr=a_ptr, a_idx=a_idx, a_val=a_val, mi_ptr=mi_ptr, mi_idx=mi_idx, mi_val=mi_val,
-        ns_q=int(scene.q_size), ns_acc=len(accumulated), f_const=np.ascontiguousarray(mode.g, dtype=float),
-        ground_row=P @ np.ones(n), mass_row=np.ascontiguousarray(mass_row, dtype=float),
-        c_dense=np.ascontiguousarray(model.C, dtype=float), ns_R=np.ascontiguousarray(scene.R, dtype=float),
-        ns_belt=np.ascontiguousarray(scene.belts, dtype=float), ns_held=held, ns_stiff=stiff, ns_damp=damp,
+        f_const=np.ascontiguousarray(mode.g, dtype=float), ground_row=P @ np.ones(n), ns_held=held, ns_stiff=stiff,
+        ns_damp=damp,
         ns_const=const, ns_law=law, ns_par=par, ns_term=term, ns_pd=pd, ns_pc=pc, h_lin=h_lin, h_f=h_f, h_g=h_g,
         gd_el=ints(el), gd_qty=ints(qty), gd_level=np.array(level, dtype=float), gd_dir=ints(direction))
 
@@ -84,17 +91,16 @@ class CompiledModes:
     (built once, cached by the mode), the rows the kernel writes, its counters and scratch."""
 
     def __init__(self, driver, size: int):
-        from smdcli.kernels.arrays import model_arrays
         from smdcli.kernels.rhs import work_size
 
         self.driver = driver
         N, n, E = len(driver.grid), driver.n, driver.scene.E
-        self.base = model_arrays(driver.model)
+        self.base = scene_arrays(driver.scene)
         self.modes: dict = {}
         self.rows, self.rows_a = np.full((N, size), np.nan), np.full((N, n), np.nan)
         self.rows_t = np.full((N, E), np.nan)
         self.counts, self.floats = np.zeros(5, dtype=np.int64), np.zeros(5)
-        self.work = np.zeros(work_size(self.base) + E)
+        self.work = np.zeros(work_size(self.base))
 
     def advance(self, states, t: float, y: np.ndarray, cuts, segment: int, k: int, outputs):
         """EventDriver.advance by the compiled kernel: the mode integrated from (t, y) to the next jump of the
@@ -111,7 +117,7 @@ class CompiledModes:
         mode = scene.mode(states)
         arrays = self.modes.get(mode.key)
         if arrays is None:
-            arrays = self.modes[mode.key] = mode_arrays(self.base, scene, mode, states, ACCUMULATED)
+            arrays = self.modes[mode.key] = mode_arrays(self.base, scene, mode, states)
         skip_t, skip_guard = -np.inf, -1
         if driver.fired is not None:
             skip_t = driver.fired[0]
@@ -127,12 +133,11 @@ class CompiledModes:
         k0 = k
         module, method = driver.kernel_method
         kernel = importlib.import_module(f"smdcli.kernels.{module}").integrate_mode
-        status, k, fired = kernel(arrays, method, y, float(t), times[1:],
-                                          0.5 * (times[:-1] + times[1:]),
-                                          driver.grid, k, driver.tol.rtol, np.full(len(y), driver.tol.atol),
-                                          driver.max_steps, driver.bound, float(skip_t), skip_guard, self.rows,
-                                          self.rows_a, self.rows_t, self.counts, self.floats, self.work)
-        store_rows(outputs, k0, k, self.rows[k0:k], self.rows_a[k0:k], self.rows_t[k0:k], states)
+        status, k, fired = kernel(arrays, method, y, float(t), times[1:], 0.5 * (times[:-1] + times[1:]), driver.grid,
+                                  k, driver.tol.rtol, np.full(len(y), driver.tol.atol), driver.max_steps,
+                                  driver.bound, float(skip_t), skip_guard, self.rows, self.rows_a, self.rows_t,
+                                  self.counts, self.floats, self.work, 0.0)
+        outputs.store_rows(k0, k, self.rows[k0:k], self.rows_a[k0:k], self.rows_t[k0:k], states)
         t_reached = float(self.floats[erk.T_REACHED])
         driver.counts.update(nfev=int(self.counts[erk.NFEV]), steps_accepted=int(self.counts[erk.ACCEPTED]),
                              steps_rejected=int(self.counts[erk.REJECTED]))
@@ -144,40 +149,3 @@ class CompiledModes:
         if status != erk.OK:
             return y, t_reached, None, failure_text(status, driver.max_steps, driver.bound), k
         return y, float(times[-1]), None, None, k
-
-
-def store_rows(outputs, k0: int, k1: int, Y: np.ndarray, A: np.ndarray, T: np.ndarray, states) -> None:
-    """Rows k0..k1-1 of an EventDriver's outputs at once, from the states Y, accelerations A and tensions T the
-    kernel wrote: what outputs.store does row by row."""
-    from smdcli.elements import State
-
-    if k1 <= k0:
-        return
-    run = outputs.run
-    scene, n, model = run.scene, run.n, run.model
-    x, v = Y[:, :n], Y[:, n:2 * n]
-    outputs.x[k0:k1], outputs.v[k0:k1], outputs.a[k0:k1] = x, v, A
-    run.v_scale = max(run.v_scale, float(np.abs(v).max(initial=0.0)))
-    d = x @ scene.R.T
-    strain = 0.5 * np.einsum("ij,ij->i", x @ model.K, x)
-    if model.cubic is not None:
-        strain += (0.25 * model.cubic.coef * (x @ model.cubic.D.T) ** 4).sum(axis=1)
-    contact = np.zeros(k1 - k0)
-    for e, (element, state, part) in enumerate(zip(scene.elements, states, scene.q_slices)):
-        law = element.law
-        variables = {name: Y[:, part.start + i] for i, name in enumerate(law.ode_states)}
-        live = State(state.mode, {**state.internal, **variables})
-        outputs.tension[k0:k1, e] = T[:, e] + law.linear_stiffness * d[:, e]
-        for name, value in zip(law.internal_names, law.internal_values(live, d[:, e])):
-            outputs.internal[f"{element.path}.{name}"][k0:k1] = value
-        term, value = law.stored(live, d[:, e])
-        if term == "strain":
-            strain = strain + value
-        elif term == "contact":
-            contact = contact + value
-    outputs.energy["kinetic"][k0:k1] = 0.5 * np.einsum("ij,ij->i", v @ model.M, v)
-    outputs.energy["strain"][k0:k1] = strain
-    outputs.energy["contact"][k0:k1] = contact
-    first = Y.shape[1] - len(ACCUMULATED)
-    for name in run.energy_terms:
-        outputs.energy[name][k0:k1] = run.cumulative[name] + Y[:, first + ACCUMULATED.index(name)]

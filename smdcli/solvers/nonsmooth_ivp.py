@@ -25,12 +25,14 @@ import time
 import numpy as np
 
 from smdcli.elements import State
+from smdcli.kernels.arrays import INTERIOR
 from smdcli.model import Model
 from smdcli.result import NonsmoothHistory, Result, SolverStats
 from smdcli.solvers.base import MAX_STEPS, Tolerances, divergence_bound, diverged, force_function
 from smdcli.solvers.compiled_events import ACCUMULATED, COMPILED_EVENT_METHODS, CompiledModes
 from smdcli.solvers.modes import Scene
 from smdcli.solvers.piecewise import MAX_EVENTS_AT_ONE_TIME, PiecewiseRun, event_root
+from smdcli.solvers.piecewise_record import stored_energies
 
 # The OdeSolver class each method name integrates nonsmooth scenes with.
 EVENT_METHODS = {"RK45": "RK45", "ode45": "RK45", "scipy:RK45": "RK45", "RK23": "RK23", "ode23": "RK23",
@@ -38,7 +40,6 @@ EVENT_METHODS = {"RK45": "RK45", "ode45": "RK45", "scipy:RK45": "RK45", "RK23": 
                  "scipy:Radau": "Radau", "BDF": "BDF", "ode15s": "BDF", "scipy:BDF": "BDF", "LSODA": "LSODA",
                  "ode23s": "Rosenbrock23", "scipy:ode23s": "Rosenbrock23", "ode23t": "Trapezoid",
                  "scipy:ode23t": "Trapezoid", "ode23tb": "TRBDF2", "scipy:ode23tb": "TRBDF2"}
-INTERIOR = 4  # interior points of each step where guards are looked at too
 PYTHON_STEPS = 200_000  # steps a run may take, driven from Python (about 300 us each)
 
 
@@ -73,12 +74,14 @@ class SmoothScene(Scene):
         """No generators here: forces are evaluated at t (y holds x, v and the laws' variables)."""
 
     def live(self, states: list[State], y: np.ndarray) -> list[State]:
-        """The states with their internal ODE variables taken from y."""
+        """The states with their internal ODE variables taken from y (a state, or rows of states: then each
+        variable is the column of its values)."""
         out = []
         for element, state, part in zip(self.elements, states, self.q_slices):
             names = element.law.ode_states
             if names:
-                state = State(state.mode, {**state.internal, **dict(zip(names, y[part]))})
+                values = np.moveaxis(y[..., part], -1, 0)
+                state = State(state.mode, {**state.internal, **dict(zip(names, values))})
             out.append(state)
         return out
 
@@ -132,14 +135,12 @@ class EventDriver(PiecewiseRun):
         super().__init__(model, grid)
         self.scene = SmoothScene(model)
         self.tol, self.name = tol, name
-        self.cls = solver_class(name)
+        self.kernel_method = COMPILED_EVENT_METHODS.get(name)  # None: an OdeSolver stepped from Python
+        self.cls = solver_class(name) if self.kernel_method is None else None
         self.own = EVENT_METHODS[name] in ("Rosenbrock23", "Trapezoid", "TRBDF2")  # smd's: they take a Jacobian
         self.counts = {"nfev": 0, "njev": 0, "nlu": 0, "steps_accepted": 0, "steps_rejected": -1}
-        self.max_steps = tol.max_steps or PYTHON_STEPS
+        self.max_steps = tol.max_steps or (PYTHON_STEPS if self.kernel_method is None else MAX_STEPS)
         self.fired = None  # (time, element, guard) of the last event
-        self.kernel_method = COMPILED_EVENT_METHODS.get(name)
-        if self.kernel_method is not None:
-            self.max_steps = tol.max_steps or MAX_STEPS
 
     def run(self):
         """x, v, a (N, n), the history, and why it stopped (None: it reached the end) with where."""
@@ -354,25 +355,32 @@ class _Outputs:
         self.energy = {name: np.full(N, np.nan) for name in run.energy_terms + ("kinetic", "strain", "contact")}
 
     def store(self, k: int, t: float, y: np.ndarray, states) -> None:
+        """Row k at (t, y): the right-hand side's acceleration and tensions at it."""
+        self.run.scene.now = t
+        accel, tension, _ = self.run.scene.parts(states, t, y)
+        self.store_rows(k, k + 1, y[None], accel[None], tension[None], states)
+
+    def store_rows(self, k0: int, k1: int, Y: np.ndarray, A: np.ndarray, T: np.ndarray, states) -> None:
+        """Rows k0..k1-1 at once, from the states Y, accelerations A and the elements' own tensions T (a compiled
+        kernel's rows, or one row of the Python-driven methods)."""
+        if k1 <= k0:
+            return
         run = self.run
         scene, n = run.scene, run.n
-        scene.now = t
-        accel, tension, _ = scene.parts(states, t, y)
-        self.x[k], self.v[k], self.a[k] = y[:n], y[n:2 * n], accel
-        run.v_scale = max(run.v_scale, float(np.abs(self.v[k]).max(initial=0.0)))
-        d = scene.R @ y[:n]
-        for e, (element, state) in enumerate(zip(scene.elements, scene.live(states, y))):
+        x, v = Y[:, :n], Y[:, n:2 * n]
+        self.x[k0:k1], self.v[k0:k1], self.a[k0:k1] = x, v, A
+        run.v_scale = max(run.v_scale, float(np.abs(v).max(initial=0.0)))
+        d = x @ scene.R.T
+        for e, (element, state) in enumerate(zip(scene.elements, scene.live(states, Y))):
             law = element.law
-            self.tension[k, e] = tension[e] + law.linear_stiffness * d[e]
-            for name, value in zip(law.internal_names, law.internal_values(state, float(d[e]))):
-                self.internal[f"{element.path}.{name}"][k] = value
-        kinetic, strain, contact = run.stored(states, y)
-        self.energy["kinetic"][k] = kinetic
-        self.energy["strain"][k] = strain
-        self.energy["contact"][k] = contact
-        last = y[len(y) - len(ACCUMULATED):]
+            self.tension[k0:k1, e] = T[:, e] + law.linear_stiffness * d[:, e]
+            for name, value in zip(law.internal_names, law.internal_values(state, d[:, e])):
+                self.internal[f"{element.path}.{name}"][k0:k1] = value
+        self.energy["kinetic"][k0:k1], self.energy["strain"][k0:k1], self.energy["contact"][k0:k1] = \
+            stored_energies(run, states, Y)
+        first = Y.shape[1] - len(ACCUMULATED)
         for name in run.energy_terms:
-            self.energy[name][k] = run.cumulative[name] + last[ACCUMULATED.index(name)]
+            self.energy[name][k0:k1] = run.cumulative[name] + Y[:, first + ACCUMULATED.index(name)]
 
     def finish(self):
         run = self.run
@@ -386,11 +394,12 @@ class _Outputs:
 
 def solve_events(model: Model, grid: np.ndarray, tol: Tolerances, name: str) -> Result:
     """A nonsmooth scene integrated by method `name` (an EVENT_METHODS key), event to event."""
-    solver_class(name)  # imported (and the compiled kernel loaded) before the clock
-    if name in COMPILED_EVENT_METHODS:
+    if name in COMPILED_EVENT_METHODS:  # the compiled kernel loaded, or the OdeSolver imported, before the clock
         from smdcli.solvers.compiled import warm
 
         warm(f"modes:{COMPILED_EVENT_METHODS[name][0]}")
+    else:
+        solver_class(name)
     start = time.perf_counter()
     driver = EventDriver(model, grid, tol, name)
     (x, v, a, history), failure, t_reached = driver.run()

@@ -48,7 +48,8 @@ def step_integrals(run, flow: Flow, mode: Mode, states, Z0: np.ndarray, h: float
 
 
 def stored_energies(run, states, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(kinetic, strain, contact) at each row of Z (m, s): the linear springs' and the elements' own."""
+    """(kinetic, strain, contact) at each row of Z (m, s): the linear springs' and the elements' own (their internal
+    variables, if Z carries them, row by row)."""
     n, model, scene = run.n, run.model, run.scene
     x, v = Z[:, :n], Z[:, n:2 * n]
     kinetic = 0.5 * np.einsum("mi,ij,mj->m", v, model.M, v)
@@ -57,7 +58,7 @@ def stored_energies(run, states, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray,
         strain = strain + (0.25 * model.cubic.coef * (x @ model.cubic.D.T) ** 4).sum(axis=1)
     contact = np.zeros(len(Z))
     d = x @ scene.R.T
-    for e, (element, state) in enumerate(zip(scene.elements, states)):
+    for e, (element, state) in enumerate(zip(scene.elements, scene.live(states, Z))):
         term, value = element.law.stored(state, d[:, e])
         if term == "strain":
             strain = strain + value

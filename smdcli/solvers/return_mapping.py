@@ -29,8 +29,6 @@ from smdcli.result import NonsmoothHistory, Result, SolverStats
 from smdcli.solvers.base import MAX_STEPS, Tolerances, cuts, divergence_bound
 
 NEWMARK_FAMILY = ("newmark", "hht", "generalized_alpha", "central_difference")
-NEWTON_ITERATIONS = 50
-NEWTON_TOLERANCE = 1e-12  # of the residual, relative to the forces' scale
 
 
 def refusal(method: str, model: Model) -> str | None:
@@ -101,7 +99,7 @@ def solve_return_mapping(model: Model, grid: np.ndarray, tol: Tolerances, solver
         model.x0.astype(float).copy(), model.v0.astype(float).copy(), committed, np.asarray(edges, dtype=float),
         jump_dx, jump_dv, float(dt), int(max_steps), float(bound), t_out, x_out, v_out, a_out, T_out, q_out, e_out,
         counts, floats, np.zeros(work_size(arrays)))
-    t = float(floats[0])
+    t = float(floats[kernel.T_REACHED])
     failure = {kernel.OK: None,
                kernel.NEWTON_FAILED: f"Newton did not converge in {kernel.NEWTON_ITERATIONS} iterations",
                kernel.STEP_BUDGET: f"more than {max_steps} steps",
@@ -110,7 +108,8 @@ def solve_return_mapping(model: Model, grid: np.ndarray, tol: Tolerances, solver
                         dt=float(dt), wall_time_s=time.perf_counter() - start, success=failure is None,
                         message=("ok: hysteretic springs by return mapping with their consistent tangent (compiled)"
                                  if failure is None else f"failed at t = {t:.6g} s: {failure}"),
-                        steps_accepted=int(counts[0]), nlu=int(counts[1]), nfev=int(counts[0]))
+                        steps_accepted=int(counts[kernel.STEPS]), nlu=int(counts[kernel.FACTORIZATIONS]),
+                        nfev=int(counts[kernel.STEPS]))
     w = slice(0, written)
     x_g, v_g, a_g, history = on_grid(grid, model, R, t_out[w], x_out[w], v_out[w], a_out[w], T_out[w], q_out[w],
                                      e_out[w])
