@@ -5,7 +5,7 @@ Imports nothing of smd (the bottom layer).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -65,6 +65,19 @@ class NonsmoothHistory:
     internal: dict[str, np.ndarray]
     events: tuple[tuple[float, str, str], ...]
     energy: dict[str, np.ndarray]  # per term, (N,): as the solver integrated them on its own pieces
+
+    def balance(self) -> Energy:
+        """The run's energy balance from the terms its solver integrated: stored (kinetic, strain, contact) less its
+        start, plus everything dissipated or lost, less the work put in."""
+        e = self.energy
+        stored = e["kinetic"] + e["strain"] + e["contact"]
+        residual = stored - stored[0] + e["dissipated"] + e["hysteretic"] + e["friction"] + e["impact"] - e["input"]
+        energy = Energy(e["kinetic"], e["strain"], e["dissipated"], e["input"], residual, 0.0,
+                        e.get("quadrature", "8-point Gauss-Legendre on the exact flow between events"),
+                        hysteretic=e["hysteretic"], friction=e["friction"], impact=e["impact"], contact=e["contact"])
+        reached = energy.largest
+        worst = float(np.max(np.abs(residual), initial=0.0))
+        return replace(energy, max_relative_residual=worst / reached if reached > 0 else 0.0)
 
 
 @dataclass(frozen=True)

@@ -46,22 +46,8 @@ def with_physics(model: Model, result: Result) -> Result:
     with np.errstate(all="ignore"):  # a scene at the edge of double precision: judged by the figures, not warned
         elements = element_forces(model, result.displacement, result.velocity, result.nonsmooth)
     if result.nonsmooth is not None:  # the solver integrated the balance on its own pieces, modes known
-        return dataclasses.replace(result, elements=elements, energy=nonsmooth_balance(result.nonsmooth))
+        return dataclasses.replace(result, elements=elements, energy=result.nonsmooth.balance())
     return dataclasses.replace(result, elements=elements, energy=energy_balance(model, result, dense_output(model, result)))
-
-
-def nonsmooth_balance(history) -> Energy:
-    """The balance of a run with nonsmooth elements, from the terms its solver integrated: stored (kinetic, strain,
-    contact) less its start, plus everything dissipated or lost, less the work put in."""
-    e = history.energy
-    stored = e["kinetic"] + e["strain"] + e["contact"]
-    residual = stored - stored[0] + e["dissipated"] + e["hysteretic"] + e["friction"] + e["impact"] - e["input"]
-    energy = Energy(e["kinetic"], e["strain"], e["dissipated"], e["input"], residual, 0.0,
-                    e.get("quadrature", "8-point Gauss-Legendre on the exact flow between events"),
-                    hysteretic=e["hysteretic"], friction=e["friction"], impact=e["impact"], contact=e["contact"])
-    reached = energy.largest
-    worst = float(np.max(np.abs(residual), initial=0.0))
-    return dataclasses.replace(energy, max_relative_residual=worst / reached if reached > 0 else 0.0)
 
 
 def dense_output(model: Model, result: Result) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None:

@@ -89,9 +89,9 @@ def _counts(events) -> dict[str, int]:
 
 def run_energy(model: Model, result: Result):
     """The run's energy balance: its own (a nonsmooth run integrates it) or from its trajectory."""
-    from smdcli.analysis.energy import energy_balance, nonsmooth_balance
+    from smdcli.analysis.energy import energy_balance
 
-    return nonsmooth_balance(result.nonsmooth) if result.nonsmooth is not None else energy_balance(model, result)
+    return result.nonsmooth.balance() if result.nonsmooth is not None else energy_balance(model, result)
 
 
 # The smoothed laws a nonsmooth scene is compared under: what methods without event location are run on.

@@ -30,6 +30,7 @@ class Tolerances:
     options: tuple[tuple[str, float | str], ...] = ()  # method parameters: beta, gamma, scheme, alpha, rho_inf
     max_steps: int | None = None  # step budget; None: the solver's own limit
     breakpoints: bool = True  # restart adaptive methods at force discontinuities (False only for study)
+    balance: bool = True  # rerun a nonsmooth scene's integrator tighter until its energy balance holds (False: study)
 
 
 class Solver:
