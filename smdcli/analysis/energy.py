@@ -32,6 +32,7 @@ import numpy as np
 from smdcli.model import Model
 from smdcli.analysis.forces import element_forces
 from smdcli.model.elements import incidence_row
+from smdcli.model.system import cheapest, rows_times
 from smdcli.result import Energy, Result, largest_energy
 from smdcli.solvers.base import Tolerances
 
@@ -69,31 +70,32 @@ def dense_output(model: Model, result: Result) -> Callable[[np.ndarray], tuple[n
 def mechanical_energy(model: Model, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Kinetic 1/2 v^T M v and strain energy per row, J: summed over the springs (1/2 k d^2 + k3 d^4 / 4) where
     the scene has elements, since x^T K x of a stiff spring between masses that move together cancels digits."""
-    kinetic = 0.5 * ((v @ model.M) * v).sum(axis=1)
+    kinetic = 0.5 * (rows_times(v, cheapest(model.M)) * v).sum(axis=1)
     if model.element_form:
         D, k, k3 = _incidence(model, "spring")
-        d = x @ D.T
+        d = rows_times(x, D.T)
         strain = (0.5 * k * d**2 + 0.25 * k3 * d**4).sum(axis=1)
     else:
-        strain = 0.5 * ((x @ model.K) * x).sum(axis=1)
+        strain = 0.5 * (rows_times(x, model.sparse[1]) * x).sum(axis=1)
     return kinetic, strain
 
 
 def _incidence(model: Model, kind: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Rows d = x_a - x_b of the linear-law elements of a kind, their coefficients, and k3 (0 but for cubic)."""
+    """Rows d = x_a - x_b of the linear-law elements of a kind (CSR where that is cheaper), their coefficients, and
+    k3 (0 but for cubic)."""
     chosen = [e for e in model.elements if e.kind == kind and e.law != "quadratic"]
     index = {name: i for i, name in enumerate(model.dofs)}
     D = np.array([incidence_row(e.connects, index, model.n) for e in chosen]).reshape(len(chosen), model.n)
-    return D, np.array([e.coef for e in chosen]), np.array([e.k3 if e.law == "cubic" else 0.0 for e in chosen])
+    return cheapest(D), np.array([e.coef for e in chosen]), np.array([e.k3 if e.law == "cubic" else 0.0 for e in chosen])
 
 
 def _dissipation(model: Model, v: np.ndarray, dampers: tuple | None = None) -> np.ndarray:
     """x'^T C x' + c |d'|^3 of quadratic dampers, per element where the scene has them, over the last axis;
     dampers: _incidence(model, "damper") where the caller has it already."""
     if not model.element_form:
-        return ((v @ model.C) * v).sum(axis=-1)
+        return (rows_times(v, model.sparse[0]) * v).sum(axis=-1)
     D, c, _ = dampers if dampers is not None else _incidence(model, "damper")
-    dv = v @ D.T
+    dv = rows_times(v, D.T)
     power = (c * dv**2).sum(axis=-1)
     if model.added_damping is not None:
         power = power + ((v @ model.added_damping) * v).sum(axis=-1)

@@ -64,6 +64,24 @@ def regime(zeta: float, omega: float = 1.0) -> str:
     return "underdamped" if zeta < 1.0 else "overdamped"
 
 
+def cheapest(A: np.ndarray):
+    """A as it multiplies cheapest: CSR where at most a tenth of its entries are nonzero (a chain's banded matrices,
+    O(n) a vector instead of O(n^2)), else itself."""
+    if A.shape[0] < 64 or np.count_nonzero(A) > A.size // 10:
+        return A
+    from scipy.sparse import csr_matrix
+
+    return csr_matrix(A)
+
+
+def rows_times(q: np.ndarray, A) -> np.ndarray:
+    """q @ A over q's last axis, A dense or CSR (from cheapest)."""
+    if isinstance(A, np.ndarray):
+        return q @ A
+    flat = np.reshape(q, (-1, q.shape[-1]))
+    return np.asarray(A.T @ flat.T).T.reshape(q.shape[:-1] + (A.shape[1],))
+
+
 @dataclass(frozen=True)
 class Model:
     """Matrices, DOF names, nonlinear elements and force signals of one scenario."""
@@ -133,6 +151,12 @@ class Model:
     def Minv(self) -> np.ndarray:
         """Inverse mass matrix, by a solve rather than inv()."""
         return mass_solve(self.M, np.eye(self.n))
+
+    @cached_property
+    def sparse(self) -> tuple:
+        """(C, K, M^-1) as they multiply a grid of states cheapest: CSR where at most a tenth of the entries are
+        nonzero (a chain's banded matrices: O(n) a state instead of O(n^2)), else the dense arrays."""
+        return cheapest(self.C), cheapest(self.K), cheapest(self.Minv)
 
     @cached_property
     def B(self) -> np.ndarray:
@@ -227,10 +251,11 @@ class Model:
 
     def acceleration(self, x: np.ndarray, v: np.ndarray, force: np.ndarray) -> np.ndarray:
         """a = M^-1 (F - C v - K x - f_nl) on a grid of states, (N, n) each."""
-        rest = force - v @ self.C.T - x @ self.K.T
+        C, K, Minv = self.sparse
+        rest = force - rows_times(v, C.T) - rows_times(x, K.T)
         if not self.is_linear:
             rest = rest - self.nonlinear_force(x, v)
-        return rest @ self.Minv.T
+        return rows_times(rest, Minv.T)
 
     # ----------------------------------------------------------------- modes
     @cached_property
@@ -248,16 +273,24 @@ class Model:
 
         masses = np.diag(self.M)
         if n >= MODAL_FORM_DOFS and np.count_nonzero(self.M) == np.count_nonzero(masses):
-            # Diagonal M: the standard problem of M^-1/2 K M^-1/2 by divide and conquer, half the generalized time
+            # Diagonal M: the standard problem of M^-1/2 K M^-1/2 by divide and conquer, half the generalized time;
+            # a chain's is tridiagonal: MRRR (O(n^2), not O(n^3))
             root = 1.0 / np.sqrt(masses)
-            squared, shapes = eigh(K * root[:, None] * root[None, :], driver="evd")
+            scaled = K * root[:, None] * root[None, :]
+            if not np.triu(scaled, 2).any():
+                from scipy.linalg import eigh_tridiagonal
+
+                squared, shapes = eigh_tridiagonal(np.diag(scaled).copy(), np.diag(scaled, 1).copy(),
+                                                   lapack_driver="stemr")
+            else:
+                squared, shapes = eigh(scaled, driver="evd")
             shapes = shapes * root[:, None]
         else:
             squared, shapes = eigh(K, self.M)
         classical = self.proportional_damping and squared.min() > 0
         if classical:  # C = Phi^-T diag(c) Phi^-1: each mode a 1-DOF oscillator (symmetric solver, 5-10x faster)
             wn = np.sqrt(squared)
-            c = (shapes * (self.C @ shapes)).sum(axis=0)  # the diagonal of Phi^T C Phi
+            c = (shapes * (self.sparse[0] @ shapes)).sum(axis=0)  # the diagonal of Phi^T C Phi
             zeta = c / (2 * wn)
             root = np.sqrt((c * c - 4 * squared).astype(complex))
             eig = np.concatenate([(-c + root) / 2, (-c - root) / 2])
@@ -287,9 +320,14 @@ class Model:
     def proportional_damping(self) -> bool:
         """C M^-1 K = K M^-1 C (Caughey's condition): the undamped modes decouple the damped system too."""
         K = self.initial_K
-        CK = self.C @ mass_solve(self.M, K)
+        C, _, Minv = self.sparse
+        CK = C @ (Minv @ cheapest(K))
+        if not isinstance(CK, np.ndarray):
+            CK = CK.toarray() if CK.nnz > CK.shape[0] ** 2 // 10 else CK
         scale = np.abs(self.C).max(initial=0.0) * np.abs(self.Minv).max(initial=0.0) * np.abs(K).max(initial=0.0)
-        return bool(np.abs(CK - CK.T).max(initial=0.0) <= 1e-12 * self.n * scale)
+        asymmetry = CK - CK.T
+        worst = np.abs(asymmetry).max(initial=0.0) if isinstance(asymmetry, np.ndarray) else abs(asymmetry).max()
+        return bool(worst <= 1e-12 * self.n * scale)
 
     @cached_property
     def stiffness_ratio(self) -> float:

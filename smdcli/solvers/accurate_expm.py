@@ -13,6 +13,10 @@ the error-free transformations TwoSum and TwoProd (Dekker's split; no fused
 multiply-add needed), vectorized with numpy. Cost: about 30 products of size^2
 arrays per column, so it is used only where double precision is not enough
 (see `needed`). Imports nothing from smd.
+
+`expm_stack` is the double-precision exponential of many small matrices at once (scipy's expm, Higham's
+Pade 13 with scaling and squaring, vectorized over the stack: a 1,000-mode scene's propagators in a few
+milliseconds rather than a fifth of a second).
 """
 
 from __future__ import annotations
@@ -105,3 +109,31 @@ def expm_times(A: np.ndarray, h: float) -> np.ndarray:
     for _ in range(squarings):
         p = _matmul(p, p)
     return p[0] + p[1]
+
+
+# Higham (2005): Pade 13 is accurate to unit roundoff for ||A||_1 <= THETA_13, after scaling by 2^-s
+_PADE_13 = (64764752532480000.0, 32382376266240000.0, 7771770303897600.0, 1187353796428800.0, 129060195264000.0,
+            10559470521600.0, 670442572800.0, 33522128640.0, 1323241920.0, 40840800.0, 960960.0, 16380.0, 182.0, 1.0)
+THETA_13 = 5.371920351148152
+
+
+def expm_stack(A: np.ndarray) -> np.ndarray:
+    """expm of each matrix of a stack (..., size, size) in double: Pade 13 after scaling each by its own power of
+    two, then squaring each as often as it was scaled."""
+    A = np.asarray(A, dtype=float)
+    norms = np.abs(A).sum(axis=-2).max(axis=-1)
+    with np.errstate(divide="ignore"):
+        squarings = np.maximum(0, np.ceil(np.log2(norms / THETA_13))).astype(int)
+    A = A * np.ldexp(1.0, -squarings)[..., None, None]
+    b = _PADE_13
+    eye = np.broadcast_to(np.eye(A.shape[-1]), A.shape)
+    A2 = A @ A
+    A4 = A2 @ A2
+    A6 = A4 @ A2
+    U = A @ (A6 @ (b[13] * A6 + b[11] * A4 + b[9] * A2) + b[7] * A6 + b[5] * A4 + b[3] * A2 + b[1] * eye)
+    V = A6 @ (b[12] * A6 + b[10] * A4 + b[8] * A2) + b[6] * A6 + b[4] * A4 + b[2] * A2 + b[0] * eye
+    E = np.linalg.solve(V - U, V + U)
+    for j in range(int(squarings.max(initial=0))):
+        more = squarings > j
+        E[more] = E[more] @ E[more]
+    return E

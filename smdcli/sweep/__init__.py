@@ -8,7 +8,7 @@ process pool (pool.py), one member per task. Modules: spec, family, batched, poo
 Must not import: io, plots, commands, cli.
 """
 
-from smdcli.sweep.batched import batched_exact, expm_batched, shared_signal_recurrence
+from smdcli.sweep.batched import batched_exact, shared_signal_recurrence
 from smdcli.sweep.family import Family, build_family, set_parameter
 from smdcli.sweep.frequency import FrequencyResponse, frequency_response, input_index, receptance, resonance_peaks
 from smdcli.sweep.members import FamilyResult, metrics, solve_family
@@ -17,7 +17,7 @@ from smdcli.sweep.spec import (METRIC_UNITS, METRICS, SETTLING_BAND, SweepSpec, 
                                parse_frequency, parse_ic, parse_values, read_spec)
 
 __all__ = ["METRICS", "METRIC_UNITS", "SETTLING_BAND", "Family", "FamilyResult", "FrequencyResponse", "SweepSpec",
-           "batched_exact", "build_family", "default_workers", "expm_batched", "frequency_response",
+           "batched_exact", "build_family", "default_workers", "frequency_response",
            "input_index", "metrics", "parameter_label", "parameter_units", "parse_frequency",
            "parse_ic", "parse_values", "read_spec", "receptance", "resonance_peaks", "run_pool",
            "set_parameter", "shared_signal_recurrence", "solve_family"]

@@ -1,43 +1,19 @@
 """Linear members solved together: one batched exact recurrence, y_{k+1} = Phi_yy y_k + Phi_yw w(t_k),
-with a vectorized Pade-13 exponential of every member's augmented matrix.
+with a vectorized Pade-13 exponential of every member's augmented matrix (expm_stack).
 
 Must not import: io, plots, commands, cli."""
 
 from __future__ import annotations
 
-import math
 from typing import Callable
 
 import numpy as np
 
 from smdcli.model import Model
+from smdcli.solvers.accurate_expm import expm_stack
 from smdcli.sweep.family import Family
 
 # ------------------------------------------------------ batched linear runs
-
-
-_PADE13 = (64764752532480000.0, 32382376266240000.0, 7771770303897600.0, 1187353796428800.0,
-           129060195264000.0, 10559470521600.0, 670442572800.0, 33522128640.0, 1323241920.0,
-           40840800.0, 960960.0, 16380.0, 182.0, 1.0)
-
-
-def expm_batched(A: np.ndarray) -> np.ndarray:
-    """exp(A) of a stack (S, m, m): Higham's scaling and squaring with the [13/13] Pade approximant,
-    vectorized over the stack (scipy's expm costs about 9 us a matrix on the small ones a sweep has)."""
-    b = _PADE13
-    norm = np.abs(A).sum(axis=-2).max(initial=0.0)
-    squarings = max(0, int(math.ceil(math.log2(norm / 5.371920351148152)))) if norm > 0 else 0
-    A = A / 2.0**squarings
-    eye = np.eye(A.shape[-1])
-    A2 = A @ A
-    A4 = A2 @ A2
-    A6 = A4 @ A2
-    U = A @ (A6 @ (b[13] * A6 + b[11] * A4 + b[9] * A2) + b[7] * A6 + b[5] * A4 + b[3] * A2 + b[1] * eye)
-    V = A6 @ (b[12] * A6 + b[10] * A4 + b[8] * A2) + b[6] * A6 + b[4] * A4 + b[2] * A2 + b[0] * eye
-    R = np.linalg.solve(V - U, V + U)
-    for _ in range(squarings):
-        R = R @ R
-    return R
 
 
 CHUNK = 16384  # members advanced together: long enough vectors that numpy's per-call cost is small
@@ -99,7 +75,7 @@ def shared_signal_recurrence(family: Family, grid: np.ndarray) -> tuple[np.ndarr
 
         def phi(dt: float) -> np.ndarray:
             if dt not in cache:
-                cache[dt] = expm_batched(A * dt)
+                cache[dt] = expm_stack(A * dt)
             return cache[dt]
 
         if uniform:
@@ -180,7 +156,7 @@ def batched_exact(models: list[Model], grid: np.ndarray) -> tuple[np.ndarray, np
                 z[s, lo:hi] = signal.exo_state(t)
 
     h = (grid[-1] - grid[0]) / (N - 1) if N > 1 else 0.0
-    phi_h = expm_batched(A * h) if N > 1 else None
+    phi_h = expm_stack(A * h) if N > 1 else None
     out = np.empty((S, N, 2 * n))
     z = np.zeros((S, size))
     z[:, :n] = [m.x0 for m in models]
@@ -194,11 +170,11 @@ def batched_exact(models: list[Model], grid: np.ndarray) -> tuple[np.ndarray, np
         while k < stop:
             dt = grid[k] - t_cur
             if dt > 0:
-                phi = phi_h if abs(dt - h) <= 1e-9 * h else expm_batched(A * dt)
+                phi = phi_h if abs(dt - h) <= 1e-9 * h else expm_stack(A * dt)
                 z = np.einsum("sij,sj->si", phi, z)
             out[:, k] = z[:, :2 * n]
             t_cur = grid[k]
             k += 1
         if not last and tb > t_cur:
-            z = np.einsum("sij,sj->si", expm_batched(A * (tb - t_cur)), z)
+            z = np.einsum("sij,sj->si", expm_stack(A * (tb - t_cur)), z)
     return out[:, :, :n], out[:, :, n:]
