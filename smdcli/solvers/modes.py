@@ -207,13 +207,21 @@ def consistent(scene: Scene, states: list[State], z: np.ndarray, t: float, on_ev
             law, state = element.law, states[e]
             table = element.kind
             if table == "friction" and state.mode == STICK and law.regularization is None:
-                if abs(tension[e]) > law.static * (1 + TOUCH):
+                if abs(rate[e]) > tolerance:  # an impact or a ground jump set it moving: it slips that way
+                    states[e] = State(SLIP_PLUS if rate[e] > 0 else SLIP_MINUS)
+                    on_event(e, "slip")
+                    changed = True
+                elif abs(tension[e]) > law.static * (1 + TOUCH):
                     states[e] = law.event(state, "slip", d[e], rate[e], tension[e])
                     on_event(e, "slip")
                     changed = True
             elif table == "friction" and state.mode in (SLIP_PLUS, SLIP_MINUS):
                 sign = 1.0 if state.mode == SLIP_PLUS else -1.0
-                if (sign * rate[e] <= tolerance or e in stopping) and e not in breaking:
+                if sign * rate[e] < -tolerance and e not in stopping:  # reversed by a jump of the velocities
+                    states[e] = State(SLIP_MINUS if sign > 0 else SLIP_PLUS)
+                    on_event(e, "slip")
+                    changed = True
+                elif (sign * rate[e] <= tolerance or e in stopping) and e not in breaking:
                     candidates.append(e)
             elif table == "stop" and law.rigid and state.mode != FREE:
                 at_min = state.mode.endswith("min")
@@ -283,9 +291,12 @@ def _stick_or_slip(scene: Scene, states: list[State], z: np.ndarray, candidates:
 
 def impact(scene: Scene, states: list[State], z: np.ndarray, element: int, restitution: float) -> np.ndarray:
     """Velocities after a rigid impact at element: d' -> -e d' by an impulse along its row, the held constraints
-    kept (their impulses solved with it); the masses' momentum is conserved where the row is internal."""
+    kept (their impulses solved with it); the masses' momentum is conserved where the row is internal. A stuck
+    friction contact holds nothing through an impact: its force is bounded, so its impulse is zero (it slips
+    after, if the impact set it moving)."""
     n = scene.n
-    held = [e for e, (el, s) in enumerate(zip(scene.elements, states)) if el.law.piece(s).held and e != element]
+    held = [e for e, (el, s) in enumerate(zip(scene.elements, states))
+            if el.law.piece(s).held and e != element and el.kind != "friction"]
     rows = [element] + held
     G = scene.R[rows]
     v = z[n:2 * n]
