@@ -101,7 +101,7 @@ def _at(m, method, t_old, h, y_old, y_new, K, F, Q, s, mid, work, jwork, arg, wh
 @no_alloc
 def _root(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, when, row, dy, g, a, b, fa, fb):
     """Brent's method (scipy's brentq) for guard g's crossing in [a, b] on the interpolant, to rounding: xtol
-    2 eps (b - a), rtol 4 eps, as smdcli.solvers.piecewise.event_root."""
+    2 eps (b - a), rtol 4 eps, as smdcli.solvers.modes.event_root."""
     xtol = 2 * EPS * (b - a)
     rtol = 4 * EPS
     pre, cur = a, b

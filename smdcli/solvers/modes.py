@@ -26,6 +26,20 @@ from smdcli.elements.base import D, RATE
 from smdcli.model import Model
 
 TOUCH = 1e-12  # relative slack with which a point on a yield surface or at zero speed counts as there
+EPS = float(np.finfo(float).eps)
+
+
+def at_level(size, const: float):
+    """How close to its level a guard's value is rounding of it: 64 ulps of the terms it sums (row |z| + |const|)."""
+    return 64 * EPS * (size + abs(const))
+
+
+def event_root(value, lo: float, hi: float, scale: float) -> float:
+    """The root of value in [lo, hi] (a sign change there) to rounding: relative to the root, or to `scale` (the
+    step's length) where the root is near zero, so that a root at the start of a step ends in a few dozen steps."""
+    from scipy.optimize import brentq
+
+    return float(brentq(value, lo, hi, xtol=2 * EPS * scale, rtol=4 * EPS, maxiter=400))
 
 
 @dataclass

@@ -30,8 +30,8 @@ from smdcli.model import Model
 from smdcli.result import NonsmoothHistory, Result, SolverStats
 from smdcli.solvers.base import MAX_STEPS, Tolerances, divergence_bound, diverged, force_function
 from smdcli.solvers.compiled_events import ACCUMULATED, COMPILED_EVENT_METHODS, CompiledModes
-from smdcli.solvers.modes import Scene
-from smdcli.solvers.piecewise import MAX_EVENTS_AT_ONE_TIME, PiecewiseRun, event_root
+from smdcli.solvers.modes import Scene, event_root
+from smdcli.solvers.piecewise import MAX_EVENTS_AT_ONE_TIME, PiecewiseRun
 from smdcli.solvers.piecewise_record import stored_energies
 
 # The OdeSolver class each method name integrates nonsmooth scenes with.

@@ -31,7 +31,7 @@ from smdcli.elements import State
 from smdcli.elements.base import EVENT_KINDS, KINK
 from smdcli.model import Model
 from smdcli.solvers.flow import Flow
-from smdcli.solvers.modes import Mode, Scene, consistent, impact
+from smdcli.solvers.modes import Mode, Scene, at_level, consistent, event_root, impact
 from smdcli.solvers.piecewise_record import Outputs, step_integrals
 
 MAX_EVENTS_AT_ONE_TIME = 200  # a mode that cannot settle at one instant is a scene smd cannot solve
@@ -41,15 +41,7 @@ MAX_IMPACTS_IN_A_SEQUENCE = 10_000
 BATCH = 256  # output steps taken together where no event interrupts them
 CHUNK = 16  # checked for events together
 MAX_SUBSTEPS = 2_000_000  # substeps a run may take (about 100 us each): a mode faster than that is refused
-EPS = float(np.finfo(float).eps)
-
-
-def event_root(value, lo: float, hi: float, scale: float) -> float:
-    """The root of value in [lo, hi] (a sign change there) to rounding: relative to the root, or to `scale` (the
-    step's length) where the root is near zero, so that a root at the start of a step ends in a few dozen steps."""
-    from scipy.optimize import brentq
-
-    return float(brentq(value, lo, hi, xtol=2 * EPS * scale, rtol=4 * EPS, maxiter=400))
+RETURN_SAMPLES = 32  # samples of a substep in which a guard left at its level may have come back and gone again
 
 
 class PiecewiseFailed(Exception):
@@ -189,7 +181,8 @@ class PiecewiseRun:
                 g0, g1 = guard.direction * (starts @ row + const), guard.direction * (stops @ row + const)
                 slope0 = guard.direction * (starts @ rate_row + rate_const)
                 slope1 = guard.direction * (stops @ rate_row + rate_const)
-                hits = np.flatnonzero((g0 < 0) & ((g1 >= 0) | ((g1 < 0) & (slope0 > 0) & (slope1 < 0))))
+                below = (g0 < 0) | (g0 <= at_level(np.abs(starts) @ np.abs(row), const))  # at it: may come back
+                hits = np.flatnonzero(below & ((g1 >= 0) | ((g1 < 0) & (slope0 > 0) & (slope1 < 0))))
                 if len(hits):
                     clear = min(clear, chunk.start + int(hits[0]))
             done = chunk.stop
@@ -223,6 +216,8 @@ class PiecewiseRun:
             tau = None
             if s * g0 < 0 <= s * g1:
                 tau = self._root(flow, mode, z0, row, const, 0.0, h)
+            elif s * g0 <= at_level(float(np.abs(row) @ np.abs(z0)), const) and s * g1 >= 0:
+                tau = self._return(flow, mode, z0, row, const, s, h)
             elif s * g0 < 0 and s * g1 < 0:  # a touch inside the substep: where the slope turns
                 slope0 = float(row @ (mode.A @ z0 + mode.b))
                 slope1 = float(row @ (mode.A @ z1 + mode.b))
@@ -233,6 +228,22 @@ class PiecewiseRun:
             if tau is not None and (best is None or tau < best[0]):
                 best = (tau, e, guard)
         return best
+
+    def _return(self, flow: Flow, mode: Mode, z0: np.ndarray, row: np.ndarray, const: float, s: float, h: float):
+        """Where a guard the event just taken left at its level comes back to it in (0, h], from the bottom of its
+        excursion below it (its slope's root, or the lowest of RETURN_SAMPLES samples); None if it stayed at it."""
+        value = lambda tau: s * float(row @ flow.at(z0, mode.b, tau) + const)  # noqa: E731
+        rate = lambda z: s * float(row @ (mode.A @ z + mode.b))  # noqa: E731
+        lo = None
+        if rate(z0) < 0 < rate(flow.at(z0, mode.b, h)):  # one turn: the bottom where the slope changes sign
+            lo = self._root(flow, mode, z0, row @ mode.A, float(row @ mode.b), 0.0, h)
+        if lo is None or value(lo) >= 0:
+            taus = h * np.arange(1, RETURN_SAMPLES) / RETURN_SAMPLES
+            values = np.array([value(tau) for tau in taus])
+            if values.min() >= 0:
+                return None
+            lo = float(taus[int(np.argmin(values))])
+        return self._root(flow, mode, z0, row, const, lo, h)
 
     def _root(self, flow: Flow, mode: Mode, z0: np.ndarray, row: np.ndarray, const: float, lo: float,
               hi: float) -> float:
