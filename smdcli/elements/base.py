@@ -81,6 +81,7 @@ class Law:
     piecewise_linear: ClassVar[bool] = True  # linear between events: solvable exactly
     ode_states: ClassVar[tuple[str, ...]] = ()  # internal variables with a differential equation (Bouc-Wen's z)
     internal_names: ClassVar[tuple[str, ...]] = ()  # what /elements writes per step (plastic_deformation, z)
+    holds_impulse: ClassVar[bool] = True  # held, it carries an impact's impulse (a bounded force cannot: friction)
 
     @property
     def linear_stiffness(self) -> float:

@@ -43,6 +43,7 @@ class Friction(Law):
 
     table: ClassVar[str] = "friction"
     name: ClassVar[str] = "coulomb"
+    holds_impulse: ClassVar[bool] = False  # its force is bounded: no impulse through it, stuck or not
     keys: ClassVar[tuple[str, ...]] = ("force", "static", "stribeck_velocity", "viscous", "regularization",
                                        "belt_velocity")
 

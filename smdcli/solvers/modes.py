@@ -310,7 +310,7 @@ def impact(scene: Scene, states: list[State], z: np.ndarray, element: int, resti
     after, if the impact set it moving)."""
     n = scene.n
     held = [e for e, (el, s) in enumerate(zip(scene.elements, states))
-            if el.law.piece(s).held and e != element and el.kind != "friction"]
+            if el.law.piece(s).held and e != element and el.law.holds_impulse]
     rows = [element] + held
     G = scene.R[rows]
     v = z[n:2 * n]

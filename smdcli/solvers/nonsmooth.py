@@ -73,6 +73,8 @@ def meet_balance(run: Callable[[Tolerances], Result], tol: Tolerances) -> Result
     if not result.success or not tol.rtol:
         return result
     tried, failed = [(tol, _balance_rtols(result, tol), result)], ""
+    if tried[0][1] <= BALANCE_RTOLS:
+        return result
     while tried[-1][1] > BALANCE_RTOLS and len(tried) <= BALANCE_RERUNS and tried[-1][0].rtol > SMALLEST_RTOL:
         last_tol, missed, _ = tried[-1]
         growth = 2 / 3
@@ -87,8 +89,6 @@ def meet_balance(run: Callable[[Tolerances], Result], tol: Tolerances) -> Result
             failed = f"; the rerun at rtol {rtol:.3g} failed ({rerun.stats.message})"
             break
         tried.append((next_tol, _balance_rtols(rerun, tol), rerun))
-    if tried[0][1] <= BALANCE_RTOLS:
-        return result
     used, balance, best = min(tried, key=lambda run: run[1])
     spent = {key: sum(getattr(r.stats, key) for _, _, r in tried)
              for key in ("wall_time_s", "nfev", "njev", "nlu", "steps_accepted", "steps_rejected")

@@ -181,7 +181,7 @@ class PiecewiseRun:
                 g0, g1 = guard.direction * (starts @ row + const), guard.direction * (stops @ row + const)
                 slope0 = guard.direction * (starts @ rate_row + rate_const)
                 slope1 = guard.direction * (stops @ rate_row + rate_const)
-                below = (g0 < 0) | (g0 <= at_level(np.abs(starts) @ np.abs(row), const))  # at it: may come back
+                below = g0 <= at_level(np.abs(starts) @ np.abs(row), const)  # or at it: it may come back
                 hits = np.flatnonzero(below & ((g1 >= 0) | ((g1 < 0) & (slope0 > 0) & (slope1 < 0))))
                 if len(hits):
                     clear = min(clear, chunk.start + int(hits[0]))
