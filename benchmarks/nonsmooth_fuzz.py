@@ -4,7 +4,7 @@ each scene where a run fails, where exact's energy balance is off by more than 1
 integrators disagree by more than 1e-6 of the peak while the integrators agree with each other, and writes it
 to OUT/fuzz_SEED_TRIAL.toml. A finder of cases for tests, not a test: run on demand.
 
-    python benchmarks/nonsmooth_fuzz.py [--seed 1] [--trials 25] [--out fuzz]
+    python benchmarks/nonsmooth_fuzz.py [--seed 1] [--trials 25] [--out fuzz] [--wide]
 """
 
 from __future__ import annotations
@@ -22,8 +22,9 @@ from smdcli.solvers import solve
 from smdcli.solvers.base import Tolerances
 
 
-def random_scene(rng: random.Random) -> str:
-    """A scene of 1-3 masses in a chain to ground, with random hysteretic springs, friction contacts and stops."""
+def random_scene(rng: random.Random, wide: bool = False) -> str:
+    """A scene of 1-3 masses in a chain to ground, with random hysteretic springs, friction contacts and stops;
+    wide, also breakaway forces above the kinetic ones, belts under ground contacts and a ground motion."""
     n = rng.choice([1, 2, 3])
     names = [f"m{i}" for i in range(n)]
     nodes = ["ground", *names]
@@ -40,12 +41,20 @@ def random_scene(rng: random.Random) -> str:
     for _ in range(rng.choice([1, 2])):
         a, b = rng.sample(nodes, 2)
         if rng.random() < 0.5:
-            lines += ["[[friction]]", f'connects = ["{a}", "{b}"]', f"force = {rng.uniform(0.2, 2):.2f}"]
+            force = rng.uniform(0.2, 2)
+            lines += ["[[friction]]", f'connects = ["{a}", "{b}"]', f"force = {force:.2f}"]
+            if wide and rng.random() < 0.5:
+                lines += [f"static = {force * rng.uniform(1.0, 1.5):.2f}"]
+            if wide and "ground" in (a, b) and rng.random() < 0.4:
+                lines += [f"belt_velocity = {rng.uniform(-0.2, 0.2):.3f}"]
         else:
             lines += ["[[stop]]", f'connects = ["{a}", "{b}"]', f"max = {rng.uniform(0.01, 0.05):.3f}",
                       f"min = {-rng.uniform(0.01, 0.05):.3f}", f"restitution = {rng.uniform(0, 0.9):.2f}"]
     lines += ["[[force]]", f'on = "{rng.choice(names)}"', 'type = "sine"', f"amplitude = {rng.uniform(1, 20):.1f}",
               f"omega = {rng.uniform(2, 20):.1f}"]
+    if wide and rng.random() < 0.4:
+        lines += ["[ground_motion]", 'quantity = "acceleration"', 'type = "sine"',
+                  f"amplitude = {rng.uniform(1, 10):.1f}", f"omega = {rng.uniform(2, 20):.1f}"]
     return "\n".join(lines) + "\n"
 
 
@@ -75,13 +84,14 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--trials", type=int, default=25)
     parser.add_argument("--out", default="fuzz")
+    parser.add_argument("--wide", action="store_true", help="also breakaway forces, belts and a ground motion")
     args = parser.parse_args()
     rng = random.Random(args.seed)
     out = Path(args.out)
     found = 0
     for trial in range(args.trials):
-        text = random_scene(rng)
-        name = f"fuzz_{args.seed}_{trial}.toml"
+        text = random_scene(rng, args.wide)
+        name = f"fuzz{'_wide' if args.wide else ''}_{args.seed}_{trial}.toml"
         why = verdict(text, name)
         if why:
             found += 1

@@ -82,6 +82,7 @@ class Law:
     ode_states: ClassVar[tuple[str, ...]] = ()  # internal variables with a differential equation (Bouc-Wen's z)
     internal_names: ClassVar[tuple[str, ...]] = ()  # what /elements writes per step (plastic_deformation, z)
     holds_impulse: ClassVar[bool] = True  # held, it carries an impact's impulse (a bounded force cannot: friction)
+    capacity: ClassVar[float | None] = None  # the most force it holds (a stuck contact's breakaway); None: unbounded
 
     @property
     def linear_stiffness(self) -> float:

@@ -106,7 +106,7 @@ class Elastoplastic(Law):
 
     def jump(self, state: State, d_old: float, d_new: float) -> tuple[State, float]:
         # the straight path from d_old to d_new return-mapped: the core yields on the way where the trial force
-        # passes fy, dissipating fy |change of d_p|; the mode is then decided by the motion (solvers.modes)
+        # passes fy, dissipating fy |change of d_p|; the mode is then decided by the motion (solvers.decisions)
         dp = self.plastic_deformation(state, d_old)
         _, _, dp_new = self.return_map(d_new, dp)
         return State(ELASTIC, {**state.internal, "dp": dp_new}), self.core.fy * abs(dp_new - dp)

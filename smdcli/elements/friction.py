@@ -75,6 +75,11 @@ class Friction(Law):
         """coulomb, stribeck or regularized: what a message calls it."""
         return "regularized" if self.regularization else "stribeck" if self.stribeck_velocity else "coulomb"
 
+    @property
+    def capacity(self) -> float:  # type: ignore[override]
+        """Stuck, it holds at most its breakaway force: contacts stuck on one row share a load in proportion."""
+        return self.static
+
     def slip_force(self, speed: float) -> float:
         """The friction force's size while slipping at |v| = speed (the viscous part aside)."""
         if self.stribeck_velocity is None:
@@ -107,7 +112,7 @@ class Friction(Law):
     def event(self, state: State, kind: str, d: float, rate: float, tension: float) -> State:
         if kind == "slip":
             return State(PLUS if tension > 0 else MINUS)
-        return State(STICK)  # "stick": a candidate; the scene's resolution decides (see solvers.modes)
+        return State(STICK)  # "stick": a candidate; the scene's resolution decides (see solvers.decisions)
 
     def dissipation(self, state: State, d: float, rate: float, tension: float) -> tuple[str, float]:
         return "friction", (tension * rate if state.mode != STICK else 0.0)

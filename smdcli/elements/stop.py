@@ -69,6 +69,11 @@ class Stop(Law):
             return State(AT_MAX)
         return State(FREE)
 
+    def nearest(self, d: float) -> float:
+        """The limit nearer to d: the one an impact or a contact at d is at."""
+        return self.min if self.min is not None and (self.max is None or abs(d - self.min) <= abs(d - self.max)) \
+            else self.max
+
     def limit(self, state: State) -> float:
         """The limit the state is in contact with."""
         return self.min if state.mode == AT_MIN else self.max
@@ -92,8 +97,7 @@ class Stop(Law):
         if kind == "separation":
             return State(FREE)
         if kind in ("contact", "rest"):
-            at_min = self.min is not None and (self.max is None or abs(d - self.min) <= abs(d - self.max))
-            return State(AT_MIN if at_min else AT_MAX)
+            return State(AT_MIN if self.nearest(d) == self.min else AT_MAX)
         return State(FREE)  # an impact with e > 0: free again, moving away
 
     def dissipation(self, state: State, d: float, rate: float, tension: float) -> tuple[str, float]:

@@ -31,11 +31,11 @@ EPS = 2.220446049250313e-16
 
 @kernel
 def watch_scratch(m, size):
-    """What watch_step needs beside a state of `size`: the sample times, their states, the guards' values there,
-    and one time and state for Brent's method."""
+    """What watch_step needs beside a state of `size`: the sample times, their states, the guards' values there
+    (and in columns G.. their slopes), and one time and state for Brent's method."""
     G = len(m.gd_el)
-    return (np.zeros(INTERIOR + 2), np.zeros((INTERIOR + 2, size)), np.zeros((INTERIOR + 2, max(G, 1))), np.zeros(1),
-            np.zeros((1, size)))
+    return (np.zeros(INTERIOR + 2), np.zeros((INTERIOR + 2, size)), np.zeros((INTERIOR + 2, max(2 * G, 1))),
+            np.zeros(1), np.zeros((1, size)))
 
 
 @no_alloc
@@ -90,11 +90,69 @@ def guard_value(m, g, y, work):
 
 
 @no_alloc
-def _at(m, method, t_old, h, y_old, y_new, K, F, Q, s, mid, work, jwork, arg, when, row, dy, g):
-    """Guard g's value on the step's interpolant at time s (row: the interpolated state)."""
+def guard_slope(m, g, y, dy):
+    """The rate of guard g's quantity at y (dy: y' there) where it is d or d' (their rates d' and d''); nan for a
+    held element's tension or an internal variable, whose touches within a step are left to the samples."""
+    quantity = m.gd_qty[g]
+    if quantity != GUARD_D and quantity != GUARD_RATE:
+        return np.nan
+    e = m.gd_el[g]
+    value = 0.0
+    for i in range(m.n):
+        value += m.ns_R[e, i] * (y[m.n + i] if quantity == GUARD_D else dy[m.n + i])
+    return value
+
+
+@no_alloc
+def _slope_at(m, method, t_old, h, y_old, y_new, K, F, Q, s, mid, work, jwork, arg, when, row, dy, g):
+    """Guard g's slope on the step's interpolant at time s."""
+    _sample(m, method, t_old, h, y_old, y_new, K, F, Q, s, mid, work, jwork, arg, when, row, dy)
+    return guard_slope(m, g, row[0], dy)
+
+
+@no_alloc
+def _touch(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, when, row, dy, g, lo, hi, f_lo,
+           slope_lo, slope_hi):
+    """Where guard g, below its level at both ends of [lo, hi] and turning there (rising at lo, falling at hi),
+    reaches its level at the top of its excursion (a light rebound landing again before the next sample); inf if
+    the top stays below. The top is the slope's root (Brent's method on it), as the exact solver's check."""
+    s = m.gd_dir[g]
+    a, b, fa, fb = lo, hi, s * slope_lo, s * slope_hi
+    for _ in range(200):  # bisection with a secant guess: the slope is smooth and changes sign once here
+        if b - a <= 4 * EPS * max(abs(a), abs(b)):
+            break
+        c = a + (b - a) * fa / (fa - fb)
+        if not a < c < b:
+            c = 0.5 * (a + b)
+        fc = s * _slope_at(m, method, t_old, h, y_old, y_new, K, F, Q, c, mid, work, jwork, arg, when, row, dy, g)
+        if fc > 0:
+            a, fa = c, fc
+        else:
+            b, fb = c, fc
+        if abs(fc) == 0 or b - a < 0.25 * (hi - lo) * 2.0 ** -40:
+            break
+    top = 0.5 * (a + b)
+    f_top = _at(m, method, t_old, h, y_old, y_new, K, F, Q, top, mid, work, jwork, arg, when, row, dy, g)
+    if s * f_top < 0:
+        return np.inf
+    if f_top == 0:
+        return top
+    return _root(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, when, row, dy, g, lo, top, f_lo,
+                 f_top)
+
+
+@no_alloc
+def _sample(m, method, t_old, h, y_old, y_new, K, F, Q, s, mid, work, jwork, arg, when, row, dy):
+    """The step's interpolant at time s into row[0], its right-hand side into dy (and the tensions into work)."""
     when[0] = s
     interpolate(m, method, t_old, h, y_old, y_new, K, F, Q, when, 0, 1, row, mid, work, jwork, arg)
     state_rhs(m, s, row[0], s >= mid, dy, work, jwork)
+
+
+@no_alloc
+def _at(m, method, t_old, h, y_old, y_new, K, F, Q, s, mid, work, jwork, arg, when, row, dy, g):
+    """Guard g's value on the step's interpolant at time s (row: the interpolated state)."""
+    _sample(m, method, t_old, h, y_old, y_new, K, F, Q, s, mid, work, jwork, arg, when, row, dy)
     return guard_value(m, g, row[0], work)
 
 
@@ -160,8 +218,11 @@ def first_crossing(m, method, t_old, t_new, h, y_old, y_new, K, F, Q, mid, work,
         state_rhs(m, samples[i], rows[i], samples[i] >= mid, dy, work, jwork)
         for g in range(G):
             values[i, g] = guard_value(m, g, rows[i], work)
+            values[i, G + g] = guard_slope(m, g, rows[i], dy)
     for g in range(G):
         s = m.gd_dir[g]
+        level = m.gd_level[g]  # at it to rounding as smdcli.solvers.modes.at_level: 64 ulps of what it sums
+        root = np.inf
         for i in range(INTERIOR + 1):
             if s * values[i, g] < 0 <= s * values[i + 1, g]:
                 lo, hi = samples[i], samples[i + 1]
@@ -171,11 +232,51 @@ def first_crossing(m, method, t_old, t_new, h, y_old, y_new, K, F, Q, mid, work,
                     root = _root(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, when, row, dy, g,
                                  lo, hi, values[i, g], values[i + 1, g])
                 if g == skip_guard and root - skip_t <= 16 * np.spacing(max(abs(skip_t), 1e-300)):
+                    root = np.inf
                     continue
-                if fired < 0 or root < t_stop:
-                    t_stop, fired = root, g
                 break
+            if s * values[i, g] < -64 * EPS * (abs(values[i, g] + level) + abs(level)) and s * values[i + 1, g] < 0 \
+                    and s * values[i, G + g] > 0 > s * values[i + 1, G + g]:  # a touch inside, not one at its level
+                root = _touch(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, when, row, dy, g,
+                              samples[i], samples[i + 1], values[i, g], values[i, G + g], values[i + 1, G + g])
+                if g == skip_guard and root - skip_t <= 16 * np.spacing(max(abs(skip_t), 1e-300)):
+                    root = np.inf
+                if root < np.inf:
+                    break
+        # at its level to the rounding of its value, and of the time of the event that started the step (another
+        # guard's on the same quantity: a spring yielding where a stop is, their levels apart by rounding)
+        slope = values[0, G + g] if values[0, G + g] == values[0, G + g] else (values[1, g] - values[0, g]) / (
+            samples[1] - samples[0])
+        at = 64 * EPS * (abs(values[0, g] + level) + abs(level)) + abs(slope) * 16 * np.spacing(abs(t_old))
+        if root == np.inf and abs(values[0, g]) <= at and s * values[1, g] >= 0:
+            root = _return(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, when, row, dy, g,
+                           samples[1], values[1, g])
+            if g == skip_guard and root - skip_t <= 16 * np.spacing(max(abs(skip_t), 1e-300)):
+                root = np.inf
+        if root < t_stop or (fired < 0 and root <= t_new):
+            t_stop, fired = root, g
     return t_stop, fired
+
+
+@no_alloc
+def _return(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, when, row, dy, g, hi, f_hi):
+    """Where guard g, at its level at t_old and past it again at hi, comes back to it after a dip below it too
+    short for the samples to see (a light rebound landing again, a spring unloading and yielding again): the dip
+    found by halving towards t_old, then the crossing located. If it never went below, it went on past its level
+    from t_old: an event there (a stop met again at rest while another contact bounced); inf where it only stays
+    at its level to rounding (a spring on its yield surface held by a stuck contact)."""
+    s = m.gd_dir[g]
+    tau = hi - t_old
+    for _ in range(60):
+        tau *= 0.5
+        value = _at(m, method, t_old, h, y_old, y_new, K, F, Q, t_old + tau, mid, work, jwork, arg, when, row, dy, g)
+        if s * value < 0:
+            if f_hi == 0:
+                return hi
+            return _root(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, when, row, dy, g,
+                         t_old + tau, hi, value, f_hi)
+    level = m.gd_level[g]
+    return t_old if s * f_hi > 64 * EPS * (abs(f_hi + level) + abs(level)) else np.inf
 
 
 @no_alloc

@@ -1,6 +1,6 @@
 """smd's compiled ODE methods on nonsmooth scenes: each mode handed to a compiled kernel (smdcli.kernels.events for
 the explicit pairs; radau, bdf, stiff) as arrays, integrated there step by step with its guards watched on the
-method's interpolant, and back in Python only at an event, where the decisions of smdcli.solvers.modes are taken.
+method's interpolant, and back in Python only at an event, where the decisions of smdcli.solvers.decisions are taken.
 
 Must not import: sweep, io, plots, commands, cli.
 """
@@ -24,7 +24,7 @@ QUANTITIES = {"d": GUARD_D, "rate": GUARD_RATE, "tension": GUARD_TENSION}
 
 
 def scene_arrays(scene) -> ModelArrays:
-    """The kernels' arrays of a SmoothScene (smdcli.solvers.nonsmooth_ivp) with what every mode shares: the state's
+    """The kernels' arrays of a SmoothScene (smdcli.solvers.smooth_scene) with what every mode shares: the state's
     internal variables and energy terms, the elements' rows and belts, M 1 and the dampers' C."""
     from smdcli.kernels.arrays import model_arrays
 
@@ -129,6 +129,9 @@ class CompiledModes:
         while last + 1 < len(cuts) and cuts[last][1] is None:
             last += 1
         times = np.array([c[0] for c in cuts[segment:last + 1]] or [t, t], dtype=float)
+        spacing = driver.held_spacing(mode)
+        if spacing:  # restarts that bound the steps where nothing moves but the forces on what holds it
+            times = np.union1d(times, np.arange(t + spacing, times[-1], spacing))
         y = np.array(y, dtype=float)
         k0 = k
         module, method = driver.kernel_method

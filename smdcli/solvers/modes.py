@@ -1,5 +1,5 @@
-"""A scene of nonsmooth elements in one mode: the linear system it is between two events, the quantities its
-events watch, and the decisions taken at an event (stick or slip, impact, rest, separation).
+"""A scene of nonsmooth elements in one mode: the linear system it is between two events and the quantities its
+events watch.
 
 In a mode every element's tension is a Piece (smdcli.elements): stiffness, damping and a constant along its
 deformation d, or held (a stuck contact, a persistent stop), its tension then the constraint's force. The held
@@ -9,14 +9,14 @@ rows G (d' = 0) are kept by the forces G^T mu with mu = -(G M^-1 G^T)^-1 G M^-1 
 
 linear in z = [x, v, w] (w the force generators' state): z' = A z + b, b constant. Every quantity an event
 watches (d, d', a held element's tension) is a row times z plus a constant. Shared by the exact event-driven
-solver (piecewise.py) and the integrators' event-driven driver (nonsmooth_ivp.py).
+solver (piecewise.py) and the integrators' event-driven driver (nonsmooth_ivp.py); the decisions at an event
+are decisions.py's.
 
 Must not import: sweep, io, plots, commands, cli.
 """
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -130,7 +130,7 @@ class Scene:
             G = R[list(held)]
             MG = self.Minv @ G.T
             S = G @ MG
-            S_pinv = np.linalg.pinv(S)  # a redundant constraint (two contacts on one row) shares its force
+            S_pinv = self._shared_inverse(S, held)
             hold = (MG, S_pinv, G)
             mu_z, mu_g = -S_pinv @ (G @ MF), -S_pinv @ (G @ Mg)
             acc_z, acc_g = MF + MG @ mu_z, Mg + MG @ mu_g
@@ -157,6 +157,28 @@ class Scene:
         return Mode(key, a_key, A, b, d_rows, rate_rows, tension_rows, tension_const, acc_z, acc_g, held,
                     Kt=Kt, Ct=Ct, g=g, hold=hold)
 
+    def _shared_inverse(self, S: np.ndarray, held: tuple[int, ...]) -> np.ndarray:
+        """S^-1 for the held rows' forces, or where some are redundant (two contacts on one row) the weighted
+        pseudo-inverse W (W S W)^+ W, W = diag(sqrt(capacity)), that shares a load among them in proportion to
+        what each can hold: stuck contacts by their breakaway forces, a stop (unbounded) taking all but 1e-6."""
+        capacities = [self.elements[e].law.capacity for e in held]
+        finite = [c for c in capacities if c is not None]
+        unbounded = 1e6 * max(finite) if finite else 1.0
+        w = np.sqrt(np.array([unbounded if c is None else c for c in capacities], dtype=float))
+        return w[:, None] * np.linalg.pinv(w[:, None] * S * w[None, :]) * w[None, :]
+
+    def trend(self, states: list[State], z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(the masses' jerk, the tensions' rates) at z in these states: what decides a motion whose rate and
+        acceleration are both zero (a row that a contact has just stopped holding, with the same force)."""
+        mode = self.mode(states)
+        zdot = mode.A @ z + mode.b
+        return (mode.A @ zdot)[self.n:2 * self.n], mode.tension_rows @ zdot
+
+    def acceleration_size(self, states: list[State], z: np.ndarray) -> np.ndarray:
+        """The size of the terms each mass's acceleration sums (the scale of its rounding)."""
+        mode = self.mode(states)
+        return np.abs(mode.acceleration_rows) @ np.abs(z) + np.abs(mode.acceleration_const)
+
     # ---------------------------------------------------------------------------------- quantities
     def quantities(self, mode: Mode, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(d, d', T) of every element at z."""
@@ -179,146 +201,3 @@ class Scene:
         if guard.quantity == RATE:
             return mode.rate_rows[element], self.belts[element] - guard.level
         return mode.tension_rows[element], mode.tension_const[element] - guard.level
-
-
-# -------------------------------------------------------------------------------- decisions at events
-
-
-def scale_of(values: np.ndarray) -> float:
-    """A magnitude to judge 'zero' against."""
-    return max(float(np.max(np.abs(values), initial=0.0)), 1e-300)
-
-
-def consistent(scene: Scene, states: list[State], z: np.ndarray, t: float, on_event,
-               stopping: tuple[int, ...] = (), v_scale: float = 0.0, breaking: tuple[int, ...] = ()) -> list[State]:
-    """The modes the scene takes at z: every element's instantaneous conditions checked until none changes. A
-    stuck contact whose force passes its breakaway slips; a persistent stop that would pull separates; a spring on
-    its yield surface loading outward yields, one unloading turns elastic; slipping contacts at zero speed stick or
-    reverse, decided together (a small complementarity problem: every subset of them tried as stuck, the largest
-    consistent one kept; `stopping` are contacts whose speed an event just found at zero, whatever its rounding).
-    A rate within TOUCH of v_scale (the run's speeds) is zero: the sign of the element's acceleration decides
-    which way it moves; `breaking` are contacts an event just let slip, their force at the breakaway: they are not
-    stuck again at that instant. on_event(element, kind) records what changed."""
-    from smdcli.elements.elastoplastic import ELASTIC
-    from smdcli.elements.friction import MINUS as SLIP_MINUS
-    from smdcli.elements.friction import PLUS as SLIP_PLUS
-    from smdcli.elements.friction import STICK
-    from smdcli.elements.stop import FREE
-
-    states = list(states)
-    tolerance = TOUCH * max(v_scale, scale_of(z[scene.n:2 * scene.n]), scale_of(scene.model.v0))
-    for _ in range(4 * scene.E + 4):
-        d, rate, tension, accel = scene.evaluate(states, z)
-        changed = False
-        candidates = []
-
-        def moving(e: int, sign: float) -> bool:  # d moves the sign's way now: by its rate, or from rest
-            if abs(rate[e]) > tolerance:
-                return sign * rate[e] > 0
-            return sign * float(scene.R[e] @ accel) > 0
-
-        for e, element in enumerate(scene.elements):
-            law, state = element.law, states[e]
-            table = element.kind
-            if table == "friction" and state.mode == STICK and law.regularization is None:
-                if abs(rate[e]) > tolerance:  # an impact or a ground jump set it moving: it slips that way
-                    states[e] = State(SLIP_PLUS if rate[e] > 0 else SLIP_MINUS)
-                    on_event(e, "slip")
-                    changed = True
-                elif abs(tension[e]) > law.static * (1 + TOUCH):
-                    states[e] = law.event(state, "slip", d[e], rate[e], tension[e])
-                    on_event(e, "slip")
-                    changed = True
-            elif table == "friction" and state.mode in (SLIP_PLUS, SLIP_MINUS):
-                sign = 1.0 if state.mode == SLIP_PLUS else -1.0
-                if sign * rate[e] < -tolerance and e not in stopping:  # reversed by a jump of the velocities
-                    states[e] = State(SLIP_MINUS if sign > 0 else SLIP_PLUS)
-                    on_event(e, "slip")
-                    changed = True
-                elif (sign * rate[e] <= tolerance or e in stopping) and e not in breaking:
-                    candidates.append(e)
-            elif table == "stop" and law.rigid and state.mode != FREE:
-                at_min = state.mode.endswith("min")
-                if (tension[e] > 0) if at_min else (tension[e] < 0):
-                    states[e] = law.event(state, "separation", d[e], rate[e], tension[e])
-                    on_event(e, "separation")
-                    changed = True
-            elif table == "spring" and hasattr(law, "core"):
-                if state.mode == ELASTIC:
-                    side = _at_surface(law, state, d[e])
-                    if side and moving(e, side):
-                        states[e] = law.event(state, "yield", d[e], rate[e], tension[e])
-                        on_event(e, "yield")
-                        changed = True
-                else:
-                    sign = 1.0 if state.mode.endswith("+") else -1.0
-                    if not moving(e, sign):
-                        states[e] = law.event(state, "unload", d[e], rate[e], tension[e])
-                        on_event(e, "unload")
-                        changed = True
-        if candidates:
-            changed |= _stick_or_slip(scene, states, z, candidates, on_event)
-            stopping = ()
-        if not changed:
-            return states
-    return states
-
-
-def _at_surface(law, state: State, d: float) -> int:
-    """+1 or -1 where an elastic spring's tension is on its yield surface (to rounding), else 0."""
-    core = law.core
-    trial = core.k * (d - state.internal["dp"])
-    if abs(trial) < core.fy * (1 - TOUCH):
-        return 0
-    return 1 if trial > 0 else -1
-
-
-def _stick_or_slip(scene: Scene, states: list[State], z: np.ndarray, candidates: list[int], on_event) -> bool:
-    """Slipping contacts at zero relative speed, decided together: the largest subset that can stick (each held
-    contact's force within its breakaway) with the others slipping each in a direction its own acceleration then
-    takes (Coulomb's complementarity, by enumeration: a scene holds a few contacts)."""
-    from smdcli.elements.friction import MINUS, PLUS, STICK
-
-    for size in range(len(candidates), -1, -1):
-        for stuck in itertools.combinations(candidates, size):
-            sliding = [e for e in candidates if e not in stuck]
-            for signs in itertools.product((1.0, -1.0), repeat=len(sliding)):
-                trial = list(states)
-                for e in stuck:
-                    trial[e] = State(STICK)
-                for e, sign in zip(sliding, signs):
-                    trial[e] = State(PLUS if sign > 0 else MINUS)
-                _, _, tension, accel = scene.evaluate(trial, z)
-                if not all(abs(tension[e]) <= scene.elements[e].law.static * (1 + TOUCH) for e in stuck):
-                    continue
-                if not all(sign * float(scene.R[e] @ accel) > 0 for e, sign in zip(sliding, signs)):
-                    continue
-                changed = False
-                for e in candidates:
-                    if trial[e].mode != states[e].mode or e in stuck:
-                        on_event(e, "stick" if e in stuck else "slip")
-                        changed = True
-                    states[e] = trial[e]
-                return changed
-    return False
-
-
-def impact(scene: Scene, states: list[State], z: np.ndarray, element: int, restitution: float) -> np.ndarray:
-    """Velocities after a rigid impact at element: d' -> -e d' by an impulse along its row, the held constraints
-    kept (their impulses solved with it); the masses' momentum is conserved where the row is internal. A stuck
-    friction contact holds nothing through an impact: its force is bounded, so its impulse is zero (it slips
-    after, if the impact set it moving)."""
-    n = scene.n
-    held = [e for e, (el, s) in enumerate(zip(scene.elements, states))
-            if el.law.piece(s).held and e != element and el.law.holds_impulse]
-    rows = [element] + held
-    G = scene.R[rows]
-    v = z[n:2 * n]
-    MG = scene.Minv @ G.T
-    target = np.zeros(len(rows))
-    target[0] = -restitution * (scene.R[element] @ v + scene.belts[element]) - scene.belts[element]
-    target[1:] = -scene.belts[held] if held else target[1:]
-    impulse = np.linalg.lstsq(G @ MG, target - G @ v, rcond=None)[0]
-    out = z.copy()
-    out[n:2 * n] = v + MG @ impulse
-    return out

@@ -3,11 +3,11 @@ located on the method's own interpolant and the method restarted there.
 
 A scene that is not linear between events (Bouc-Wen springs, Stribeck or regularized friction, stops and
 friction beside cubic springs or quadratic dampers) is integrated mode by mode, with the same modes, guards and
-decisions as the exact event-driven solver (modes.py): its state y = [x, v, q] carries the laws' internal
-variables q (Bouc-Wen's z) with their differential equations. After every accepted step each guard is looked at
-on the step's dense output (its ends and four interior points, so that a touch within a step is seen), a
-crossing located by Brent's method on that interpolant, the step cut back there, the event decided, and the
-method started afresh from the event. The energy terms' powers are integrated with the motion, under the
+decisions as the exact event-driven solver (modes.py, decisions.py): its state y = [x, v, q] (smooth_scene.py)
+carries the laws' internal variables q (Bouc-Wen's z) with their differential equations. After every accepted
+step each guard is looked at on the step's dense output (its ends and four interior points, so that a touch
+within a step is seen), a crossing located by Brent's method on that interpolant, the step cut back there, the
+event decided, and the method started afresh from the event. The energy terms' powers are integrated with the motion, under the
 method's own error control.
 
 Every method of the ODE family takes part. smd's compiled ones (RK23, RK45, DOP853, Radau, BDF, ode15s, ode23s,
@@ -24,15 +24,15 @@ import time
 
 import numpy as np
 
-from smdcli.elements import State
 from smdcli.kernels.arrays import INTERIOR
 from smdcli.model import Model
 from smdcli.result import NonsmoothHistory, Result, SolverStats
 from smdcli.solvers.base import MAX_STEPS, Tolerances, divergence_bound, diverged, force_function
 from smdcli.solvers.compiled_events import ACCUMULATED, COMPILED_EVENT_METHODS, CompiledModes
-from smdcli.solvers.modes import Scene, event_root
+from smdcli.solvers.modes import at_level, event_root
 from smdcli.solvers.piecewise import MAX_EVENTS_AT_ONE_TIME, PiecewiseRun
 from smdcli.solvers.piecewise_record import stored_energies
+from smdcli.solvers.smooth_scene import SmoothScene
 
 # The OdeSolver class each method name integrates nonsmooth scenes with.
 EVENT_METHODS = {"RK45": "RK45", "ode45": "RK45", "scipy:RK45": "RK45", "RK23": "RK23", "ode23": "RK23",
@@ -55,79 +55,6 @@ def solver_class(name: str):
     return getattr(si, scipy_name)
 
 
-class SmoothScene(Scene):
-    """A scene whose modes carry smooth nonlinear forces and internal differential equations: y = [x, v, q]."""
-
-    def __init__(self, model: Model):
-        super().__init__(model)
-        self.q_slices = []
-        start = 2 * self.n
-        for element in self.elements:
-            count = len(element.law.ode_states)
-            self.q_slices.append(slice(start, start + count))
-            start += count
-        self.q_size = start - 2 * self.n
-        self.now = 0.0  # the time evaluate() looks at (the driver sets it)
-        self.force = None  # u(t) on the current segment
-
-    def reseed(self, z: np.ndarray, t: float) -> None:
-        """No generators here: forces are evaluated at t (y holds x, v and the laws' variables)."""
-
-    def live(self, states: list[State], y: np.ndarray) -> list[State]:
-        """The states with their internal ODE variables taken from y (a state, or rows of states: then each
-        variable is the column of its values)."""
-        out = []
-        for element, state, part in zip(self.elements, states, self.q_slices):
-            names = element.law.ode_states
-            if names:
-                values = np.moveaxis(y[..., part], -1, 0)
-                state = State(state.mode, {**state.internal, **dict(zip(names, values))})
-            out.append(state)
-        return out
-
-    def parts(self, states: list[State], t: float, y: np.ndarray):
-        """(x'', T, q') at (t, y): the mode's linear part, its smooth forces, the held rows' constraint forces."""
-        n = self.n
-        x, v = y[:n], y[n:2 * n]
-        mode = self.mode(states)
-        model = self.model
-        F = mode.g - mode.Kt @ x - mode.Ct @ v
-        if model.signals:
-            F = F + model.B @ self.force(t)
-        if not model.is_linear and (model.cubic is not None or model.quadratic is not None):
-            F = F - model.nonlinear_force(x, v)
-        d = self.R @ x
-        rate = self.R @ v + self.belts
-        tension = np.zeros(self.E)
-        qdot = np.zeros(self.q_size)
-        live = self.live(states, y)
-        for e, (element, state) in enumerate(zip(self.elements, live)):
-            piece = element.law.piece(state)
-            if piece.held:
-                continue
-            tension[e] = piece.stiffness * d[e] + piece.damping * rate[e] + piece.constant
-            if piece.nonlinear is not None:
-                extra = piece.nonlinear(d[e], rate[e], state.internal)
-                tension[e] += extra
-                F = F - extra * self.R[e]
-            part = self.q_slices[e]
-            if part.stop > part.start:
-                qdot[part.start - 2 * n:part.stop - 2 * n] = element.law.ode(state, d[e], rate[e])
-        accel = self.Minv @ F
-        if mode.hold is not None:
-            MG, S_pinv, _ = mode.hold
-            mu = -S_pinv @ (mode.hold[2] @ accel)
-            accel = accel + MG @ mu
-            tension[list(mode.held)] = -mu
-        return accel, tension, qdot
-
-    def evaluate(self, states, y):
-        """(d, d', T, x'') at y, at the time the driver set."""
-        n = self.n
-        accel, tension, _ = self.parts(states, self.now, y)
-        return self.R @ y[:n], self.R @ y[n:2 * n] + self.belts, tension, accel
-
-
 class EventDriver(PiecewiseRun):
     """An OdeSolver, mode by mode, events located on its interpolant."""
 
@@ -141,6 +68,7 @@ class EventDriver(PiecewiseRun):
         self.counts = {"nfev": 0, "njev": 0, "nlu": 0, "steps_accepted": 0, "steps_rejected": -1}
         self.max_steps = tol.max_steps or (PYTHON_STEPS if self.kernel_method is None else MAX_STEPS)
         self.fired = None  # (time, element, guard) of the last event
+        self.fastest_force = None  # rad/s, once asked (held_spacing)
 
     def run(self):
         """x, v, a (N, n), the history, and why it stopped (None: it reached the end) with where."""
@@ -208,6 +136,8 @@ class EventDriver(PiecewiseRun):
         t_end = cuts[segment + 1][0] if segment + 1 < len(cuts) else float(grid[-1])
         fun = self.rhs(states)
         options = {"jac": _numeric_jacobian(fun)} if self.own else {}
+        spacing = self.held_spacing(self.scene.mode(states))
+        options.update({"max_step": spacing} if spacing else {})
         solver = self.cls(fun, t, y, t_end, rtol=self.tol.rtol, atol=self.tol.atol, **options)
         event = failure = None
         t_reached = t
@@ -237,6 +167,22 @@ class EventDriver(PiecewiseRun):
         self.counts["njev"] += solver.njev
         self.counts["nlu"] += solver.nlu
         return y, t_reached, event, failure, k
+
+    def held_spacing(self, mode) -> float | None:
+        """Where every mass is held (a mass at rest on its stop), the longest step that still sees the forces on
+        what holds it change: a sixteenth of the fastest force's period. None elsewhere: the motion bounds the
+        steps, where here nothing moves and a step would span periods, its samples missing the separation."""
+        if mode.hold is None or np.linalg.matrix_rank(mode.hold[2]) < self.n:
+            return None
+        if self.fastest_force is None:
+            omegas = [float(np.abs(np.linalg.eigvals(exo.S).imag).max()) for exo in self.scene.exos
+                      if exo is not None and exo.S.size]
+            self.fastest_force = max(omegas, default=0.0)
+        return 2 * np.pi / self.fastest_force / 16 if self.fastest_force > 0 else None
+
+    def speed_resolution(self) -> float:
+        """The speed below which the method cannot tell a motion from rest: its tolerance on the run's speeds."""
+        return max(super().speed_resolution(), self.tol.rtol * self.v_scale + self.tol.atol)
 
     def cut_times(self) -> list[tuple[float, object]]:
         """Where the method restarts: the start, force discontinuities, the ground's jumps, the end."""
@@ -288,19 +234,30 @@ class EventDriver(PiecewiseRun):
         best = None
         for j, (e, guard) in enumerate(guards):
             s = guard.direction
+
+            def value(t, j=j):
+                return self.guard_values(guards, states, t, dense(t))[j]
+
+            def fired_again(root, e=e, guard=guard):  # the guard that just fired, read on the far side of its rounding
+                return self.fired is not None and self.fired[1:] == (e, guard) and \
+                    root - self.fired[0] <= 16 * np.spacing(max(abs(self.fired[0]), 1e-300))
+
+            root = None
             for i in range(len(times) - 1):
                 if s * values[i, j] < 0 <= s * values[i + 1, j]:
-                    def value(t, j=j):
-                        return self.guard_values(guards, states, t, dense(t))[j]
-
                     lo, hi = times[i], times[i + 1]
                     root = hi if value(hi) == 0 else event_root(value, lo, hi, hi - lo)
-                    if self.fired is not None and self.fired[1:] == (e, guard) and \
-                            root - self.fired[0] <= 16 * np.spacing(max(abs(self.fired[0]), 1e-300)):
-                        continue  # the guard that just fired, read again on the far side of its own rounding
-                    if best is None or root < best[0]:
-                        best = (root, e, guard)
+                    if fired_again(root):
+                        root = None
+                        continue
                     break
+            slope = (values[1, j] - values[0, j]) / (times[1] - times[0])  # for the rounding of the time it started
+            at = at_level(abs(values[0, j] + guard.level), guard.level) + abs(slope) * 16 * np.spacing(abs(t0))
+            if root is None and abs(values[0, j]) <= at and s * values[1, j] >= 0:
+                root = _return(value, s, guard.level, t0, times[1], values[1, j])
+                root = None if root is None or fired_again(root) else root
+            if root is not None and (best is None or root < best[0]):
+                best = (root, e, guard)
         return best
 
     def guard_values(self, guards, states, t: float, y: np.ndarray) -> np.ndarray:
@@ -317,6 +274,20 @@ class EventDriver(PiecewiseRun):
             else:
                 values.append(table[g.quantity][e] - g.level)
         return np.array(values)
+
+def _return(value, s: float, level: float, t0: float, hi: float, f_hi: float) -> float | None:
+    """Where a guard at its level at t0 and past it again at hi comes back to it after a dip below it too short for
+    the samples to see (a light rebound landing again): the dip found by halving towards t0, then the crossing
+    located; t0 where it went on past its level instead, None where it only stays at it to rounding (as
+    smdcli.kernels.guards._return)."""
+    tau = hi - t0
+    for _ in range(60):
+        tau *= 0.5
+        f = value(t0 + tau)
+        if s * f < 0:
+            return hi if f_hi == 0 else event_root(value, t0 + tau, hi, hi - t0 - tau)
+    return t0 if s * f_hi > at_level(abs(f_hi + level), level) else None
+
 
 def _numeric_jacobian(fun):
     """A forward-difference Jacobian of fun(t, y), for the methods that ask for one."""

@@ -11,7 +11,8 @@ Brent's method to rounding. The events' decisions (modes.consistent, modes.impac
 A rigid stop's impacts that accumulate (a ball coming to rest) are ended by the rule a sequence of geometric
 flight times obeys: once successive flights shrink by the restitution (to 1e-6), or a flight would be shorter
 than 1e-10 of the run, the remaining flights sum to the last one times e / (1 - e); the stop then holds
-(persistent contact) from that accumulation time, recorded as "rest".
+(persistent contact) from that accumulation time, recorded as "rest". A rebound that would rise less than the
+rounding of the stop's deformation ends the sequence there too (PiecewiseRun.unresolved).
 
 The energy balance is integrated on the same pieces (Gauss-Legendre, 8 nodes a substep, exact for the
 quadratic powers of a linear flow): dissipated by dampers, hysteretic (yielding), friction, impact (lost at
@@ -28,16 +29,14 @@ import time
 import numpy as np
 
 from smdcli.elements import State
-from smdcli.elements.base import EVENT_KINDS, KINK
+from smdcli.elements.base import D, EVENT_KINDS, KINK, RATE
 from smdcli.model import Model
 from smdcli.solvers.flow import Flow
-from smdcli.solvers.modes import Mode, Scene, at_level, consistent, event_root, impact
+from smdcli.solvers.decisions import accumulation, consistent, impact, project, touch, unresolved
+from smdcli.solvers.modes import TOUCH, Mode, Scene, at_level, event_root
 from smdcli.solvers.piecewise_record import Outputs, step_integrals
 
 MAX_EVENTS_AT_ONE_TIME = 200  # a mode that cannot settle at one instant is a scene smd cannot solve
-ACCUMULATION_RATIO = 1e-6  # successive flight times within this of e (relative): a geometric sequence
-ACCUMULATION_FLIGHT = 1e-10  # of the run: a flight this short is summed with the rest, not stepped
-MAX_IMPACTS_IN_A_SEQUENCE = 10_000
 BATCH = 256  # output steps taken together where no event interrupts them
 CHUNK = 16  # checked for events together
 MAX_SUBSTEPS = 2_000_000  # substeps a run may take (about 100 us each): a mode faster than that is refused
@@ -214,11 +213,17 @@ class PiecewiseRun:
             g0, g1 = float(row @ z0 + const), float(row @ z1 + const)
             s = guard.direction
             tau = None
-            if s * g0 < 0 <= s * g1:
-                tau = self._root(flow, mode, z0, row, const, 0.0, h)
-            elif s * g0 <= at_level(float(np.abs(row) @ np.abs(z0)), const) and s * g1 >= 0:
+            # at its level to rounding: of the terms it sums, or for a rate of the speeds it was computed from
+            size = float(np.abs(row) @ np.abs(z0))
+            level = at_level(max(size, self.v_scale) if guard.quantity == RATE else size, const)
+            at = abs(g0) <= level  # at its level (on either side of it by rounding)
+            if at and guard.quantity == D and s * float(row @ (mode.A @ z0 + mode.b)) > TOUCH * self.v_scale:
+                tau = 0.0  # leaving its level past it now (a spring yielding onto a stop it is at), however soon back
+            elif at and s * g1 >= 0:
                 tau = self._return(flow, mode, z0, row, const, s, h)
-            elif s * g0 < 0 and s * g1 < 0:  # a touch inside the substep: where the slope turns
+            elif s * g0 < 0 <= s * g1:
+                tau = self._root(flow, mode, z0, row, const, 0.0, h)
+            elif s * g0 < -level and s * g1 < 0:  # a touch inside the substep, not at its start: where the slope turns
                 slope0 = float(row @ (mode.A @ z0 + mode.b))
                 slope1 = float(row @ (mode.A @ z1 + mode.b))
                 if s * slope0 > 0 > s * slope1:
@@ -231,19 +236,29 @@ class PiecewiseRun:
 
     def _return(self, flow: Flow, mode: Mode, z0: np.ndarray, row: np.ndarray, const: float, s: float, h: float):
         """Where a guard the event just taken left at its level comes back to it in (0, h], from the bottom of its
-        excursion below it (its slope's root, or the lowest of RETURN_SAMPLES samples); None if it stayed at it."""
+        excursion below it (its slope's root; a dip right after the start found by halving towards it, the return
+        then bracketed by doubling; or the lowest of RETURN_SAMPLES samples). If it never went below, it goes on
+        past its level from here: an event now (a spring that yields where its stop is met, the two at one
+        instant); None where it only stays at its level to rounding (a spring on its surface held by a contact)."""
         value = lambda tau: s * float(row @ flow.at(z0, mode.b, tau) + const)  # noqa: E731
         rate = lambda z: s * float(row @ (mode.A @ z + mode.b))  # noqa: E731
-        lo = None
-        if rate(z0) < 0 < rate(flow.at(z0, mode.b, h)):  # one turn: the bottom where the slope changes sign
+        lo, hi = None, h
+        leaving = rate(z0) < 0
+        if leaving and rate(flow.at(z0, mode.b, h)) > 0:  # one turn: the bottom where the slope changes sign
             lo = self._root(flow, mode, z0, row @ mode.A, float(row @ mode.b), 0.0, h)
+        if leaving and (lo is None or value(lo) >= 0):  # a rebound that lands again long before the samples
+            lo = next((tau for tau in h * 0.5 ** np.arange(1, 60) if value(tau) < 0), None)
+            if lo is not None:
+                hi = next((tau for tau in lo * 2.0 ** np.arange(1, 60) if tau >= h or value(tau) >= 0), h)
+                hi = min(hi, h)
         if lo is None or value(lo) >= 0:
             taus = h * np.arange(1, RETURN_SAMPLES) / RETURN_SAMPLES
             values = np.array([value(tau) for tau in taus])
             if values.min() >= 0:
-                return None
+                end = value(h)
+                return 0.0 if end > at_level(float(np.abs(row) @ np.abs(z0)), const) else None
             lo = float(taus[int(np.argmin(values))])
-        return self._root(flow, mode, z0, row, const, lo, h)
+        return self._root(flow, mode, z0, row, const, lo, hi)
 
     def _root(self, flow: Flow, mode: Mode, z0: np.ndarray, row: np.ndarray, const: float, lo: float,
               hi: float) -> float:
@@ -298,15 +313,20 @@ class PiecewiseRun:
         law = scene.elements[element].law
         before = self.kinetic(z)
         speed = abs(float(scene.R[element] @ z[n:2 * n]))
-        z = impact(scene, states, z, element, law.restitution)
-        self.record(t, element, "impact")
+        met = touch(scene, states, z, element, self.speed_resolution())
+        if met == "graze":
+            return states, z
         history = self.impacts.setdefault(element, [])
-        history.append((t, speed))
-        span = float(self.grid[-1] - self.grid[0])
-        rest_at = self.accumulation(history, law.restitution, span)
-        scale = max(history[0][1], 1e-300)
+        rest_at, resting = None, True  # met at rest, pressed on: persistent contact, no impact
+        if met == "impact":
+            z = impact(scene, states, z, element, law.restitution)
+            self.record(t, element, "impact")
+            history.append((t, speed))
+            rest_at = accumulation(history, law.restitution, float(self.grid[-1] - self.grid[0]))
+            resting = law.restitution == 0 or rest_at is not None or speed <= 1e-14 * max(history[0][1], 1e-300) or \
+                unresolved(scene, states, z, element)
         states = list(states)
-        if law.restitution == 0 or rest_at is not None or speed <= 1e-14 * scale:
+        if resting:
             states[element] = law.event(states[element], "rest", float(scene.R[element] @ z[:n]), 0.0, 0.0)
             z = self.project(states, z)
             self.record(t if rest_at is None else rest_at, element, "rest")
@@ -315,39 +335,13 @@ class PiecewiseRun:
         states = self.settle(states, z, t)
         return states, self.project(states, z)
 
-    def accumulation(self, history, e: float, span: float) -> float | None:
-        """When an accumulating sequence of impacts ends (its remaining flights summed), or None while it does
-        not accumulate yet."""
-        if e >= 1.0 or len(history) < 3:
-            return None
-        (t0, _), (t1, _), (t2, _) = history[-3:]
-        last, before = t2 - t1, t1 - t0
-        geometric = len(history) >= 24 and abs(last - e * before) <= ACCUMULATION_RATIO * e * before
-        short = e * last < ACCUMULATION_FLIGHT * max(span, 1e-300)
-        if geometric or short or len(history) >= MAX_IMPACTS_IN_A_SEQUENCE:
-            return t2 + last * e / (1 - e)
-        return None
+    def speed_resolution(self) -> float:
+        """The speed below which the run cannot tell a motion from rest: the rounding of the run's speeds."""
+        return TOUCH * self.v_scale
 
     def project(self, states, z: np.ndarray) -> np.ndarray:
-        """Positions and velocities put exactly on the held constraints (a stop's limit, a stuck contact's speed)."""
-        from smdcli.elements.stop import Stop
-
-        scene, n = self.scene, self.n
-        held = [e for e, (el, s) in enumerate(zip(scene.elements, states)) if el.law.piece(s).held]
-        if not held:
-            return z
-        G = scene.R[held]
-        MG = scene.Minv @ G.T
-        z = z.copy()
-        v = z[n:2 * n]
-        z[n:2 * n] = v + MG @ (np.linalg.pinv(G @ MG) @ (-scene.belts[held] - G @ v))
-        stops = [(i, e) for i, e in enumerate(held) if isinstance(scene.elements[e].law, Stop)]
-        if stops:
-            Gs = G[[i for i, _ in stops]]
-            target = np.array([scene.elements[e].law.limit(states[e]) for _, e in stops])
-            MGs = scene.Minv @ Gs.T
-            z[:n] = z[:n] + MGs @ (np.linalg.pinv(Gs @ MGs) @ (target - Gs @ z[:n]))
-        return z
+        """z put exactly on the held constraints (decisions.project)."""
+        return project(self.scene, states, z, self.v_scale)
 
     def start(self, states, z: np.ndarray, t: float):
         """The modes at the start: a rigid stop met moving into it is an impact at once; then consistent."""
