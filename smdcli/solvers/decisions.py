@@ -32,8 +32,9 @@ def consistent(scene: Scene, states: list[State], z: np.ndarray, t: float, on_ev
     reverse, decided together (a small complementarity problem: every subset of them tried as stuck, the largest
     consistent one kept; `stopping` are contacts whose speed an event just found at zero, whatever its rounding).
     A rate within TOUCH of v_scale (the run's speeds) is zero: the sign of the element's acceleration decides
-    which way it moves; `breaking` are contacts an event just let slip, their force at the breakaway: they are not
-    stuck again at that instant. on_event(element, kind) records what changed."""
+    which way it moves, or where that is zero to rounding too, its jerk (Motion); a stuck contact on its breakaway
+    slips if its force is still growing. `breaking` are contacts an event just let slip, their force at the
+    breakaway: they are not stuck again at that instant. on_event(element, kind) records what changed."""
     from smdcli.elements.elastoplastic import ELASTIC
     from smdcli.elements.friction import MINUS as SLIP_MINUS
     from smdcli.elements.friction import PLUS as SLIP_PLUS
