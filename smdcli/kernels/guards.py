@@ -90,6 +90,20 @@ def guard_value(m, g, y, work):
 
 
 @no_alloc
+def _rounding(value, level):
+    """How far from its level a guard's value (quantity less level) is rounding of it: 64 ulps of what it sums,
+    as smdcli.solvers.modes.at_level."""
+    return 64 * EPS * (abs(value + level) + abs(level))
+
+
+@no_alloc
+def _fired_again(g, root, skip_guard, skip_t):
+    """Whether guard g's root is the event just taken (skip_guard at skip_t), read again on the far side of its
+    own rounding: within 16 ulps of its time."""
+    return g == skip_guard and root - skip_t <= 16 * np.spacing(max(abs(skip_t), 1e-300))
+
+
+@no_alloc
 def guard_slope(m, g, y, dy):
     """The rate of guard g's quantity at y (dy: y' there) where it is d or d' (their rates d' and d''); nan for a
     held element's tension or an internal variable, whose touches within a step are left to the samples."""
@@ -115,7 +129,8 @@ def _touch(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, wh
            slope_lo, slope_hi):
     """Where guard g, below its level at both ends of [lo, hi] and turning there (rising at lo, falling at hi),
     reaches its level at the top of its excursion (a light rebound landing again before the next sample); inf if
-    the top stays below. The top is the slope's root (Brent's method on it), as the exact solver's check."""
+    the top stays below. The top is the slope's root (bisection with a secant guess), as the exact solver's
+    check finds it."""
     s = m.gd_dir[g]
     a, b, fa, fb = lo, hi, s * slope_lo, s * slope_hi
     for _ in range(200):  # bisection with a secant guess: the slope is smooth and changes sign once here
@@ -221,7 +236,7 @@ def first_crossing(m, method, t_old, t_new, h, y_old, y_new, K, F, Q, mid, work,
             values[i, G + g] = guard_slope(m, g, rows[i], dy)
     for g in range(G):
         s = m.gd_dir[g]
-        level = m.gd_level[g]  # at it to rounding as smdcli.solvers.modes.at_level: 64 ulps of what it sums
+        level = m.gd_level[g]
         root = np.inf
         for i in range(INTERIOR + 1):
             if s * values[i, g] < 0 <= s * values[i + 1, g]:
@@ -231,15 +246,15 @@ def first_crossing(m, method, t_old, t_new, h, y_old, y_new, K, F, Q, mid, work,
                 else:
                     root = _root(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, when, row, dy, g,
                                  lo, hi, values[i, g], values[i + 1, g])
-                if g == skip_guard and root - skip_t <= 16 * np.spacing(max(abs(skip_t), 1e-300)):
+                if _fired_again(g, root, skip_guard, skip_t):
                     root = np.inf
                     continue
                 break
-            if s * values[i, g] < -64 * EPS * (abs(values[i, g] + level) + abs(level)) and s * values[i + 1, g] < 0 \
+            if s * values[i, g] < -_rounding(values[i, g], level) and s * values[i + 1, g] < 0 \
                     and s * values[i, G + g] > 0 > s * values[i + 1, G + g]:  # a touch inside, not one at its level
                 root = _touch(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, when, row, dy, g,
                               samples[i], samples[i + 1], values[i, g], values[i, G + g], values[i + 1, G + g])
-                if g == skip_guard and root - skip_t <= 16 * np.spacing(max(abs(skip_t), 1e-300)):
+                if _fired_again(g, root, skip_guard, skip_t):
                     root = np.inf
                 if root < np.inf:
                     break
@@ -247,11 +262,11 @@ def first_crossing(m, method, t_old, t_new, h, y_old, y_new, K, F, Q, mid, work,
         # guard's on the same quantity: a spring yielding where a stop is, their levels apart by rounding)
         slope = values[0, G + g] if values[0, G + g] == values[0, G + g] else (values[1, g] - values[0, g]) / (
             samples[1] - samples[0])
-        at = 64 * EPS * (abs(values[0, g] + level) + abs(level)) + abs(slope) * 16 * np.spacing(abs(t_old))
+        at = _rounding(values[0, g], level) + abs(slope) * 16 * np.spacing(abs(t_old))
         if root == np.inf and abs(values[0, g]) <= at and s * values[1, g] >= 0:
             root = _return(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, when, row, dy, g,
                            samples[1], values[1, g])
-            if g == skip_guard and root - skip_t <= 16 * np.spacing(max(abs(skip_t), 1e-300)):
+            if _fired_again(g, root, skip_guard, skip_t):
                 root = np.inf
         if root < t_stop or (fired < 0 and root <= t_new):
             t_stop, fired = root, g
@@ -275,8 +290,7 @@ def _return(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, w
                 return hi
             return _root(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, when, row, dy, g,
                          t_old + tau, hi, value, f_hi)
-    level = m.gd_level[g]
-    return t_old if s * f_hi > 64 * EPS * (abs(f_hi + level) + abs(level)) else np.inf
+    return t_old if s * f_hi > _rounding(f_hi, m.gd_level[g]) else np.inf
 
 
 @no_alloc
