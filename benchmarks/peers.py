@@ -13,8 +13,9 @@ Work compared:
 - a linear 3-DOF forced response (three_dof_forced, 0..120 s, 12,001 points): smd exact against
   python-control's forced_response and scipy's solve_ivp RK45 (rtol 1e-6); error: largest displacement
   difference from DOP853 at rtol 1e-12, over the peak;
-- a linear chain of 1,000 masses, 1,001 output points: smd exact against OpenSees (Newmark, banded); error of
-  both against the dense state transition (one expm of the whole augmented system, stepped);
+- linear chains of 1,000 and 10,000 masses, 1,001 output points: smd's `auto` (exact at 1,000, extrapolated sparse
+  Newmark at 10,000) against OpenSees (Newmark, banded), and the whole `smd simulate` of the 10,000; error of both
+  against the dense state transition of the 1,000 (one expm of the whole augmented system, stepped);
 - an elastoplastic 1-DOF under the record: smd exact against OpenSees ElasticPP at dt / 16 (from
   benchmarks/elastoplastic_vs_opensees.py); error against smd's event-driven Radau at rtol 1e-11.
 """
@@ -227,14 +228,36 @@ def dense_chain_reference(model, grid) -> np.ndarray:
     return x
 
 
-def chain_rows(repeats):
-    """A linear chain of 1,000 masses (1 kg, 100 N/m and 0.5 N s/m on every link), a sine force on the first,
-    0..10 s on 1,001 points: smd exact (the model built, its modes found and the scene solved) against OpenSees
-    (the model built, Newmark average acceleration, banded solver, the output step); error: the first mass's
-    displacement against the dense state transition's, over its peak."""
+def opensees_chain(n: int, dt: float, steps: int, repeats: int):
+    """(median seconds, first mass's x on the grid) of OpenSees on the chain, or None where it does not run."""
     import json
     import os
     import subprocess
+
+    spec = importlib.util.find_spec("openseespylinux")
+    env = dict(os.environ)
+    if spec is not None and spec.submodule_search_locations:
+        lib = Path(list(spec.submodule_search_locations)[0]) / "lib"
+        env["LD_LIBRARY_PATH"] = f"{lib}:{env.get('LD_LIBRARY_PATH', '')}"
+    elif not installed("openseespy"):
+        return None
+    done = subprocess.run([sys.executable, "-c", CHAIN_OPENSEES], capture_output=True, text=True, env=env,
+                          input=json.dumps([n, 100.0, 0.5, 1.0, dt, steps, repeats]))
+    if done.returncode != 0:
+        return None
+    found = json.loads(done.stdout.strip().splitlines()[-1])
+    return found["seconds"], np.array(found["x"])
+
+
+def chain_rows(repeats):
+    """Linear chains of 1,000 and 10,000 masses (1 kg, 100 N/m and 0.5 N s/m on every link), a sine force on the
+    first, 0..10 s on 1,001 points: smd (the model built, and solved by `auto`: exact in modal coordinates at 1,000
+    masses, extrapolated sparse Newmark at 10,000) against OpenSees (the model built, Newmark average acceleration,
+    banded solver, the output step); and the whole `smd simulate` of the 10,000 (scenario read, solved, element
+    forces and energy balance, the 0.5 GB HDF5 file and three PNGs written). Error: the first mass's displacement
+    against the dense state transition of the 1,000-mass chain, over its peak. The 10,000-mass chain's first mass
+    moves as the 1,000's to rounding over these 10 s: a wave travels at most sqrt(k/m) = 10 links a second, so the
+    far end's reflection would return after 200 s."""
     import tempfile
 
     import wall
@@ -244,34 +267,51 @@ def chain_rows(repeats):
     from smdcli.solvers import solve
     from smdcli.solvers.base import Tolerances
 
-    n = 1000
+    rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "chain.toml"
-        path.write_text(wall.chain(n, False, "every"))
-        sc = scenario.load(path)
-    grid = time_grid(sc.time)
-    # the model built afresh each time, its modes included, as OpenSees builds its own
-    seconds, result = timed(lambda: solve(build(sc), grid, "exact", Tolerances()), max(1, repeats // 3))
-    x = result.displacement[:, 0]
-    work = f"linear chain of {n} masses, {len(grid)} points"
-    reference = dense_chain_reference(build(sc), grid)
-    peak = np.abs(reference).max()
-    smd = (seconds, np.abs(x - reference).max() / peak)
-    spec = importlib.util.find_spec("openseespylinux")
-    env = dict(os.environ)
-    if spec is not None and spec.submodule_search_locations:
-        lib = Path(list(spec.submodule_search_locations)[0]) / "lib"
-        env["LD_LIBRARY_PATH"] = f"{lib}:{env.get('LD_LIBRARY_PATH', '')}"
-    elif not installed("openseespy"):
-        return [(work, smd, "OpenSees: not installed", None)]
-    done = subprocess.run([sys.executable, "-c", CHAIN_OPENSEES], capture_output=True, text=True, env=env,
-                          input=json.dumps([n, 100.0, 0.5, 1.0, float(grid[1] - grid[0]), len(grid) - 1, 3]))
-    if done.returncode != 0:
-        return [(work, smd, "OpenSees did not run", None)]
-    found = json.loads(done.stdout.strip().splitlines()[-1])
-    ops_x = np.array(found["x"])
-    return [(work, smd, "OpenSees Newmark, dt = output step",
-             (found["seconds"], np.abs(ops_x - reference).max() / peak))]
+        reference = peak = None
+        for n in (1000, 10000):
+            path = Path(tmp) / f"chain{n}.toml"
+            path.write_text(wall.chain(n, False, "every"))
+            sc = scenario.load(path)
+            grid = time_grid(sc.time)
+            if reference is None:
+                reference = dense_chain_reference(build(sc), grid)
+                peak = np.abs(reference).max()
+            # the model built afresh each time, its modes included, as OpenSees builds its own
+            seconds, result = timed(lambda: solve(build(sc), grid, "auto", Tolerances()), max(1, repeats // 3))
+            smd = (seconds, np.abs(result.displacement[:, 0] - reference).max() / peak)
+            work = f"linear chain of {n} masses, {len(grid)} points ({result.stats.method})"
+            found = opensees_chain(n, float(grid[1] - grid[0]), len(grid) - 1, 3 if n < 10000 else 1)
+            if found is None:
+                rows.append((work, smd, "OpenSees: not installed or did not run", None))
+                continue
+            ops = (found[0], np.abs(found[1] - reference).max() / peak)
+            rows.append((work, smd, "OpenSees Newmark, dt = output step", ops))
+            if n == 10000:
+                rows.append(simulate_row(path, Path(tmp) / "out", reference, peak, ops))
+    return rows
+
+
+def simulate_row(path: Path, out: Path, reference, peak, ops):
+    """The whole `smd simulate` of a scene, timed and its peak memory measured; its error read from its file."""
+    import os
+    import subprocess
+    import time
+
+    import h5py
+
+    start = time.perf_counter()
+    child = subprocess.Popen([sys.executable, "-m", "smdcli", "simulate", str(path), "-o", str(out)],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    _, status, usage = os.wait4(child.pid, 0)
+    seconds = time.perf_counter() - start
+    work = f"smd simulate {path.name} (file, plots; {usage.ru_maxrss / 1024:.0f} MB peak)"
+    if os.waitstatus_to_exitcode(status) != 0:
+        return (work, (seconds, math.nan), "smd simulate failed", None)
+    with h5py.File(out / f"{path.stem}.h5") as f:
+        x = f["displacement"][:, 0]
+    return (work, (seconds, np.abs(x - reference).max() / peak), "OpenSees Newmark, dt = output step", ops)
 
 
 def main() -> None:
@@ -279,15 +319,16 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=7)
     args = parser.parse_args()
     rows = spectrum_rows(args.repeats) + linear_rows(args.repeats) + chain_rows(args.repeats) + opensees_rows()
-    print(f"{'work':<46} {'smd time':>10} {'smd error':>10}   {'peer':<38} {'peer time':>10} {'peer error':>10} "
+    wide = max(len(work) for work, *_ in rows)
+    print(f"{'work':<{wide}} {'smd time':>10} {'smd error':>10}   {'peer':<38} {'peer time':>10} {'peer error':>10} "
           f"{'time ratio':>10}")
     for work, (s_time, s_err), peer, found in rows:
         if found is None:
-            print(f"{work:<46} {s_time * 1e3:8.1f} ms {s_err:10.1e}   {peer:<38}")
+            print(f"{work:<{wide}} {s_time * 1e3:8.1f} ms {s_err:10.1e}   {peer:<38}")
             continue
         p_time, p_err = found
-        print(f"{work:<46} {s_time * 1e3:8.1f} ms {s_err:10.1e}   {peer:<38} {p_time * 1e3:8.1f} ms {p_err:10.1e} "
-              f"{p_time / s_time:9.2f}x")
+        print(f"{work:<{wide}} {s_time * 1e3:8.1f} ms {s_err:10.1e}   {peer:<38} {p_time * 1e3:8.1f} ms "
+              f"{p_err:10.1e} {p_time / s_time:9.2f}x")
     print("time ratio: peer time / smd time (above 1: smd is faster)")
 
 

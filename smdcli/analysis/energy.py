@@ -31,8 +31,7 @@ import numpy as np
 
 from smdcli.model import Model
 from smdcli.analysis.forces import element_forces
-from smdcli.model.elements import incidence_row
-from smdcli.model.system import cheapest, rows_times
+from smdcli.model.sparse import cheapest, rows_times
 from smdcli.result import Energy, Result, largest_energy
 from smdcli.solvers.base import Tolerances
 
@@ -82,11 +81,20 @@ def mechanical_energy(model: Model, x: np.ndarray, v: np.ndarray) -> tuple[np.nd
 
 def _incidence(model: Model, kind: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rows d = x_a - x_b of the linear-law elements of a kind (CSR where that is cheaper), their coefficients, and
-    k3 (0 but for cubic)."""
-    chosen = [e for e in model.elements if e.kind == kind and e.law != "quadratic"]
-    index = {name: i for i, name in enumerate(model.dofs)}
-    D = np.array([incidence_row(e.connects, index, model.n) for e in chosen]).reshape(len(chosen), model.n)
-    return cheapest(D), np.array([e.coef for e in chosen]), np.array([e.k3 if e.law == "cubic" else 0.0 for e in chosen])
+    k3 (0 but for cubic); kept with the (frozen) model, as its cached properties are."""
+    key = f"_incidence_{kind}"
+    if key not in model.__dict__:
+        from scipy.sparse import coo_matrix
+
+        chosen = [e for e in model.elements if e.kind == kind and e.law != "quadratic"]
+        ends = [(i, node, sign) for i, e in enumerate(chosen) for node, sign in ((e.a, 1.0), (e.b, -1.0)) if node >= 0]
+        rows, columns, signs = (np.array([end[j] for end in ends], dtype=float if j == 2 else int) for j in range(3))
+        D = coo_matrix((signs, (rows, columns)), shape=(len(chosen), model.n)).tocsr()
+        # the same rule as cheapest(): dense where small or more than a tenth full
+        D = D.toarray() if len(chosen) < 64 or D.nnz > (len(chosen) * model.n) // 10 else D
+        model.__dict__[key] = (D, np.array([e.coef for e in chosen]),
+                               np.array([e.k3 if e.law == "cubic" else 0.0 for e in chosen]))
+    return model.__dict__[key]
 
 
 def _dissipation(model: Model, v: np.ndarray, dampers: tuple | None = None) -> np.ndarray:

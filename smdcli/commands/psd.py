@@ -89,7 +89,7 @@ def psd(path: str | Path, spec: str, out: str | Path, on: str | None = None, uni
     factor = (STANDARD_GRAVITY**2 if units == "g" else 1.0) if support else 1.0
     profile, white = read_profile(spec, factor)
     sc = load(path)
-    model = build(sc)
+    model = build(sc).dense()  # every mode, in the frequency domain
     if not model.is_linear:
         raise UsageError(f"{path}: random vibration by frequency response needs a linear scene; this one has "
                          "nonlinear or nonsmooth elements")

@@ -98,7 +98,7 @@ def rsa(path: str | Path, spectrum: str | Path, out: str | Path, combination: st
     if count is not None and count < 1:
         raise UsageError(f"--modes: expected at least 1, found {count}")
     sc = load(path)
-    model = build(sc)
+    model = build(sc).dense()  # every mode it combines
     if not model.is_linear:
         raise UsageError(f"{path}: response-spectrum analysis needs a linear scene; this one has nonlinear or "
                          "nonsmooth elements (use smd simulate with its [ground_motion])")

@@ -13,9 +13,10 @@ from pathlib import Path
 import numpy as np
 
 from smdcli import scenario as scenario_mod
-from smdcli.errors import SolverFailed
+from smdcli.errors import SolverFailed, UsageError
 from smdcli.io.folders import output_folder
 from smdcli.model import GROUND_DOF, Model, build, time_grid
+from smdcli.model.sparse import SPARSE_DOFS
 from smdcli.result import Result
 from smdcli.scenario import Scenario
 from smdcli.solvers.checked import failure_message, solve_scenario
@@ -151,7 +152,10 @@ def format_summary(data: dict) -> str:
     """Terminal text for a run summary."""
     lines = [f"{data['scenario']}: {data['title']}" if data["title"] else data["scenario"],
              f"  method   {data['method']} ({data['reason']})"]
-    if data.get("dt") is not None and data["dt"] == data["dt"]:  # a fixed step: no tolerance was used
+    if data["method"] == "sparse_newmark":  # fixed steps, chosen to meet the tolerance
+        lines.append(f"  tolerance rtol={data['rtol']:g} atol={data['atol']:g}, met by the error estimate; finest "
+                     f"step {data['dt']:g} s")
+    elif data.get("dt") is not None and data["dt"] == data["dt"]:  # a fixed step: no tolerance was used
         lines.append(f"  step     dt = {data['dt']:g} s, fixed (rtol and atol do not apply)")
     elif data["rtol"] is not None:
         lines.append(f"  tolerance rtol={data['rtol']:g} atol={data['atol']:g}")
@@ -198,6 +202,10 @@ def info(path: str | Path, state_space: Path | None = None) -> dict:
     if state_space is not None:
         from smdcli.io.state_space import write_state_space
 
+        if model.is_sparse:
+            raise UsageError(f"--state-space: {sc.path} is a sparse scene of {model.n} DOFs; its state matrix "
+                             f"would hold (2n)^2 = {4 * model.n ** 2:.3g} numbers; expected at most "
+                             f"{SPARSE_DOFS} masses")
         write_state_space(state_space, model)
     m = model.modes
     from smdcli.solvers.auto import Auto
@@ -210,9 +218,9 @@ def info(path: str | Path, state_space: Path | None = None) -> dict:
     data = {
         "scenario": sc.path, "title": sc.title, "dofs": list(model.dofs),
         "form": "element" if model.element_form else "matrix",
-        "M": model.M.tolist(), "C": model.C.tolist(), "K": model.K.tolist(),
+        "M": _listed(model.M), "C": _listed(model.C), "K": _listed(model.K),
         # with hysteretic springs, K holds only their always-present part; at rest (the modes') they are elastic
-        **({"K_initial": model.initial_K.tolist()} if not np.array_equal(model.initial_K, model.K) else {}),
+        **({"K_initial": model.initial_K.tolist()} if model.initial_K is not model.K else {}),
         "linear": model.is_linear, "nonlinear_elements": list(model.nonlinear_paths),
         "forces": [f"{p} on {model.dofs[d]}: {kind}"
                    for p, kind, d in zip(model.force_paths, model.force_types, model.force_dofs) if d != GROUND_DOF],
@@ -223,10 +231,13 @@ def info(path: str | Path, state_space: Path | None = None) -> dict:
             for w, z, r, g in zip(m.natural_frequencies, m.damping_ratios, m.regimes, gamma)
         ],
         "eigenvalues": [[float(e.real), float(e.imag)] for e in m.eigenvalues],
-        "stiffness_ratio": model.stiffness_ratio,
-        "stiff": model.is_stiff,
+        # a sparse scene's modes are its lowest few: its spread of decay rates is not known
+        "stiffness_ratio": None if model.is_sparse else model.stiffness_ratio,
+        "stiff": None if model.is_sparse else model.is_stiff,
         "time": {"start": float(grid[0]), "end": float(grid[-1]), "points": len(grid)},
     }
+    if model.is_sparse:
+        data["modes_listed"] = f"the lowest {len(m.natural_frequencies)} of {model.n}"
     if model.ground is not None:
         data["ground_motion"] = {"quantity": model.ground.quantity, "type": model.ground.kind,
                                  "jumps": len(model.ground.jumps),
@@ -249,12 +260,25 @@ def info(path: str | Path, state_space: Path | None = None) -> dict:
     return data
 
 
+def _listed(matrix) -> list | dict:
+    """A matrix as JSON takes it: rows of numbers, or a sparse scene's nonzeros as coordinates (its n^2 zeros are
+    gigabytes of text)."""
+    if isinstance(matrix, np.ndarray):
+        return matrix.tolist()
+    entries = matrix.tocoo()
+    return {"shape": list(entries.shape), "rows": entries.row.tolist(), "columns": entries.col.tolist(),
+            "values": entries.data.tolist()}
+
+
 SHOWN = 12  # DOFs, matrix rows and modes `smd info` writes out on a terminal; beyond, a summary
 
 
 def format_info(d: dict) -> str:
     """Terminal text for `smd info`."""
     def matrix(name, rows):
+        if isinstance(rows, dict):  # a sparse scene's, as coordinates
+            n = rows["shape"][0]
+            return f"  {name} =  {n} x {n}, {len(rows['values'])} nonzero (sparse; --json lists them as coordinates)"
         if len(rows) > SHOWN:  # a large model's matrices are for --json or the HDF5 file, not a terminal
             values = np.asarray(rows)
             kind = "diagonal" if np.count_nonzero(values) == np.count_nonzero(np.diag(values)) else "sparse" \
@@ -286,8 +310,13 @@ def format_info(d: dict) -> str:
         lines.append(f"    {i:<5}  {mode['natural_frequency_rad_s']:14.6g} {mode['natural_frequency_hz']:10.4g}"
                      f"   {'-' if mode['regime'] == 'rigid-body' else format(mode['damping_ratio'], '<10.5g'):<10}"
                      f"  {mode['regime']:<17}{mode['participation']:9.4g}  {mode['effective_mass_ratio']:6.1%}")
-    lines.append(f"  stiffness ratio {d['stiffness_ratio']:.4g} ({'stiff' if d['stiff'] else 'not stiff'}"
-                 f"{' in its linear part' if not d['linear'] else ''})")
+    if "modes_listed" in d:
+        lines.append(f"    ({d['modes_listed']} modes: a sparse scene's)")
+    if d["stiffness_ratio"] is None:
+        lines.append("  stiffness ratio not computed: a sparse scene's needs every mode")
+    else:
+        lines.append(f"  stiffness ratio {d['stiffness_ratio']:.4g} ({'stiff' if d['stiff'] else 'not stiff'}"
+                     f"{' in its linear part' if not d['linear'] else ''})")
     if "linearized_at_start" in d:
         lines.append(f"  linearized at t0: stiffness ratio {d['linearized_at_start']['stiffness_ratio']:.4g}")
     lines.append(f"  auto     {d['auto']['method']}: {d['auto']['reason']}")

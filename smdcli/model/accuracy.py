@@ -108,6 +108,8 @@ def _bounded(model) -> dict[str, float]:
     modes = model.modes
     squared = np.sort(modes.natural_frequencies ** 2)
     top = float(squared.max(initial=0.0))
+    if model.is_sparse:  # its modes are the lowest few; the rounding scales with the highest
+        top = max(top, model.omega_max ** 2)
     change = 8 * model.n * EPS * top
     w = np.sqrt(squared)
     frequency = float((change / (w + np.sqrt(change))).max(initial=0.0)) / max(float(w.max(initial=0.0)), 1e-300)

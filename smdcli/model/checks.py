@@ -21,11 +21,15 @@ def check_matrices_finite(M: np.ndarray, C: np.ndarray, K: np.ndarray, scenario:
     """Refuse a scene whose accelerations overflow (a mass of 1e-320 kg under a stiffness), naming the mass: no
     method could solve it, and the undamped modes [damping] needs could not be computed."""
     with np.errstate(all="ignore"):
-        try:
-            rows = np.hstack([mass_solve(M, K), mass_solve(M, C)])
-        except np.linalg.LinAlgError:
-            rows = np.full((len(dofs), 2 * len(dofs)), np.nan)
-    bad = ~np.isfinite(rows).all(axis=1)
+        if not isinstance(M, np.ndarray):  # a sparse scene's diagonal M: each row of K and C over its mass
+            bad = ~(finite_rows(K.multiply(1.0 / M.diagonal()[:, None]).tocsr())
+                    & finite_rows(C.multiply(1.0 / M.diagonal()[:, None]).tocsr()))
+        else:
+            try:
+                rows = np.hstack([mass_solve(M, K), mass_solve(M, C)])
+            except np.linalg.LinAlgError:
+                rows = np.full((len(dofs), 2 * len(dofs)), np.nan)
+            bad = ~np.isfinite(rows).all(axis=1)
     if bad.any():
         i = int(np.argmax(bad))
         where = f"mass[{i}].m" if scenario.system is None else "system.M"
@@ -36,12 +40,22 @@ def check_matrices_finite(M: np.ndarray, C: np.ndarray, K: np.ndarray, scenario:
 def check_finite(scenario: Scenario, dofs: tuple[str, ...], **matrices: np.ndarray) -> None:
     """Refuse an assembled K or C that overflows, naming the field that put the overflow there."""
     for name, matrix in matrices.items():
-        bad = ~np.isfinite(matrix).all(axis=1)
+        bad = ~finite_rows(matrix)
         if bad.any():
             i = int(np.argmax(bad))
             raise ScenarioError(scenario.path, _blame(scenario, name, dofs[i]),
                                 f"the assembled {name} overflows double precision at DOF {dofs[i]!r}; expected "
                                 "numbers whose sums and products stay below 1.8e308")
+
+
+def finite_rows(matrix) -> np.ndarray:
+    """Per row, whether every entry is finite: a dense array or a CSR matrix (its stored entries)."""
+    if isinstance(matrix, np.ndarray):
+        return np.isfinite(matrix).all(axis=1)
+    bad = np.repeat(np.arange(matrix.shape[0]), np.diff(matrix.indptr))[~np.isfinite(matrix.data)]
+    finite = np.ones(matrix.shape[0], dtype=bool)
+    finite[bad] = False
+    return finite
 
 
 def _blame(scenario: Scenario, matrix: str, dof: str) -> str:

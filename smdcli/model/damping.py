@@ -29,8 +29,13 @@ def check_damping(C: np.ndarray, scenario: Scenario) -> None:
     """With [damping], the total C must be positive semidefinite: otherwise some motion gains energy."""
     if scenario.damping is None:
         return
-    lowest = float(np.linalg.eigvalsh(C).min(initial=0.0))
-    if lowest < -1e-12 * max(float(np.abs(C).max(initial=0.0)), 1e-300):
+    if isinstance(C, np.ndarray):
+        lowest, largest = float(np.linalg.eigvalsh(C).min(initial=0.0)), float(np.abs(C).max(initial=0.0))
+    else:  # a sparse scene's: Lanczos for the lowest eigenvalue alone
+        from scipy.sparse.linalg import eigsh
+
+        lowest, largest = float(eigsh(C, k=1, which="SA", tol=1e-10)[0][0]), float(abs(C).max())
+    if lowest < -1e-12 * max(largest, 1e-300):
         key = "damping.modal" if scenario.damping.modal else "damping"
         raise ScenarioError(scenario.path, key, f"makes the damping matrix indefinite (eigenvalue {lowest:.4g} N s/m): "
                                                 "some mode would be negatively damped; expected damping >= 0")

@@ -20,17 +20,16 @@ import numpy as np
 
 from smdcli.errors import ScenarioError
 from smdcli.model.damping import added_damping, check_damping
-from smdcli.model.elements import Element, Incidence, elements_of, incidence, incidence_row
+from smdcli.model.elements import GROUND, Element, Incidence, elements_of, incidence, incidence_row
 from smdcli.model.forcing import Signal, build_signal
 from smdcli.model.ground import MAX_JUMPS, GroundMotion, ground_motion, state_jumps
 from smdcli.model.checks import check_finite, check_forces, check_matrices_finite
 from smdcli.model.mass import mass_solve
+from smdcli.model.modes import RIGID_BODY, Modes, regime
 from smdcli.model.nonsmooth import NonsmoothElement, initial_stiffness, nonsmooth_elements
+from smdcli.model.sparse import assembled, cheapest, gershgorin_omega, is_sparse_scene, lowest_modes, rows_times
 from smdcli.scenario import Scenario
 
-RIGID_BODY = 1e-6  # a natural frequency below this fraction of the largest is a rigid-body mode's zero
-# Relative width around zeta = 1 inside which a mode is called critically damped.
-CRITICAL_BAND = 1e-8
 # A linear model whose decaying eigenvalues spread wider than this is stiff.
 STIFF_RATIO = 1e3
 # From this many DOFs the undamped modes of a diagonal M come from the standard symmetric problem (divide and
@@ -42,52 +41,11 @@ GROUND_DOF = -1
 
 
 @dataclass(frozen=True)
-class Modes:
-    """Modes of the linear part, from the eigenvalues of the state matrix."""
-
-    eigenvalues: np.ndarray  # (2n,) complex
-    natural_frequencies: np.ndarray  # (n,) rad/s
-    damping_ratios: np.ndarray  # (n,)
-    regimes: tuple[str, ...]
-    shapes: np.ndarray  # (n, n) undamped mass-normalized mode shapes, columns
-
-
-def regime(zeta: float, omega: float = 1.0) -> str:
-    """The damping regime's name for a damping ratio; a mode of zero natural frequency is a rigid-body one (it has
-    no restoring stiffness, and its damping ratio is not defined)."""
-    if omega == 0.0:
-        return "rigid-body"
-    if zeta == 0.0:
-        return "undamped"
-    if abs(zeta - 1.0) <= CRITICAL_BAND:
-        return "critically damped"
-    return "underdamped" if zeta < 1.0 else "overdamped"
-
-
-def cheapest(A: np.ndarray):
-    """A as it multiplies cheapest: CSR where at most a tenth of its entries are nonzero (a chain's banded matrices,
-    O(n) a vector instead of O(n^2)), else itself."""
-    if A.shape[0] < 64 or np.count_nonzero(A) > A.size // 10:
-        return A
-    from scipy.sparse import csr_matrix
-
-    return csr_matrix(A)
-
-
-def rows_times(q: np.ndarray, A) -> np.ndarray:
-    """q @ A over q's last axis, A dense or CSR (from cheapest)."""
-    if isinstance(A, np.ndarray):
-        return q @ A
-    flat = np.reshape(q, (-1, q.shape[-1]))
-    return np.asarray(A.T @ flat.T).T.reshape(q.shape[:-1] + (A.shape[1],))
-
-
-@dataclass(frozen=True)
 class Model:
     """Matrices, DOF names, nonlinear elements and force signals of one scenario."""
 
     dofs: tuple[str, ...]
-    M: np.ndarray
+    M: np.ndarray  # M, C and K: CSR matrices where is_sparse (a scene of more than SPARSE_DOFS masses)
     C: np.ndarray
     K: np.ndarray
     x0: np.ndarray
@@ -114,6 +72,18 @@ class Model:
         return model
 
     # ------------------------------------------------------------ structure
+    @property
+    def is_sparse(self) -> bool:
+        """M, C and K are CSR matrices (assembled so above SPARSE_DOFS masses)."""
+        return not isinstance(self.M, np.ndarray)
+
+    def dense(self) -> Model:
+        """This model with dense M, C and K, for the methods that take dense matrices (itself where they are)."""
+        if not self.is_sparse:
+            return self
+        return dataclasses.replace(self, M=self.M.toarray(), C=self.C.toarray(), K=self.K.toarray(),
+                                   added_damping=None if self.added_damping is None else self.added_damping.toarray())
+
     @property
     def n(self) -> int:
         """Number of degrees of freedom."""
@@ -149,7 +119,11 @@ class Model:
 
     @cached_property
     def Minv(self) -> np.ndarray:
-        """Inverse mass matrix, by a solve rather than inv()."""
+        """Inverse mass matrix, by a solve rather than inv() (a sparse scene's diagonal M: its reciprocals, CSR)."""
+        if self.is_sparse:
+            from scipy.sparse import diags
+
+            return diags(1.0 / self.M.diagonal()).tocsr()
         return mass_solve(self.M, np.eye(self.n))
 
     @cached_property
@@ -263,6 +237,8 @@ class Model:
         """Natural frequencies, damping ratios and regimes of the linear part (hysteretic springs elastic)."""
         K = self.initial_K
         n = self.n
+        if self.is_sparse:
+            return lowest_modes(self)
         if n == 1:
             m, c, k = self.M[0, 0], self.C[0, 0], K[0, 0]
             wn = math.sqrt(k / m)
@@ -333,9 +309,12 @@ class Model:
         re = re[re > 1e-12 * max(scale, 1.0)]
         return float(re.max() / re.min()) if len(re) else 1.0
 
-    @property
+    @cached_property
     def omega_max(self) -> float:
-        """Highest undamped natural frequency, rad/s: what bounds an explicit step."""
+        """Highest undamped natural frequency, rad/s: what bounds an explicit step (a sparse scene's, whose modes are
+        the lowest few: Gershgorin's bound on it)."""
+        if self.is_sparse:
+            return gershgorin_omega(self)
         return float(self.modes.natural_frequencies.max())
 
     @property
@@ -384,25 +363,29 @@ def build(scenario: Scenario) -> Model:
         M, C, K = (np.array(a, dtype=float) for a in (sys.M, sys.C, sys.K))
         x0, v0 = np.array(sys.x0, dtype=float), np.array(sys.v0, dtype=float)
     else:
-        M = np.diag([m.m for m in scenario.masses]).astype(float)
-        C = np.zeros((n, n))
-        K = np.zeros((n, n))
+        masses = np.array([m.m for m in scenario.masses], dtype=float)
         x0 = np.array([m.x0 for m in scenario.masses], dtype=float)
         v0 = np.array([m.v0 for m in scenario.masses], dtype=float)
+        stamps = {"spring": ([], [], []), "damper": ([], [], [])}  # (rows, columns, values): summed where they meet
         cubic_rows, quad_rows = [], []
         for element in scenario.springs + scenario.dampers:
-            row = incidence_row(element.connects, index, n)
-            target = K if element.kind == "spring" else C
             if element.kind == "damper" and element.law == "quadratic":
-                quad_rows.append((row, element.coef, element.path))
+                quad_rows.append((incidence_row(element.connects, index, n), element.coef, element.path))
                 continue
-            nodes = np.flatnonzero(row)  # one or two: the element's stamp, not an n x n outer product per element
+            # its one or two nodes, +1 and -1 (the ground has none): a 2x2 stamp, not a row of n per element
+            ends = [(index[node], sign) for node, sign in zip(element.connects, (1.0, -1.0)) if node != GROUND]
             # a hysteretic spring stamps only the stiffness it always has (a bilinear spring's b k); its law the rest
             coef = element.coef if element.nonsmooth is None else element.nonsmooth.linear_stiffness
+            rows, columns, values = stamps[element.kind]
             with np.errstate(over="ignore", invalid="ignore"):  # an overflow is named by _check_finite below
-                target[np.ix_(nodes, nodes)] += coef * np.outer(row[nodes], row[nodes])
+                for i, si in ends:
+                    for j, sj in ends:
+                        rows.append(i), columns.append(j), values.append(coef * si * sj)
             if element.law == "cubic":
-                cubic_rows.append((row, element.k3, element.path))
+                cubic_rows.append((incidence_row(element.connects, index, n), element.k3, element.path))
+        sparse = is_sparse_scene(scenario)
+        M, K, C = (assembled(masses_or_stamp, n, sparse) for masses_or_stamp in
+                   ((range(n), range(n), masses), stamps["spring"], stamps["damper"]))
         cubic, quadratic = incidence(cubic_rows), incidence(quad_rows)
     nonsmooth = nonsmooth_elements(scenario, dofs)
     check_finite(scenario, dofs, K=K, C=C)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from smdcli.plots.common import MAX_DRAWN, _figure, _wrap, envelope, legend_beside
+from smdcli.plots.common import MAX_DRAWN, _figure, _wrap, drawn_dofs, envelope, legend_beside
 from smdcli.plots.sweep import _STYLES
 from smdcli.result import Result
 
@@ -92,6 +92,8 @@ def response_figure(result: Result, title: str):
     axes = fig.subplots(len(rows), 1, sharex=True, gridspec_kw={"height_ratios": heights})
     fig.subplots_adjust(left=0.1, right=0.97, top=0.9, bottom=0.07, hspace=0.12)
     window = _fast_window(result)
+    drawn, note = drawn_dofs(len(result.dofs))
+    colours = {j: f"C{i % 10}" for i, j in enumerate(drawn)}  # a force drawn in its DOF's colour
     shaded = {}
     for ax, (name, label) in zip(axes, rows):
         if name == "ground":
@@ -102,16 +104,18 @@ def response_figure(result: Result, title: str):
             continue
         data = result.absolute(name[len("absolute_"):]) if name.startswith("absolute_") else getattr(result, name)
         shaded[name] = None
-        for j, dof in enumerate(result.dofs):
+        for j in (np.flatnonzero(np.any(data != 0, axis=0)) if name == "force" else drawn):
+            dof = result.dofs[j]
             if name == "force" and not np.any(data[:, j] != 0):
                 continue
             style = FORCE_STYLES[len(ax.get_lines()) % len(FORCE_STYLES)] if name == "force" else "-"
-            if _draw(ax, result.time, data[:, j], f"C{j}", f"F on {dof}" if name == "force" else dof, style):
-                shaded[name] = shaded[name] or f"C{j}"  # the first shaded series' colour, for the legend's swatch
+            if _draw(ax, result.time, data[:, j], colours.get(j, "k"), f"F on {dof}" if name == "force" else dof,
+                     style):
+                shaded[name] = shaded[name] or colours.get(j, "k")  # the first shaded series' colour, for the legend's swatch
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.4)
         if window is not None and name.endswith("acceleration"):
-            _zoom_inset(ax, result, data, window)
+            _zoom_inset(ax, result, data, window, drawn)
     if forced:
         _legend(axes[0], shaded["force"])
     _legend(axes[1 if forced or ground is not None else 0],  # the DOFs' legend once, with the first shading's colour
@@ -122,7 +126,7 @@ def response_figure(result: Result, title: str):
                      va="center", fontsize=9, bbox={"facecolor": "white", "edgecolor": "0.6"})
     axes[-1].set_xlabel("Time t [s]")
     axes[0].set_xlim(result.time[0], result.time[-1])
-    fig.suptitle(title, fontsize=11)
+    fig.suptitle(title + note, fontsize=11 if not note else 9)
     return fig
 
 
@@ -149,14 +153,14 @@ def _legend(ax, banded: str | None) -> None:
     ax.legend(handles, labels, loc="upper right", fontsize=8, framealpha=0.85)
 
 
-def _zoom_inset(ax, result: Result, data: np.ndarray, window: tuple[float, float]) -> None:
+def _zoom_inset(ax, result: Result, data: np.ndarray, window: tuple[float, float], drawn: np.ndarray) -> None:
     """The last few periods of the fastest oscillation, drawn in full, in an inset of `ax`."""
     low, high = ax.get_ylim()  # the data moved into the lower 54 %: the inset above them hides none
     ax.set_ylim(low, low + (high - low) / 0.54)
     inset = ax.inset_axes((0.56, 0.56, 0.42, 0.4))
     keep = (result.time >= window[0]) & (result.time <= window[1])
-    for j, dof in enumerate(result.dofs):
-        inset.plot(result.time[keep], data[keep, j], lw=0.9, color=f"C{j}")
+    for i, j in enumerate(drawn):
+        inset.plot(result.time[keep], data[keep, j], lw=0.9, color=f"C{i % 10}")
     from matplotlib.ticker import MaxNLocator
 
     inset.set_xlim(*window)
@@ -172,8 +176,9 @@ def _zoom_inset(ax, result: Result, data: np.ndarray, window: tuple[float, float
 
 def phase_figure(result: Result, title: str):
     """Phase portrait of a run: velocity against displacement per DOF, start and direction marked."""
-    curves = [(dof, result.displacement[:, j], result.velocity[:, j]) for j, dof in enumerate(result.dofs)]
-    return portrait_figure(curves, f"{title}\nphase portrait")
+    drawn, note = drawn_dofs(len(result.dofs))
+    curves = [(result.dofs[j], result.displacement[:, j], result.velocity[:, j]) for j in drawn]
+    return portrait_figure(curves, f"{title}\nphase portrait{note}")
 
 
 def portrait_figure(curves, title: str, poincare=None):

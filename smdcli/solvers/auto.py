@@ -75,6 +75,8 @@ class Auto(Solver):
             result = solve_nonsmooth(solver, model, grid, tol)
         else:
             result = solver.solve(model, grid, tol)
+            if model.is_sparse and result.success:  # what error it expects: its estimate's
+                reason += f" (estimated error {result.stats.stated_accuracy:.2g} of the peak, rtol {tol.rtol:g})"
         stats = dataclasses.replace(result.stats, requested_method=self.name, reason=reason,
                                     wall_time_s=result.stats.wall_time_s + abandoned_s)
         return dataclasses.replace(result, stats=stats)
@@ -83,6 +85,15 @@ class Auto(Solver):
         """The solver for a model on a grid and the reason, or (None, '') where the trajectory must decide."""
         if model.nonsmooth:
             return _nonsmooth_choice(model)
+        if model.is_sparse:
+            from smdcli.solvers.sparse_newmark import SparseNewmark
+
+            kind = "linear" if model.is_linear else f"nonlinear ({', '.join(model.nonlinear_paths)})"
+            return SparseNewmark(), (
+                f"{kind}, {model.n} DOFs, sparse: an exact modal solution would hold {model.n}^2 mode-shape entries "
+                f"({8 * model.n ** 2 / 2**30:.2g} GiB) and take longer (n^2 per output point); Newmark average "
+                "acceleration on the sparse matrices instead, one factorization reused across steps, extrapolated "
+                "over steps h, h/2, h/4 (Romberg) until its error estimate meets rtol")
         if model.is_linear:
             # Stiffness does not matter to exact methods, but the user should know an integrator would feel it;
             # not at the price of a general eigenvalue problem larger than the exact solve (smd info computes it).

@@ -82,7 +82,13 @@ def acceleration_accuracy(M: np.ndarray, C: np.ndarray, K: np.ndarray, stated, x
     A stiff scene's K x and C v are large terms that cancel (1e4 N against an acceleration of 0.04 m/s^2 in the
     1e6:1 chain), so the acceleration is only as good as those terms' errors and roundings over its own size.
     One run: M, C, K (n, n) and x, v, a, f (N, n); a family: a leading member axis on all, stated (S,)."""
-    M, C, K = (np.asarray(A, dtype=float).reshape((-1,) + np.shape(A)[-2:]) for A in (M, C, K))
+    if not isinstance(M, np.ndarray):  # a sparse scene's (one run, diagonal M): the norms row by row
+        mass = M.diagonal()
+        norms = [np.array([float((abs(A).sum(axis=1).A1 / mass).max())]) for A in (K, C, M)]
+        M = np.ones((1, 1, 1))
+    else:
+        M, C, K = (np.asarray(A, dtype=float).reshape((-1,) + np.shape(A)[-2:]) for A in (M, C, K))
+        norms = None
     S = M.shape[0]
     stated = np.broadcast_to(np.asarray(stated, dtype=float), (S,))
 
@@ -96,8 +102,10 @@ def acceleration_accuracy(M: np.ndarray, C: np.ndarray, K: np.ndarray, stated, x
 
     peak_x, peak_v, peak_a, peak_f = (peak(q) for q in (x, v, a, f))
     norm = lambda A: np.abs(mass_solve(M, A)).sum(axis=2).max(axis=1)  # noqa: E731 (inf-norm of M^-1 A)
-    k, c = norm(K), norm(C)
-    forcing = norm(np.broadcast_to(np.eye(M.shape[-1]), M.shape)) * peak_f
+    if norms is None:
+        norms = [norm(K), norm(C), norm(np.broadcast_to(np.eye(M.shape[-1]), M.shape))]
+    k, c = norms[0], norms[1]
+    forcing = norms[2] * peak_f
     with np.errstate(over="ignore", divide="ignore", invalid="ignore"):  # overflowing terms: an inf bound, not a warning
         carried = stated * (k * peak_x + c * peak_v)
         rounding = 8 * UNIT_ROUNDOFF * (k * peak_x + c * peak_v + forcing)

@@ -81,6 +81,19 @@ def _tiny_run(family: str) -> None:
               np.zeros((4, 1)), np.zeros((4, 1)), np.zeros((4, 4)), np.zeros(2, dtype=np.int64), np.zeros(1),
               np.zeros(work_size(arrays)))
         return
+    if family == "banded":  # a 2-DOF chain with a cubic spring and a quadratic damper, two steps
+        pair, one = np.array([[0, 1]], dtype=np.int64), np.ones(1)
+        band = np.array([[2.0, 1.0], [-1.0, 0.0]])
+        factors = band[None] + np.array([[[1e6, 1e6], [0.0, 0.0]]])
+        effective = factors.copy()
+        from smdcli.kernels.banded import cholesky
+
+        cholesky(factors[0])
+        entry(np.ones((1, 2)), band, band, effective, factors, np.array([1e-3]), np.zeros(1, dtype=np.int64), 2,
+              grid, np.ones(1, dtype=np.bool_), np.ones((1, 1)), np.ones((1, 2, 1)), np.ones((2, 1)), pair, one,
+              pair, one, np.arange(2, dtype=np.int64), np.array([0, 1], dtype=np.int64), np.ones(2), np.zeros(2),
+              np.zeros((2, 2)), np.zeros((2, 2)), np.zeros(3, dtype=np.int64), np.zeros(1))
+        return
     if family.startswith("modes:"):
         from smdcli.kernels.rhs import work_size
 
@@ -107,12 +120,12 @@ def _entry(family: str):
 
     module, name = {"erk": ("erk", "integrate"), "fixed": ("fixed", "march"), "stiff": ("stiff", "integrate"),
                     "radau": ("radau", "integrate"), "bdf": ("bdf", "integrate"), "rhs": ("rhs", "state_rhs"),
-                    "return_mapping": ("return_mapping", "march")}.get(family, (family.removeprefix("modes:"), "integrate_mode"))  # modes:MODULE: its mode kernel
+                    "return_mapping": ("return_mapping", "march"), "banded": ("banded", "march")}.get(family, (family.removeprefix("modes:"), "integrate_mode"))  # modes:MODULE: its mode kernel
     return getattr(importlib.import_module(f"smdcli.kernels.{module}"), name)
 
 
 KERNEL_FAMILIES = ("erk", "fixed", "stiff", "radau", "bdf", "rhs", "modes:events", "modes:radau", "modes:bdf",
-                   "modes:stiff", "return_mapping")
+                   "modes:stiff", "return_mapping", "banded")
 _warmed: set[str] = set()
 
 

@@ -23,16 +23,20 @@ def _solvers() -> dict[str, type[Solver]]:
     from smdcli.solvers.auto import Auto
     from smdcli.solvers.closed_form import ClosedForm
     from smdcli.solvers.exact import Exact
+    from smdcli.solvers.sparse_newmark import SparseNewmark
     from smdcli.solvers.fixed_step import HHT, RK4, CentralDifference, Euler, GeneralizedAlpha, Newmark
     from smdcli.solvers.compiled import BDF, DOP853, RK23, RK45, Radau, ode15s, ode23, ode23s, ode23t, ode23tb, ode45
     from smdcli.solvers.ivp import (LSODA, Ode113, ScipyBDF, ScipyDOP853, ScipyOde23s, ScipyOde23t, ScipyOde23tb,
                                     ScipyRadau, ScipyRK23, ScipyRK45)
 
     classes = (Auto, ClosedForm, Exact, RK45, RK23, DOP853, Radau, BDF, LSODA, ode45, ode23, Ode113, ode15s,
-               ode23s, ode23t, ode23tb, Newmark, HHT, GeneralizedAlpha, CentralDifference, Euler, RK4,
+               ode23s, ode23t, ode23tb, Newmark, SparseNewmark, HHT, GeneralizedAlpha, CentralDifference, Euler, RK4,
                ScipyRK45, ScipyRK23, ScipyDOP853, ScipyOde23s, ScipyOde23t, ScipyOde23tb, ScipyRadau,
                ScipyBDF)
     return {cls.name: cls for cls in classes}
+
+
+SPARSE_METHODS = ("auto", "sparse_newmark")  # the methods that take a sparse scene's matrices as they are
 
 
 def get_solver(name: str) -> Solver:
@@ -49,6 +53,8 @@ def solve(model: Model, grid: np.ndarray, method: str, tol: Tolerances, field: s
     if problem:
         raise ScenarioError(model.source, field, problem)
     solver = _solvers()[method]()
+    if model.is_sparse and method not in SPARSE_METHODS:  # the others take dense matrices: n^2 memory, as asked
+        model = model.dense()
     problem = nonsmooth_refusal(method, model) if model.nonsmooth else solver.refuse(model)
     if problem:
         raise ScenarioError(model.source, field, problem)

@@ -159,7 +159,7 @@ class Family:
     def model(self, s: int) -> Model:
         """Member s as a Model."""
         if self.scenarios is not None:
-            return build(self.scenarios[s])
+            return build(self.scenarios[s]).dense()
         cubic, quadratic = self.base.cubic, self.base.quadratic
         if self.cubic_coef is not None:
             cubic = replace(cubic, coef=self.cubic_coef[s])
@@ -258,7 +258,7 @@ def build_family(sc: Scenario, spec: SweepSpec) -> Family:
     """The sweep's members, validated. Structural sweeps become matrices (and a nonlinear scene's element
     coefficients) interpolated between validated corner members (every check on a value is an interval, so
     the corners vouch for the grid); anything else becomes one validated scenario per member."""
-    base = build(sc)
+    base = build(sc).dense()  # a family's members are stacked dense
     if spec.ics:
         states = []
         for text in spec.ics:
@@ -300,14 +300,14 @@ def build_family(sc: Scenario, spec: SweepSpec) -> Family:
     structural = STRUCTURAL if base.is_linear else STRUCTURAL_NONLINEAR
     if not all(structural.match(p) for p in spec.parameters):
         scenarios = [member(combo) for combo in combos]
-        return Family(sc, spec, labels, combos, shape, base, **_stack([build(m) for m in scenarios]),
+        return Family(sc, spec, labels, combos, shape, base, **_stack([build(m).dense() for m in scenarios]),
                       scenarios=scenarios)
     low = np.array([v.min() for v in spec.values])
     high = np.array([v.max() for v in spec.values])
     corners = {}
     for pick in np.ndindex(*(2,) * len(low)):
         corner = np.where(np.array(pick) == 1, high, low)
-        corners[pick] = build(member(corner))
+        corners[pick] = build(member(corner)).dense()
     origin = _coefficients(corners[(0,) * len(low)])
     stacks = {name: np.broadcast_to(value, (len(combos),) + value.shape).copy() for name, value in origin.items()}
     for i in range(len(low)):

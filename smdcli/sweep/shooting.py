@@ -89,7 +89,7 @@ def _measure_direction(args: tuple[Scenario, np.ndarray, int]) -> tuple[np.ndarr
     from smdcli.model.forcing import build_signal
 
     sc, omega, force_index = args
-    base = build(sc)
+    base = build(sc).dense()
     amplitude = np.full((len(omega), len(sc.dof_names)), np.nan)
     lag = np.full_like(amplitude, np.nan)
     steady = np.zeros(len(omega), bool)

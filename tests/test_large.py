@@ -1,0 +1,178 @@
+"""Large scenes: sparse assembly above SPARSE_DOFS masses, extrapolated sparse Newmark (compiled on the band, or on a
+sparse LU), the result file of a sparse scene, against exact solutions, tight runs of other methods and closed
+forms."""
+
+import json
+import math
+
+import h5py
+import numpy as np
+import pytest
+from conftest import model_of
+
+import smdcli.model.sparse as sparse_module
+from smdcli.errors import ScenarioError
+from smdcli.kernels import banded
+from smdcli.solvers import solve
+from smdcli.solvers.base import Tolerances
+from smdcli.solvers.sparse_newmark import SparseNewmark, _March
+
+SPARSE_DOFS = sparse_module.SPARSE_DOFS
+
+
+def chain(n: int, *, cubic: bool = False, quadratic: bool = False, force: str = "sine", rayleigh: str = "",
+          end: float = 4.0, step: float = 0.02) -> str:
+    """An n-mass chain fixed at one end: 1 kg and 100 N/m a link, 0.5 N s/m on every link; a force on the first
+    mass; optionally its first spring cubic (k3 1000) and its last damper quadratic."""
+    lines = ["[time]", f"end = {end}", f"step = {step}"]
+    lines += [line for i in range(n) for line in ("[[mass]]", f'name = "m{i}"', "m = 1.0")]
+    for i in range(n):
+        left = "ground" if i == 0 else f"m{i - 1}"
+        lines += ["[[spring]]", f'connects = ["{left}", "m{i}"]', "k = 100.0"]
+        if i == 0 and cubic:
+            lines += ['law = "cubic"', "k3 = 1000.0"]
+        lines += ["[[damper]]", f'connects = ["{left}", "m{i}"]', "c = 0.5"]
+        if i == n - 1 and quadratic:
+            lines += ['law = "quadratic"']
+    if force == "sine":
+        lines += ["[[force]]", 'on = "m0"', 'type = "sine"', "amplitude = 10.0", "omega = 5.0"]
+    elif force == "step":  # a jump between output points: the steps must land on it
+        lines += ["[[force]]", 'on = "m0"', 'type = "step"', "amplitude = 10.0", "t0 = 0.513"]
+    return "\n".join(lines + ([rayleigh] if rayleigh else [])) + "\n"
+
+
+@pytest.fixture
+def sparse_from_ten(monkeypatch):
+    """Scenes of more than 10 masses assembled sparse, so that small ones test the path."""
+    monkeypatch.setattr(sparse_module, "SPARSE_DOFS", 10)
+
+
+def peak_error(x, reference) -> float:
+    return float(np.abs(x - reference).max() / np.abs(reference).max())
+
+
+def test_sparse_assembly_is_the_dense_one(sparse_from_ten):
+    text = chain(12, cubic=True, quadratic=True, rayleigh="[damping]\nalpha = 0.1\nbeta = 0.002")
+    _, sparse, _ = model_of(text)
+    sparse_module.SPARSE_DOFS = SPARSE_DOFS
+    _, dense, _ = model_of(text)
+    assert sparse.is_sparse and not dense.is_sparse
+    for name in ("M", "C", "K"):
+        assert np.array_equal(getattr(sparse, name).toarray(), getattr(dense, name))
+    assert np.array_equal(sparse.cubic.D, dense.cubic.D) and np.array_equal(sparse.quadratic.D, dense.quadratic.D)
+    # Gershgorin's bound on the highest frequency: above it, and within its (loose) reach
+    assert dense.omega_max <= sparse.omega_max <= 2 * dense.omega_max
+
+
+def test_auto_solves_a_sparse_scene_by_extrapolated_newmark_to_its_tolerance(sparse_from_ten):
+    _, model, grid = model_of(chain(40))
+    reference = solve(model.dense(), grid, "exact", Tolerances())
+    errors = []
+    for rtol in (1e-6, 1e-8):
+        run = solve(model, grid, "auto", Tolerances(rtol=rtol, atol=1e-12))
+        assert run.stats.method == "sparse_newmark" and "sparse" in run.stats.reason and run.success
+        errors.append(peak_error(run.displacement, reference.displacement))
+        # the stated error is the estimate of T32's: it bounds T33's, and meets rtol (10 rtol, as adaptive runs)
+        assert errors[-1] <= run.stats.stated_accuracy <= 10 * rtol
+    assert errors[1] < errors[0] / 100  # measured 1.2e-9 and 2.3e-12
+
+
+def test_a_force_jump_between_output_points_is_a_step_end(sparse_from_ten):
+    _, model, grid = model_of(chain(20, force="step"))
+    run = solve(model, grid, "sparse_newmark", Tolerances(rtol=1e-8, atol=1e-12))
+    reference = solve(model.dense(), grid, "exact", Tolerances())
+    # across the jump the trapezoidal rule restarts from equilibrium: its error series holds on both sides
+    assert peak_error(run.displacement, reference.displacement) < 1e-9
+    assert peak_error(run.velocity, reference.velocity) < 1e-8
+
+
+def test_nonlinear_chain_against_radau(sparse_from_ten):
+    _, model, grid = model_of(chain(15, cubic=True, quadratic=True))
+    run = solve(model, grid, "auto", Tolerances(rtol=1e-8, atol=1e-12))
+    reference = solve(model.dense(), grid, "Radau", Tolerances(1e-12, 1e-15))
+    assert run.stats.method == "sparse_newmark" and "nonlinear (spring[0], damper[14])" in run.stats.reason
+    assert peak_error(run.displacement, reference.displacement) < 1e-8  # measured 3e-11
+
+
+def test_band_kernel_and_sparse_lu_take_the_same_steps(sparse_from_ten):
+    _, model, grid = model_of(chain(25, cubic=True, quadratic=True))
+    march = _March(model, grid, Tolerances())
+    assert march.band is not None and march.band.stiffness.shape[0] == 2  # a chain: half-bandwidth 1
+    x_band, v_band = march.run(2)
+    x_lu, v_lu = march._run_sparse(2)
+    assert peak_error(x_band, x_lu) < 1e-12 and peak_error(v_band, v_lu) < 1e-12
+
+
+@pytest.mark.parametrize("width", [1, 3])
+def test_band_cholesky_solve_and_product_against_dense_linear_algebra(width):
+    rng = np.random.default_rng(width)
+    n = 30
+    dense = np.zeros((n, n))
+    for d in range(1, width + 1):
+        off = rng.normal(size=n - d)
+        dense += np.diag(off, d) + np.diag(off, -d)
+    dense += np.diag(np.abs(dense).sum(axis=1) + rng.uniform(0.5, 2.0, n))  # diagonally dominant: definite
+    band = np.array([np.concatenate([np.diag(dense, -d), np.zeros(d)]) for d in range(width + 1)])
+    x = rng.normal(size=n)
+    out = np.zeros(n)
+    banded.add_times(band, x, out)
+    assert np.allclose(out, dense @ x, rtol=0, atol=1e-13 * np.abs(dense @ x).max())
+    factor = band.copy()
+    assert banded.cholesky(factor)
+    b = dense @ x
+    banded.solve(factor, b)
+    assert np.abs(b - x).max() < 1e-13 * np.linalg.cond(dense) * np.abs(x).max()
+    assert not banded.cholesky(band - np.array([[4 * np.abs(dense).max()] * n] + [[0.0] * n] * width))
+
+
+def test_other_methods_take_a_sparse_scene_dense(sparse_from_ten):
+    _, model, grid = model_of(chain(12))
+    run = solve(model, grid, "exact", Tolerances())
+    reference = solve(model.dense(), grid, "exact", Tolerances())
+    assert peak_error(run.displacement, reference.displacement) < 1e-13
+
+
+def test_sparse_newmark_refuses_what_it_cannot_take():
+    _, model, grid = model_of(chain(2) + '[[stop]]\nconnects = ["ground", "m0"]\nmax = 0.01\n')
+    with pytest.raises(ScenarioError, match="'sparse_newmark' cannot take nonsmooth elements; stop\\[0\\]"):
+        solve(model, grid, "sparse_newmark", Tolerances())
+    shaken = chain(2, force="none") + '[ground_motion]\nquantity = "acceleration"\ntype = "sine"\namplitude = 1.0\n' \
+        'omega = 3.0\n'
+    _, model, grid = model_of(shaken)
+    with pytest.raises(ScenarioError, match="'sparse_newmark' does not take a ground motion; try 'auto'"):
+        solve(model, grid, "sparse_newmark", Tolerances())
+    assert SparseNewmark().refuse(model_of(chain(2))[1]) is None
+
+
+def test_a_chain_above_sparse_dofs_from_the_command_line(cli, tmp_path):
+    """2,100 masses (sparse for real): the run, the file's chunked matrices, and its lowest modes against the fixed-
+    free chain's closed form w_j = 2 sqrt(k/m) sin((2j - 1) pi / (2 (2n + 1)))."""
+    n = 2100
+    assert n > sparse_module.SPARSE_DOFS
+    scene = tmp_path / "long.toml"
+    scene.write_text(chain(n, end=1.0, step=0.01))
+    ran = cli("simulate", scene, "-o", tmp_path / "out")
+    assert ran.exit_code == 0, ran.output
+    assert "sparse_newmark" in ran.stdout and "met by the error estimate" in ran.stdout
+    with h5py.File(tmp_path / "out" / "long.h5") as f:
+        assert f["displacement"].shape == (101, n)
+        K = f["model/K"]
+        assert K.chunks is not None and K.compression == "gzip"
+        corner = K[:3, :3]
+        assert np.array_equal(corner, [[200.0, -100.0, 0.0], [-100.0, 200.0, -100.0], [0.0, -100.0, 200.0]])
+        assert K[n - 1, n - 1] == 100.0 and K[0, n - 1] == 0.0
+        modes = f["model/modes"]
+        lowest = modes.attrs["lowest"]
+        assert lowest == 20 and modes["shapes"].shape == (n, 20)
+        j = np.arange(1, lowest + 1)
+        closed = 2 * math.sqrt(100.0) * np.sin((2 * j - 1) * math.pi / (2 * (2 * n + 1)))
+        assert np.allclose(modes["natural_frequencies_rad_s"][()], closed, rtol=1e-8, atol=0)
+        assert np.allclose(modes["damping_ratios"][()], 0.5 * closed / 200.0, rtol=1e-8)  # c_j = (c/k) w_j^2
+        assert f.attrs["kind"] == "simulate" and f["solver"].attrs["method"] == "sparse_newmark"
+    shown = cli("info", scene, "--json")
+    assert shown.exit_code == 0, shown.output
+    data = json.loads(shown.stdout)
+    assert data["K"]["shape"] == [n, n] and len(data["K"]["values"]) == 3 * n - 2
+    assert data["stiffness_ratio"] is None and len(data["modes"]) == 20 and data["auto"]["method"] == "sparse_newmark"
+    refused = cli("info", scene, "--state-space", tmp_path / "ss.h5")
+    assert refused.exit_code == 2 and "sparse scene" in refused.stderr and not (tmp_path / "ss.h5").exists()
