@@ -61,6 +61,7 @@ class SparseNewmark(Solver):
         return None
 
     def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
+        """Romberg's table of three runs, repeated at finer steps until its estimate meets the tolerances."""
         start = time.perf_counter()
         march = _March(model, grid, tol)
         span = float(grid[-1] - grid[0]) if len(grid) > 1 else 0.0
