@@ -125,12 +125,10 @@ print(json.dumps(out))
 SUBSTEPS = (1, 4, 16)
 
 
-def opensees(t, a, k, c, fy, b):
-    """[(substeps, median seconds, x)] of OpenSees ElasticPP (b = 0) or Steel01 (hardening b), or None where
-    openseespy is not installed. Run in a child with openseespy's bundled BLAS on LD_LIBRARY_PATH, as its wheel
-    needs."""
+def opensees_env() -> dict | None:
+    """The environment an OpenSees child needs (openseespy's bundled BLAS on LD_LIBRARY_PATH, as its wheel needs), or
+    None where openseespy is not installed."""
     import importlib.util
-    import json
 
     spec = importlib.util.find_spec("openseespylinux")
     env = dict(os.environ)
@@ -138,6 +136,18 @@ def opensees(t, a, k, c, fy, b):
         lib = Path(list(spec.submodule_search_locations)[0]) / "lib"
         env["LD_LIBRARY_PATH"] = f"{lib}:{env.get('LD_LIBRARY_PATH', '')}"
     elif importlib.util.find_spec("openseespy") is None:
+        return None
+    return env
+
+
+def opensees(t, a, k, c, fy, b):
+    """[(substeps, median seconds, x)] of OpenSees ElasticPP (b = 0) or Steel01 (hardening b), or None where
+    openseespy is not installed. Run in a child with openseespy's bundled BLAS on LD_LIBRARY_PATH, as its wheel
+    needs."""
+    import json
+
+    env = opensees_env()
+    if env is None:
         return None
     done = subprocess.run([sys.executable, "-c", OPENSEES], input=json.dumps([list(t), list(a), M, k, c, fy, b, SUBSTEPS, REPEATS]),
                           capture_output=True, text=True, env=env)

@@ -231,15 +231,12 @@ def dense_chain_reference(model, grid) -> np.ndarray:
 def opensees_chain(n: int, dt: float, steps: int, repeats: int):
     """(median seconds, first mass's x on the grid) of OpenSees on the chain, or None where it does not run."""
     import json
-    import os
     import subprocess
 
-    spec = importlib.util.find_spec("openseespylinux")
-    env = dict(os.environ)
-    if spec is not None and spec.submodule_search_locations:
-        lib = Path(list(spec.submodule_search_locations)[0]) / "lib"
-        env["LD_LIBRARY_PATH"] = f"{lib}:{env.get('LD_LIBRARY_PATH', '')}"
-    elif not installed("openseespy"):
+    from elastoplastic_vs_opensees import opensees_env
+
+    env = opensees_env()
+    if env is None:
         return None
     done = subprocess.run([sys.executable, "-c", CHAIN_OPENSEES], capture_output=True, text=True, env=env,
                           input=json.dumps([n, 100.0, 0.5, 1.0, dt, steps, repeats]))

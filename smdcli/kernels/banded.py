@@ -129,14 +129,10 @@ def _stamp(band, a, b, value) -> None:
 
 @kernel
 def _equilibrium(mass, damping, stiffness, forcing, u, cubic, cubic_coef, quadratic, quadratic_coef, x, v, kx, cv,
-                 force, a) -> None:
-    """kx = K x, cv = C v, force = F(u), and a = M^-1 (F - C v - K x - f_nl(x, v)) (M diagonal)."""
+                 a) -> None:
+    """kx = K x, cv = C v, and a = M^-1 (F(u) - C v - K x - f_nl(x, v)) (M diagonal)."""
     n = x.shape[0]
     for j in range(n):
-        s = 0.0
-        for q in range(forcing.shape[1]):
-            s += forcing[j, q] * u[q]
-        force[j] = s
         kx[j] = 0.0
         cv[j] = 0.0
         a[j] = 0.0
@@ -144,7 +140,10 @@ def _equilibrium(mass, damping, stiffness, forcing, u, cubic, cubic_coef, quadra
     add_times(damping, v, cv)
     _nonlinear(cubic, cubic_coef, quadratic, quadratic_coef, x, v, a)  # f_nl, held in a for a moment
     for j in range(n):
-        a[j] = (force[j] - kx[j] - cv[j] - a[j]) / mass[0, j]
+        force = 0.0
+        for q in range(forcing.shape[1]):
+            force += forcing[j, q] * u[q]
+        a[j] = (force - kx[j] - cv[j] - a[j]) / mass[0, j]
 
 
 @kernel
@@ -167,7 +166,6 @@ def march(mass, damping, stiffness, effective, factors, steps, factor_of, divisi
     a = np.zeros(n)
     kx = np.zeros(n)
     cv = np.zeros(n)
-    force = np.zeros(n)
     rhs = np.zeros(n)
     d = np.zeros(n)
     tangent = np.empty_like(factors[0])
@@ -182,7 +180,7 @@ def march(mass, damping, stiffness, effective, factors, steps, factor_of, divisi
             break
         if restart[i]:
             _equilibrium(mass, damping, stiffness, forcing, u_start[i], cubic, cubic_coef, quadratic,
-                         quadratic_coef, x, v, kx, cv, force, a)
+                         quadratic_coef, x, v, kx, cv, a)
             counts[EVALUATIONS] += 1
         f = factor_of[i]
         h = steps[f]
@@ -205,7 +203,7 @@ def march(mass, damping, stiffness, effective, factors, steps, factor_of, divisi
                 x[j] += d[j]
                 v[j] = c2 * d[j] - v[j]
             _equilibrium(mass, damping, stiffness, forcing, u_steps[i, k], cubic, cubic_coef, quadratic,
-                         quadratic_coef, x, v, kx, cv, force, a)
+                         quadratic_coef, x, v, kx, cv, a)
             counts[STEPS] += 1
     return OK
 

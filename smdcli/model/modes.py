@@ -35,3 +35,18 @@ def regime(zeta: float, omega: float = 1.0) -> str:
     if abs(zeta - 1.0) <= CRITICAL_BAND:
         return "critically damped"
     return "underdamped" if zeta < 1.0 else "overdamped"
+
+
+def modal_eigenvalues(c: np.ndarray, squared: np.ndarray) -> np.ndarray:
+    """The state eigenvalues of modes of damping c (diagonal of Phi^T C Phi) and squared frequencies: the roots of
+    s^2 + c s + w^2, all first roots then all second."""
+    root = np.sqrt((c * c - 4 * squared).astype(complex))
+    return np.concatenate([(-c + root) / 2, (-c - root) / 2])
+
+
+def signed(shapes: np.ndarray) -> np.ndarray:
+    """Mode shapes with the sign LAPACK leaves free fixed: the first entry within 1e-6 of the column's largest is
+    positive (a tie broken by position, not by which rounding came out larger)."""
+    size = np.abs(shapes)
+    lead = np.argmax(size >= (1 - 1e-6) * size.max(axis=0), axis=0)
+    return shapes * np.where(shapes[lead, np.arange(shapes.shape[1])] < 0, -1.0, 1.0)

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from smdcli.model.modes import RIGID_BODY, Modes, regime
+from smdcli.model.modes import RIGID_BODY, Modes, modal_eigenvalues, regime, signed
 from smdcli.scenario import Scenario
 
 # Above this many masses an element-form scene is assembled sparse (is_sparse_scene) and auto solves it by
@@ -58,13 +58,9 @@ def lowest_modes(model) -> Modes:
     wn = np.sqrt(squared)
     c = (shapes * (model.C @ shapes)).sum(axis=0)
     zeta = np.where(wn > 0, c / (2 * np.where(wn > 0, wn, 1.0)), np.inf)
-    root = np.sqrt((c * c - 4 * squared).astype(complex))
-    eig = np.concatenate([(-c + root) / 2, (-c - root) / 2])
-    size = np.abs(shapes)
-    lead = np.argmax(size >= (1 - 1e-6) * size.max(axis=0), axis=0)
-    shapes = shapes * np.where(shapes[lead, np.arange(k)] < 0, -1.0, 1.0)
     rigid = wn <= RIGID_BODY * model.omega_max
-    return Modes(eig, wn, zeta, tuple(regime(z, 0.0 if r else w) for z, w, r in zip(zeta, wn, rigid)), shapes)
+    return Modes(modal_eigenvalues(c, squared), wn, zeta,
+                 tuple(regime(z, 0.0 if r else w) for z, w, r in zip(zeta, wn, rigid)), signed(shapes))
 
 
 def is_sparse_scene(scenario: Scenario) -> bool:

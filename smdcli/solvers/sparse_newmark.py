@@ -29,8 +29,6 @@ from smdcli.result import Result, SolverStats
 from smdcli.solvers.base import MAX_STEPS, Solver, Tolerances, cuts, make_result
 
 LEVELS = (1, 2, 4)  # the steps of Romberg's table, as divisions of the coarsest
-NEWTON_ITERATIONS = 40  # per step, modified and full together
-NEWTON_SLOW = 0.25  # a modified-Newton contraction above this refactors at the tangent
 STEP_SAFETY = 1.3  # finer than the fourth root asks, so the rerun lands inside the tolerance
 
 
@@ -77,7 +75,7 @@ class SparseNewmark(Solver):
             try:
                 x, v, estimate = march.extrapolated(divisions)
             except NewtonFailed as stop:
-                failure, x, v, estimate = stop, None, None, math.inf
+                failure = stop
                 break
             peak_x = float(np.abs(x).max(initial=0.0))
             peak_v = float(np.abs(v).max(initial=0.0))
@@ -87,20 +85,18 @@ class SparseNewmark(Solver):
                 break
             divisions = max(finer, divisions + 1)
         n = model.n
-        if failure is not None or x is None:
-            x = np.full((len(grid), n), np.nan)
-            v = np.full((len(grid), n), np.nan)
-        stated = max(estimate[0] / peak_x if x is not None and peak_x > 0 else 0.0,
-                     estimate[1] / peak_v if x is not None and peak_v > 0 else 0.0) if failure is None else math.nan
-        met = failure is None and excess <= 1
         if failure is not None:
+            from smdcli.kernels.banded import NEWTON_ITERATIONS
+
+            x = v = np.full((len(grid), n), np.nan)
+            stated, met = math.nan, False
             message = (f"failed at t = {failure.t:.6g} s: Newton did not converge in {NEWTON_ITERATIONS} iterations "
                        "on a step's nonlinear equation")
-        elif not met:
-            message = (f"the error estimate {stated:.3g} of the peak is above the tolerance; a finer step would take "
-                       f"more than {max_steps} steps")
         else:
-            message = "ok"
+            stated = max(estimate[0] / peak_x if peak_x > 0 else 0.0, estimate[1] / peak_v if peak_v > 0 else 0.0)
+            met = excess <= 1
+            message = "ok" if met else (f"the error estimate {stated:.3g} of the peak is above the tolerance; a finer "
+                                        f"step would take more than {max_steps} steps")
         stats = SolverStats(
             method=self.name, requested_method=self.name, reason="", rtol=tol.rtol, atol=tol.atol,
             dt=spacing / divisions / LEVELS[-1], wall_time_s=time.perf_counter() - start, success=met,
@@ -108,9 +104,8 @@ class SparseNewmark(Solver):
             nlu=march.factorizations, stated_accuracy=stated)
         notes = (f"sparse Newmark: steps of {spacing / divisions:.4g}, /2 and /4 s extrapolated (Romberg) in "
                  f"{passes} pass(es); estimated error {stated:.3g} of the peak",) if met else ()
-        t_failed = None if met else (failure.t if failure is not None else float(grid[0]))
-        if not met and failure is None:  # the best the step budget allows is still returned, flagged failed
-            t_failed = float(grid[-1])
+        # past the step budget, the best it allows is still returned, flagged failed
+        t_failed = None if met else failure.t if failure is not None else float(grid[-1])
         return make_result(model, grid, x, v, stats, t_failed=t_failed, notes=notes)
 
 
@@ -303,18 +298,16 @@ class _March:
     def _acceleration(self, x: np.ndarray, v: np.ndarray, f: np.ndarray) -> np.ndarray:
         """M^-1 (F - C v - K x - f_nl): equilibrium."""
         self.evaluations += 1
-        rest = f - self.C @ v - self.K @ x
-        if not self.model.is_linear:
-            rest = rest - self.model.nonlinear_force(x, v)
-        if self.mass is not None:
-            return rest / self.mass
-        from scipy.sparse.linalg import spsolve
-
-        return spsolve(self.M.tocsc(), rest)
+        return self.model.acceleration(x[None], v[None], f[None])[0]
 
     def _newton(self, d, x, v, rhs, h: float, lu, t: float) -> np.ndarray:
-        """Solve K_eff d + f_nl(x + d, 2 d / h - v) = rhs: modified Newton on the linear LU, refactored at the
-        tangent wherever it contracts slowly."""
+        """Solve K_eff d + f_nl(x + d, 2 d / h - v) = rhs as the compiled march does (kernels/banded.py: its
+        iteration limit, slow contraction and tolerance), on the sparse LU."""
+        from scipy.sparse import csc_matrix
+        from scipy.sparse.linalg import splu
+
+        from smdcli.kernels.banded import NEWTON_ITERATIONS, NEWTON_SLOW, NEWTON_TOL
+
         model = self.model
         scale = max(float(np.abs(d).max(initial=0.0)) + float(np.abs(x).max(initial=0.0)), 1e-300)
         previous = math.inf
@@ -325,13 +318,11 @@ class _March:
             delta = lu.solve(residual)
             d = d + delta
             size = float(np.abs(delta).max(initial=0.0))
-            if size <= 1e-13 * scale:  # far below what the extrapolation keeps
+            if size <= NEWTON_TOL * scale:
                 return d
             if size > NEWTON_SLOW * previous:  # slow: Newton proper, on the tangent here
-                from scipy.sparse.linalg import splu
-
-                Kt, Ct = _tangent(model, x + d, (2.0 / h) * d - v)
-                lu = splu((Kt + (2.0 / h) * Ct + (4.0 / h ** 2) * self.M).tocsc())
+                Kt, Ct = model.tangent(x + d, (2.0 / h) * d - v)
+                lu = splu(csc_matrix(Kt + (2.0 / h) * Ct + (4.0 / h ** 2) * self.M))
                 self.tangents += 1
                 self.factorizations += 1
             previous = size
@@ -390,19 +381,3 @@ class _Band:
             return nodes, np.asarray(inc.coef, dtype=float)
 
         return cls(order, band(M, 0), band(C, width), band(K, width), (*ends(model.cubic), *ends(model.quadratic)))
-
-
-def _tangent(model: Model, x: np.ndarray, v: np.ndarray):
-    """Sparse tangent stiffness and damping at (x, v): the linear parts plus the nonlinear elements' few rows."""
-    from scipy.sparse import csr_matrix
-
-    Kt, Ct = model.K, model.C
-    if model.cubic is not None:
-        D = csr_matrix(model.cubic.D)
-        d = D @ x
-        Kt = Kt + D.T @ csr_matrix((3 * model.cubic.coef * d ** 2)[:, None] * model.cubic.D)
-    if model.quadratic is not None:
-        D = csr_matrix(model.quadratic.D)
-        dv = D @ v
-        Ct = Ct + D.T @ csr_matrix((2 * model.quadratic.coef * np.abs(dv))[:, None] * model.quadratic.D)
-    return Kt, Ct
