@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from smdcli.kernels import tableaus as tb
+from smdcli.kernels.arrays import CUBIC_SPRING
 from smdcli.kernels.compiler import inlined, kernel, no_alloc
 from smdcli.kernels.rhs import spectral_bound, state_rhs, state_rhs_inlined
 
@@ -34,6 +35,8 @@ NFEV, ACCEPTED, REJECTED, WATCHED, LIMITED = range(5)
 T_REACHED, MAX_RHO, STIFF_T, STIFF_FRACTION, STIFF_RHO = range(5)
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
+# A reversal this close to a step's start is left inside it: its kink's error goes as the cube of that distance.
+NEAR_START = 1e-3
 WATCH_WINDOW, WATCH_LIMIT = 200, 0.8
 
 _A = (tb.RK23_A, tb.RK45_A, tb.DOP853_A)
@@ -201,12 +204,49 @@ def _dense(m, method, t_old, h, y_old, y_new, K, grid, k, j, out, mid, work, jwo
                     axpy(h * P[s, q] * power, K[s], out[row])
 
 
+@inlined
+def _relative(q, a, b, offset):
+    """q[offset + a] - q[offset + b], ground (index -1) at zero."""
+    return (q[offset + a] if a >= 0 else 0.0) - (q[offset + b] if b >= 0 else 0.0)
+
+
+@no_alloc
+def reversal(m, y, y_new, f, f_new, h):
+    """Where in the step (a fraction of it) a quadratic damper's velocity first changes sign, or 1.0 for none: the
+    root of the velocity's cubic Hermite interpolant (ends and accelerations), bracketed by bisection and
+    returned at its far side, so that the step ends just past the reversal."""
+    n = m.n
+    first = 1.0
+    for e in range(len(m.el_law)):
+        if m.el_law[e] == CUBIC_SPRING:
+            continue
+        a, b = m.el_a[e], m.el_b[e]
+        r0, r1 = _relative(y, a, b, n), _relative(y_new, a, b, n)
+        if r0 * r1 >= 0.0:
+            continue
+        d0, d1 = h * _relative(f, a, b, n), h * _relative(f_new, a, b, n)
+        lo, hi = 0.0, first
+        for _ in range(48):
+            s = 0.5 * (lo + hi)
+            u = 1.0 - s
+            value = (r0 * (1 + 2 * s) + d0 * s) * u * u + (r1 * (3 - 2 * s) - d1 * u) * s * s
+            if value * r0 > 0.0:
+                lo = s
+            else:
+                hi = s
+        first = hi
+    return first
+
+
 @no_alloc
 def attempt(m, method, t, y, h_abs, t_bound, mid, rtol, atol, fixed_h, K, y_new, scale, err, err3, arg, work, jwork,
-            counts):
+            counts, land=False):
     """One accepted step from (t, y) with scipy's error control, from a first try of h_abs: (status, t_new, h,
     the next step's h_abs); y_new and K (K[S] = f(t_new, y_new)) hold the step; status TOO_SMALL_STEP where the
-    step shrank below rounding. fixed_h > 0 takes that step without error control."""
+    step shrank below rounding. fixed_h > 0 takes that step without error control. land: a try in which a
+    quadratic damper's velocity reverses is cut short to end just past the reversal (once a step), so that its
+    kink (c |v| v has no second derivative at v = 0) falls between steps, not inside one, where it would cost
+    rejected tries and shrunken steps."""
     S = STAGES[method]
     B = _B[method]
     exponent = -1.0 / (ERROR_ORDER[method] + 1)
@@ -214,6 +254,7 @@ def attempt(m, method, t, y, h_abs, t_bound, mid, rtol, atol, fixed_h, K, y_new,
     if h_abs < min_step:
         h_abs = min_step
     rejected = False
+    landed = not land
     while True:
         if h_abs < min_step:
             return TOO_SMALL_STEP, t, 0.0, h_abs
@@ -229,6 +270,13 @@ def attempt(m, method, t, y, h_abs, t_bound, mid, rtol, atol, fixed_h, K, y_new,
         counts[NFEV] += S
         for i in range(len(y)):
             scale[i] = atol[i] + max(abs(y[i]), abs(y_new[i])) * rtol
+        if not landed:
+            landed = True
+            fraction = reversal(m, y, y_new, K[0], K[S], h)
+            if NEAR_START < fraction < 1.0:
+                h_abs *= fraction
+                counts[REJECTED] += 1
+                continue
         error = _error_norm(method, K, h, scale, err, err3)
         if fixed_h > 0:
             return OK, t_new, h, fixed_h
@@ -243,13 +291,15 @@ def attempt(m, method, t, y, h_abs, t_bound, mid, rtol, atol, fixed_h, K, y_new,
 
 
 @kernel
-def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out, counts, floats, work, fixed_h):
+def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out, counts, floats, work, fixed_h,
+              land):
     """Integrate from y0 = out[0] over the grid, restarting at each cut; returns a status (OK, ...).
 
     atol is per component; boundary > 0 turns on the stiffness watch (stop with STIFF when 80 % of the last
     200 steps are stability-limited). counts and floats receive the statistics named above; work is the
     right-hand side's scratch (rhs.work_size). fixed_h > 0 takes steps of that size with no error control
-    (for measuring a formula's order)."""
+    (for measuring a formula's order); land ends steps at quadratic dampers' velocity reversals (attempt).
+    """
     size = len(y0)
     S = STAGES[method]
     K = np.zeros((16, size))
@@ -271,7 +321,7 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, boundary,
         counts[NFEV] += 2
         while t < t_bound:
             status, t_new, h, h_abs = attempt(m, method, t, y, h_abs, t_bound, mid, rtol, atol, fixed_h, K, y_new,
-                                              scale, err, err3, arg, work, jwork, counts)
+                                              scale, err, err3, arg, work, jwork, counts, land)
             if status != OK:
                 floats[T_REACHED] = t
                 out[k:] = np.nan

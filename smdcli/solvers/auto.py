@@ -56,7 +56,7 @@ class Auto(Solver):
         solver, reason = self.choose(model, grid)
         abandoned_s = 0.0  # an explicit attempt given up as stiff still cost its time
         if solver is None:  # nonlinear: try explicit with a stiffness watch
-            explicit = DOP853(watch=True)
+            explicit = DOP853(watch=True, land=True)
             try:
                 result = explicit.solve(model, grid, tol)
                 watch = explicit.watch

@@ -37,9 +37,10 @@ def announce_compile(dispatcher, quiet: bool = False) -> None:
 
 
 def run_kernel(model: Model, method: int, grid: np.ndarray, y0: np.ndarray, rtol: float, atol: np.ndarray,
-               max_steps: int, bound: float, boundary: float = 0.0, breakpoints: bool = True, fixed_h: float = 0.0):
+               max_steps: int, bound: float, boundary: float = 0.0, breakpoints: bool = True, fixed_h: float = 0.0,
+               land: bool = False):
     """Run the compiled pair from y0 over the grid: (status, out rows, int counts, float statistics).
-    fixed_h > 0: steps of that size, no error control."""
+    fixed_h > 0: steps of that size, no error control; land: steps end at quadratic dampers' velocity reversals."""
     from smdcli.kernels import erk
     from smdcli.kernels.arrays import model_arrays
     from smdcli.kernels.rhs import work_size
@@ -51,7 +52,7 @@ def run_kernel(model: Model, method: int, grid: np.ndarray, y0: np.ndarray, rtol
     status = erk.integrate(arrays, method, np.asarray(y0, dtype=float), np.asarray(grid, dtype=float),
                            cuts(model, grid, breakpoints), float(rtol), np.asarray(atol, dtype=float),
                            int(max_steps), float(bound), float(boundary), out, counts, floats,
-                           np.zeros(work_size(arrays)), float(fixed_h))
+                           np.zeros(work_size(arrays)), float(fixed_h), bool(land))
     return status, out, counts, floats
 
 
@@ -190,8 +191,8 @@ class CompiledRK(Solver):
     stability_boundary: ClassVar[float]
     watch: Watch | None = None
 
-    def __init__(self, watch: bool = False):
-        self.watching = watch
+    def __init__(self, watch: bool = False, land: bool = False):
+        self.watching, self.landing = watch, land
 
     def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
         from smdcli.kernels import erk
@@ -204,7 +205,7 @@ class CompiledRK(Solver):
         boundary = self.stability_boundary if self.watching else 0.0
         status, out, counts, floats = run_kernel(model, self.kernel_method, grid, y0, tol.rtol,
                                                  np.full(len(y0), tol.atol), max_steps, bound, boundary,
-                                                 tol.breakpoints)
+                                                 tol.breakpoints, land=self.landing)
         elapsed = time.perf_counter() - start
         self.watch = Watch(int(counts[erk.WATCHED]), int(counts[erk.LIMITED]), float(floats[erk.MAX_RHO]))
         if status == erk.STIFF:
