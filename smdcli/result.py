@@ -145,6 +145,21 @@ ENERGY_TERMS = ("kinetic", "strain", "dissipated", "input", "residual")
 NONSMOOTH_TERMS = ("hysteretic", "friction", "impact", "contact")
 
 
+def finite_peak(q: np.ndarray) -> float:
+    """The largest finite |q| (0 for none), without a temporary of q's size where every entry is finite."""
+    if q.size == 0:
+        return 0.0
+    low, high = float(np.min(q)), float(np.max(q))
+    if np.isfinite(low) and np.isfinite(high):
+        return max(high, -low)
+    return float(np.abs(q[np.isfinite(q)]).max(initial=0.0))
+
+
+def all_finite(q: np.ndarray) -> bool:
+    """Every entry of q finite (a NaN or an inf makes its minimum or maximum one)."""
+    return q.size == 0 or bool(np.isfinite(np.min(q)) and np.isfinite(np.max(q)))
+
+
 def largest_energy(kinetic, strain, dissipated, work) -> float:
     """The largest energy a run reached: mechanical, dissipated or put in; what the residual is measured by."""
     return max(float(np.max(kinetic + strain, initial=0.0)), float(np.max(np.abs(dissipated), initial=0.0)),

@@ -12,7 +12,7 @@ from typing import Callable, ClassVar
 import numpy as np
 
 from smdcli.model import Model, mass_solve
-from smdcli.result import Result, SolverStats
+from smdcli.result import Result, SolverStats, finite_peak
 
 
 # A state larger than this (relative to the initial and forced scale) has diverged.
@@ -114,11 +114,14 @@ def acceleration_accuracy(M: np.ndarray, C: np.ndarray, K: np.ndarray, stated, x
 
 
 def make_result(model: Model, grid: np.ndarray, x: np.ndarray, v: np.ndarray, stats: SolverStats,
-                t_failed: float | None = None, notes: tuple[str, ...] = ()) -> Result:
-    """A Result from displacement and velocity on the grid; force and acceleration derived."""
-    force = model.applied_force(grid) if model.is_forced else np.zeros_like(x)
-    with np.errstate(all="ignore"):
-        acceleration = model.acceleration(x, v, force)
+                t_failed: float | None = None, notes: tuple[str, ...] = (), force: np.ndarray | None = None,
+                acceleration: np.ndarray | None = None) -> Result:
+    """A Result from displacement and velocity on the grid; force and acceleration derived where not given."""
+    if force is None:
+        force = model.applied_force(grid) if model.is_forced else np.zeros_like(x)
+    if acceleration is None:
+        with np.errstate(all="ignore"):
+            acceleration = model.acceleration(x, v, force)
     return Result(time=grid, dofs=model.dofs, displacement=x, velocity=v, acceleration=acceleration,
                   force=force, stats=stats, t_failed=t_failed, notes=notes)
 
@@ -170,11 +173,12 @@ def force_function(model: Model, ta: float, tb: float) -> Callable[[float], np.n
     return u
 
 
-def divergence_bound(model: Model, grid: np.ndarray) -> float:
-    """GROWTH_BOUND times a size a bounded response stays within: initial state and static deflection."""
+def divergence_bound(model: Model, grid: np.ndarray, force: np.ndarray | None = None) -> float:
+    """GROWTH_BOUND times a size a bounded response stays within: initial state and static deflection (force: the
+    applied force on the grid, where the caller has it)."""
     scale = max(np.abs(model.x0).max(initial=0.0), np.abs(model.v0).max(initial=0.0), 1.0)
     if model.is_forced:
-        peak_force = np.abs(model.applied_force(grid)).max(initial=0.0)
+        peak_force = finite_peak(model.applied_force(grid) if force is None else force)
         stiffness = np.abs(np.diag(model.K)).min(initial=0.0)
         scale = max(scale, peak_force / stiffness if stiffness > 0 else peak_force * (grid[-1] - grid[0]) ** 2)
     return GROWTH_BOUND * scale

@@ -12,7 +12,7 @@ import numpy as np
 
 from smdcli.errors import ScenarioError
 from smdcli.model import Model
-from smdcli.result import Result
+from smdcli.result import Result, all_finite, finite_peak
 from smdcli.solvers.base import Solver, Tolerances, stated_rounding, stated_tolerance
 from smdcli.solvers.catalog import check_method_name
 from smdcli.solvers.ground import across_jumps, drift_note, ground_history
@@ -25,11 +25,12 @@ def _solvers() -> dict[str, type[Solver]]:
     from smdcli.solvers.exact import Exact
     from smdcli.solvers.sparse_newmark import SparseNewmark
     from smdcli.solvers.fixed_step import HHT, RK4, CentralDifference, Euler, GeneralizedAlpha, Newmark
-    from smdcli.solvers.compiled import BDF, DOP853, RK23, RK45, Radau, ode15s, ode23, ode23s, ode23t, ode23tb, ode45
+    from smdcli.solvers.compiled import (BDF, DOP853, RK23, RK45, Radau, Taylor, ode15s, ode23, ode23s, ode23t, ode23tb,
+                                         ode45)
     from smdcli.solvers.ivp import (LSODA, Ode113, ScipyBDF, ScipyDOP853, ScipyOde23s, ScipyOde23t, ScipyOde23tb,
                                     ScipyRadau, ScipyRK23, ScipyRK45)
 
-    classes = (Auto, ClosedForm, Exact, RK45, RK23, DOP853, Radau, BDF, LSODA, ode45, ode23, Ode113, ode15s,
+    classes = (Auto, ClosedForm, Exact, RK45, RK23, DOP853, Taylor, Radau, BDF, LSODA, ode45, ode23, Ode113, ode15s,
                ode23s, ode23t, ode23tb, Newmark, SparseNewmark, HHT, GeneralizedAlpha, CentralDifference, Euler, RK4,
                ScipyRK45, ScipyRK23, ScipyDOP853, ScipyOde23s, ScipyOde23t, ScipyOde23tb, ScipyRadau,
                ScipyBDF)
@@ -85,7 +86,7 @@ def solve(model: Model, grid: np.ndarray, method: str, tol: Tolerances, field: s
 def _stated_accuracy(solver: Solver, model: Model, result: Result) -> float:
     """The error a run vouches for, relative to the peak, for methods that do not state it themselves."""
     s = result.stats
-    peak = float(np.abs(result.displacement[np.isfinite(result.displacement)]).max(initial=0.0))
+    peak = finite_peak(result.displacement)
     if solver.adaptive:
         return stated_tolerance(s.rtol, s.atol, peak)
     span = float(result.time[-1] - result.time[0]) if len(result.time) > 1 else 0.0
@@ -98,7 +99,7 @@ def _stated_accuracy(solver: Solver, model: Model, result: Result) -> float:
 
 def _refuse_non_finite(result):
     """A run that reports success but holds NaN or inf (numbers beyond double precision) is a failure."""
-    if not result.success or (np.isfinite(result.displacement).all() and np.isfinite(result.velocity).all()):
+    if not result.success or (all_finite(result.displacement) and all_finite(result.velocity)):
         return result
     state = np.concatenate([result.displacement, result.velocity], axis=1)
     bad = ~np.isfinite(state).all(axis=1)
