@@ -53,7 +53,7 @@ FIXED_STEP = ["newmark", "hht", "generalized_alpha", "central_difference", "eule
 ADAPTIVE_FIXED_ORDER = {"RK45": 5, "RK23": 3, "DOP853": 8, "Radau": 5, "ode45": 5, "ode23": 3,
                         "ode23s": 2, "ode23t": 2, "ode23tb": 2, "scipy:RK45": 5, "scipy:RK23": 3, "scipy:DOP853": 8,
                         "scipy:ode23s": 2, "scipy:ode23t": 2, "scipy:ode23tb": 2, "scipy:Radau": 5}
-VARIABLE_ORDER = ["BDF", "ode15s", "LSODA", "ode113", "scipy:BDF"]
+VARIABLE_ORDER = ["BDF", "ode15s", "LSODA", "ode113", "scipy:BDF", "taylor"]  # taylor: its order by rtol
 EXTRAPOLATED = ["sparse_newmark"]  # fixed steps h, h/2, h/4 combined by Romberg's table: sixth order
 
 
@@ -181,6 +181,7 @@ NONLINEAR_SETTINGS = {
     "euler": (Tolerances(dt=1e-5), 2.5e-3), "rk4": (Tolerances(dt=1e-4), 1e-6),
     "ode23s": (Tolerances(1e-5, 1e-10), 3e-4), "ode23t": (Tolerances(1e-5, 1e-10), 3e-4),
     "ode23tb": (Tolerances(1e-5, 1e-10), 3e-4), "sparse_newmark": (Tolerances(1e-8, 1e-12), 1e-7),
+    "taylor": (Tolerances(1e-8, 1e-12), 1e-8),
 }
 
 

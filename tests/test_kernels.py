@@ -225,16 +225,23 @@ def test_default_settings_of_the_books_stiff_case_are_within_1e_8_of_a_tight_ref
     ours = solve_scenario(sc, model, grid)
     reference = solve(model, grid, "Radau", Tolerances(rtol=1e-12, atol=1e-16))
     peak = np.abs(reference.displacement).max()
-    assert ours.stats.method == "DOP853"
+    assert ours.stats.method == "taylor"
     assert np.abs(ours.displacement - reference.displacement).max() <= 1e-8 * peak
 
 
 def test_the_stiffness_watch_reads_the_books_damper_as_not_stiff():
-    """h |lambda| from the O(n) bound stays well under DOP853's boundary along the run (exact eigenvalues: 1.2)."""
+    """h |lambda| from the O(n) bound stays under half the boundaries of DOP853 and of auto's Taylor series along
+    the run (exact eigenvalues: 1.2), but for one of DOP853's 846 steps at rtol 1e-6 (3.1 against 3.0)."""
+    from smdcli.solvers.compiled import DOP853
+
     sc, model, grid = load("one_dof_nonlinear_stiff")
-    r = solve(model, grid, "auto", Tolerances(rtol=1e-6, atol=1e-12))
-    assert r.stats.method == "DOP853" and "not stiff" in r.stats.reason
+    tol = Tolerances(rtol=1e-6, atol=1e-12)
+    r = solve(model, grid, "auto", tol)
+    assert r.stats.method == "taylor" and "not stiff" in r.stats.reason
     assert "on 0% of" in r.stats.reason
+    explicit = DOP853(watch=True, land=True)
+    explicit.solve(model, grid, tol)
+    assert explicit.watch.share < 0.01 and explicit.watch.max_rho < 0.6 * DOP853.stability_boundary
 
 
 def test_kernels_run_as_plain_python_without_the_compiler():
@@ -247,7 +254,10 @@ def test_kernels_run_as_plain_python_without_the_compiler():
             "g = g[:201]\n"
             "a = solve(m, g, 'DOP853', Tolerances(rtol=1e-7, atol=1e-10))\n"
             "b = solve(m, g, 'scipy:DOP853', Tolerances(rtol=1e-7, atol=1e-10))\n"
-            "print(np.abs(a.displacement - b.displacement).max() / np.abs(b.displacement).max())\n")
+            "c = solve(m, g, 'taylor', Tolerances(rtol=1e-7, atol=1e-10))\n"
+            "peak = np.abs(b.displacement).max()\n"
+            "print(max(np.abs(a.displacement - b.displacement).max(), np.abs(c.displacement - b.displacement).max())"
+            " / peak)\n")
     env = dict(os.environ, NUMBA_DISABLE_JIT="1")
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT / "tests", env=env, capture_output=True, text=True,
                           timeout=300)

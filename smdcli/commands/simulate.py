@@ -253,10 +253,15 @@ def info(path: str | Path, state_space: Path | None = None) -> dict:
         ratio0 = float(re.max() / re.min()) if len(re) else 1.0
         data["linearized_at_start"] = {"eigenvalues": [[float(e.real), float(e.imag)] for e in lam],
                                        "stiffness_ratio": ratio0}
-        data["auto"] = {"method": "DOP853 or Radau",
+        from smdcli.solvers.compiled import Taylor
+
+        unsupported = Taylor.unsupported(model)
+        explicit = f"DOP853 (no Taylor series for {unsupported})" if unsupported else "taylor"
+        data["auto"] = {"method": f"{explicit.split()[0]} or Radau",
                         "reason": (f"nonlinear ({', '.join(model.nonlinear_paths)}): the linearization at the start "
                                    f"has stiffness ratio {ratio0:.3g}, but stiffness is decided along the trajectory: "
-                                   "DOP853 runs while h*|lambda|max stays below its stability limit, else Radau")}
+                                   f"{explicit} runs while h*|lambda|max stays below its stability limit, "
+                                   "else Radau")}
     return data
 
 

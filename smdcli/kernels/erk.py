@@ -290,6 +290,26 @@ def attempt(m, method, t, y, h_abs, t_bound, mid, rtol, atol, fixed_h, K, y_new,
         counts[REJECTED] += 1
 
 
+@no_alloc
+def held_by_stability(m, y, h, t, boundary, node, ring, counts, floats):
+    """The stiffness watch after a step of h to (t, y): record whether h |lambda| passed half the boundary, in the
+    ring of the last WATCH_WINDOW steps and the counters; True (where it stopped, in floats) when WATCH_LIMIT of
+    them did. node is spectral_bound's scratch."""
+    rho = h * spectral_bound(m, y, node)
+    floats[MAX_RHO] = max(floats[MAX_RHO], rho)
+    limited = rho > 0.5 * boundary
+    slot = counts[WATCHED] % WATCH_WINDOW
+    counts[LIMITED] += limited
+    counts[WATCHED] += 1
+    ring[slot] = limited
+    if counts[WATCHED] >= WATCH_WINDOW:
+        fraction = np.sum(ring) / WATCH_WINDOW
+        if fraction >= WATCH_LIMIT:
+            floats[STIFF_T], floats[STIFF_FRACTION], floats[STIFF_RHO] = t, fraction, rho
+            return True
+    return False
+
+
 @kernel
 def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out, counts, floats, work, fixed_h,
               land):
@@ -341,19 +361,8 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, boundary,
             if status != OK:
                 out[k:] = np.nan
                 return status
-            if boundary > 0:
-                rho = h * spectral_bound(m, y_new, node)
-                floats[MAX_RHO] = max(floats[MAX_RHO], rho)
-                limited = rho > 0.5 * boundary
-                slot = counts[WATCHED] % WATCH_WINDOW
-                counts[LIMITED] += limited
-                counts[WATCHED] += 1
-                ring[slot] = limited
-                if counts[WATCHED] >= WATCH_WINDOW:
-                    fraction = np.sum(ring) / WATCH_WINDOW
-                    if fraction >= WATCH_LIMIT:
-                        floats[STIFF_T], floats[STIFF_FRACTION], floats[STIFF_RHO] = t_new, fraction, rho
-                        return STIFF
+            if boundary > 0 and held_by_stability(m, y_new, h, t_new, boundary, node, ring, counts, floats):
+                return STIFF
             t = t_new
             y[:] = y_new
             K[0] = K[S]

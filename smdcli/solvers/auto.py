@@ -15,7 +15,7 @@ from smdcli.solvers.base import Solver, Tolerances
 from smdcli.solvers.closed_form import ClosedForm
 from smdcli.solvers.exact import Exact, sparse_action
 from smdcli.solvers.modal import modal_applies
-from smdcli.solvers.compiled import DOP853, Radau, StiffnessDetected
+from smdcli.solvers.compiled import DOP853, Radau, StiffnessDetected, Taylor, taylor_boundary, taylor_order
 
 
 def _force_kinds(model: Model, exact: bool | None = None) -> str:
@@ -56,17 +56,27 @@ class Auto(Solver):
         solver, reason = self.choose(model, grid)
         abandoned_s = 0.0  # an explicit attempt given up as stiff still cost its time
         if solver is None:  # nonlinear: try explicit with a stiffness watch
-            explicit = DOP853(watch=True, land=True)
+            nonlinear = f"nonlinear ({', '.join(model.nonlinear_paths)})"
+            why_not = Taylor.unsupported(model)
+            explicit = DOP853(watch=True, land=True) if why_not else Taylor(watch=True)
             try:
                 result = explicit.solve(model, grid, tol)
                 watch = explicit.watch
-                reason = (f"nonlinear ({', '.join(model.nonlinear_paths)}); compiled DOP853 was held by stability "
-                          f"on {watch.share:.0%} of {watch.steps} steps (max h*|lambda| = {watch.max_rho:.2f}, "
-                          f"limit {DOP853.stability_boundary}): not stiff along this trajectory")
+                if why_not:
+                    how = (f"compiled DOP853 (no Taylor series for {why_not}), its steps ending at quadratic dampers' "
+                           "velocity reversals")
+                    limit = DOP853.stability_boundary
+                else:
+                    how = (f"compiled Taylor series of order {taylor_order(tol.rtol)} (smooth, polynomial elements: "
+                           "its terms by recurrence, its steps ending at quadratic dampers' velocity reversals)")
+                    limit = round(taylor_boundary(taylor_order(tol.rtol)), 2)
+                reason = (f"{nonlinear}; {how}, held by stability on {watch.share:.0%} of {watch.steps} steps "
+                          f"(max h*|lambda| = {watch.max_rho:.2f}, limit {limit}): not stiff along this trajectory")
             except StiffnessDetected as stiff:
                 abandoned_s = stiff.elapsed_s
                 result = Radau().solve(model, grid, tol)
-                reason = (f"nonlinear ({', '.join(model.nonlinear_paths)}) and stiff: explicit DOP853 was "
+                name = "DOP853" if why_not else "Taylor series"
+                reason = (f"{nonlinear} and stiff: the explicit {name} was "
                           f"stability-limited on {stiff.fraction:.0%} of its steps by t = {stiff.t:.3g} s "
                           f"(h*|lambda| = {stiff.rho:.2f}); implicit Radau with the analytic Jacobian")
         elif model.nonsmooth:

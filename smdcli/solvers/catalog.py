@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import difflib
 
-METHOD_NAMES = ("auto", "closed_form", "exact", "RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA", "ode45", "ode23",
+METHOD_NAMES = ("auto", "closed_form", "exact", "RK45", "RK23", "DOP853", "taylor", "Radau", "BDF", "LSODA", "ode45", "ode23",
                 "ode113", "ode15s", "ode23s", "ode23t", "ode23tb", "newmark", "sparse_newmark", "hht",
                 "generalized_alpha", "central_difference", "euler", "rk4", "scipy:RK45", "scipy:RK23", "scipy:DOP853", "scipy:ode23s",
                 "scipy:ode23t", "scipy:ode23tb", "scipy:Radau", "scipy:BDF")

@@ -8,6 +8,8 @@ Must not import: sweep, io, plots, commands, cli.
 
 from __future__ import annotations
 
+import functools
+import math
 import sys
 import time
 from dataclasses import dataclass
@@ -72,6 +74,10 @@ def _tiny_run(family: str) -> None:
     if family == "erk":
         run_kernel(tiny, tableaus.RK45, grid, y0, 1e-3, np.full(2, 1e-6), 10, 1e8)
         return
+    if family == "taylor":
+        entry(model_arrays(tiny), 8, y0, grid, grid, 1e-3, 1e-6, 10, 1e8, 0.0, np.zeros((2, 3)),
+              np.zeros(5, dtype=np.int64), np.zeros(5))
+        return
     if family == "return_mapping":
         from smdcli.kernels.rhs import work_size
 
@@ -121,12 +127,13 @@ def _entry(family: str):
 
     module, name = {"erk": ("erk", "integrate"), "fixed": ("fixed", "march"), "stiff": ("stiff", "integrate"),
                     "radau": ("radau", "integrate"), "bdf": ("bdf", "integrate"), "rhs": ("rhs", "state_rhs"),
-                    "return_mapping": ("return_mapping", "march"), "banded": ("banded", "march")}.get(family, (family.removeprefix("modes:"), "integrate_mode"))  # modes:MODULE: its mode kernel
+                    "return_mapping": ("return_mapping", "march"), "banded": ("banded", "march"),
+                    "taylor": ("taylor", "integrate")}.get(family, (family.removeprefix("modes:"), "integrate_mode"))  # modes:MODULE: its mode kernel
     return getattr(importlib.import_module(f"smdcli.kernels.{module}"), name)
 
 
 KERNEL_FAMILIES = ("erk", "fixed", "stiff", "radau", "bdf", "rhs", "modes:events", "modes:radau", "modes:bdf",
-                   "modes:stiff", "return_mapping", "banded")
+                   "modes:stiff", "return_mapping", "banded", "taylor")
 _warmed: set[str] = set()
 
 
@@ -182,6 +189,29 @@ def failure_text(status: int, max_steps: int, bound: float) -> str:
     }[status]
 
 
+def explicit_outcome(solver, status: int, counts: np.ndarray, floats: np.ndarray, elapsed: float, tol: Tolerances,
+                     max_steps: int, bound: float) -> tuple[SolverStats, float | None]:
+    """An explicit kernel's run read back (erk's counters and floats): the solver's watch set, StiffnessDetected
+    raised where the watch stopped it, else its statistics and where it failed (None if it did not)."""
+    from smdcli.kernels import erk
+
+    solver.watch = Watch(int(counts[erk.WATCHED]), int(counts[erk.LIMITED]), float(floats[erk.MAX_RHO]))
+    if status == erk.STIFF:
+        solver.watch = Watch(solver.watch.steps, solver.watch.limited, solver.watch.max_rho, float(floats[erk.STIFF_T]),
+                             float(floats[erk.STIFF_FRACTION]), float(floats[erk.STIFF_RHO]))
+        raise StiffnessDetected(solver.watch, elapsed)
+    failure = None if status == erk.OK else failure_text(status, max_steps, bound)
+    t_reached = float(floats[erk.T_REACHED])
+    stats = SolverStats(
+        method=solver.name, requested_method=solver.name, reason="", rtol=tol.rtol, atol=tol.atol,
+        wall_time_s=elapsed, success=failure is None,
+        message="ok" if failure is None else f"failed at t = {t_reached:.6g} s: {failure}",
+        nfev=int(counts[erk.NFEV]), njev=0, nlu=0, steps_accepted=int(counts[erk.ACCEPTED]),
+        steps_rejected=int(counts[erk.REJECTED]),
+    )
+    return stats, None if failure is None else t_reached
+
+
 class CompiledRK(Solver):
     """An explicit Runge-Kutta pair run by the compiled kernel, restarted at every force discontinuity."""
 
@@ -195,8 +225,6 @@ class CompiledRK(Solver):
         self.watching, self.landing = watch, land
 
     def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
-        from smdcli.kernels import erk
-
         warm()
         start = time.perf_counter()
         y0 = np.concatenate([model.x0, model.v0])
@@ -206,24 +234,88 @@ class CompiledRK(Solver):
         status, out, counts, floats = run_kernel(model, self.kernel_method, grid, y0, tol.rtol,
                                                  np.full(len(y0), tol.atol), max_steps, bound, boundary,
                                                  tol.breakpoints, land=self.landing)
-        elapsed = time.perf_counter() - start
-        self.watch = Watch(int(counts[erk.WATCHED]), int(counts[erk.LIMITED]), float(floats[erk.MAX_RHO]))
-        if status == erk.STIFF:
-            self.watch = Watch(self.watch.steps, self.watch.limited, self.watch.max_rho,
-                               float(floats[erk.STIFF_T]), float(floats[erk.STIFF_FRACTION]),
-                               float(floats[erk.STIFF_RHO]))
-            raise StiffnessDetected(self.watch, elapsed)
-        failure = None if status == erk.OK else failure_text(status, max_steps, bound)
-        t_reached = float(floats[erk.T_REACHED])
-        stats = SolverStats(
-            method=self.name, requested_method=self.name, reason="", rtol=tol.rtol, atol=tol.atol,
-            wall_time_s=elapsed, success=failure is None,
-            message="ok" if failure is None else f"failed at t = {t_reached:.6g} s: {failure}",
-            nfev=int(counts[erk.NFEV]), njev=0, nlu=0, steps_accepted=int(counts[erk.ACCEPTED]),
-            steps_rejected=int(counts[erk.REJECTED]),
-        )
+        stats, t_failed = explicit_outcome(self, status, counts, floats, time.perf_counter() - start, tol, max_steps,
+                                           bound)
         n = model.n
-        return make_result(model, grid, out[:, :n], out[:, n:], stats, t_failed=None if failure is None else t_reached)
+        return make_result(model, grid, out[:, :n], out[:, n:], stats, t_failed=t_failed)
+
+
+# A Taylor step's tolerance: this share of rtol and atol, as its steps' errors add up over a run (measured: the
+# global error is about 10 times the step's on the bundled nonlinear scenes).
+TAYLOR_STEP_SHARE = 0.01
+
+
+def taylor_order(rtol: float) -> int:
+    """The series' order for a run's tolerance: about 0.7 ln(1/(step's tolerance)), between 8 and 30 (an order costs
+    about a right-hand side; higher orders take longer steps)."""
+    return int(min(30, max(8, math.ceil(0.7 * math.log(1 / max(rtol * TAYLOR_STEP_SHARE, 1e-16))))))
+
+
+@functools.lru_cache(maxsize=None)
+def taylor_boundary(order: int) -> float:
+    """Where on the negative real axis the order's truncated exponential sum_k z^k / k! first reaches 1 in size."""
+    series = 1.0 / np.cumprod(np.concatenate([[1.0], np.arange(1.0, order + 1)]))  # 1 / k!, rising powers of z
+    crossings = [root.real for level in (1.0, -1.0) for root in np.roots((series - np.eye(order + 1)[0] * level)[::-1])
+                 if abs(root.imag) < 1e-9 and root.real < -1e-9]
+    return float(-max(crossings))
+
+
+class Taylor(Solver):
+    """Taylor series of the motion, its coefficients by recurrence, summed compiled (smdcli.kernels.taylor)."""
+
+    name = "taylor"
+    family = "compiled Taylor series"
+    description = ("Taylor series of order 8-30 (by the tolerance), coefficients by recurrence, compiled; for smooth "
+                   "scenes with cubic springs, quadratic dampers and forces other than chirps and expressions")
+    compiled = True
+    order = None
+    watch: Watch | None = None
+
+    def __init__(self, watch: bool = False):
+        self.watching = watch
+
+    @staticmethod
+    def unsupported(model: Model) -> str | None:
+        """What in the scene has no series here (nonsmooth elements, a chirp or expression force), or None."""
+        from smdcli.model.forcing import Chirp, ExpressionSignal
+
+        if model.nonsmooth:
+            return "nonsmooth elements"
+        for signal in model.signals:
+            if isinstance(signal, (Chirp, ExpressionSignal)):
+                return f"a {'chirp' if isinstance(signal, Chirp) else 'expression'} force"
+        return None
+
+    def refuse(self, model: Model) -> str | None:
+        """Scenes with something that has no series: say what, and what to use instead."""
+        what = self.unsupported(model)
+        return f"'taylor' has no series for {what}; try 'DOP853' or 'auto'" if what else None
+
+    def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
+        from smdcli.kernels import taylor
+        from smdcli.kernels.arrays import model_arrays
+
+        warm("taylor")
+        start = time.perf_counter()
+        n = model.n
+        y0 = np.concatenate([model.x0, model.v0]).astype(float)
+        force = model.applied_force(grid) if model.is_forced else np.zeros((len(grid), n))
+        bound = divergence_bound(model, grid, force)
+        max_steps = tol.max_steps or MAX_STEPS
+        order = taylor_order(tol.rtol)
+        boundary = taylor_boundary(order) if self.watching else 0.0
+        out = np.empty((len(grid), 3 * n))  # x, v, a
+        out[0, :2 * n] = y0
+        out[0, 2 * n:] = model.acceleration(model.x0[None], model.v0[None], force[:1])[0]
+        counts, floats = np.zeros(5, dtype=np.int64), np.zeros(5)
+        status = taylor.integrate(model_arrays(model), order, y0, np.asarray(grid, dtype=float),
+                                  cuts(model, grid, tol.breakpoints), float(tol.rtol) * TAYLOR_STEP_SHARE,
+                                  float(tol.atol) * TAYLOR_STEP_SHARE, int(max_steps), float(bound), float(boundary),
+                                  out, counts, floats)
+        stats, t_failed = explicit_outcome(self, status, counts, floats, time.perf_counter() - start, tol, max_steps,
+                                           bound)
+        return make_result(model, grid, out[:, :n], out[:, n:2 * n], stats, t_failed=t_failed, force=force,
+                           acceleration=out[:, 2 * n:])
 
 
 def _compiled(name: str, method: int, order: int, boundary: float, text: str):

@@ -1,0 +1,309 @@
+"""A compiled Taylor series integrator for smooth scenes whose nonlinearities are polynomials.
+
+Between two force discontinuities and two velocity reversals of its quadratic dampers, the motion of
+M x'' + C x' + K x + f_nl(x, x') = B u(t) is analytic and its Taylor coefficients follow from a recurrence:
+x_(k+1) = v_k / (k + 1), v_(k+1) = (M^-1 (u_k - f_k) - M^-1 K x_k - M^-1 C v_k) / (k + 1), where u_k are the
+forces' coefficients (closed forms for sines and cosines, a constant or a line between a table's knots) and
+f_k the elements' (a cubic spring's k3 d^3 and a quadratic damper's c s d'^2, s the sign of d' on the step,
+by Cauchy products). One order costs one sparse product, about a right-hand side; a step sums the series to
+order p at a step where its last two terms fall under the tolerance (Jorba and Zou, 2005), so no try is
+rejected, the output rows are the polynomial evaluated (no interpolant to build) and a damper's reversal is
+the root of its velocity's polynomial, where the step ends.
+
+Must not import: solvers, sweep, io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from smdcli.kernels.arrays import (CONSTANT, COSINE, CUBIC_SPRING, FOURIER_SQUARE, PULSE, SINE, SQUARE, STEP,
+                                   TABLE_LINEAR, TABLE_PREVIOUS)
+from smdcli.kernels.compiler import inlined, kernel, no_alloc
+from smdcli.kernels.erk import (ACCEPTED, NFEV, OK, STEP_BUDGET, STIFF, T_REACHED, TOO_SMALL_STEP, WATCH_WINDOW,
+                                held_by_stability, rows_through, state_status)
+from smdcli.kernels.rhs import force_value
+
+SUPPORTED_FORCES = (CONSTANT, STEP, PULSE, SINE, COSINE, SQUARE, FOURIER_SQUARE, TABLE_LINEAR, TABLE_PREVIOUS)
+SAFETY = 0.9
+ROWS = 16  # output rows summed side by side
+SAMPLES = 4  # points of each step where a damper's velocity polynomial is checked for a reversal
+
+
+@no_alloc
+def _harmonic(amplitude, omega, phase, cosine, p, column, series):
+    """Taylor coefficients of amplitude sin(phase + omega tau) (cos if cosine) about tau = 0 into series[:, column]."""
+    s, c = math.sin(phase), math.cos(phase)
+    cycle = (c, -s, -c, s) if cosine else (s, c, -s, -c)
+    scale = amplitude
+    for k in range(p + 1):
+        series[k, column] += scale * cycle[k % 4]
+        scale *= omega / (k + 1)
+
+
+@no_alloc
+def force_series(m, t, ta, mid, p, series, stack):
+    """Each force's Taylor coefficients about t (in a stretch [ta, tb) between discontinuities, mid its middle);
+    stack is force_value's scratch."""
+    series[:, :] = 0.0
+    for j in range(len(m.f_kind)):
+        kind = m.f_kind[j]
+        q = m.f_par[j]
+        if kind == SINE or kind == COSINE:
+            _harmonic(q[0], q[1], q[1] * t + q[2], kind == COSINE, p, j, series)
+        elif kind == FOURIER_SQUARE:
+            data = m.f_data[m.f_ptr[j]:m.f_ptr[j + 1]]
+            terms = len(data) // 2
+            for i in range(terms):
+                omega = data[i] * q[0]
+                _harmonic(data[terms + i], omega, omega * (t - q[1]) + q[2], False, p, j, series)
+        elif kind == TABLE_LINEAR:  # a line between knots (they are discontinuities of its slope)
+            series[0, j] = force_value(m, j, t, t >= mid, stack)
+            if p >= 1 and mid > ta:
+                series[1, j] = (force_value(m, j, mid, False, stack) - force_value(m, j, ta, False, stack)) / (mid - ta)
+        else:  # constant on the stretch: its value in the middle
+            series[0, j] = force_value(m, j, mid, False, stack)
+
+
+@no_alloc
+def direction(D, e, k, scale_v, h_last):
+    """The sign of quadratic damper e's d' on the step, from its series' terms 0..k: d' itself, unless it is within
+    rounding of zero (1e-12 of the running peak speed scale_v) or reverses within a millionth of the last step
+    h_last (a step that ended at a reversal leaves d' there, on either side); then its first term that is not
+    zero. 0.0 while all are."""
+    r0, r1 = D[0, e], D[1, e]
+    if abs(r0) > 1e-12 * scale_v and not (r0 * r1 < 0 and abs(r0) < 1e-6 * abs(r1) * h_last):
+        return 1.0 if r0 > 0 else -1.0
+    for j in range(1, k + 1):
+        if D[j, e] != 0.0:
+            return 1.0 if D[j, e] > 0 else -1.0
+    return 0.0
+
+
+@no_alloc
+def coefficients(m, p, Y, U, D, D2, sign, scale_v, h_last, work):
+    """Orders 1..p of the state's series Y = [x, v] (order 0 given), from the forces' series U; D and D2 hold each
+    element's d (or d') and d^2 series, sign each quadratic damper's sign of d' on the step (direction); h_last is
+    the last step; work is scratch of n."""
+    n = m.n
+    E = len(m.el_law)
+    for e in range(E):
+        sign[e] = 0.0
+    for k in range(p):
+        for i in range(n):
+            work[i] = 0.0
+        ground = 0.0
+        for j in range(len(m.f_kind)):
+            if m.f_dof[j] >= 0:
+                work[m.f_dof[j]] += U[k, j]
+            else:
+                ground += U[k, j]
+        for e in range(E):
+            a, b = m.el_a[e], m.el_b[e]
+            offset = 0 if m.el_law[e] == CUBIC_SPRING else n
+            D[k, e] = (Y[k, offset + a] if a >= 0 else 0.0) - (Y[k, offset + b] if b >= 0 else 0.0)
+            square = 0.0
+            for i in range(k + 1):
+                square += D[i, e] * D[k - i, e]
+            D2[k, e] = square
+            if m.el_law[e] == CUBIC_SPRING:
+                cube = 0.0
+                for i in range(k + 1):
+                    cube += D2[i, e] * D[k - i, e]
+                g = m.el_coef[e] * cube
+            elif k < 2:  # c |d'| d' and its first derivative need no sign
+                g = m.el_coef[e] * abs(D[0, e]) * (D[0, e] if k == 0 else 2 * D[1, e])
+            else:
+                if sign[e] == 0.0:
+                    sign[e] = direction(D, e, k, scale_v, h_last)
+                g = m.el_coef[e] * sign[e] * square
+            if a >= 0:
+                work[a] -= g
+            if b >= 0:
+                work[b] += g
+        inverse = 1.0 / (k + 1)
+        row, below = Y[k + 1], Y[k]
+        for i in range(n):
+            row[i] = below[n + i] * inverse
+        for i in range(n):
+            s = -ground
+            for q in range(m.mi_ptr[i], m.mi_ptr[i + 1]):
+                s += m.mi_val[q] * work[m.mi_idx[q]]
+            for q in range(m.a_ptr[i], m.a_ptr[i + 1]):
+                s += m.a_val[q] * below[m.a_idx[q]]
+            row[n + i] = s * inverse
+
+
+@inlined
+def horner(S, tau, i):
+    """The series S[:, i] summed at tau."""
+    value = 0.0
+    for k in range(S.shape[0] - 1, -1, -1):
+        value = value * tau + S[k, i]
+    return value
+
+
+@inlined
+def horner_slope(S, tau, i):
+    """The series S[:, i] and its derivative, summed at tau."""
+    value, slope = 0.0, 0.0
+    for k in range(S.shape[0] - 1, -1, -1):
+        slope = slope * tau + value
+        value = value * tau + S[k, i]
+    return value, slope
+
+
+@no_alloc
+def emit(Z, t, grid, first, last, out, taus, sums):
+    """Rows first..last-1 of out: the series Z summed at the rows' times. One Horner sum is a chain of dependent
+    multiply-adds, so sums run side by side: a row's components where there are many, else ROWS rows of each
+    component. taus and sums are scratch of ROWS and Z's width."""
+    size = Z.shape[1]
+    p = Z.shape[0] - 1
+    if size >= ROWS:
+        for r in range(first, last):
+            tau = grid[r] - t
+            for i in range(size):
+                sums[i] = Z[p, i]
+            for k in range(p - 1, -1, -1):
+                for i in range(size):
+                    sums[i] = sums[i] * tau + Z[k, i]
+            for i in range(size):
+                out[r, i] = sums[i]
+        return
+    for start in range(first, last, ROWS):
+        count = min(ROWS, last - start)
+        for r in range(count):
+            taus[r] = grid[start + r] - t
+        for i in range(size):
+            for r in range(count):
+                sums[r] = Z[p, i]
+            for k in range(p - 1, -1, -1):
+                c = Z[k, i]
+                for r in range(count):
+                    sums[r] = sums[r] * taus[r] + c
+            for r in range(count):
+                out[start + r, i] = sums[r]
+
+
+@no_alloc
+def step_size(Y, p, tol_x, tol_v):
+    """The step at which the series' last two terms, relative to the tolerances (of x and of v), fall to SAFETY
+    times 1 (inf if they vanish)."""
+    h = math.inf
+    n = Y.shape[1] // 2
+    for k in (p - 1, p):
+        size = 0.0
+        for i in range(n):
+            size = max(size, abs(Y[k, i]) / tol_x, abs(Y[k, n + i]) / tol_v)
+        if size > 0.0:
+            h = min(h, size ** (-1.0 / k))
+    return SAFETY * h
+
+
+@no_alloc
+def reversal(m, D, sign, h):
+    """Where in (0, h] a quadratic damper's velocity first changes sign (its series' root), or h. A velocity larger
+    than the sum of its series' other terms' sizes cannot reverse within the step; else the first of SAMPLES points
+    past the root brackets it, and Newton's steps, kept inside the bracket, close in on it."""
+    first = h
+    for e in range(len(m.el_law)):
+        if m.el_law[e] == CUBIC_SPRING or sign[e] == 0.0:
+            continue
+        reach, power = 0.0, 1.0
+        for k in range(1, D.shape[0]):
+            power *= first
+            reach += abs(D[k, e]) * power
+        if reach < abs(D[0, e]):
+            continue
+        lo = 0.0
+        for s in range(1, SAMPLES + 1):
+            tau = first * s / SAMPLES
+            if horner(D, tau, e) * sign[e] >= 0.0:
+                lo = tau
+                continue
+            hi = tau
+            guess = 0.5 * (lo + hi)
+            for _ in range(50):
+                value, slope = horner_slope(D, guess, e)
+                if value * sign[e] < 0.0:
+                    hi = guess
+                else:
+                    lo = guess
+                step = guess - value / slope if slope != 0.0 else 0.5 * (lo + hi)
+                if not lo <= step <= hi:
+                    step = 0.5 * (lo + hi)
+                if abs(step - guess) <= 4e-16 * hi:
+                    break
+                guess = step
+            first = guess
+            break
+    return first
+
+
+@kernel
+def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out, counts, floats):
+    """Sum the Taylor series of order p from y0 over the grid into out's rows [x, v, a] (from row 1; row 0 is the
+    caller's), restarting at each cut; a status (erk's OK, ...). The acceleration's series is the velocity's
+    derivative, whose terms are M^-1 (u - f_nl - K x - C v) order by order: equilibrium's, to order p - 1. Tolerances scale with the running peaks of |x| and |v| (the error is stated relative to the peak);
+    boundary > 0 watches for stiffness as erk.integrate does, h |lambda| against the series' stability limit."""
+    n = m.n
+    E = len(m.el_law)
+    Z = np.zeros((p + 1, 3 * n))  # the series of x, v and a
+    Y = Z[:, :2 * n]
+    U = np.zeros((p + 1, len(m.f_kind)))
+    D, D2 = np.zeros((p + 1, max(E, 1))), np.zeros((p + 1, max(E, 1)))
+    sign, node, work, stack = np.zeros(max(E, 1)), np.zeros(2 * n), np.zeros(n), np.zeros(1)
+    taus, sums = np.zeros(ROWS), np.zeros(max(ROWS, 3 * n))
+    y = y0.copy()
+    ring = np.zeros(WATCH_WINDOW, dtype=np.bool_)
+    peak_x, peak_v = 0.0, 0.0
+    for i in range(n):
+        peak_x, peak_v = max(peak_x, abs(y[i])), max(peak_v, abs(y[n + i]))
+    row = 1
+    h_last = 0.0
+    floats[T_REACHED] = grid[0]
+    for seg in range(len(cuts) - 1):
+        ta, tb = cuts[seg], cuts[seg + 1]
+        mid = 0.5 * (ta + tb)
+        t = ta
+        while t < tb:
+            Y[0] = y
+            force_series(m, t, ta, mid, p, U, stack)
+            coefficients(m, p, Y, U, D, D2, sign, peak_v, h_last, work)
+            counts[NFEV] += p
+            h = min(step_size(Y, p, max(atol + rtol * peak_x, 1e-300), max(atol + rtol * peak_v, 1e-300)), tb - t)
+            if E > 0:
+                h = reversal(m, D, sign, h)
+            t_new = tb if h >= tb - t else t + h
+            if t_new <= t or h < 10 * abs(np.nextafter(t, np.inf) - t):
+                floats[T_REACHED] = t
+                out[row:] = np.nan
+                return TOO_SMALL_STEP
+            counts[ACCEPTED] += 1
+            if counts[ACCEPTED] > max_steps:
+                out[row:] = np.nan
+                return STEP_BUDGET
+            last = rows_through(grid, row, t_new)
+            for k in range(p):
+                for i in range(n):
+                    Z[k, 2 * n + i] = (k + 1) * Z[k + 1, n + i]
+            emit(Z, t, grid, row, last, out, taus, sums)
+            row = last
+            h = t_new - t
+            h_last = h
+            for i in range(2 * n):
+                y[i] = horner(Y, h, i)
+            for i in range(n):
+                peak_x, peak_v = max(peak_x, abs(y[i])), max(peak_v, abs(y[n + i]))
+            floats[T_REACHED] = t_new
+            status = state_status(y, bound)
+            if status != OK:
+                out[row:] = np.nan
+                return status
+            if boundary > 0 and held_by_stability(m, y, h, t_new, boundary, node, ring, counts, floats):
+                return STIFF
+            t = t_new
+    return OK

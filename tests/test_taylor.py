@@ -1,0 +1,151 @@
+"""The compiled Taylor series (method 'taylor', auto's choice for smooth nonlinear scenes) against independent
+references: scipy's DOP853 and smd's Radau at tight tolerances, the exact modal solution of a linear scene, the
+equilibrium of the model's own right-hand side, and the stability limit of the truncated exponential."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from conftest import bundled as load
+from conftest import model_of
+from test_kernels import FORCES
+
+from smdcli.solvers import solve
+from smdcli.solvers.base import Tolerances
+from smdcli.solvers.compiled import Taylor, taylor_boundary, taylor_order
+
+TIGHT = Tolerances(rtol=1e-13, atol=1e-16)
+
+
+def smooth_forces() -> str:
+    """test_kernels' scene with every force kind but those with no series (chirp, expression)."""
+    head, *blocks = FORCES.split("[[force]]")
+    kept = [b for b in blocks if 'type = "chirp"' not in b and 'type = "expression"' not in b]
+    return "[[force]]".join([head, *kept])
+
+
+def relative_error(result, reference) -> float:
+    peak = np.abs(reference.displacement).max()
+    return float(np.abs(result.displacement - reference.displacement).max() / peak)
+
+
+@pytest.mark.parametrize("rtol", [1e-6, 1e-8, 1e-10])
+def test_every_force_with_a_series_and_both_element_laws_within_rtol_of_a_tight_dop853(rtol):
+    """Constant, step, pulse, sine, cosine, square, Fourier square and both tables, on a cubic spring and a quadratic
+    damper, restarted at each edge: the error stays under the tolerance asked for."""
+    _, model, grid = model_of(smooth_forces())
+    assert Taylor().refuse(model) is None
+    ours = solve(model, grid, "taylor", Tolerances(rtol=rtol, atol=1e-12))
+    reference = solve(model, grid, "scipy:DOP853", TIGHT)
+    assert ours.success, ours.stats.message
+    assert relative_error(ours, reference) <= rtol
+    assert ours.stats.steps_rejected == 0
+
+
+def test_the_books_stiff_damper_at_its_settings_is_within_1e_9_of_a_tight_radau_in_fewer_terms_than_dop853_stages():
+    """The book's c |v| v scene reverses 200 times: each reversal is a root of the velocity's series, where a step
+    ends, so the series never spans the kink; its default run is 20x inside rtol, at a third of DOP853's work."""
+    sc, model, grid = load("one_dof_nonlinear_stiff")
+    from smdcli.solvers.checked import solve_scenario
+
+    ours = solve_scenario(sc, model, grid)
+    reference = solve(model, grid, "Radau", Tolerances(rtol=1e-12, atol=1e-16))
+    dop853 = solve(model, grid, "DOP853", Tolerances(rtol=sc.solver.rtol, atol=sc.solver.atol))
+    assert ours.stats.method == "taylor" and "not stiff" in ours.stats.reason
+    assert relative_error(ours, reference) <= 1e-9
+    assert relative_error(ours, reference) < relative_error(dop853, reference)
+    assert ours.stats.nfev < dop853.stats.nfev / 2
+
+
+def test_a_linear_scene_agrees_with_its_exact_modal_solution():
+    """Three masses, a sine and a step: the exact recurrence is the independent reference (rounding-level)."""
+    _, model, grid = load("three_dof_forced")
+    exact = solve(model, grid, "exact", Tolerances())
+    for rtol in (1e-7, 1e-10):
+        ours = solve(model, grid, "taylor", Tolerances(rtol=rtol, atol=1e-14))
+        assert relative_error(ours, exact) <= rtol
+
+
+def test_the_accelerations_are_equilibriums_of_the_summed_states():
+    """The acceleration rows come from the velocity's series; M a must balance the forces at the summed x and v."""
+    _, model, grid = load("duffing_frequency_response")
+    tol = Tolerances(rtol=1e-9, atol=1e-12)
+    ours = solve(model, grid, "taylor", tol)
+    balanced = model.acceleration(ours.displacement, ours.velocity, model.applied_force(grid))
+    assert np.abs(ours.acceleration - balanced).max() <= 10 * tol.rtol * np.abs(balanced).max()
+
+
+def test_a_support_motion_record_integrates_between_its_samples():
+    """A ground acceleration table: linear between samples (its knots are restarts), -a_g on every DOF."""
+    text = """
+[time]
+end = 2.0
+step = 0.005
+[[mass]]
+name = "m"
+m = 1.0
+[[spring]]
+connects = ["ground", "m"]
+k = 400.0
+law = "cubic"
+k3 = 2.0e4
+[[damper]]
+connects = ["ground", "m"]
+c = 0.4
+[ground_motion]
+quantity = "acceleration"
+type = "table"
+t = [0.0, 0.1, 0.25, 0.4, 0.7, 1.0, 1.3]
+values = [0.0, 3.0, -4.0, 2.5, -1.0, 0.5, 0.0]
+"""
+    _, model, grid = model_of(text)
+    ours = solve(model, grid, "taylor", Tolerances(rtol=1e-9, atol=1e-12))
+    reference = solve(model, grid, "scipy:DOP853", TIGHT)
+    assert ours.success and relative_error(ours, reference) <= 1e-9
+
+
+def test_auto_takes_dop853_where_a_force_has_no_series_and_says_so():
+    _, model, grid = model_of(FORCES)
+    assert "chirp" in Taylor().refuse(model)
+    r = solve(model, grid, "auto", Tolerances(rtol=1e-7, atol=1e-10))
+    assert r.stats.method == "DOP853" and "no Taylor series for a chirp force" in r.stats.reason
+
+
+def test_the_order_grows_with_the_tolerance_and_its_stability_limit_is_the_truncated_exponentials():
+    """RK4's polynomial (order 4) is stable on the negative real axis to 2.7853; the order's limit is where
+    |sum z^k / k!| first reaches 1, checked by evaluating the sum just inside and outside it."""
+    assert abs(taylor_boundary(4) - 2.785293563405) < 1e-9
+    for order in (8, 13, 17, 30):
+        r = taylor_boundary(order)
+        size = lambda z: abs(sum(z ** k / math.factorial(k) for k in range(order + 1)))  # noqa: E731
+        assert size(-0.999 * r) <= 1 < size(-1.001 * r)
+    assert [taylor_order(rtol) for rtol in (1e-4, 1e-6, 1e-8, 1e-10, 1e-14)] == sorted(
+        taylor_order(rtol) for rtol in (1e-4, 1e-6, 1e-8, 1e-10, 1e-14))
+    assert taylor_order(1e-8) > taylor_order(1e-4)
+
+
+@pytest.mark.parametrize("case", ["at rest, pushed", "twins", "still"])
+def test_a_quadratic_damper_whose_speed_starts_at_or_stays_at_zero(case):
+    """d' = 0 at the start (its sign is then its acceleration's), d' = 0 throughout (two identical masses moving
+    together: the damper never acts), and nothing moving at all: each as a tight DOP853 has it."""
+    masses = ('[[mass]]\nname = "a"\nm = 1.0\nx0 = 0.1\n[[mass]]\nname = "b"\nm = 1.0\nx0 = 0.1\n'
+              if case == "twins" else '[[mass]]\nname = "a"\nm = 1.0\n[[mass]]\nname = "b"\nm = 1.0\n')
+    text = ("[time]\nend = 3.0\nstep = 0.01\n" + masses +
+            '[[spring]]\nconnects = ["ground", "a"]\nk = 50.0\n[[spring]]\nconnects = ["ground", "b"]\nk = 50.0\n'
+            '[[damper]]\nconnects = ["a", "b"]\nc = 30.0\nlaw = "quadratic"\n'
+            '[[damper]]\nconnects = ["ground", "a"]\nc = 5.0\nlaw = "quadratic"\n'
+            '[[damper]]\nconnects = ["ground", "b"]\nc = 5.0\nlaw = "quadratic"\n')
+    if case == "at rest, pushed":
+        text += '[[force]]\non = "a"\ntype = "step"\namplitude = 20.0\nt0 = 0.0\n'
+    _, model, grid = model_of(text)
+    ours = solve(model, grid, "taylor", Tolerances(rtol=1e-9, atol=1e-12))
+    assert ours.success, ours.stats.message
+    if case == "still":
+        assert not np.any(ours.displacement) and not np.any(ours.velocity)
+        return
+    reference = solve(model, grid, "scipy:DOP853", TIGHT)
+    assert relative_error(ours, reference) <= 1e-9
+    if case == "twins":
+        assert np.array_equal(ours.displacement[:, 0], ours.displacement[:, 1])
