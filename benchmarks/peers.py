@@ -17,7 +17,13 @@ Work compared:
   Newmark at 10,000) against OpenSees (Newmark, banded), and the whole `smd simulate` of the 10,000; error of both
   against the dense state transition of the 1,000 (one expm of the whole augmented system, stepped);
 - an elastoplastic 1-DOF under the record: smd exact against OpenSees ElasticPP at dt / 16 (from
-  benchmarks/elastoplastic_vs_opensees.py); error against smd's event-driven Radau at rtol 1e-11.
+  benchmarks/elastoplastic_vs_opensees.py); error against smd's event-driven Radau at rtol 1e-11;
+- nonlinear scenes at the same error: the book's stiff damper (one_dof_nonlinear_stiff, c |v| v, 20,001 points) and
+  chains of 10, 100 and 1,000 masses with a cubic first spring and a sine force (compiled_vs_solve_ivp.chain,
+  1,001 points): smd's `auto` at the scene's settings against scipy's solve_ivp DOP853, RK45 and Radau (its
+  analytic Jacobian, sparse for chains) on the right-hand side a user would write in numpy, each at the loosest
+  rtol (10^-3 to 10^-13 in half decades, atol 1e-3 rtol times the peak) whose error is no larger than smd's;
+  error: the largest displacement difference from scipy DOP853 at rtol 1e-13, over the peak.
 """
 
 from __future__ import annotations
@@ -290,32 +296,144 @@ def chain_rows(repeats):
     return rows
 
 
+# Times a command and reads its peak memory from a small process of its own: a child's ru_maxrss counts the
+# memory of the process it was started from (Linux takes the old image's peak at exec), and this one holds GBs.
+MEASURER = ("import os, subprocess, sys, time\n"
+            "start = time.perf_counter()\n"
+            "child = subprocess.Popen(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)\n"
+            "_, status, usage = os.wait4(child.pid, 0)\n"
+            "print(time.perf_counter() - start, usage.ru_maxrss / 1024, os.waitstatus_to_exitcode(status))\n")
+
+
 def simulate_row(path: Path, out: Path, reference, peak, ops):
     """The whole `smd simulate` of a scene, timed and its peak memory measured; its error read from its file."""
-    import os
     import subprocess
-    import time
 
     import h5py
 
-    start = time.perf_counter()
-    child = subprocess.Popen([sys.executable, "-m", "smdcli", "simulate", str(path), "-o", str(out)],
-                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    _, status, usage = os.wait4(child.pid, 0)
-    seconds = time.perf_counter() - start
-    work = f"smd simulate {path.name} (file, plots; {usage.ru_maxrss / 1024:.0f} MB peak)"
-    if os.waitstatus_to_exitcode(status) != 0:
+    measured = subprocess.run([sys.executable, "-c", MEASURER, sys.executable, "-m", "smdcli", "simulate", str(path),
+                               "-o", str(out)], capture_output=True, text=True, check=True).stdout.split()
+    seconds, megabytes, code = float(measured[0]), float(measured[1]), int(measured[2])
+    work = f"smd simulate {path.name} (file, plots; {megabytes:.0f} MB peak)"
+    if code != 0:
         return (work, (seconds, math.nan), "smd simulate failed", None)
     with h5py.File(out / f"{path.stem}.h5") as f:
         x = f["displacement"][:, 0]
     return (work, (seconds, np.abs(x - reference).max() / peak), "OpenSees Newmark, dt = output step", ops)
 
 
+def user_rhs(name: str, n: int):
+    """The right-hand side and Jacobian a scipy user writes for a scene, in numpy: (f, jac)."""
+    from scipy import sparse
+
+    if name == "stiff":  # the book's M u'' + C |u'| u' + K u = 0, M = 1, C = 1001, K = 1000
+        def f(t, y):
+            return [y[1], -1000.0 * y[0] - 1001.0 * abs(y[1]) * y[1]]
+
+        def jac(t, y):
+            return [[0.0, 1.0], [-1000.0, -2002.0 * abs(y[1])]]
+
+        return f, jac
+    # compiled_vs_solve_ivp.chain: 1 kg masses, 100 N/m links, the first to ground also k3 = 1000 N/m^3 and
+    # 0.5 N s/m, a force 10 sin 5t on it
+    stiffness = sparse.diags([np.r_[200.0 * np.ones(n - 1), 100.0], -100.0 * np.ones(n - 1), -100.0 * np.ones(n - 1)],
+                             [0, 1, -1], format="csr")
+    base = sparse.bmat([[None, sparse.eye(n)], [-stiffness, None]], format="lil")
+    base[n, n] = -0.5
+
+    def f(t, y):
+        x, v = y[:n], y[n:]
+        a = -(stiffness @ x)
+        a[0] += 10.0 * np.sin(5.0 * t) - 1000.0 * x[0] ** 3 - 0.5 * v[0]
+        return np.concatenate([v, a])
+
+    def jac(t, y):
+        J = base.copy()
+        J[n, 0] = -200.0 - 3000.0 * y[0] ** 2 if n > 1 else -100.0 - 3000.0 * y[0] ** 2
+        return J.tocsc()
+
+    return f, jac
+
+
+SCIPY_RTOLS = [10 ** (-k / 2) for k in range(6, 27)]
+
+
+def scipy_at_error(f, jac, span, y0, grid, reference, peak, target, method, repeats, patience):
+    """scipy's method at the loosest rtol whose error is within target: (rtol, median seconds, error), or
+    (None, seconds of the last run, its error) where no rtol reached it within `patience` seconds a run."""
+    import time
+
+    from scipy.integrate import solve_ivp
+
+    n = reference.shape[1]
+
+    def run(rtol):
+        extra = {"jac": jac} if method == "Radau" else {}
+        return solve_ivp(f, span, y0, method=method, t_eval=grid, rtol=rtol, atol=1e-3 * rtol * peak, **extra)
+
+    for rtol in SCIPY_RTOLS:
+        start = time.perf_counter()
+        sol = run(rtol)
+        seconds = time.perf_counter() - start
+        error = np.abs(sol.y[:n].T - reference).max() / peak if sol.success else math.inf
+        if error <= target:
+            seconds, sol = timed(lambda: run(rtol), repeats if seconds < 1 else 1)
+            return rtol, seconds, np.abs(sol.y[:n].T - reference).max() / peak
+        if seconds > patience:
+            return None, seconds, error
+    return None, seconds, error
+
+
+def nonlinear_rows(repeats):
+    """The book's stiff damper and nonlinear chains: smd's auto against scipy's three methods at smd's error."""
+    from compiled_vs_solve_ivp import chain
+    from scipy.integrate import solve_ivp
+
+    from smdcli import scenario
+    from smdcli.model import build, time_grid
+    from smdcli.solvers.checked import solve_scenario
+
+    scenes = [("book's stiff damper c|v|v, 1 DOF", "stiff", 1,
+               scenario.load(ROOT / "scenarios" / "one_dof_nonlinear_stiff.toml"))]
+    scenes += [(f"nonlinear chain of {n} masses", "chain", n, scenario.parse(chain(n), f"chain{n}.toml"))
+               for n in (10, 100, 1000)]
+    rows = []
+    for work, name, n, sc in scenes:
+        model, grid = build(sc), time_grid(sc.time)
+        f, jac = user_rhs(name, n)
+        y0, span = np.concatenate([model.x0, model.v0]), (grid[0], grid[-1])
+        reference = solve_ivp(f, span, y0, method="DOP853", t_eval=grid, rtol=1e-13, atol=1e-16).y[:n].T
+        peak = np.abs(reference).max()
+        solve_scenario(sc, model, grid)  # kernels loaded
+        seconds, result = timed(lambda: solve_scenario(sc, model, grid), repeats * 3)
+        smd = (seconds, np.abs(result.displacement - reference).max() / peak)
+        work = f"{work}, {len(grid)} points ({result.stats.method})"
+        best = math.inf
+        for method in ("DOP853", "RK45", "Radau"):
+            patience = min(30.0, 60 * best)
+            rtol, p_seconds, p_error = scipy_at_error(f, jac, span, y0, grid, reference, peak, smd[1], method,
+                                                      max(1, repeats // 2), patience)
+            if rtol is None:
+                rows.append((work, smd, f"scipy {method}: {p_error:.1e} after {p_seconds:.1f} s, stopped", None))
+                continue
+            best = min(best, p_seconds)
+            rows.append((work, smd, f"scipy {method}, rtol {rtol:.1e}", (p_seconds, p_error)))
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--only", choices=("spectrum", "linear", "chain", "elastoplastic", "nonlinear"),
+                        help="one part of the table")
     args = parser.parse_args()
-    rows = spectrum_rows(args.repeats) + linear_rows(args.repeats) + chain_rows(args.repeats) + opensees_rows()
+    parts = {"spectrum": lambda: spectrum_rows(args.repeats), "linear": lambda: linear_rows(args.repeats),
+             "chain": lambda: chain_rows(args.repeats), "elastoplastic": opensees_rows,
+             "nonlinear": lambda: nonlinear_rows(args.repeats)}
+    from smdcli.solvers.compiled import KERNEL_FAMILIES, warm
+
+    warm(*KERNEL_FAMILIES)  # compiled (or loaded) before any clock starts: an edit to a kernel clears the cache
+    rows = [row for part, rows_of in parts.items() if args.only in (None, part) for row in rows_of()]
     wide = max(len(work) for work, *_ in rows)
     print(f"{'work':<{wide}} {'smd time':>10} {'smd error':>10}   {'peer':<38} {'peer time':>10} {'peer error':>10} "
           f"{'time ratio':>10}")
