@@ -256,11 +256,12 @@ def info(path: str | Path, state_space: Path | None = None) -> dict:
         from smdcli.solvers.compiled import Taylor
 
         unsupported = Taylor.unsupported(model)
-        explicit = f"DOP853 (no Taylor series for {unsupported})" if unsupported else "taylor"
-        data["auto"] = {"method": f"{explicit.split()[0]} or Radau",
+        explicit = "DOP853" if unsupported else "taylor"
+        why = f" (no Taylor series for {unsupported})" if unsupported else ""
+        data["auto"] = {"method": f"{explicit} or Radau",
                         "reason": (f"nonlinear ({', '.join(model.nonlinear_paths)}): the linearization at the start "
                                    f"has stiffness ratio {ratio0:.3g}, but stiffness is decided along the trajectory: "
-                                   f"{explicit} runs while h*|lambda|max stays below its stability limit, "
+                                   f"{explicit}{why} runs while h*|lambda|max stays below its stability limit, "
                                    "else Radau")}
     return data
 

@@ -205,7 +205,7 @@ def _dense(m, method, t_old, h, y_old, y_new, K, grid, k, j, out, mid, work, jwo
 
 
 @inlined
-def _relative(q, a, b, offset):
+def relative(q, a, b, offset):
     """q[offset + a] - q[offset + b], ground (index -1) at zero."""
     return (q[offset + a] if a >= 0 else 0.0) - (q[offset + b] if b >= 0 else 0.0)
 
@@ -221,10 +221,10 @@ def reversal(m, y, y_new, f, f_new, h):
         if m.el_law[e] == CUBIC_SPRING:
             continue
         a, b = m.el_a[e], m.el_b[e]
-        r0, r1 = _relative(y, a, b, n), _relative(y_new, a, b, n)
+        r0, r1 = relative(y, a, b, n), relative(y_new, a, b, n)
         if r0 * r1 >= 0.0:
             continue
-        d0, d1 = h * _relative(f, a, b, n), h * _relative(f_new, a, b, n)
+        d0, d1 = h * relative(f, a, b, n), h * relative(f_new, a, b, n)
         lo, hi = 0.0, first
         for _ in range(48):
             s = 0.5 * (lo + hi)

@@ -19,14 +19,12 @@ import math
 
 import numpy as np
 
-from smdcli.kernels.arrays import (CONSTANT, COSINE, CUBIC_SPRING, FOURIER_SQUARE, PULSE, SINE, SQUARE, STEP,
-                                   TABLE_LINEAR, TABLE_PREVIOUS)
+from smdcli.kernels.arrays import COSINE, CUBIC_SPRING, FOURIER_SQUARE, SINE, TABLE_LINEAR
 from smdcli.kernels.compiler import inlined, kernel, no_alloc
 from smdcli.kernels.erk import (ACCEPTED, NFEV, OK, STEP_BUDGET, STIFF, T_REACHED, TOO_SMALL_STEP, WATCH_WINDOW,
-                                held_by_stability, rows_through, state_status)
+                                held_by_stability, relative, rows_through, state_status)
 from smdcli.kernels.rhs import force_value
 
-SUPPORTED_FORCES = (CONSTANT, STEP, PULSE, SINE, COSINE, SQUARE, FOURIER_SQUARE, TABLE_LINEAR, TABLE_PREVIOUS)
 SAFETY = 0.9
 ROWS = 16  # output rows summed side by side
 SAMPLES = 4  # points of each step where a damper's velocity polynomial is checked for a reversal
@@ -63,7 +61,7 @@ def force_series(m, t, ta, mid, p, series, stack):
             series[0, j] = force_value(m, j, t, t >= mid, stack)
             if p >= 1 and mid > ta:
                 series[1, j] = (force_value(m, j, mid, False, stack) - force_value(m, j, ta, False, stack)) / (mid - ta)
-        else:  # constant on the stretch: its value in the middle
+        else:  # constant on the stretch, its value in the middle (chirps and expressions: Taylor.refuse)
             series[0, j] = force_value(m, j, mid, False, stack)
 
 
@@ -103,7 +101,7 @@ def coefficients(m, p, Y, U, D, D2, sign, scale_v, h_last, work):
         for e in range(E):
             a, b = m.el_a[e], m.el_b[e]
             offset = 0 if m.el_law[e] == CUBIC_SPRING else n
-            D[k, e] = (Y[k, offset + a] if a >= 0 else 0.0) - (Y[k, offset + b] if b >= 0 else 0.0)
+            D[k, e] = relative(Y[k], a, b, offset)
             square = 0.0
             for i in range(k + 1):
                 square += D[i, e] * D[k - i, e]

@@ -67,9 +67,10 @@ class Auto(Solver):
                            "velocity reversals")
                     limit = DOP853.stability_boundary
                 else:
-                    how = (f"compiled Taylor series of order {taylor_order(tol.rtol)} (smooth, polynomial elements: "
-                           "its terms by recurrence, its steps ending at quadratic dampers' velocity reversals)")
-                    limit = round(taylor_boundary(taylor_order(tol.rtol)), 2)
+                    order = taylor_order(tol.rtol)
+                    how = (f"compiled Taylor series of order {order} (smooth, polynomial elements: its terms by "
+                           "recurrence, its steps ending at quadratic dampers' velocity reversals)")
+                    limit = round(taylor_boundary(order), 2)
                 reason = (f"{nonlinear}; {how}, held by stability on {watch.share:.0%} of {watch.steps} steps "
                           f"(max h*|lambda| = {watch.max_rho:.2f}, limit {limit}): not stiff along this trajectory")
             except StiffnessDetected as stiff:
