@@ -10,6 +10,7 @@ Must not import: solvers, sweep, io, plots, commands, cli. Imports no numba: thi
 
 from __future__ import annotations
 
+import weakref
 from typing import NamedTuple
 
 import numpy as np
@@ -128,8 +129,23 @@ def _force_row(signal: Signal) -> tuple[int, list[float], list[float], list[int]
     raise AssertionError(f"no compiled form for {type(signal).__name__}")
 
 
+_BUILT: dict[int, tuple[weakref.ref, ModelArrays]] = {}
+
+
 def model_arrays(model: Model) -> ModelArrays:
-    """The arrays of a model, for the compiled kernels."""
+    """The arrays of a model, for the compiled kernels: built once per model (a Model is frozen and no kernel writes
+    to them), so that solving one model again and again, as a sweep's pieces or a benchmark do, does not rebuild
+    its sparse rows each time."""
+    key = id(model)
+    held = _BUILT.get(key)
+    if held is not None and held[0]() is model:
+        return held[1]
+    arrays = _build(model)
+    _BUILT[key] = (weakref.ref(model, lambda _, key=key: _BUILT.pop(key, None)), arrays)
+    return arrays
+
+
+def _build(model: Model) -> ModelArrays:
     n = model.n
     a_ptr, a_idx, a_val = csr(model.state_matrix[n:])
     mi_ptr, mi_idx, mi_val = csr(model.Minv)

@@ -24,7 +24,7 @@ import numpy as np
 from smdcli.kernels import tableaus as tb
 from smdcli.kernels.arrays import CUBIC_SPRING
 from smdcli.kernels.compiler import inlined, kernel, no_alloc
-from smdcli.kernels.rhs import spectral_bound, state_rhs, state_rhs_inlined
+from smdcli.kernels.rhs import linear_norms, spectral_bound, state_rhs, state_rhs_inlined
 
 RK23, RK45, DOP853 = tb.RK23, tb.RK45, tb.DOP853
 # How a run ended (index 0 of the status array).
@@ -291,11 +291,11 @@ def attempt(m, method, t, y, h_abs, t_bound, mid, rtol, atol, fixed_h, K, y_new,
 
 
 @no_alloc
-def held_by_stability(m, y, h, t, boundary, node, ring, counts, floats):
+def held_by_stability(m, y, h, t, boundary, norms, node, ring, counts, floats):
     """The stiffness watch after a step of h to (t, y): record whether h |lambda| passed half the boundary, in the
     ring of the last WATCH_WINDOW steps and the counters; True (where it stopped, in floats) when WATCH_LIMIT of
-    them did. node is spectral_bound's scratch."""
-    rho = h * spectral_bound(m, y, node)
+    them did. norms and node are spectral_bound's (rhs.linear_norms, scratch)."""
+    rho = h * spectral_bound(m, y, norms, node)
     floats[MAX_RHO] = max(floats[MAX_RHO], rho)
     limited = rho > 0.5 * boundary
     slot = counts[WATCHED] % WATCH_WINDOW
@@ -327,6 +327,7 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, boundary,
     jwork = np.zeros((2 * m.n, 2 * m.n)) if size > 2 * m.n else np.zeros((1, 1))
     arg, err, err3 = np.zeros(size), np.zeros(size), np.zeros(size)
     y_new, scale, node = np.zeros(size), np.zeros(size), np.zeros(2 * m.n)
+    norms = linear_norms(m)
     ring = np.zeros(WATCH_WINDOW, dtype=np.bool_)
     y = y0.copy()
     k = 1
@@ -361,7 +362,7 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, boundary,
             if status != OK:
                 out[k:] = np.nan
                 return status
-            if boundary > 0 and held_by_stability(m, y_new, h, t_new, boundary, node, ring, counts, floats):
+            if boundary > 0 and held_by_stability(m, y_new, h, t_new, boundary, norms, node, ring, counts, floats):
                 return STIFF
             t = t_new
             y[:] = y_new

@@ -394,11 +394,24 @@ def state_rhs(m, t, y, left, dy, work, J):
     state_rhs_inlined(m, t, y, left, dy, work, J)
 
 
+@kernel
+def linear_norms(m):
+    """Each row's sums of |M^-1 K| and |M^-1 C| ([0:n] and [n:2n]): the linear part of spectral_bound's norms,
+    which a run computes once."""
+    n = m.n
+    norms = np.zeros(2 * n)
+    for i in range(n):
+        for q in range(m.a_ptr[i], m.a_ptr[i + 1]):
+            norms[i + (n if m.a_idx[q] >= n else 0)] += abs(m.a_val[q])
+    return norms
+
+
 @no_alloc
-def spectral_bound(m, y, node):
+def spectral_bound(m, y, norms, node):
     """An upper bound on |lambda| of the Jacobian at y, in O(nonzeros): |lambda|^2 <= c |lambda| + k gives
-    |lambda| <= c + sqrt(k), with k and c the infinity norms of M^-1 Kt and M^-1 Ct (tangents included).
-    node is scratch of length 2n: each DOF's tangent stiffness and damping from nonlinear elements."""
+    |lambda| <= c + sqrt(k), with k and c the infinity norms of M^-1 Kt and M^-1 Ct (tangents included); norms are
+    the linear part's (linear_norms). node is scratch of length 2n: each DOF's tangent stiffness and damping from
+    nonlinear elements."""
     n = m.n
     for i in range(2 * n):
         node[i] = 0.0
@@ -414,16 +427,12 @@ def spectral_bound(m, y, node):
     k = 0.0
     c = 0.0
     for i in range(n):
-        row_k = 0.0
-        row_c = 0.0
-        for q in range(m.a_ptr[i], m.a_ptr[i + 1]):
-            if m.a_idx[q] < n:
-                row_k += abs(m.a_val[q])
-            else:
-                row_c += abs(m.a_val[q])
-        for q in range(m.mi_ptr[i], m.mi_ptr[i + 1]):
-            row_k += abs(m.mi_val[q]) * node[m.mi_idx[q]]
-            row_c += abs(m.mi_val[q]) * node[n + m.mi_idx[q]]
+        row_k = norms[i]
+        row_c = norms[n + i]
+        if len(m.el_law) > 0:
+            for q in range(m.mi_ptr[i], m.mi_ptr[i + 1]):
+                row_k += abs(m.mi_val[q]) * node[m.mi_idx[q]]
+                row_c += abs(m.mi_val[q]) * node[n + m.mi_idx[q]]
         k = max(k, row_k)
         c = max(c, row_c)
     return c + math.sqrt(k)

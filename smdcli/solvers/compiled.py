@@ -75,7 +75,7 @@ def _tiny_run(family: str) -> None:
         run_kernel(tiny, tableaus.RK45, grid, y0, 1e-3, np.full(2, 1e-6), 10, 1e8)
         return
     if family == "taylor":
-        entry(model_arrays(tiny), 8, y0, grid, grid, 1e-3, 1e-6, 10, 1e8, 0.0, np.zeros((2, 3)),
+        entry(model_arrays(tiny), 8, y0, grid, grid, 1e-3, 1e-6, 10, 1e8, 0.0, np.zeros((3, 2, 1)),
               np.zeros(5, dtype=np.int64), np.zeros(5))
         return
     if family == "return_mapping":
@@ -304,9 +304,8 @@ class Taylor(Solver):
         max_steps = tol.max_steps or MAX_STEPS
         order = taylor_order(tol.rtol)
         boundary = taylor_boundary(order) if self.watching else 0.0
-        out = np.empty((len(grid), 3 * n))  # x, v, a
-        out[0, :2 * n] = y0
-        out[0, 2 * n:] = model.acceleration(model.x0[None], model.v0[None], force[:1])[0]
+        out = np.empty((3, len(grid), n))  # x, v, a
+        out[0, 0], out[1, 0] = model.x0, model.v0
         counts, floats = np.zeros(5, dtype=np.int64), np.zeros(5)
         status = taylor.integrate(model_arrays(model), order, y0, np.asarray(grid, dtype=float),
                                   cuts(model, grid, tol.breakpoints), float(tol.rtol) * TAYLOR_STEP_SHARE,
@@ -314,8 +313,7 @@ class Taylor(Solver):
                                   out, counts, floats)
         stats, t_failed = explicit_outcome(self, status, counts, floats, time.perf_counter() - start, tol, max_steps,
                                            bound)
-        return make_result(model, grid, out[:, :n], out[:, n:2 * n], stats, t_failed=t_failed, force=force,
-                           acceleration=out[:, 2 * n:])
+        return make_result(model, grid, out[0], out[1], stats, t_failed=t_failed, force=force, acceleration=out[2])
 
 
 def _compiled(name: str, method: int, order: int, boundary: float, text: str):
