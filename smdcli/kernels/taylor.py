@@ -5,10 +5,10 @@ M x'' + C x' + K x + f_nl(x, x') = B u(t) is analytic and its Taylor coefficient
 x_(k+1) = v_k / (k + 1), v_(k+1) = (M^-1 (u_k - f_k) - M^-1 K x_k - M^-1 C v_k) / (k + 1), where u_k are the
 forces' coefficients (closed forms for sines and cosines, a constant or a line between a table's knots) and
 f_k the elements' (a cubic spring's k3 d^3 and a quadratic damper's c s d'^2, s the sign of d' on the step,
-by Cauchy products). One order costs one sparse product, about a right-hand side; a step sums the series to
-order p at a step where its last two terms fall under the tolerance (Jorba and Zou, 2005), so no try is
-rejected, the output rows are the polynomial evaluated (no interpolant to build) and a damper's reversal is
-the root of its velocity's polynomial, where the step ends.
+by Cauchy products). One order costs one banded or sparse product (diagonals), about a right-hand side; a
+step sums the series to order p at a step where its last two terms fall under the tolerance (Jorba and Zou,
+2005), so no try is rejected, the output rows are the polynomial evaluated (no interpolant to build) and a
+damper's reversal is the root of its velocity's polynomial, where the step ends.
 
 Must not import: solvers, sweep, io, plots, commands, cli.
 """
