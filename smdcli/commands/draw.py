@@ -71,7 +71,7 @@ def animate(path: str | Path, out: str | Path, fps: int = 20, seconds: float | N
 
     with bar("drawing frames", len(t), progress) as advance:
         for k in range(len(t)):
-            for artist in [*ax.lines, *ax.patches, *ax.texts, *ax.collections]:
+            for artist in [*ax.lines, *ax.patches, *ax.texts, *ax.collections, *ax.images, *ax.artists]:
                 artist.remove()  # not ax.clear(), which rebuilds the hidden axes' ticks: a third of a frame's time
             draw(ax, plan, x[k], scale, labels=False, ground=ground[k])
             fig.texts.clear()

@@ -46,13 +46,13 @@ def diagonals(m):
     if w > MAX_BAND or 2 * w + 1 > n:
         return np.zeros((2, 0, n)), np.zeros(n)
     band = np.zeros((2, 2 * w + 1, n))
-    minv = np.zeros(n)
+    minv_diagonal = np.zeros(n)
     for i in range(n):
-        minv[i] = m.mi_val[m.mi_ptr[i]]
+        minv_diagonal[i] = m.mi_val[m.mi_ptr[i]]
         for q in range(m.a_ptr[i], m.a_ptr[i + 1]):
             column = m.a_idx[q]
             band[column // n, w + column % n - i, i] += m.a_val[q]
-    return band, minv
+    return band, minv_diagonal
 
 
 @no_alloc
@@ -106,11 +106,11 @@ def direction(D, e, k, scale_v, h_last):
 
 
 @no_alloc
-def coefficients(m, band, minv, p, Y, U, D, D2, sign, scale_v, h_last, work):
-    """Orders 1..p of the state's series Y = [x, v] (order 0 given), from the forces' series U; band and minv are
-    the linear rows as diagonals (empty: the CSR rows); D and D2 hold each element's d (or d') and d^2 series,
-    sign each quadratic damper's sign of d' on the step (direction); h_last is the last step; work is scratch of
-    n."""
+def coefficients(m, band, minv_diagonal, p, Y, U, D, D2, sign, scale_v, h_last, work):
+    """Orders 1..p of the state's series Y = [x, v] (order 0 given), from the forces' series U; band and
+    minv_diagonal are the linear rows as diagonals (empty: the CSR rows); D and D2 hold each element's d (or d')
+    and d^2 series, sign each quadratic damper's sign of d' on the step (direction); h_last is the last step; work
+    is scratch of n."""
     n = m.n
     E = len(m.el_law)
     for e in range(E):
@@ -153,7 +153,7 @@ def coefficients(m, band, minv, p, Y, U, D, D2, sign, scale_v, h_last, work):
         for i in range(n):
             row[i] = speed[i] * inverse
         if band.shape[1] > 0:
-            banded_rows(band, minv, below, work, ground, inverse, row)
+            banded_rows(band, minv_diagonal, below, work, ground, inverse, row)
             continue
         for i in range(n):
             s = -ground
@@ -165,12 +165,12 @@ def coefficients(m, band, minv, p, Y, U, D, D2, sign, scale_v, h_last, work):
 
 
 @inlined
-def banded_rows(band, minv, below, work, ground, inverse, row):
+def banded_rows(band, minv_diagonal, below, work, ground, inverse, row):
     """row[n:] = (M^-1 work - ground + A below) inverse, A held as diagonals (diagonals); work is overwritten."""
-    n = len(minv)
+    n = len(minv_diagonal)
     w = band.shape[1] // 2
     for i in range(n):
-        work[i] = minv[i] * work[i] - ground
+        work[i] = minv_diagonal[i] * work[i] - ground
     for part in range(2):
         for j in range(2 * w + 1):
             d = j - w
@@ -192,6 +192,18 @@ def horner(S, tau, i):
     for k in range(S.shape[0] - 1, -1, -1):
         value = value * tau + S[k, i]
     return value
+
+
+@inlined
+def summed(S, tau, into):
+    """Every component of the series S summed at tau, into `into`: an order at a time over all the components, so
+    the loops vectorize where one component's Horner sum is a chain of dependent multiply-adds."""
+    p = S.shape[0] - 1
+    for i in range(S.shape[1]):
+        into[i] = S[p, i]
+    for k in range(p - 1, -1, -1):
+        for i in range(S.shape[1]):
+            into[i] = into[i] * tau + S[k, i]
 
 
 @inlined
@@ -226,12 +238,7 @@ def emit(Z, t, grid, first, last, out, taus, sums):
     p = Z.shape[0] - 1
     if size >= ROWS:
         for r in range(first, last):
-            tau = grid[r] - t
-            for i in range(size):
-                sums[i] = Z[p, i]
-            for k in range(p - 1, -1, -1):
-                for i in range(size):
-                    sums[i] = sums[i] * tau + Z[k, i]
+            summed(Z, grid[r] - t, sums)
             store_row(sums, out, r)
         return
     for start in range(first, last, ROWS):
@@ -320,7 +327,7 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
     D, D2 = np.zeros((p + 1, max(E, 1))), np.zeros((p + 1, max(E, 1)))
     sign, node, work, stack = np.zeros(max(E, 1)), np.zeros(2 * n), np.zeros(n), np.zeros(1)
     taus, sums = np.zeros(ROWS), np.zeros(max(ROWS, 3 * n))
-    band, minv = diagonals(m)
+    band, minv_diagonal = diagonals(m)
     norms = linear_norms(m)
     y = y0.copy()
     ring = np.zeros(WATCH_WINDOW, dtype=np.bool_)
@@ -337,7 +344,7 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
         while t < tb:
             Y[0] = y
             force_series(m, t, ta, mid, p, U, stack)
-            coefficients(m, band, minv, p, Y, U, D, D2, sign, peak_v, h_last, work)
+            coefficients(m, band, minv_diagonal, p, Y, U, D, D2, sign, peak_v, h_last, work)
             counts[NFEV] += p
             h = min(step_size(Y, p, max(atol + rtol * peak_x, 1e-300), max(atol + rtol * peak_v, 1e-300)), tb - t)
             if E > 0:
@@ -364,11 +371,7 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
             row = last
             h = t_new - t
             h_last = h
-            for i in range(2 * n):  # the series summed at h, all components side by side
-                y[i] = Y[p, i]
-            for k in range(p - 1, -1, -1):
-                for i in range(2 * n):
-                    y[i] = y[i] * h + Y[k, i]
+            summed(Y, h, y)
             for i in range(n):
                 peak_x, peak_v = max(peak_x, abs(y[i])), max(peak_v, abs(y[n + i]))
             floats[T_REACHED] = t_new
