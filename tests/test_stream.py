@@ -181,15 +181,22 @@ def _resume_matches_a_whole_run(cli, command: list[str], out, whole) -> None:
     assert same.exit_code == 0, same.output
 
 
-def test_a_sweep_killed_with_sigkill_is_finished_by_resume_with_the_same_data(cli, tmp_path):
+@pytest.fixture(scope="module")
+def whole_big_sweep(tmp_path_factory):
+    """The folder of one uninterrupted run of _big_sweep: what a stopped and resumed run must equal."""
+    folder = tmp_path_factory.mktemp("whole")
+    assert subprocess.run(_big_sweep(folder) + ["-o", str(folder)], env=ENV, timeout=600).returncode == 0
+    return folder
+
+
+def test_a_sweep_killed_with_sigkill_is_finished_by_resume_with_the_same_data(cli, tmp_path, whole_big_sweep):
     """SIGKILL halfway (no handler runs): the partial file on disk is what --resume finishes."""
     command = _big_sweep(tmp_path)
-    assert subprocess.run(command + ["-o", str(tmp_path / "whole")], env=ENV, timeout=600).returncode == 0
     out = tmp_path / "killed"
     _signal_once_members_are_done(command, out, signal.SIGKILL)
     done = _members_done(out / "scene_sweep.partial.h5")
     assert 0 < done < 2400 and not (out / "scene_sweep.h5").exists()
-    _resume_matches_a_whole_run(cli, command, out, tmp_path / "whole")
+    _resume_matches_a_whole_run(cli, command, out, whole_big_sweep)
 
 
 def test_a_local_dask_cluster_gives_the_same_data_sets_as_this_process(cli, tmp_path, small_chunks):
@@ -221,12 +228,12 @@ def test_an_unreachable_scheduler_is_a_usage_error(cli, tmp_path):
     assert not list(tmp_path.glob("*.h5"))
 
 
-def test_a_cluster_sweep_stopped_by_sigterm_says_one_line_and_resumes_on_the_cluster(cli, tmp_path):
+def test_a_cluster_sweep_stopped_by_sigterm_says_one_line_and_resumes_on_the_cluster(cli, tmp_path,
+                                                                                    whole_big_sweep):
     pytest.importorskip("distributed")
     command = _big_sweep(tmp_path, "--scheduler", "local", "--workers", "2")
     out = tmp_path / "cut"
     code, stderr = _signal_once_members_are_done(command, out, signal.SIGTERM)
     assert code == 143, stderr
     assert stderr.count("\n") == 1 and "--resume finishes it" in stderr and "Traceback" not in stderr, stderr
-    assert subprocess.run(_big_sweep(tmp_path) + ["-o", str(tmp_path / "whole")], env=ENV, timeout=600).returncode == 0
-    _resume_matches_a_whole_run(cli, command, out, tmp_path / "whole")
+    _resume_matches_a_whole_run(cli, command, out, whole_big_sweep)

@@ -137,6 +137,13 @@ KERNEL_FAMILIES = ("erk", "fixed", "stiff", "radau", "bdf", "rhs", "modes:events
 _warmed: set[str] = set()
 
 
+def cached(family: str) -> bool:
+    """Whether a kernel family's code is compiled in this process or in numba's cache (warm then costs no compile)."""
+    from smdcli.kernels.compiler import is_cached
+
+    return is_cached(_entry(family))
+
+
 def warm(*families: str) -> None:
     """Compile kernel families (erk, fixed, stiff, radau, bdf, rhs, and modes:events, modes:radau ... for nonsmooth
     scenes' modes; default erk) or load them from numba's cache
