@@ -164,7 +164,12 @@ class Model:
 
     def applied_force(self, t: np.ndarray) -> np.ndarray:
         """External force per DOF on the grid: (N, n)."""
-        return self.forces(t) @ self.B.T
+        forces = self.forces(t)
+        out = np.zeros(forces.shape[:-1] + (self.n,))
+        for j, column in enumerate(self.B.T):  # a force acts on one DOF (the ground's on all): no dense product
+            dofs = np.flatnonzero(column)
+            out[..., dofs] += forces[..., j, None] * column[dofs]
+        return out
 
     def breakpoints(self, t0: float, t1: float) -> np.ndarray:
         """Sorted distinct times in (t0, t1) where some force jumps or kinks."""

@@ -6,6 +6,7 @@ Must not import: sweep, io, plots, commands, cli.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -19,6 +20,7 @@ from smdcli.solvers.ground import across_jumps, drift_note, ground_history
 from smdcli.solvers.nonsmooth import nonsmooth_refusal, solve_nonsmooth
 
 
+@functools.cache  # one dict, built on first use: its imports are deferred for startup, not repeated per solve
 def _solvers() -> dict[str, type[Solver]]:
     from smdcli.solvers.auto import Auto
     from smdcli.solvers.closed_form import ClosedForm
