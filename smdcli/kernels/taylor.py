@@ -342,12 +342,13 @@ def reversal(m, D, sign, h):
 
 
 @kernel
-def aligned_zeros(rows, columns):
-    """A (rows, columns) array of zeros that starts on a 64-byte boundary: a vector load of 8 doubles that spans two
-    cache lines costs two, and the allocator aligns to less (measured: a run 30 % slower in half of all processes)."""
-    buffer = np.zeros(rows * columns + 8)
+def aligned_empty(size):
+    """An uninitialized array of size doubles that starts on a 64-byte boundary, for the series and the output rows:
+    the allocators align to less, and a vector access that spans two cache lines costs two (a run of 100 DOFs writing
+    1,001 rows: 0.94 ms aligned, 1.19 ms not, measured in one process)."""
+    buffer = np.empty(size + 8)
     skip = (-buffer.ctypes.data % 64) // 8
-    return buffer[skip:skip + rows * columns].reshape((rows, columns))
+    return buffer[skip:skip + size]
 
 
 @kernel
@@ -359,8 +360,10 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
     boundary > 0 watches for stiffness as erk.integrate does, h |lambda| against the series' stability limit."""
     n = m.n
     E = len(m.el_law)
-    Y = aligned_zeros(p + 1, 2 * n)  # the state's series, contiguous: its loops vectorize
-    A = aligned_zeros(p, n)  # the acceleration's series, the velocity's derivative
+    # the state's series, contiguous (its loops vectorize), and the acceleration's, the velocity's derivative: each
+    # order written in full before it is read
+    Y = aligned_empty((p + 1) * 2 * n).reshape((p + 1, 2 * n))
+    A = aligned_empty(p * n).reshape((p, n))
     U = np.zeros((p + 1, len(m.f_kind)))
     D, D2 = np.zeros((p + 1, max(E, 1))), np.zeros((p + 1, max(E, 1)))
     sign, node, work, stack = np.zeros(max(E, 1)), np.zeros(2 * n), np.zeros(n), np.zeros(1)
@@ -397,12 +400,13 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
                 out[:, row:] = np.nan
                 return STEP_BUDGET
             last = rows_through(grid, row, t_new)
-            if last > row or (row == 1 and t == grid[0]):
+            start = row == 1 and t == grid[0]
+            if last > row or start:  # the acceleration's series only where a row needs it
                 for k in range(p):
                     speed, acceleration = Y[k + 1, n:], A[k]
                     for i in range(n):
                         acceleration[i] = (k + 1) * speed[i]
-                if row == 1 and t == grid[0]:
+                if start:
                     out[2, 0, :] = A[0]  # equilibrium's acceleration at the start
                 emit(Y, A, t, grid, row, last, out, taus, sums)
             row = last

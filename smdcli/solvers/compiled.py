@@ -300,7 +300,7 @@ class Taylor(Solver):
 
     def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
         from smdcli.kernels import taylor
-        from smdcli.kernels.arrays import aligned_empty, model_arrays
+        from smdcli.kernels.arrays import model_arrays
 
         warm("taylor")
         start = time.perf_counter()
@@ -311,7 +311,7 @@ class Taylor(Solver):
         max_steps = tol.max_steps or MAX_STEPS
         order = taylor_order(tol.rtol)
         boundary = taylor_boundary(order) if self.watching else 0.0
-        out = aligned_empty((3, len(grid), n))  # x, v, a
+        out = taylor.aligned_empty(3 * len(grid) * n).reshape((3, len(grid), n))  # x, v, a
         out[0, 0], out[1, 0] = model.x0, model.v0
         counts, floats = np.zeros(5, dtype=np.int64), np.zeros(5)
         status = taylor.integrate(model_arrays(model), order, y0, np.asarray(grid, dtype=float),
