@@ -7,8 +7,8 @@ Within a record interval the input is a + s tau, so y is a particular line (P0 +
 z with z(tau) = exp(sigma tau) [C(tau) z0 + S(tau) (zeta w z0 + z0')], sigma = -zeta w, where C, S are cos and
 sin/wd (under-damped), cosh and sinh/q (over-damped) or 1 and tau (critical). Each interval is cut into pieces of
 at most an eighth of the period, on which the derivative changes sign at most once where it matters; where it
-does and the extremum could pass the largest found so far, the root is found by false position (Illinois) on the
-closed form to a relative 1e-13 of the piece.
+does and the extremum could pass the largest found so far, the root is found by Newton's method on the closed form
+(q'' known there too), from the root of the cubic Hermite interpolant's slope, kept inside the bracket.
 
 Must not import: solvers, sweep, io, plots, commands, cli.
 """
@@ -40,16 +40,18 @@ def _cs(omega, zeta, tau):
 
 @inlined
 def _quantity(kind, omega, zeta, y, v, a, slope):
-    """(q, dq/dt) of the measured quantity from the relative state and the input's value and slope."""
-    if kind == DISPLACEMENT:
-        return y, v
+    """(q, dq/dt, d2q/dt2) of the measured quantity from the relative state and the input's value and slope."""
     accel = -2.0 * zeta * omega * v - omega * omega * y - a  # y''
-    return -(2.0 * zeta * omega * v + omega * omega * y), -(2.0 * zeta * omega * accel + omega * omega * v)
+    if kind == DISPLACEMENT:
+        return y, v, accel
+    jerk = -2.0 * zeta * omega * accel - omega * omega * v - slope  # y''', the input's second derivative zero
+    return (-(2.0 * zeta * omega * v + omega * omega * y), -(2.0 * zeta * omega * accel + omega * omega * v),
+            -(2.0 * zeta * omega * jerk + omega * omega * accel))
 
 
 @kernel
 def _at(kind, omega, zeta, zy, zv, P0, P1, a0, slope, tau0, theta):
-    """(q, dq/dt) at tau0 + theta of an interval whose homogeneous state at tau0 is (zy, zv)."""
+    """(q, dq/dt, d2q/dt2) at tau0 + theta of an interval whose homogeneous state at tau0 is (zy, zv)."""
     c, s = _cs(omega, zeta, theta)
     hy = c * zy + s * (zeta * omega * zy + zv)
     hv = c * zv - s * (omega * omega * zy + zeta * omega * zv)
@@ -57,30 +59,48 @@ def _at(kind, omega, zeta, zy, zv, P0, P1, a0, slope, tau0, theta):
     return _quantity(kind, omega, zeta, hy + P0 + P1 * tau, hv + P1, a0 + slope * tau, slope)
 
 
+@inlined
+def _hermite_root(h, q0, q1, d0, d1):
+    """Where in (0, h) the derivative of the cubic through (q0, d0) at 0 and (q1, d1) at h crosses zero (d0 and d1
+    of opposite signs): a guess within O(h^4) of the extremum's time; false position's where the cubic gives none."""
+    secant = (q1 - q0) / h
+    b = 2.0 * (3.0 * secant - 2.0 * d0 - d1) / h  # the cubic's slope: d0 + b s + c s^2
+    c = 3.0 * (d0 + d1 - 2.0 * secant) / (h * h)
+    disc = b * b - 4.0 * c * d0
+    if disc >= 0.0 and (b != 0.0 or disc > 0.0):
+        r = -2.0 * d0 / (b + math.copysign(math.sqrt(disc), b))  # one root without cancellation
+        if 0.0 < r < h:
+            return r
+        if c != 0.0 and r != 0.0:
+            r = d0 / (c * r)  # the other: the product of the roots is d0 / c
+            if 0.0 < r < h:
+                return r
+    return h * d0 / (d0 - d1)
+
+
 @kernel
-def _extremum(kind, omega, zeta, zy, zv, P0, P1, a0, slope, tau0, h, d0, d1):
-    """(q, theta) where dq/dt crosses zero inside (0, h), dq/dt being d0 at 0 and d1 at h (opposite signs)."""
-    lo, hi, f_lo, f_hi = 0.0, h, d0, d1
-    side = 0
-    theta = 0.5 * h
+def _extremum(kind, omega, zeta, zy, zv, P0, P1, a0, slope, tau0, h, q0, q1, d0, d1):
+    """(q, theta) where dq/dt crosses zero inside (0, h), q and dq/dt being q0, d0 at 0 and q1, d1 at h (d0 and d1 of
+    opposite signs): Newton's method on the closed form from the cubic Hermite guess, kept inside the bracket (three
+    evaluations, where false position took eight). It stops where the next step is under 1e-9 h: q is then off the
+    extremum by half q'' times the step squared, under 1e-18 q'' h^2."""
+    lo, hi, f_lo = 0.0, h, d0
+    theta = _hermite_root(h, q0, q1, d0, d1)
+    q = q0
     for _ in range(100):
-        theta = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
-        if not (lo < theta < hi):
-            theta = 0.5 * (lo + hi)
-        f = _at(kind, omega, zeta, zy, zv, P0, P1, a0, slope, tau0, theta)[1]
+        q, f, curvature = _at(kind, omega, zeta, zy, zv, P0, P1, a0, slope, tau0, theta)
+        if f == 0.0:
+            break
         if (f > 0.0) == (f_lo > 0.0):
             lo, f_lo = theta, f
-            if side == -1:
-                f_hi *= 0.5
-            side = -1
         else:
-            hi, f_hi = theta, f
-            if side == 1:
-                f_lo *= 0.5
-            side = 1
-        if hi - lo <= 1e-13 * h or f == 0.0:
+            hi = theta
+        step = -f / curvature if curvature != 0.0 else math.inf
+        if abs(step) <= 1e-9 * h or hi - lo <= 1e-13 * h:
             break
-    return _at(kind, omega, zeta, zy, zv, P0, P1, a0, slope, tau0, theta)[0], theta
+        guess = theta + step
+        theta = guess if lo < guess < hi else 0.5 * (lo + hi)
+    return q, theta
 
 
 @kernel
@@ -100,13 +120,13 @@ def _propagate(kind, w, z, h, e, pieces, t0, y, v, a0, slope, q_max, t_max, q_mi
     P1 = -slope * inv_w2
     P0 = (-a0 - 2.0 * z * w * P1) * inv_w2
     zy, zv = y - P0, v - P1
-    q0, d0 = _quantity(kind, w, z, y, v, a0, slope)
+    q0, d0, _ = _quantity(kind, w, z, y, v, a0, slope)
     for j in range(pieces):
         tau0 = j * h
         ny, nv = e11 * zy + e12 * zv, e21 * zy + e22 * zv
         tau1 = tau0 + h
         y, v = ny + P0 + P1 * tau1, nv + P1
-        q1, d1 = _quantity(kind, w, z, y, v, a0 + slope * tau1, slope)
+        q1, d1, _ = _quantity(kind, w, z, y, v, a0 + slope * tau1, slope)
         if q1 > q_max:
             q_max, t_max = q1, t0 + tau1
         if q1 < q_min:
@@ -115,11 +135,11 @@ def _propagate(kind, w, z, h, e, pieces, t0, y, v, a0, slope, q_max, t_max, q_mi
         # where it could pass the extreme found so far
         reach = h * max(abs(d0), abs(d1))
         if d0 > 0.0 and d1 < 0.0 and max(q0, q1) + reach > q_max:
-            q, theta = _extremum(kind, w, z, zy, zv, P0, P1, a0, slope, tau0, h, d0, d1)
+            q, theta = _extremum(kind, w, z, zy, zv, P0, P1, a0, slope, tau0, h, q0, q1, d0, d1)
             if q > q_max:
                 q_max, t_max = q, t0 + tau0 + theta
         elif d0 < 0.0 and d1 > 0.0 and min(q0, q1) - reach < q_min:
-            q, theta = _extremum(kind, w, z, zy, zv, P0, P1, a0, slope, tau0, h, d0, d1)
+            q, theta = _extremum(kind, w, z, zy, zv, P0, P1, a0, slope, tau0, h, q0, q1, d0, d1)
             if q < q_min:
                 q_min, t_min = q, t0 + tau0 + theta
         zy, zv, q0, d0 = ny, nv, q1, d1
