@@ -21,6 +21,7 @@ import numpy as np
 
 from smdcli.kernels.arrays import COSINE, CUBIC_SPRING, FOURIER_SQUARE, SINE, TABLE_LINEAR
 from smdcli.kernels.compiler import inlined, kernel, no_alloc
+from smdcli.kernels.diagonals import banded_rows, diagonals, tridiagonal_rows
 from smdcli.kernels.erk import (ACCEPTED, NFEV, OK, STEP_BUDGET, STIFF, T_REACHED, TOO_SMALL_STEP, WATCH_WINDOW,
                                 held_by_stability, relative, rows_through, state_status)
 from smdcli.kernels.rhs import force_value, linear_norms
@@ -28,42 +29,6 @@ from smdcli.kernels.rhs import force_value, linear_norms
 SAFETY = 0.9
 ROWS = 16  # output rows summed side by side
 SAMPLES = 4  # points of each step where a damper's velocity polynomial is checked for a reversal
-MAX_BAND = 8  # widest half-band held as diagonals; wider rows stay sparse (CSR)
-
-
-@kernel
-def diagonals(m):
-    """The rows [-M^-1 K, -M^-1 C] as diagonals, band[part, w + d, i] = A[i, part n + i + d] for a half-width w, each
-    diagonal's span [first, last) of rows that are not zero (spans[part, w + d]; first == last where it is all zero:
-    a chain's damping is often one damper), and M^-1's diagonal, where M^-1 is diagonal and w is at most MAX_BAND: one
-    order's product is then a pass over contiguous rows per diagonal, which vectorizes, instead of a sparse row's
-    gather. An empty band where not."""
-    n = m.n
-    w = 0
-    for i in range(n):
-        if m.mi_ptr[i + 1] - m.mi_ptr[i] != 1 or m.mi_idx[m.mi_ptr[i]] != i:
-            return np.zeros((2, 0, n)), np.zeros((2, 0, 2), dtype=np.int64), np.zeros(n)
-        for q in range(m.a_ptr[i], m.a_ptr[i + 1]):
-            w = max(w, abs(m.a_idx[q] % n - i))
-    if w > MAX_BAND or 2 * w + 1 > n:
-        return np.zeros((2, 0, n)), np.zeros((2, 0, 2), dtype=np.int64), np.zeros(n)
-    band = np.zeros((2, 2 * w + 1, n))
-    minv_diagonal = np.zeros(n)
-    for i in range(n):
-        minv_diagonal[i] = m.mi_val[m.mi_ptr[i]]
-        for q in range(m.a_ptr[i], m.a_ptr[i + 1]):
-            column = m.a_idx[q]
-            band[column // n, w + column % n - i, i] += m.a_val[q]
-    spans = np.zeros((2, 2 * w + 1, 2), dtype=np.int64)
-    for part in range(2):
-        for j in range(2 * w + 1):
-            first, last = n, 0
-            for i in range(n):
-                if band[part, j, i] != 0.0:
-                    first, last = min(first, i), i + 1
-            if first < last:
-                spans[part, j, 0], spans[part, j, 1] = first, last
-    return band, spans, minv_diagonal
 
 
 @no_alloc
@@ -163,6 +128,9 @@ def coefficients(m, band, spans, minv_diagonal, p, Y, U, D, D2, sign, scale_v, h
         speed = below[n:]
         for i in range(n):
             row[i] = speed[i] * inverse
+        if band.shape[1] == 3:
+            tridiagonal_rows(m, band, spans, minv_diagonal, below, work, ground, inverse, row)
+            continue
         if band.shape[1] > 0:
             banded_rows(m, band, spans, minv_diagonal, below, work, ground, inverse, row)
             continue
@@ -175,45 +143,6 @@ def coefficients(m, band, spans, minv_diagonal, p, Y, U, D, D2, sign, scale_v, h
             row[n + i] = s * inverse
         for i in range(n):
             work[i] = 0.0
-
-
-@inlined
-def banded_rows(m, band, spans, minv_diagonal, below, work, ground, inverse, row):
-    """row[n:] = (A below - ground + M^-1 work) inverse, A held as diagonals with their spans (diagonals) and work
-    not zero only at forces' and elements' DOFs, where it is read and zeroed (not a pass over every DOF)."""
-    n = len(minv_diagonal)
-    w = band.shape[1] // 2
-    target = row[n:]
-    for i in range(n):
-        target[i] = -ground
-    for part in range(2):
-        for j in range(2 * w + 1):
-            d = j - w
-            first, last = max(spans[part, j, 0], -d), min(spans[part, j, 1], n - d)
-            if first >= last:
-                continue
-            # slices, so that the loop's index starts at 0: numba checks a possibly negative index, which would
-            # keep the loop from vectorizing
-            diagonal, part_target = band[part, j, first:last], target[first:last]
-            source = below[part * n + d + first:part * n + d + last]
-            for i in range(last - first):
-                part_target[i] += diagonal[i] * source[i]
-    for j in range(len(m.f_dof)):
-        moved_into(m.f_dof[j], minv_diagonal, work, target)
-    for e in range(len(m.el_a)):
-        moved_into(m.el_a[e], minv_diagonal, work, target)
-        moved_into(m.el_b[e], minv_diagonal, work, target)
-    for i in range(n):
-        target[i] *= inverse
-
-
-@inlined
-def moved_into(dof, minv_diagonal, work, target):
-    """target[dof] += M^-1 work at a DOF (none where dof < 0, the ground), work[dof] zeroed: a DOF that several forces
-    share is added once."""
-    if dof >= 0:
-        target[dof] += minv_diagonal[dof] * work[dof]
-        work[dof] = 0.0
 
 
 @inlined

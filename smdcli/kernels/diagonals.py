@@ -1,0 +1,125 @@
+"""The linear rows of a scene, [-M^-1 K, -M^-1 C], held as diagonals where M is diagonal and the DOFs are numbered
+along a narrow band (a chain's half-width is 1): one product of the rows with a state is then a pass over contiguous
+rows per diagonal, which vectorizes, instead of a sparse row's gather. The Taylor series' recurrence
+(smdcli.kernels.taylor) takes one such product an order.
+
+Must not import: solvers, sweep, io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from smdcli.kernels.compiler import inlined, kernel
+
+MAX_BAND = 8  # widest half-band held as diagonals; wider rows stay sparse (CSR)
+
+
+@kernel
+def diagonals(m):
+    """The rows [-M^-1 K, -M^-1 C] as diagonals, band[part, w + d, i] = A[i, part n + i + d] for a half-width w, each
+    diagonal's span [first, last) of rows that are not zero (spans[part, w + d]; first == last where it is all zero:
+    a chain's damping is often one damper), and M^-1's diagonal, where M^-1 is diagonal and w is at most MAX_BAND: one
+    order's product is then a pass over contiguous rows per diagonal, which vectorizes, instead of a sparse row's
+    gather. An empty band where not."""
+    n = m.n
+    w = 0
+    for i in range(n):
+        if m.mi_ptr[i + 1] - m.mi_ptr[i] != 1 or m.mi_idx[m.mi_ptr[i]] != i:
+            return np.zeros((2, 0, n)), np.zeros((2, 0, 2), dtype=np.int64), np.zeros(n)
+        for q in range(m.a_ptr[i], m.a_ptr[i + 1]):
+            w = max(w, abs(m.a_idx[q] % n - i))
+    if w > MAX_BAND or 2 * w + 1 > n:
+        return np.zeros((2, 0, n)), np.zeros((2, 0, 2), dtype=np.int64), np.zeros(n)
+    band = np.zeros((2, 2 * w + 1, n))
+    minv_diagonal = np.zeros(n)
+    for i in range(n):
+        minv_diagonal[i] = m.mi_val[m.mi_ptr[i]]
+        for q in range(m.a_ptr[i], m.a_ptr[i + 1]):
+            column = m.a_idx[q]
+            band[column // n, w + column % n - i, i] += m.a_val[q]
+    spans = np.zeros((2, 2 * w + 1, 2), dtype=np.int64)
+    for part in range(2):
+        for j in range(2 * w + 1):
+            first, last = n, 0
+            for i in range(n):
+                if band[part, j, i] != 0.0:
+                    first, last = min(first, i), i + 1
+            if first < last:
+                spans[part, j, 0], spans[part, j, 1] = first, last
+    return band, spans, minv_diagonal
+
+
+@inlined
+def banded_rows(m, band, spans, minv_diagonal, below, work, ground, inverse, row):
+    """row[n:] = (A below - ground + M^-1 work) inverse, A held as diagonals with their spans (diagonals) and work
+    not zero only at forces' and elements' DOFs, where it is read and zeroed (not a pass over every DOF)."""
+    n = len(minv_diagonal)
+    w = band.shape[1] // 2
+    target = row[n:]
+    for i in range(n):
+        target[i] = -ground
+    for part in range(2):
+        for j in range(2 * w + 1):
+            d = j - w
+            first, last = max(spans[part, j, 0], -d), min(spans[part, j, 1], n - d)
+            if first >= last:
+                continue
+            # slices, so that the loop's index starts at 0: numba checks a possibly negative index, which would
+            # keep the loop from vectorizing
+            diagonal, part_target = band[part, j, first:last], target[first:last]
+            source = below[part * n + d + first:part * n + d + last]
+            for i in range(last - first):
+                part_target[i] += diagonal[i] * source[i]
+    for j in range(len(m.f_dof)):
+        moved_into(m.f_dof[j], minv_diagonal, work, 1.0, target)
+    for e in range(len(m.el_a)):
+        moved_into(m.el_a[e], minv_diagonal, work, 1.0, target)
+        moved_into(m.el_b[e], minv_diagonal, work, 1.0, target)
+    for i in range(n):
+        target[i] *= inverse
+
+
+@inlined
+def tridiagonal_rows(m, band, spans, minv_diagonal, below, work, ground, inverse, row):
+    """banded_rows for a half-width of one (a chain numbered along it): the three diagonals of M^-1 K, the load on
+    the ground and the order's scaling in one pass over the DOFs, where a pass each cost a loop's overhead each, then
+    M^-1 C's diagonals over their spans (a chain damped at one mass: one entry)."""
+    n = len(minv_diagonal)
+    target = row[n:]
+    for i in (0, n - 1):  # the ends, where a neighbour is missing
+        s = -ground
+        for j in range(3):
+            column = i + j - 1
+            if 0 <= column < n:
+                s += band[0, j, i] * below[column]
+        target[i] = s * inverse
+    # slices, so that the loop's index starts at 0 (see banded_rows)
+    lower, diagonal, upper = band[0, 0, 1:n - 1], band[0, 1, 1:n - 1], band[0, 2, 1:n - 1]
+    x_lower, x_at, x_upper = below[0:n - 2], below[1:n - 1], below[2:n]
+    inner = target[1:n - 1]
+    for i in range(n - 2):
+        inner[i] = (lower[i] * x_lower[i] + diagonal[i] * x_at[i] + upper[i] * x_upper[i] - ground) * inverse
+    for j in range(3):
+        d = j - 1
+        first, last = max(spans[1, j, 0], -d), min(spans[1, j, 1], n - d)
+        if first >= last:
+            continue
+        damping, part_target = band[1, j, first:last], target[first:last]
+        source = below[n + d + first:n + d + last]
+        for i in range(last - first):
+            part_target[i] += damping[i] * source[i] * inverse
+    for j in range(len(m.f_dof)):
+        moved_into(m.f_dof[j], minv_diagonal, work, inverse, target)
+    for e in range(len(m.el_a)):
+        moved_into(m.el_a[e], minv_diagonal, work, inverse, target)
+        moved_into(m.el_b[e], minv_diagonal, work, inverse, target)
+
+
+@inlined
+def moved_into(dof, minv_diagonal, work, scale, target):
+    """target[dof] += M^-1 work scale at a DOF (none where dof < 0, the ground), work[dof] zeroed: a DOF that several
+    forces share is added once."""
+    if dof >= 0:
+        target[dof] += minv_diagonal[dof] * work[dof] * scale
+        work[dof] = 0.0
