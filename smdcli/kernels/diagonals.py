@@ -55,27 +55,12 @@ def banded_rows(m, band, spans, minv_diagonal, below, work, ground, inverse, row
     """row[n:] = (A below - ground + M^-1 work) inverse, A held as diagonals with their spans (diagonals) and work
     not zero only at forces' and elements' DOFs, where it is read and zeroed (not a pass over every DOF)."""
     n = len(minv_diagonal)
-    w = band.shape[1] // 2
     target = row[n:]
     for i in range(n):
         target[i] = -ground
     for part in range(2):
-        for j in range(2 * w + 1):
-            d = j - w
-            first, last = max(spans[part, j, 0], -d), min(spans[part, j, 1], n - d)
-            if first >= last:
-                continue
-            # slices, so that the loop's index starts at 0: numba checks a possibly negative index, which would
-            # keep the loop from vectorizing
-            diagonal, part_target = band[part, j, first:last], target[first:last]
-            source = below[part * n + d + first:part * n + d + last]
-            for i in range(last - first):
-                part_target[i] += diagonal[i] * source[i]
-    for j in range(len(m.f_dof)):
-        moved_into(m.f_dof[j], minv_diagonal, work, 1.0, target)
-    for e in range(len(m.el_a)):
-        moved_into(m.el_a[e], minv_diagonal, work, 1.0, target)
-        moved_into(m.el_b[e], minv_diagonal, work, 1.0, target)
+        add_diagonals(band, spans, part, below, 1.0, target)
+    moved_loads(m, minv_diagonal, work, 1.0, target)
     for i in range(n):
         target[i] *= inverse
 
@@ -94,26 +79,43 @@ def tridiagonal_rows(m, band, spans, minv_diagonal, below, work, ground, inverse
             if 0 <= column < n:
                 s += band[0, j, i] * below[column]
         target[i] = s * inverse
-    # slices, so that the loop's index starts at 0 (see banded_rows)
+    # slices, so that the loop's index starts at 0 (see add_diagonals)
     lower, diagonal, upper = band[0, 0, 1:n - 1], band[0, 1, 1:n - 1], band[0, 2, 1:n - 1]
     x_lower, x_at, x_upper = below[0:n - 2], below[1:n - 1], below[2:n]
     inner = target[1:n - 1]
     for i in range(n - 2):
         inner[i] = (lower[i] * x_lower[i] + diagonal[i] * x_at[i] + upper[i] * x_upper[i] - ground) * inverse
-    for j in range(3):
-        d = j - 1
-        first, last = max(spans[1, j, 0], -d), min(spans[1, j, 1], n - d)
+    add_diagonals(band, spans, 1, below, inverse, target)
+    moved_loads(m, minv_diagonal, work, inverse, target)
+
+
+@inlined
+def add_diagonals(band, spans, part, below, scale, target):
+    """target += (the part's diagonals times below) scale (part 0: M^-1 K on x, 1: M^-1 C on v), each diagonal over
+    its span only."""
+    n = len(target)
+    w = band.shape[1] // 2
+    for j in range(2 * w + 1):
+        d = j - w
+        first, last = max(spans[part, j, 0], -d), min(spans[part, j, 1], n - d)
         if first >= last:
             continue
-        damping, part_target = band[1, j, first:last], target[first:last]
-        source = below[n + d + first:n + d + last]
+        # slices, so that the loop's index starts at 0: numba checks a possibly negative index, which would keep the
+        # loop from vectorizing
+        entries, part_target = band[part, j, first:last], target[first:last]
+        source = below[part * n + d + first:part * n + d + last]
         for i in range(last - first):
-            part_target[i] += damping[i] * source[i] * inverse
+            part_target[i] += entries[i] * source[i] * scale
+
+
+@inlined
+def moved_loads(m, minv_diagonal, work, scale, target):
+    """target += M^-1 work scale at the DOFs of the forces and the elements (moved_into)."""
     for j in range(len(m.f_dof)):
-        moved_into(m.f_dof[j], minv_diagonal, work, inverse, target)
+        moved_into(m.f_dof[j], minv_diagonal, work, scale, target)
     for e in range(len(m.el_a)):
-        moved_into(m.el_a[e], minv_diagonal, work, inverse, target)
-        moved_into(m.el_b[e], minv_diagonal, work, inverse, target)
+        moved_into(m.el_a[e], minv_diagonal, work, scale, target)
+        moved_into(m.el_b[e], minv_diagonal, work, scale, target)
 
 
 @inlined
