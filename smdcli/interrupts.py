@@ -140,6 +140,23 @@ def result(future, timeout_error=TimeoutError):
                 pass
 
 
+def submit(pool, function, *args):
+    """pool.submit(function, *args) with signals deferred: submitting takes the pool's locks (a thread pool's
+    idle-thread semaphore), and an interrupt raised while one is held leaves it held, so that the pool's threads
+    wait on it forever and so does the shutdown that joins them."""
+    with deferred():
+        return pool.submit(function, *args)
+
+
+def in_threads(function, tasks: list) -> list:
+    """function over tasks, one thread each, results in order, waited for with signals deferred (never raised inside
+    the pool's locks): for compiled kernels, which no signal stops before they return anyway."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    with deferred(), ThreadPoolExecutor(len(tasks)) as pool:
+        return list(pool.map(function, tasks))
+
+
 def settled(future) -> None:
     """Wait for a future to finish, whatever signals arrive meanwhile (cleanup after an interrupt)."""
     with deferred(raise_after=False):

@@ -132,6 +132,36 @@ def test_settling_keeps_the_first_signal_and_no_later_one_kills_the_process():
     assert _python_prints(code) == [str(int(signal.SIGINT)), "alive"]
 
 
+@pytest.mark.parametrize("pool", ["run_threads", "in_threads"])
+def test_thread_pools_end_or_raise_whenever_an_interrupt_lands(pool):
+    """Ctrl-C at random moments of a thread pool's life, 400 times in one process: each run ends or raises
+    KeyboardInterrupt, and the next one runs. An interrupt raised inside pool.submit, while it held the pool's
+    idle-thread semaphore, left the semaphore held: the workers waited on it and the shutdown on them, forever."""
+    runs = {"run_threads": "run_threads(abs, list(range(200)), 2)", "in_threads": "interrupts.in_threads(abs, [-1, -2])"}
+    code = ("import random, signal\n"
+            "from smdcli import interrupts\n"
+            "from smdcli.solvers.compiled import warm\n"
+            "from smdcli.sweep.pool import run_threads\n"
+            "warm()\n"  # kernels loaded before the first run, which would otherwise always be interrupted
+            "interrupts.install()\n"
+            "signal.signal(signal.SIGALRM, lambda *a: signal.raise_signal(signal.SIGINT))\n"
+            "rng, ends = random.Random(1), set()\n"
+            f"run = lambda: {runs[pool]}\n"
+            "for trial in range(400):\n"
+            "    interrupts._received = None\n"
+            "    try:\n"
+            "        try:\n"
+            "            signal.setitimer(signal.ITIMER_REAL, rng.uniform(1e-5, 4e-3))\n"
+            "            run()\n"
+            "            ends.add('finished')\n"
+            "        finally:\n"
+            "            signal.setitimer(signal.ITIMER_REAL, 0)\n"
+            "    except KeyboardInterrupt:\n"
+            "        ends.add('interrupted')\n"
+            "print(*sorted(ends))\n")
+    assert _python_prints(code) == ["finished", "interrupted"]
+
+
 def test_no_interrupt_is_lost_at_any_point_of_a_run_under_load(tmp_path):
     """SIGINT or SIGTERM at many points of a whole run (start-up, imports, solve, HDF5, plots), with every core
     busy: a signal that lands before the run's files are committed always gives exit 130 or 143, no temporary

@@ -190,12 +190,13 @@ def _solve_chunks(run: SweepRun, stream, plan: list[range], method, workers, gri
                         make_room()  # and so the buffers about to be reused are on disk
                         result = solve_family(family.take(members), method, workers, advance if shown else None,
                                               buffers[k % 2])
-                        writing.append(writer.submit(_measure_and_write, run, stream, members, result, grid, length))
+                        writing.append(interrupts.submit(writer, _measure_and_write, run, stream, members, result, grid,
+                                                        length))
                 else:
                     for chunk in cluster.chunks(family, [m for _, m in todo], method, run.keep, grid, length,
                                                 family.spec.quantity, advance if shown else None):
                         make_room()
-                        writing.append(writer.submit(_write_chunk, run, stream, chunk))
+                        writing.append(interrupts.submit(writer, _write_chunk, run, stream, chunk))
                 for pending in writing:
                     interrupts.result(pending)
             run.wall_time_s = time.perf_counter() - started

@@ -22,6 +22,7 @@ import math
 
 import numpy as np
 
+from smdcli import interrupts
 from smdcli.kernels.compiler import kernel
 from smdcli.kernels.oscillator import _cs
 
@@ -203,7 +204,6 @@ def peaks(acceleration: np.ndarray, dt: float, omega, zeta, uy, hardening, threa
     """(O, 4): max u, min u, final plastic deformation and yield events per oscillator (arrays broadcast to O);
     oscillators shared among threads."""
     import os
-    from concurrent.futures import ThreadPoolExecutor
 
     a = np.ascontiguousarray(acceleration, dtype=float)
     omega, zeta, uy, hardening = (np.ascontiguousarray(x, dtype=float) for x in
@@ -220,6 +220,5 @@ def peaks(acceleration: np.ndarray, dt: float, omega, zeta, uy, hardening, threa
         inelastic_peaks(a, dt, omega[share], zeta[share], uy[share], hardening[share], part)
         out[share] = part
 
-    with ThreadPoolExecutor(threads) as pool:
-        list(pool.map(run, shares))
+    interrupts.in_threads(run, shares)
     return out

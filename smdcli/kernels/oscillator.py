@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 
+from smdcli import interrupts
 from smdcli.kernels.compiler import inlined, kernel
 
 DISPLACEMENT, ABSOLUTE_ACCELERATION = 0, 1  # the quantity whose extremes are measured
@@ -176,7 +177,6 @@ def extremes(acceleration: np.ndarray, dt: float, omega: np.ndarray, zeta: np.nd
              tail_periods: float = 0.0, threads: int = 0) -> np.ndarray:
     """(O, 4) largest q, its time, smallest q, its time per oscillator; oscillators shared among threads."""
     import os
-    from concurrent.futures import ThreadPoolExecutor
 
     a = np.ascontiguousarray(acceleration, dtype=float)
     omega = np.ascontiguousarray(omega, dtype=float)
@@ -194,6 +194,5 @@ def extremes(acceleration: np.ndarray, dt: float, omega: np.ndarray, zeta: np.nd
         oscillator_extremes(a, dt, omega[share], zeta[share], kind, tail_periods, part)
         out[share] = part
 
-    with ThreadPoolExecutor(threads) as pool:
-        list(pool.map(run, shares))
+    interrupts.in_threads(run, shares)
     return out

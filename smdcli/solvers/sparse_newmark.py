@@ -164,11 +164,9 @@ class _March:
         cores the three take the time of the finest), else one after another."""
         if self.band is None:
             return [self.run(divisions * level) for level in LEVELS]
-        from concurrent.futures import ThreadPoolExecutor
+        from smdcli import interrupts
 
-        with ThreadPoolExecutor(len(LEVELS)) as pool:
-            runs = [pool.submit(self.run, divisions * level) for level in reversed(LEVELS)]
-            return [run.result() for run in reversed(runs)]
+        return interrupts.in_threads(lambda level: self.run(divisions * level), LEVELS[::-1])[::-1]
 
     def _step(self, length: float, divisions: int) -> float:
         """length / divisions, or a step already factored within 1e-12 of it: a uniform grid's rounded spacings are

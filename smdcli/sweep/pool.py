@@ -66,15 +66,15 @@ def run_threads(function: Callable, tasks: list, workers: int, progress: Callabl
     interval = sys.getswitchinterval()
     sys.setswitchinterval(5e-4)
     try:
-        futures = {pool.submit(function, task): i for i, task in enumerate(tasks)}
+        futures = {interrupts.submit(pool, function, task): i for i, task in enumerate(tasks)}
         pending = set(futures)
         while pending:
-            with interrupts.deferred():  # an interrupt raises between waits, never inside a future's lock
+            with interrupts.deferred():  # an interrupt raises between waits, never inside a pool's or future's lock
                 done, pending = wait(pending, timeout=interrupts.SLICE, return_when=FIRST_COMPLETED)
-            for future in done:
-                results[futures[future]] = future.result()
-                if reporter and not steps:
-                    reporter.put(1)
+                for future in done:
+                    results[futures[future]] = future.result()
+                    if reporter and not steps:
+                        reporter.put(1)
     finally:
         with interrupts.deferred(raise_after=False):
             pool.shutdown(wait=True, cancel_futures=True)
@@ -109,15 +109,15 @@ def run_pool(function: Callable, tasks: list, workers: int, progress: Callable[[
     ticks = multiprocessing.get_context().Queue() if (steps and progress) else None
     pool = ProcessPoolExecutor(max_workers=min(workers, len(tasks)), initializer=_set_ticks, initargs=(ticks,))
     try:
-        futures = {pool.submit(function, task): i for i, task in enumerate(tasks)}
+        futures = {interrupts.submit(pool, function, task): i for i, task in enumerate(tasks)}
         pending = set(futures)
         while pending:
             with interrupts.deferred():
                 done, pending = wait(pending, timeout=interrupts.SLICE, return_when=FIRST_COMPLETED)
-            for future in done:
-                results[futures[future]] = future.result()
-                if progress and not steps:
-                    progress(1)
+                for future in done:
+                    results[futures[future]] = future.result()
+                    if progress and not steps:
+                        progress(1)
             while ticks is not None:
                 try:
                     ticks.get_nowait()
