@@ -7,8 +7,9 @@ Within a record interval the input is a + s tau, so y is a particular line (P0 +
 z with z(tau) = exp(sigma tau) [C(tau) z0 + S(tau) (zeta w z0 + z0')], sigma = -zeta w, where C, S are cos and
 sin/wd (under-damped), cosh and sinh/q (over-damped) or 1 and tau (critical). Each interval is cut into pieces of
 at most an eighth of the period, on which the derivative changes sign at most once where it matters; where it
-does and the extremum could pass the largest found so far, the root is found by Newton's method on the closed form
-(q'' known there too), from the root of the cubic Hermite interpolant's slope, kept inside the bracket.
+does and the extremum could pass the extremes found by the end of a block of pieces, the root is found by Newton's
+method on the closed form (q'' known there too), from the root of the cubic Hermite interpolant's slope, kept inside
+the bracket.
 
 Must not import: solvers, sweep, io, plots, commands, cli.
 """
@@ -111,40 +112,80 @@ def _piece_propagator(w, z, h):
     return c + s * z * w, s, -s * w * w, c - s * z * w
 
 
+BLOCK = 256  # piece ends held for the second pass: 8 KB, in the first-level cache
+
+
 @inlined
-def _propagate(kind, w, z, h, e, pieces, t0, y, v, a0, slope, q_max, t_max, q_min, t_min):
-    """Advance (y, v) over `pieces` pieces of length h (transition e) of an interval starting at t0 with input
-    a0 + slope tau; returns the new (y, v) and the extremes so far (largest q, its time, smallest q, its time),
-    every extremum inside the interval counted."""
-    e11, e12, e21, e22 = e
-    inv_w2 = 1.0 / (w * w)  # hoisted by the compiler out of the caller's loop once inlined
+def _candidates(h, qs, ds, q_max, q_min, i):
+    """Whether the piece from end i - 1 to end i (q and dq/dt in qs, ds) may hold an extremum past q_max or q_min:
+    dq/dt changes sign there, and the extremum exceeds the piece's ends by less than h max |dq/dt| at the ends.
+    Bitwise operators, not `and`: no branch, so a loop over the pieces vectorizes."""
+    q0, q1, d0, d1 = qs[i - 1], qs[i], ds[i - 1], ds[i]
+    reach = h * max(abs(d0), abs(d1))
+    return (((d0 > 0.0) & (d1 < 0.0) & (max(q0, q1) + reach > q_max))
+            | ((d0 < 0.0) & (d1 > 0.0) & (min(q0, q1) - reach < q_min)))
+
+
+@inlined
+def _particular(acceleration, dt, inv_w2, zw, k):
+    """Interval k's input (value a0 at its start, slope) and the line P0 + P1 tau that answers it."""
+    a0 = acceleration[k]
+    slope = (acceleration[k + 1] - a0) / dt
     P1 = -slope * inv_w2
-    P0 = (-a0 - 2.0 * z * w * P1) * inv_w2
-    zy, zv = y - P0, v - P1
-    q0, d0, _ = _quantity(kind, w, z, y, v, a0, slope)
-    for j in range(pieces):
-        tau0 = j * h
-        ny, nv = e11 * zy + e12 * zv, e21 * zy + e22 * zv
-        tau1 = tau0 + h
-        y, v = ny + P0 + P1 * tau1, nv + P1
-        q1, d1, _ = _quantity(kind, w, z, y, v, a0 + slope * tau1, slope)
-        if q1 > q_max:
-            q_max, t_max = q1, t0 + tau1
-        if q1 < q_min:
-            q_min, t_min = q1, t0 + tau1
-        # an extremum inside the piece exceeds its ends by less than h max |dq/dt| at the ends: refine it only
-        # where it could pass the extreme found so far
-        reach = h * max(abs(d0), abs(d1))
-        if d0 > 0.0 and d1 < 0.0 and max(q0, q1) + reach > q_max:
-            q, theta = _extremum(kind, w, z, zy, zv, P0, P1, a0, slope, tau0, h, q0, q1, d0, d1)
+    return a0, slope, (-a0 - 2.0 * zw * P1) * inv_w2, P1
+
+
+@inlined
+def _sweep(kind, w, z, acceleration, dt, pieces, h, e, t_start, y, v, found, ys, vs, qs, ds):
+    """Advance (y, v) from t_start over the intervals of `acceleration` (samples dt apart, the input a line between
+    them), each cut into `pieces` pieces of length h with transition e; returns the new (y, v) and updates found
+    (largest q, its time, smallest q, its time), every extremum inside an interval counted.
+
+    Blocks of BLOCK piece ends, in two passes: the first steps the closed form, keeping each piece end's state, q
+    and dq/dt; the second refines the pieces whose extremum could pass the extremes found by the block's end. The
+    stepping loop is then free of the tests on dq/dt's sign, which mispredict at every turn of the oscillator, and
+    the tests run in a loop that vectorizes (one thread, 200 periods of a 4,001-sample record: 5.8 ms, was 6.6)."""
+    e11, e12, e21, e22 = e
+    inv_w2, zw = 1.0 / (w * w), z * w
+    q_max, t_max, q_min, t_min = found[0], found[1], found[2], found[3]
+    intervals = acceleration.shape[0] - 1
+    per_block = max(1, BLOCK // pieces)
+    for first in range(0, intervals, per_block):
+        a0, slope, P0, P1 = _particular(acceleration, dt, inv_w2, zw, first)
+        q, d, _ = _quantity(kind, w, z, y, v, a0, slope)
+        ys[0], vs[0], qs[0], ds[0] = y, v, q, d
+        count = 0
+        for k in range(first, min(intervals, first + per_block)):
+            a0, slope, P0, P1 = _particular(acceleration, dt, inv_w2, zw, k)
+            zy, zv = y - P0, v - P1  # the homogeneous part
+            for j in range(1, pieces + 1):
+                zy, zv = e11 * zy + e12 * zv, e21 * zy + e22 * zv
+                tau = j * h
+                y, v = zy + P0 + P1 * tau, zv + P1
+                q, d, _ = _quantity(kind, w, z, y, v, a0 + slope * tau, slope)
+                count += 1
+                ys[count], vs[count], qs[count], ds[count] = y, v, q, d
+                if q > q_max:
+                    q_max, t_max = q, t_start + k * dt + tau
+                if q < q_min:
+                    q_min, t_min = q, t_start + k * dt + tau
+        hits = 0
+        for i in range(1, count + 1):
+            hits += _candidates(h, qs, ds, q_max, q_min, i)
+        for i in range(1, count + 1 if hits else 1):
+            if not _candidates(h, qs, ds, q_max, q_min, i):
+                continue
+            k = first + (i - 1) // pieces
+            tau0 = ((i - 1) % pieces) * h
+            a0, slope, P0, P1 = _particular(acceleration, dt, inv_w2, zw, k)
+            zy, zv = ys[i - 1] - P0 - P1 * tau0, vs[i - 1] - P1
+            q, theta = _extremum(kind, w, z, zy, zv, P0, P1, a0, slope, tau0, h, qs[i - 1], qs[i], ds[i - 1], ds[i])
             if q > q_max:
-                q_max, t_max = q, t0 + tau0 + theta
-        elif d0 < 0.0 and d1 > 0.0 and min(q0, q1) - reach < q_min:
-            q, theta = _extremum(kind, w, z, zy, zv, P0, P1, a0, slope, tau0, h, q0, q1, d0, d1)
+                q_max, t_max = q, t_start + k * dt + tau0 + theta
             if q < q_min:
-                q_min, t_min = q, t0 + tau0 + theta
-        zy, zv, q0, d0 = ny, nv, q1, d1
-    return y, v, q_max, t_max, q_min, t_min
+                q_min, t_min = q, t_start + k * dt + tau0 + theta
+    found[0], found[1], found[2], found[3] = q_max, t_max, q_min, t_min
+    return y, v
 
 
 @kernel
@@ -152,25 +193,25 @@ def oscillator_extremes(acceleration, dt, omega, zeta, kind, tail_periods, out):
     """For each oscillator i from rest: out[i] = (largest q, its time, smallest q, its time) over the record and
     `tail_periods` of its own periods of free motion after the record's end (the residual response)."""
     n = acceleration.shape[0]
-    inv_dt = 1.0 / dt
+    tail_pieces = int(math.ceil(tail_periods * PIECES_PER_PERIOD))
+    most_pieces = int(math.ceil(PIECES_PER_PERIOD * dt * omega.max() / (2.0 * math.pi))) if len(omega) else 1
+    size = max(BLOCK, most_pieces, tail_pieces) + 1
+    ys, vs, qs, ds = np.empty(size), np.empty(size), np.empty(size), np.empty(size)
+    found = np.empty(4)
+    at_rest = np.zeros(2)  # the input after the record
     for i in range(omega.shape[0]):
         w, z = omega[i], zeta[i]
         period = 2.0 * math.pi / w
         pieces = max(1, int(math.ceil(PIECES_PER_PERIOD * dt / period)))
-        q_max = t_max = q_min = t_min = 0.0
-        y = v = 0.0
         h = dt / pieces
-        e = _piece_propagator(w, z, h)
-        for k in range(n - 1):
-            slope = (acceleration[k + 1] - acceleration[k]) * inv_dt
-            y, v, q_max, t_max, q_min, t_min = _propagate(kind, w, z, h, e, pieces, k * dt, y, v, acceleration[k],
-                                                          slope, q_max, t_max, q_min, t_min)
-        if tail_periods > 0.0:  # free motion: no input, so pieces of an eighth of the period whatever dt
+        found[:] = 0.0
+        y, v = _sweep(kind, w, z, acceleration, dt, pieces, h, _piece_propagator(w, z, h), 0.0, 0.0, 0.0, found,
+                      ys, vs, qs, ds)
+        if tail_pieces > 0:  # free motion, one interval: pieces of an eighth of the period whatever dt
             h = period / PIECES_PER_PERIOD
-            y, v, q_max, t_max, q_min, t_min = _propagate(
-                kind, w, z, h, _piece_propagator(w, z, h), int(math.ceil(tail_periods * PIECES_PER_PERIOD)),
-                (n - 1) * dt, y, v, 0.0, 0.0, q_max, t_max, q_min, t_min)
-        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = q_max, t_max, q_min, t_min
+            _sweep(kind, w, z, at_rest, tail_pieces * h, tail_pieces, h, _piece_propagator(w, z, h), (n - 1) * dt,
+                   y, v, found, ys, vs, qs, ds)
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = found[0], found[1], found[2], found[3]
 
 
 def extremes(acceleration: np.ndarray, dt: float, omega: np.ndarray, zeta: np.ndarray, kind: int,
