@@ -1,5 +1,6 @@
 """The peers a user would pick instead, on the same inputs as smd, in one process where they run in Python: time
-(median of repeats) and error of each, in one table. Peers that are not installed are skipped with a line
+(median of repeats; on the spectra and the nonlinear scenes smd's runs are split before and after its peers') and
+error of each, in one table. Peers that are not installed are skipped with a line
 (pip install -e '.[peers]': openseespy, eqsig, pyrotd, python-control; scipy is always there).
 
     python benchmarks/peers.py [--repeats 7]
@@ -49,6 +50,27 @@ def timed(fn, repeats: int):
     return median_time(fn, repeats)
 
 
+def timed_around(fn, repeats: int, peers):
+    """(median seconds, last result) of fn run `repeats` times before the peers' runs and as many after, with what
+    `peers()` returns: smd timed over the same stretch of time as its peers, so that a slow spell of a shared machine
+    does not fall on one side only."""
+    import statistics
+    import time
+
+    def runs():
+        times, out = [], None
+        for _ in range(repeats):
+            start = time.perf_counter()
+            out = fn()
+            times.append(time.perf_counter() - start)
+        return times, out
+
+    before, _ = runs()
+    found = peers()
+    after, out = runs()
+    return statistics.median(before + after), out, found
+
+
 def installed(name: str) -> bool:
     return importlib.util.find_spec(name) is not None
 
@@ -84,34 +106,36 @@ def spectrum_rows(repeats):
     periods = np.logspace(math.log10(0.02), 1, 200)
     reference = lsim_reference(t, a, periods, 0.05)
     response_spectrum(t, a, periods[:2], [0.05])  # kernels loaded
-    seconds, found = timed(lambda: response_spectrum(t, a, periods, [0.05]), repeats)
     # eqsig returns the PGA for periods below 6 dt (its convention): errors are taken over the others
     kept = periods >= 6 * dt
 
     def error(sa):
         return np.abs(np.asarray(sa)[kept] - reference[kept]).max() / reference.max()
 
-    smd = (seconds, error(found.Sa[0]))
+    def peers():
+        found = []
+        if installed("eqsig"):
+            import eqsig
+
+            eqsig.sdof.pseudo_response_spectra(a, dt, periods[:2], 0.05)
+            s, (_, _, sa) = timed(lambda: eqsig.sdof.pseudo_response_spectra(a, dt, periods, 0.05), repeats)
+            found.append(("eqsig 1.2 (Nigam-Jennings)", (s, error(sa))))
+        else:
+            found.append(("eqsig: not installed", None))
+        if installed("pyrotd"):
+            import pyrotd
+
+            s, sa = timed(lambda: pyrotd.calc_spec_accels(dt, a, 1 / periods, 0.05), repeats)
+            sa = np.asarray(sa.spec_accel if hasattr(sa, "spec_accel") else sa)
+            found.append(("pyrotd 0.6 (frequency domain)", (s, error(sa))))
+        else:
+            found.append(("pyrotd: not installed", None))
+        return found
+
+    seconds, spectrum, found = timed_around(lambda: response_spectrum(t, a, periods, [0.05]), repeats, peers)
+    smd = (seconds, error(spectrum.Sa[0]))
     work = f"response spectrum, {len(t)} samples, 200 periods, 5 %"
-    rows = []
-    if installed("eqsig"):
-        import eqsig
-
-        eqsig.sdof.pseudo_response_spectra(a, dt, periods[:2], 0.05)
-        s, (_, _, sa) = timed(lambda: eqsig.sdof.pseudo_response_spectra(a, dt, periods, 0.05), repeats)
-        rows.append((work, smd, "eqsig 1.2 (Nigam-Jennings)", (s, error(sa))))
-    else:
-        rows.append((work, smd, "eqsig: not installed", None))
-    if installed("pyrotd"):
-        import pyrotd
-
-        freqs = 1 / periods
-        s, sa = timed(lambda: pyrotd.calc_spec_accels(dt, a, freqs, 0.05), repeats)
-        sa = np.asarray(sa.spec_accel if hasattr(sa, "spec_accel") else sa)
-        rows.append((work, smd, "pyrotd 0.6 (frequency domain)", (s, error(sa))))
-    else:
-        rows.append((work, smd, "pyrotd: not installed", None))
-    return rows
+    return [(work, smd, peer, result) for peer, result in found]
 
 
 def linear_rows(repeats):
@@ -404,20 +428,26 @@ def nonlinear_rows(repeats):
         y0, span = np.concatenate([model.x0, model.v0]), (grid[0], grid[-1])
         reference = solve_ivp(f, span, y0, method="DOP853", t_eval=grid, rtol=1e-13, atol=1e-16).y[:n].T
         peak = np.abs(reference).max()
-        solve_scenario(sc, model, grid)  # kernels loaded
-        seconds, result = timed(lambda: solve_scenario(sc, model, grid), repeats * 3)
+        result = solve_scenario(sc, model, grid)  # kernels loaded
+        target = np.abs(result.displacement - reference).max() / peak
+
+        def peers():
+            found, best = [], math.inf
+            for method in ("DOP853", "RK45", "Radau"):
+                patience = min(30.0, 60 * best)
+                rtol, p_seconds, p_error = scipy_at_error(f, jac, span, y0, grid, reference, peak, target, method,
+                                                          max(1, repeats // 2), patience)
+                if rtol is None:
+                    found.append((f"scipy {method}: {p_error:.1e} after {p_seconds:.1f} s, stopped", None))
+                    continue
+                best = min(best, p_seconds)
+                found.append((f"scipy {method}, rtol {rtol:.1e}", (p_seconds, p_error)))
+            return found
+
+        seconds, result, found = timed_around(lambda: solve_scenario(sc, model, grid), repeats * 3, peers)
         smd = (seconds, np.abs(result.displacement - reference).max() / peak)
         work = f"{work}, {len(grid)} points ({result.stats.method})"
-        best = math.inf
-        for method in ("DOP853", "RK45", "Radau"):
-            patience = min(30.0, 60 * best)
-            rtol, p_seconds, p_error = scipy_at_error(f, jac, span, y0, grid, reference, peak, smd[1], method,
-                                                      max(1, repeats // 2), patience)
-            if rtol is None:
-                rows.append((work, smd, f"scipy {method}: {p_error:.1e} after {p_seconds:.1f} s, stopped", None))
-                continue
-            best = min(best, p_seconds)
-            rows.append((work, smd, f"scipy {method}, rtol {rtol:.1e}", (p_seconds, p_error)))
+        rows += [(work, smd, peer, p_result) for peer, p_result in found]
     return rows
 
 
