@@ -36,12 +36,19 @@ def chain(n: int = 100) -> str:
     return "\n".join(lines) + "\n"
 
 
-def median_time(fn, repeats: int) -> tuple[float, object]:
+def run_times(fn, repeats: int) -> tuple[list[float], object]:
+    """The seconds of each of `repeats` runs of fn, and the last run's result."""
     times, out = [], None
     for _ in range(repeats):
         start = time.perf_counter()
         out = fn()
         times.append(time.perf_counter() - start)
+    return times, out
+
+
+def median_time(fn, repeats: int) -> tuple[float, object]:
+    """(median seconds, last result) of `repeats` runs of fn."""
+    times, out = run_times(fn, repeats)
     return statistics.median(times), out
 
 

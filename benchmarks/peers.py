@@ -55,19 +55,12 @@ def timed_around(fn, repeats: int, peers):
     `peers()` returns: smd timed over the same stretch of time as its peers, so that a slow spell of a shared machine
     does not fall on one side only."""
     import statistics
-    import time
 
-    def runs():
-        times, out = [], None
-        for _ in range(repeats):
-            start = time.perf_counter()
-            out = fn()
-            times.append(time.perf_counter() - start)
-        return times, out
+    from compiled_vs_solve_ivp import run_times
 
-    before, _ = runs()
+    before, _ = run_times(fn, repeats)
     found = peers()
-    after, out = runs()
+    after, out = run_times(fn, repeats)
     return statistics.median(before + after), out, found
 
 

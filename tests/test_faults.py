@@ -137,7 +137,8 @@ def test_thread_pools_end_or_raise_whenever_an_interrupt_lands(pool):
     """Ctrl-C at random moments of a thread pool's life, 400 times in one process: each run ends or raises
     KeyboardInterrupt, and the next one runs. An interrupt raised inside pool.submit, while it held the pool's
     idle-thread semaphore, left the semaphore held: the workers waited on it and the shutdown on them, forever."""
-    runs = {"run_threads": "run_threads(abs, list(range(200)), 2)", "in_threads": "interrupts.in_threads(abs, [-1, -2])"}
+    runs = {"run_threads": "run_threads(abs, list(range(200)), 2)",
+            "in_threads": "interrupts.in_threads(abs, [-1, -2])"}
     code = ("import random, signal\n"
             "from smdcli import interrupts\n"
             "from smdcli.solvers.compiled import warm\n"

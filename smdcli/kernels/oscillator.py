@@ -136,10 +136,11 @@ def _particular(acceleration, inv_dt, inv_w2, zw, k):
 
 
 @inlined
-def _sweep(kind, w, z, acceleration, dt, pieces, h, e, t_start, y, v, found, ys, vs, qs, ds):
+def _sweep(kind, w, z, acceleration, dt, pieces, h, e, t_start, y, v, q_max, t_max, q_min, t_min, ys, vs, qs, ds):
     """Advance (y, v) from t_start over the intervals of `acceleration` (samples dt apart, the input a line between
-    them), each cut into `pieces` pieces of length h with transition e; returns the new (y, v) and updates found
-    (largest q, its time, smallest q, its time), every extremum inside an interval counted.
+    them), each cut into `pieces` pieces of length h with transition e; returns the new (y, v) and the extremes so
+    far (largest q, its time, smallest q, its time), every extremum inside an interval counted. ys, vs, qs and ds
+    are scratch for a block's piece ends.
 
     Blocks of BLOCK piece ends, in two passes: the first steps the closed form, keeping each piece end's state, q
     and dq/dt; the second refines the pieces whose extremum could pass the extremes found by the block's end. The
@@ -147,11 +148,10 @@ def _sweep(kind, w, z, acceleration, dt, pieces, h, e, t_start, y, v, found, ys,
     the tests run in a loop that vectorizes (one thread, 200 periods of a 4,001-sample record: 5.8 ms, was 6.6)."""
     e11, e12, e21, e22 = e
     inv_w2, zw, inv_dt = 1.0 / (w * w), z * w, 1.0 / dt
-    q_max, t_max, q_min, t_min = found[0], found[1], found[2], found[3]
     intervals = acceleration.shape[0] - 1
     per_block = max(1, BLOCK // pieces)
     for first in range(0, intervals, per_block):
-        a0, slope, P0, P1 = _particular(acceleration, inv_dt, inv_w2, zw, first)
+        a0, slope, _, _ = _particular(acceleration, inv_dt, inv_w2, zw, first)
         q, d, _ = _quantity(kind, w, z, y, v, a0, slope)
         ys[0], vs[0], qs[0], ds[0] = y, v, q, d
         count = 0
@@ -184,8 +184,7 @@ def _sweep(kind, w, z, acceleration, dt, pieces, h, e, t_start, y, v, found, ys,
                 q_max, t_max = q, t_start + k * dt + tau0 + theta
             if q < q_min:
                 q_min, t_min = q, t_start + k * dt + tau0 + theta
-    found[0], found[1], found[2], found[3] = q_max, t_max, q_min, t_min
-    return y, v
+    return y, v, q_max, t_max, q_min, t_min
 
 
 @kernel
@@ -197,21 +196,20 @@ def oscillator_extremes(acceleration, dt, omega, zeta, kind, tail_periods, out):
     most_pieces = int(math.ceil(PIECES_PER_PERIOD * dt * omega.max() / (2.0 * math.pi))) if len(omega) else 1
     size = max(BLOCK, most_pieces, tail_pieces) + 1
     ys, vs, qs, ds = np.empty(size), np.empty(size), np.empty(size), np.empty(size)
-    found = np.empty(4)
     at_rest = np.zeros(2)  # the input after the record
     for i in range(omega.shape[0]):
         w, z = omega[i], zeta[i]
         period = 2.0 * math.pi / w
         pieces = max(1, int(math.ceil(PIECES_PER_PERIOD * dt / period)))
         h = dt / pieces
-        found[:] = 0.0
-        y, v = _sweep(kind, w, z, acceleration, dt, pieces, h, _piece_propagator(w, z, h), 0.0, 0.0, 0.0, found,
-                      ys, vs, qs, ds)
+        y, v, q_max, t_max, q_min, t_min = _sweep(kind, w, z, acceleration, dt, pieces, h, _piece_propagator(w, z, h),
+                                                  0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, ys, vs, qs, ds)
         if tail_pieces > 0:  # free motion, one interval: pieces of an eighth of the period whatever dt
             h = period / PIECES_PER_PERIOD
-            _sweep(kind, w, z, at_rest, tail_pieces * h, tail_pieces, h, _piece_propagator(w, z, h), (n - 1) * dt,
-                   y, v, found, ys, vs, qs, ds)
-        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = found[0], found[1], found[2], found[3]
+            _, _, q_max, t_max, q_min, t_min = _sweep(kind, w, z, at_rest, tail_pieces * h, tail_pieces, h,
+                                                      _piece_propagator(w, z, h), (n - 1) * dt, y, v, q_max, t_max,
+                                                      q_min, t_min, ys, vs, qs, ds)
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = q_max, t_max, q_min, t_min
 
 
 def extremes(acceleration: np.ndarray, dt: float, omega: np.ndarray, zeta: np.ndarray, kind: int,

@@ -166,6 +166,7 @@ class _March:
             return [self.run(divisions * level) for level in LEVELS]
         from smdcli import interrupts
 
+        # the finest first: it takes longest
         return interrupts.in_threads(lambda level: self.run(divisions * level), LEVELS[::-1])[::-1]
 
     def _step(self, length: float, divisions: int) -> float:
