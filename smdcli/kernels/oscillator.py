@@ -9,7 +9,7 @@ sin/wd (under-damped), cosh and sinh/q (over-damped) or 1 and tau (critical). Ea
 at most an eighth of the period, on which the derivative changes sign at most once where it matters; where it
 does and the extremum could pass the extremes found by the end of a block of pieces, the root is found by Newton's
 method on the closed form (q'' known there too), from the root of the cubic Hermite interpolant's slope, kept inside
-the bracket.
+the bracket. Oscillators with as many pieces to an interval are stepped LANES at a time, side by side.
 
 Must not import: solvers, sweep, io, plots, commands, cli.
 """
@@ -112,104 +112,191 @@ def _piece_propagator(w, z, h):
     return c + s * z * w, s, -s * w * w, c - s * z * w
 
 
-BLOCK = 256  # piece ends held for the second pass: 8 KB, in the first-level cache
+BLOCK = 32  # piece ends held for the second pass, LANES oscillators each: 32 KB, in the first-level cache
+LANES = 32  # oscillators stepped side by side (8 and 16: 3.7 and 3.1 ms where 32 take 3.0)
+# A group's lanes, a column each: rows of osc, what the stepping reads (the oscillator's constants and its
+# interval's particular line), and of state, what it writes (the relative motion, the extremes so far and their
+# times, the homogeneous part, the extremes before a block, a block's count of candidate pieces). Two arrays: rows
+# of one array, which the compiler cannot tell apart, kept the lanes' loops from vectorizing.
+W, ZETA, H, E11, E12, E21, E22, INV_W2, ZW, P0, P1 = range(11)
+Y, V, Q_MAX, T_MAX, Q_MIN, T_MIN, ZY, ZV, MAX_BEFORE, MIN_BEFORE, HITS = range(11)
 
 
 @inlined
-def _candidates(h, qs, ds, q_max, q_min, i):
-    """Whether the piece from end i - 1 to end i (q and dq/dt in qs, ds) may hold an extremum past q_max or q_min:
+def _candidate(h, q0, q1, d0, d1, q_max, q_min):
+    """Whether a piece from (q0, d0) to (q1, d1) (q and dq/dt at its ends) may hold an extremum past q_max or q_min:
     dq/dt changes sign there, and the extremum exceeds the piece's ends by less than h max |dq/dt| at the ends.
-    Bitwise operators, not `and`: no branch, so a loop over the pieces vectorizes."""
-    q0, q1, d0, d1 = qs[i - 1], qs[i], ds[i - 1], ds[i]
+    Bitwise operators, not `and`: no branch, so a loop over the lanes vectorizes."""
     reach = h * max(abs(d0), abs(d1))
     return (((d0 > 0.0) & (d1 < 0.0) & (max(q0, q1) + reach > q_max))
             | ((d0 < 0.0) & (d1 > 0.0) & (min(q0, q1) - reach < q_min)))
 
 
 @inlined
-def _particular(acceleration, inv_dt, inv_w2, zw, k):
-    """Interval k's input (value a0 at its start, slope) and the line P0 + P1 tau that answers it."""
-    a0 = acceleration[k]
-    slope = (acceleration[k + 1] - a0) * inv_dt
-    P1 = -slope * inv_w2
-    return a0, slope, (-a0 - 2.0 * zw * P1) * inv_w2, P1
+def _particular(a0, slope, inv_w2, zw):
+    """The line P0 + P1 tau that answers an interval's input (value a0 at its start, slope): (P0, P1)."""
+    line_slope = -slope * inv_w2
+    return (-a0 - 2.0 * zw * line_slope) * inv_w2, line_slope
 
 
 @inlined
-def _sweep(kind, w, z, acceleration, dt, pieces, h, e, t_start, y, v, q_max, t_max, q_min, t_min, ys, vs, qs, ds):
-    """Advance (y, v) from t_start over the intervals of `acceleration` (samples dt apart, the input a line between
-    them), each cut into `pieces` pieces of length h with transition e; returns the new (y, v) and the extremes so
-    far (largest q, its time, smallest q, its time), every extremum inside an interval counted. ys, vs, qs and ds
-    are scratch for a block's piece ends.
+def _input(acceleration, inv_dt, k):
+    """Interval k's input: its value at the start and its slope (the sample difference times 1/dt)."""
+    a0 = acceleration[k]
+    return a0, (acceleration[k + 1] - a0) * inv_dt
+
+
+@inlined
+def _pieces(kind, lanes, osc, state, ends, count, pieces, a0, slope):
+    """Step the lanes over an interval's pieces from their homogeneous parts, each piece end's y, v, q and dq/dt into
+    ends' rows count + 1.., the extremes' values (not their times) into state; the new count. Only selects in the
+    lanes' loop, no branches (times kept there did not vectorize), and kind a constant where it is inlined: the loop
+    vectorizes."""
+    L = LANES
+    for j in range(1, pieces + 1):
+        count += 1
+        row = ends[count]
+        for lane in range(lanes):
+            hy, hv = state[ZY, lane], state[ZV, lane]
+            hy, hv = osc[E11, lane] * hy + osc[E12, lane] * hv, osc[E21, lane] * hy + osc[E22, lane] * hv
+            state[ZY, lane], state[ZV, lane] = hy, hv
+            tau = j * osc[H, lane]
+            y, v = hy + osc[P0, lane] + osc[P1, lane] * tau, hv + osc[P1, lane]
+            q, d, _ = _quantity(kind, osc[W, lane], osc[ZETA, lane], y, v, a0 + slope * tau, slope)
+            row[lane], row[L + lane], row[2 * L + lane], row[3 * L + lane] = y, v, q, d
+            q_max, q_min = state[Q_MAX, lane], state[Q_MIN, lane]
+            state[Q_MAX, lane] = q if q > q_max else q_max
+            state[Q_MIN, lane] = q if q < q_min else q_min
+    return count
+
+
+@inlined
+def _sweep(kind, lanes, osc, state, acceleration, dt, pieces, t_start, ends):
+    """Advance `lanes` oscillators side by side from t_start over the intervals of `acceleration` (samples dt
+    apart, the input a line between them), each cut into `pieces` pieces, lane l's osc[H, l] long; every extremum
+    inside an interval counted in the extremes. osc and state: the rows named above, updated; ends: scratch for a
+    block's piece ends, a row each (y, v, q, dq/dt of the lanes side by side).
 
     Blocks of BLOCK piece ends, in two passes: the first steps the closed form, keeping each piece end's state, q
-    and dq/dt; the second refines the pieces whose extremum could pass the extremes found by the block's end. The
-    stepping loop is then free of the tests on dq/dt's sign, which mispredict at every turn of the oscillator, and
-    the tests run in a loop that vectorizes (one thread, 200 periods of a 4,001-sample record: 5.8 ms, was 6.6)."""
-    e11, e12, e21, e22 = e
-    inv_w2, zw, inv_dt = 1.0 / (w * w), z * w, 1.0 / dt
+    and dq/dt; the second finds the time of a block's new extreme sample, and refines the pieces whose extremum could
+    pass the extremes found by the block's end. One oscillator's step waits on the last (its transition's
+    multiply-adds); LANES of them side by side fill the vector units, where one at a time left them idle (one thread,
+    200 periods of a 4,001-sample record at 5 %: 3.0-3.3 ms, were 5.3-5.4); the tests on dq/dt's sign, which
+    mispredict at every turn, run in loops without branches."""
+    L = LANES
+    inv_dt = 1.0 / dt
     intervals = acceleration.shape[0] - 1
     per_block = max(1, BLOCK // pieces)
     for first in range(0, intervals, per_block):
-        a0, slope, _, _ = _particular(acceleration, inv_dt, inv_w2, zw, first)
-        q, d, _ = _quantity(kind, w, z, y, v, a0, slope)
-        ys[0], vs[0], qs[0], ds[0] = y, v, q, d
+        a0, slope = _input(acceleration, inv_dt, first)
+        row = ends[0]
+        for lane in range(lanes):
+            y, v = state[Y, lane], state[V, lane]
+            q, d, _ = _quantity(kind, osc[W, lane], osc[ZETA, lane], y, v, a0, slope)
+            row[lane], row[L + lane], row[2 * L + lane], row[3 * L + lane] = y, v, q, d
+            state[MAX_BEFORE, lane], state[MIN_BEFORE, lane] = state[Q_MAX, lane], state[Q_MIN, lane]
         count = 0
         for k in range(first, min(intervals, first + per_block)):
-            a0, slope, P0, P1 = _particular(acceleration, inv_dt, inv_w2, zw, k)
-            zy, zv = y - P0, v - P1  # the homogeneous part
-            for j in range(1, pieces + 1):
-                zy, zv = e11 * zy + e12 * zv, e21 * zy + e22 * zv
-                tau = j * h
-                y, v = zy + P0 + P1 * tau, zv + P1
-                q, d, _ = _quantity(kind, w, z, y, v, a0 + slope * tau, slope)
-                count += 1
-                ys[count], vs[count], qs[count], ds[count] = y, v, q, d
-                if q > q_max:
-                    q_max, t_max = q, t_start + k * dt + tau
-                if q < q_min:
-                    q_min, t_min = q, t_start + k * dt + tau
-        hits = 0
+            a0, slope = _input(acceleration, inv_dt, k)
+            for lane in range(lanes):
+                osc[P0, lane], osc[P1, lane] = _particular(a0, slope, osc[INV_W2, lane], osc[ZW, lane])
+                state[ZY, lane] = state[Y, lane] - osc[P0, lane]  # the homogeneous part
+                state[ZV, lane] = state[V, lane] - osc[P1, lane]
+            if kind == DISPLACEMENT:
+                count = _pieces(DISPLACEMENT, lanes, osc, state, ends, count, pieces, a0, slope)
+            else:
+                count = _pieces(ABSOLUTE_ACCELERATION, lanes, osc, state, ends, count, pieces, a0, slope)
+            for lane in range(lanes):
+                state[Y, lane], state[V, lane] = ends[count, lane], ends[count, L + lane]
+        for lane in range(lanes):
+            h = osc[H, lane]
+            if state[Q_MAX, lane] > state[MAX_BEFORE, lane] or state[Q_MIN, lane] < state[MIN_BEFORE, lane]:
+                for i in range(1, count + 1):  # the first sample at the block's new extreme: its time
+                    k, j = first + (i - 1) // pieces, (i - 1) % pieces + 1
+                    q = ends[i, 2 * L + lane]
+                    if q == state[Q_MAX, lane] and state[Q_MAX, lane] > state[MAX_BEFORE, lane]:
+                        state[T_MAX, lane] = t_start + k * dt + j * h
+                        state[MAX_BEFORE, lane] = state[Q_MAX, lane]
+                    if q == state[Q_MIN, lane] and state[Q_MIN, lane] < state[MIN_BEFORE, lane]:
+                        state[T_MIN, lane] = t_start + k * dt + j * h
+                        state[MIN_BEFORE, lane] = state[Q_MIN, lane]
+            state[HITS, lane] = 0.0
         for i in range(1, count + 1):
-            hits += _candidates(h, qs, ds, q_max, q_min, i)
-        for i in range(1, count + 1 if hits else 1):
-            if not _candidates(h, qs, ds, q_max, q_min, i):
+            before, at = ends[i - 1], ends[i]
+            for lane in range(lanes):
+                state[HITS, lane] += _candidate(osc[H, lane], before[2 * L + lane], at[2 * L + lane],
+                                                before[3 * L + lane], at[3 * L + lane], state[Q_MAX, lane],
+                                                state[Q_MIN, lane])
+        for lane in range(lanes):
+            if state[HITS, lane] == 0.0:
                 continue
-            k = first + (i - 1) // pieces
-            tau0 = ((i - 1) % pieces) * h
-            a0, slope, P0, P1 = _particular(acceleration, inv_dt, inv_w2, zw, k)
-            zy, zv = ys[i - 1] - P0 - P1 * tau0, vs[i - 1] - P1
-            q, theta = _extremum(kind, w, z, zy, zv, P0, P1, a0, slope, tau0, h, qs[i - 1], qs[i], ds[i - 1], ds[i])
-            if q > q_max:
-                q_max, t_max = q, t_start + k * dt + tau0 + theta
-            if q < q_min:
-                q_min, t_min = q, t_start + k * dt + tau0 + theta
-    return y, v, q_max, t_max, q_min, t_min
+            h, inv_w2, zw = osc[H, lane], osc[INV_W2, lane], osc[ZW, lane]
+            for i in range(1, count + 1):
+                q0, q1 = ends[i - 1, 2 * L + lane], ends[i, 2 * L + lane]
+                d0, d1 = ends[i - 1, 3 * L + lane], ends[i, 3 * L + lane]
+                if not _candidate(h, q0, q1, d0, d1, state[Q_MAX, lane], state[Q_MIN, lane]):
+                    continue
+                k = first + (i - 1) // pieces
+                tau0 = ((i - 1) % pieces) * h
+                a0, slope = _input(acceleration, inv_dt, k)
+                p0, p1 = _particular(a0, slope, inv_w2, zw)
+                q, theta = _extremum(kind, osc[W, lane], osc[ZETA, lane], ends[i - 1, lane] - p0 - p1 * tau0,
+                                     ends[i - 1, L + lane] - p1, p0, p1, a0, slope, tau0, h, q0, q1, d0, d1)
+                if q > state[Q_MAX, lane]:
+                    state[Q_MAX, lane], state[T_MAX, lane] = q, t_start + k * dt + tau0 + theta
+                if q < state[Q_MIN, lane]:
+                    state[Q_MIN, lane], state[T_MIN, lane] = q, t_start + k * dt + tau0 + theta
+
+
+@inlined
+def _lanes_at(osc, lanes, omega, zeta, order, first, h_of):
+    """Fill osc's lanes with oscillators order[first:first + lanes], lane l's pieces h_of[its index] long."""
+    for lane in range(lanes):
+        i = order[first + lane]
+        w, z = omega[i], zeta[i]
+        h = h_of[i]
+        e11, e12, e21, e22 = _piece_propagator(w, z, h)
+        osc[W, lane], osc[ZETA, lane], osc[H, lane] = w, z, h
+        osc[E11, lane], osc[E12, lane], osc[E21, lane], osc[E22, lane] = e11, e12, e21, e22
+        osc[INV_W2, lane], osc[ZW, lane] = 1.0 / (w * w), z * w
 
 
 @kernel
 def oscillator_extremes(acceleration, dt, omega, zeta, kind, tail_periods, out):
     """For each oscillator i from rest: out[i] = (largest q, its time, smallest q, its time) over the record and
-    `tail_periods` of its own periods of free motion after the record's end (the residual response)."""
+    `tail_periods` of its own periods of free motion after the record's end (the residual response). Oscillators
+    with as many pieces to an interval run LANES at a time."""
     n = acceleration.shape[0]
+    count = omega.shape[0]
     tail_pieces = int(math.ceil(tail_periods * PIECES_PER_PERIOD))
-    most_pieces = int(math.ceil(PIECES_PER_PERIOD * dt * omega.max() / (2.0 * math.pi))) if len(omega) else 1
+    pieces_of = np.empty(count, dtype=np.int64)
+    record_h, tail_h = np.empty(count), np.empty(count)
+    for i in range(count):
+        period = 2.0 * math.pi / omega[i]
+        pieces_of[i] = max(1, int(math.ceil(PIECES_PER_PERIOD * dt / period)))
+        record_h[i] = dt / pieces_of[i]
+        tail_h[i] = period / PIECES_PER_PERIOD  # free motion, one interval: pieces of an eighth of the period
+    order = np.argsort(pieces_of, kind="mergesort")
+    most_pieces = pieces_of.max() if count else 1
     size = max(BLOCK, most_pieces, tail_pieces) + 1
-    ys, vs, qs, ds = np.empty(size), np.empty(size), np.empty(size), np.empty(size)
+    osc, state, ends = np.empty((11, LANES)), np.empty((11, LANES)), np.empty((size, 4 * LANES))
     at_rest = np.zeros(2)  # the input after the record
-    for i in range(omega.shape[0]):
-        w, z = omega[i], zeta[i]
-        period = 2.0 * math.pi / w
-        pieces = max(1, int(math.ceil(PIECES_PER_PERIOD * dt / period)))
-        h = dt / pieces
-        y, v, q_max, t_max, q_min, t_min = _sweep(kind, w, z, acceleration, dt, pieces, h, _piece_propagator(w, z, h),
-                                                  0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, ys, vs, qs, ds)
-        if tail_pieces > 0:  # free motion, one interval: pieces of an eighth of the period whatever dt
-            h = period / PIECES_PER_PERIOD
-            _, _, q_max, t_max, q_min, t_min = _sweep(kind, w, z, at_rest, tail_pieces * h, tail_pieces, h,
-                                                      _piece_propagator(w, z, h), (n - 1) * dt, y, v, q_max, t_max,
-                                                      q_min, t_min, ys, vs, qs, ds)
-        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = q_max, t_max, q_min, t_min
+    first = 0
+    while first < count:
+        pieces = pieces_of[order[first]]
+        lanes = 1
+        while lanes < LANES and first + lanes < count and pieces_of[order[first + lanes]] == pieces:
+            lanes += 1
+        state[:, :] = 0.0
+        _lanes_at(osc, lanes, omega, zeta, order, first, record_h)
+        _sweep(kind, lanes, osc, state, acceleration, dt, pieces, 0.0, ends)
+        if tail_pieces > 0:
+            _lanes_at(osc, lanes, omega, zeta, order, first, tail_h)
+            _sweep(kind, lanes, osc, state, at_rest, 1.0, tail_pieces, (n - 1) * dt, ends)
+        for lane in range(lanes):
+            i = order[first + lane]
+            out[i] = state[Q_MAX, lane], state[T_MAX, lane], state[Q_MIN, lane], state[T_MIN, lane]
+        first += lanes
 
 
 def extremes(acceleration: np.ndarray, dt: float, omega: np.ndarray, zeta: np.ndarray, kind: int,
