@@ -64,10 +64,13 @@ class PiecewiseRun:
         self.v_scale = float(np.abs(model.v0).max(initial=0.0))  # the run's speeds, as far as seen
         self.damped = bool(np.any(model.C))
 
-    def flow(self, mode: Mode) -> Flow:
-        """The cached flow of a mode's A."""
+    def flow(self, mode: Mode, t: float) -> Flow:
+        """The cached flow of a mode's A, entered at t; PiecewiseFailed where A overflows double precision."""
         found = self.flows.get(mode.a_key)
         if found is None:
+            if not np.isfinite(mode.A).all():  # a force or stiffness beyond double precision over a mass
+                raise PiecewiseFailed(f"at t = {t:.6g} s the scene's equations overflow double precision (NaN or "
+                                      "inf in its matrix): check its numbers and their units")
             found = self.flows[mode.a_key] = Flow(mode.A)
         return found
 
@@ -94,7 +97,7 @@ class PiecewiseRun:
         at_same_time, last_event_time = 0, None
         while k < self.N:
             mode = scene.mode(states)
-            flow = self.flow(mode)
+            flow = self.flow(mode, t)
             while b_next < len(breaks) and breaks[b_next][0] <= t:
                 b_next += 1
             break_time = breaks[b_next][0] if b_next < len(breaks) else math.inf
