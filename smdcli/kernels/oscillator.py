@@ -292,6 +292,7 @@ def oscillator_extremes(acceleration, dt, omega, zeta, kind, tail_periods, out):
         _sweep(kind, lanes, osc, state, acceleration, dt, pieces, 0.0, ends)
         if tail_pieces > 0:
             _lanes_at(osc, lanes, omega, zeta, order, first, tail_h)
+            # one interval at rest (k = 0), so its dt scales nothing: the pieces are each lane's own
             _sweep(kind, lanes, osc, state, at_rest, 1.0, tail_pieces, (n - 1) * dt, ends)
         for lane in range(lanes):
             i = order[first + lane]

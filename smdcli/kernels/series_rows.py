@@ -40,7 +40,8 @@ def summed(S, first, tau, into, top):
 
 @inlined
 def largest(values):
-    """max |values| (0 for none), four running maxima side by side: one is a chain of dependent comparisons."""
+    """max |values| (0 for none), four running maxima side by side: one is a chain of dependent comparisons (with one,
+    the 100-mass chain's kernel took 0.80 ms instead of 0.75, the 1,000-mass chain's 9.1 instead of 8.2)."""
     a, b, c, d = 0.0, 0.0, 0.0, 0.0
     count = len(values)
     whole = count - count % 4
@@ -55,17 +56,18 @@ def largest(values):
 
 
 @no_alloc
-def order_sizes(Y, sizes):
-    """The largest |term| of each order of x, v and a: sizes[0, k], sizes[1, k] and sizes[2, k] (a's series, the
-    velocity's derivative, has the terms (k + 1) v_(k+1), so its sizes follow from v's)."""
+def order_sizes(Y, sizes, lowest, highest):
+    """The largest |term| of v's orders lowest..highest, and of those of x and a that follow from them: sizes[1, k],
+    sizes[0, k] and sizes[2, k] (x's terms are v's over k, a's (k + 1) v_(k+1))."""
     p = Y.shape[0] - 1
     n = Y.shape[1] // 2
-    sizes[0, 0] = largest(Y[0, :n])
-    for k in range(p + 1):
+    for k in range(lowest, highest + 1):
         sizes[1, k] = largest(Y[k, n:])
-    for k in range(p):  # x_(k+1) = v_k / (k + 1), term by term (rounding keeps the largest the largest)
-        sizes[0, k + 1] = sizes[1, k] * (1.0 / (k + 1))
-    for k in range(p):
+    if lowest == 0:
+        sizes[0, 0] = largest(Y[0, :n])
+    for k in range(lowest + 1, min(highest + 1, p) + 1):  # x_k = v_(k-1) / k: rounding keeps the largest the largest
+        sizes[0, k] = sizes[1, k - 1] * (1.0 / k)
+    for k in range(max(lowest - 1, 0), highest):
         sizes[2, k] = (k + 1) * sizes[1, k + 1]
     sizes[2, p] = 0.0
 

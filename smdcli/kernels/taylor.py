@@ -267,7 +267,8 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
             force_series(m, t, ta, mid, p, U, stack)
             coefficients(m, band, spans, minv_diagonal, p, Y, U, D, D2, sign, peak_v, h_last, work)
             counts[NFEV] += p
-            order_sizes(Y, sizes)
+            order_sizes(Y, sizes, p - 2, p)  # what the step needs (x's and v's last two orders); the rest where a
+            # row needs it
             tol_x, tol_v = max(atol + rtol * peak_x, 1e-300), max(atol + rtol * peak_v, 1e-300)
             h_series = step_size(sizes, p, tol_x, tol_v)
             h = min(h_series, tb - t)
@@ -278,6 +279,7 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
             start = row == 1 and t == grid[0]
             series_a = pending < row or last > row or start  # the acceleration's series only where a row needs it
             if series_a:
+                order_sizes(Y, sizes, 0, p - 3)
                 acceleration_series(Y, A)
                 for i in range(n):
                     peak_a = max(peak_a, abs(A[0, i]))
