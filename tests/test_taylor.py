@@ -212,3 +212,70 @@ def test_every_row_of_x_v_and_a_is_within_rtol_whichever_series_sums_it(rtol):
         for quantity in ("displacement", "velocity", "acceleration"):
             mine, theirs = getattr(ours, quantity)[smooth], getattr(reference, quantity)[smooth]
             assert np.abs(mine - theirs).max() <= rtol * np.abs(theirs).max(), quantity
+
+
+def long_chain_text(case: str) -> str:
+    """200 masses 3 s long: a wave travels about 30 of them; the rest stay at rest but for what is far under rtol."""
+    n = 200
+    driven = {"driven at its root": 0, "driven midway, its tip displaced": 100, "damped between masses": 0}[case]
+    lines = ["[time]", "end = 3.0", "step = 0.01"]
+    for i in range(n):
+        x0 = 0.01 if case == "driven midway, its tip displaced" and i == n - 1 else 0.0
+        lines += ["[[mass]]", f'name = "m{i}"', "m = 1.0", f"x0 = {x0}"]
+    lines += ["[[spring]]", 'connects = ["ground", "m0"]', "k = 100.0"]
+    lines += [f'[[spring]]\nconnects = ["m{i - 1}", "m{i}"]\nk = 100.0' for i in range(1, n)]
+    lines += ["[[spring]]", f'connects = ["ground", "m{driven}"]', 'law = "cubic"', "k = 10.0", "k3 = 1000.0"]
+    lines += ["[[damper]]", f'connects = ["ground", "m{driven}"]', "c = 0.5"]
+    if case == "damped between masses":  # M^-1 C couples neighbours: the wave's terms spread a DOF an order
+        lines += [f'[[damper]]\nconnects = ["m{i - 1}", "m{i}"]\nc = 0.2' for i in range(1, n)]
+    lines += ["[[force]]", f'on = "m{driven}"', 'type = "sine"', "amplitude = 10.0", "omega = 5.0"]
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("case", ["driven at its root", "driven midway, its tip displaced", "damped between masses"])
+def test_a_long_chain_works_out_only_the_masses_its_motion_reaches_and_stays_within_rtol(case):
+    """A step works out the series only at the DOFs the motion has reached (their x or v past a millionth of the
+    step's tolerance) and those its terms can reach within the step; the rest stay exactly zero. x, v and a are within
+    rtol of a tight DOP853 against their own peaks, the masses left at zero included, and most rows are those zeros."""
+    rtol = 1e-8
+    _, model, grid = model_of(long_chain_text(case))
+    ours = solve(model, grid, "taylor", Tolerances(rtol=rtol, atol=1e-14))
+    reference = solve(model, grid, "scipy:DOP853", TIGHT)
+    assert ours.success, ours.stats.message
+    for quantity in ("displacement", "velocity", "acceleration"):
+        mine, theirs = getattr(ours, quantity), getattr(reference, quantity)
+        assert np.abs(mine - theirs).max() <= rtol * np.abs(theirs).max(), quantity
+    # the share of rows left at zero: from the first mass to the wave's front (midway: the front nearer the root, as
+    # the span between the two loaded masses is worked out whole)
+    assert (ours.displacement == 0.0).mean() > (0.25 if "midway" in case else 0.6)
+
+
+@pytest.mark.parametrize("links_damped", [False, True])
+def test_the_series_terms_are_zero_outside_the_span_a_step_works_out_and_reach_its_edge(links_damped):
+    """A 60-mass chain moving only at masses 30-34: its series' terms of order k, worked out at every DOF, are zero
+    outside terms_span, which the kernel works them out over, and reach its edge (v's terms spread a mass an order
+    where dampers join the masses, else a mass each two orders): the span misses nothing and is no wider."""
+    from smdcli.kernels.arrays import model_arrays
+    from smdcli.kernels.taylor import coefficients, coupling_orders, diagonals, terms_span
+
+    n, p, first, last = 60, 12, 30, 35
+    lines = ["[time]", "end = 1.0", "step = 0.01"]
+    lines += [f'[[mass]]\nname = "m{i}"\nm = 1.0\nx0 = {0.01 if first <= i < last else 0.0}' for i in range(n)]
+    lines += ["[[spring]]", 'connects = ["ground", "m0"]', "k = 100.0"]
+    lines += [f'[[spring]]\nconnects = ["m{i - 1}", "m{i}"]\nk = 100.0' for i in range(1, n)]
+    if links_damped:
+        lines += [f'[[damper]]\nconnects = ["m{i - 1}", "m{i}"]\nc = 0.5' for i in range(1, n)]
+    _, model, _ = model_of("\n".join(lines) + "\n")
+    m = model_arrays(model)
+    band, spans, minv_diagonal = diagonals(m)
+    orders = coupling_orders(band, spans)
+    assert (band.shape[1], orders) == (3, 1 if links_damped else 2)
+    Y = np.zeros((p + 1, 2 * n))
+    Y[0, first:last] = 0.01
+    Y[0, n + first:n + last] = np.linspace(1.0, 2.0, last - first)
+    coefficients(m, band, spans, minv_diagonal, p, Y, np.zeros((p + 1, 0)), np.zeros((p + 1, 1)), np.zeros((p + 1, 1)),
+                 np.zeros(1), 1.0, 0.0, np.zeros(n), 0, n, n, 1)  # every DOF of every order
+    for k in range(p + 1):
+        lowest, highest = terms_span(first, last, k, 1, orders, n)
+        moving = np.flatnonzero((Y[k, :n] != 0) | (Y[k, n:] != 0))
+        assert (moving.min(), moving.max() + 1) == (lowest, highest), k

@@ -51,53 +51,58 @@ def diagonals(m):
 
 
 @inlined
-def banded_rows(m, band, spans, minv_diagonal, below, work, ground, inverse, row):
-    """row[n:] = (A below - ground + M^-1 work) inverse, A held as diagonals with their spans (diagonals) and work
-    not zero only at forces' and elements' DOFs, where it is read and zeroed (not a pass over every DOF)."""
+def banded_rows(m, band, spans, minv_diagonal, below, work, ground, inverse, row, first, last):
+    """row[n + first:n + last] = (A below - ground + M^-1 work) inverse, A held as diagonals with their spans
+    (diagonals) and work not zero only at forces' and elements' DOFs, where it is read and zeroed (not a pass over
+    every DOF); the rows outside [first, last) are the caller's (zero where below's terms reach no further)."""
     n = len(minv_diagonal)
     target = row[n:]
-    for i in range(n):
+    for i in range(first, last):
         target[i] = -ground
     for part in range(2):
-        add_diagonals(band, spans, part, below, 1.0, target)
+        add_diagonals(band, spans, part, below, 1.0, target, first, last)
     moved_loads(m, minv_diagonal, work, 1.0, target)
-    for i in range(n):
+    for i in range(first, last):
         target[i] *= inverse
 
 
 @inlined
-def tridiagonal_rows(m, band, spans, minv_diagonal, below, work, ground, inverse, row):
+def tridiagonal_rows(m, band, spans, minv_diagonal, below, work, ground, inverse, row, first, last):
     """banded_rows for a half-width of one (a chain numbered along it): the three diagonals of M^-1 K, the load on
     the ground and the order's scaling in one pass over the DOFs, where a pass each cost a loop's overhead each, then
     M^-1 C's diagonals over their spans (a chain damped at one mass: one entry)."""
     n = len(minv_diagonal)
     target = row[n:]
     for i in (0, n - 1):  # the ends, where a neighbour is missing
-        s = -ground
-        for j in range(3):
-            column = i + j - 1
-            if 0 <= column < n:
-                s += band[0, j, i] * below[column]
-        target[i] = s * inverse
+        if first <= i < last:
+            s = -ground
+            for j in range(3):
+                column = i + j - 1
+                if 0 <= column < n:
+                    s += band[0, j, i] * below[column]
+            target[i] = s * inverse
     # slices, so that the loop's index starts at 0 (see add_diagonals)
-    lower, diagonal, upper = band[0, 0, 1:n - 1], band[0, 1, 1:n - 1], band[0, 2, 1:n - 1]
-    x_lower, x_at, x_upper = below[0:n - 2], below[1:n - 1], below[2:n]
-    inner = target[1:n - 1]
-    for i in range(n - 2):
-        inner[i] = (lower[i] * x_lower[i] + diagonal[i] * x_at[i] + upper[i] * x_upper[i] - ground) * inverse
-    add_diagonals(band, spans, 1, below, inverse, target)
+    a, b = max(first, 1), min(last, n - 1)
+    if a < b:
+        lower, diagonal, upper = band[0, 0, a:b], band[0, 1, a:b], band[0, 2, a:b]
+        x_lower, x_at, x_upper = below[a - 1:b - 1], below[a:b], below[a + 1:b + 1]
+        inner = target[a:b]
+        for i in range(b - a):
+            inner[i] = (lower[i] * x_lower[i] + diagonal[i] * x_at[i] + upper[i] * x_upper[i] - ground) * inverse
+    add_diagonals(band, spans, 1, below, inverse, target, first, last)
     moved_loads(m, minv_diagonal, work, inverse, target)
 
 
 @inlined
-def add_diagonals(band, spans, part, below, scale, target):
-    """target += (the part's diagonals times below) scale (part 0: M^-1 K on x, 1: M^-1 C on v), each diagonal over
-    its span only."""
+def add_diagonals(band, spans, part, below, scale, target, lowest, highest):
+    """target[lowest:highest] += (the part's diagonals times below) scale (part 0: M^-1 K on x, 1: M^-1 C on v),
+    each diagonal over its span only."""
     n = len(target)
     w = band.shape[1] // 2
     for j in range(2 * w + 1):
         d = j - w
-        first, last = max(spans[part, j, 0], -d), min(spans[part, j, 1], n - d)
+        first = max(spans[part, j, 0], -d, lowest)
+        last = min(spans[part, j, 1], n - d, highest)
         if first >= last:
             continue
         # slices, so that the loop's index starts at 0: numba checks a possibly negative index, which would keep the

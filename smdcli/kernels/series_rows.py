@@ -56,15 +56,16 @@ def largest(values):
 
 
 @no_alloc
-def order_sizes(Y, sizes, lowest, highest):
+def order_sizes(Y, sizes, lowest, highest, first, last):
     """The largest |term| of v's orders lowest..highest, and of those of x and a that follow from them: sizes[1, k],
-    sizes[0, k] and sizes[2, k] (x's terms are v's over k, a's (k + 1) v_(k+1))."""
+    sizes[0, k] and sizes[2, k] (x's terms are v's over k, a's (k + 1) v_(k+1)); DOFs first..last-1 hold every term
+    that is not zero."""
     p = Y.shape[0] - 1
     n = Y.shape[1] // 2
     for k in range(lowest, highest + 1):
-        sizes[1, k] = largest(Y[k, n:])
+        sizes[1, k] = largest(Y[k, n + first:n + last])
     if lowest == 0:
-        sizes[0, 0] = largest(Y[0, :n])
+        sizes[0, 0] = largest(Y[0, first:last])
     for k in range(lowest + 1, min(highest + 1, p) + 1):  # x_k = v_(k-1) / k: rounding keeps the largest the largest
         sizes[0, k] = sizes[1, k - 1] * (1.0 / k)
     for k in range(max(lowest - 1, 0), highest):
@@ -97,21 +98,33 @@ def fill_powers(tau, powers):
 
 
 @no_alloc
-def emit_rows(Y, A, sizes, thresholds, powers, t, grid, first, last, out):
-    """Rows first..last-1 of out, a row's components side by side, each quantity summed to the order its row needs.
-    Its own function: inlined into emit, the same loops ran 10 % slower than one order at a time."""
+def emit_rows(Y, A, sizes, thresholds, powers, t, grid, first, last, out, lowest, highest, zeroed):
+    """Rows first..last-1 of out, a row's components side by side, each quantity summed to the order its row needs,
+    over DOFs lowest..highest-1 and zeros elsewhere, as the series' terms are there (unless out is zeroed already).
+    Its own function: inlined into emit, the
+    same loops ran 10 % slower than one order at a time."""
     n = out.shape[2]
     p = Y.shape[0] - 1
     for r in range(first, last):
         tau = grid[r] - t
         fill_powers(tau, powers)
-        summed(Y, 0, tau, out[0, r], row_order(sizes, 0, powers, thresholds[0], p))
-        summed(Y, n, tau, out[1, r], row_order(sizes, 1, powers, thresholds[1], p))
-        summed(A, 0, tau, out[2, r], row_order(sizes, 2, powers, thresholds[2], p - 1))
+        x, v, a = out[0, r], out[1, r], out[2, r]
+        if highest - lowest < n:
+            if not zeroed:
+                for q in range(3):  # slices, so that the loops' indices start at 0 and vectorize (see summed)
+                    before, after = out[q, r, :lowest], out[q, r, highest:]
+                    for i in range(len(before)):
+                        before[i] = 0.0
+                    for i in range(len(after)):
+                        after[i] = 0.0
+            x, v, a = x[lowest:highest], v[lowest:highest], a[lowest:highest]
+        summed(Y, lowest, tau, x, row_order(sizes, 0, powers, thresholds[0], p))
+        summed(Y, n + lowest, tau, v, row_order(sizes, 1, powers, thresholds[1], p))
+        summed(A, lowest, tau, a, row_order(sizes, 2, powers, thresholds[2], p - 1))
 
 
 @no_alloc
-def emit(Y, A, sizes, thresholds, powers, t, grid, first, last, out, taus, sums):
+def emit(Y, A, sizes, thresholds, powers, t, grid, first, last, out, taus, sums, lowest, highest, zeroed):
     """Rows first..last-1 of out's blocks x, v and a: the state's series Y = [x, v] and the acceleration's A summed at
     the rows' times (before t too: rows past the middle of a step are summed from the next step's series), each to the
     order its rows need, the terms it drops under thresholds (x, v, a). One Horner sum is a chain of dependent
@@ -119,7 +132,7 @@ def emit(Y, A, sizes, thresholds, powers, t, grid, first, last, out, taus, sums)
     component. taus and sums are scratch of ROWS, powers of the series' length."""
     n = out.shape[2]
     if 3 * n >= ROWS:
-        emit_rows(Y, A, sizes, thresholds, powers, t, grid, first, last, out)
+        emit_rows(Y, A, sizes, thresholds, powers, t, grid, first, last, out, lowest, highest, zeroed)
         return
     p = Y.shape[0] - 1
     for start in range(first, last, ROWS):
@@ -153,10 +166,10 @@ def emit(Y, A, sizes, thresholds, powers, t, grid, first, last, out, taus, sums)
 
 
 @no_alloc
-def acceleration_series(Y, A):
-    """The acceleration's series A, the velocity's derivative, from the state's Y = [x, v]."""
+def acceleration_series(Y, A, first, last):
+    """The acceleration's series A, the velocity's derivative, from the state's Y = [x, v], at DOFs first..last-1."""
     n = Y.shape[1] // 2
     for k in range(A.shape[0]):
-        speed, acceleration = Y[k + 1, n:], A[k]
-        for i in range(n):
+        speed, acceleration = Y[k + 1, n + first:n + last], A[k, first:last]
+        for i in range(last - first):
             acceleration[i] = (k + 1) * speed[i]
