@@ -5,6 +5,7 @@ Imports nothing of smd (the bottom layer).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -145,19 +146,23 @@ ENERGY_TERMS = ("kinetic", "strain", "dissipated", "input", "residual")
 NONSMOOTH_TERMS = ("hysteretic", "friction", "impact", "contact")
 
 
-def finite_peak(q: np.ndarray) -> float:
-    """The largest finite |q| (0 for none), without a temporary of q's size where every entry is finite."""
-    if q.size == 0:
-        return 0.0
-    low, high = float(np.min(q)), float(np.max(q))
-    if np.isfinite(low) and np.isfinite(high):
+def finite_peak(q: np.ndarray, known: tuple[float, float] | None = None) -> float:
+    """The largest finite |q| (0 for none), without a temporary of q's size where every entry is finite; known: q's
+    extremes, where the caller has them."""
+    low, high = known or extremes(q)
+    if math.isfinite(low) and math.isfinite(high):
         return max(high, -low)
     return float(np.abs(q[np.isfinite(q)]).max(initial=0.0))
 
 
+def extremes(q: np.ndarray) -> tuple[float, float]:
+    """(min, max) of q, (0, 0) for none: a NaN or an inf in q makes one of them so."""
+    return (float(np.min(q)), float(np.max(q))) if q.size else (0.0, 0.0)
+
+
 def all_finite(q: np.ndarray) -> bool:
     """Every entry of q finite (a NaN or an inf makes its minimum or maximum one)."""
-    return q.size == 0 or bool(np.isfinite(np.min(q)) and np.isfinite(np.max(q)))
+    return all(map(math.isfinite, extremes(q)))
 
 
 def largest_energy(kinetic, strain, dissipated, work) -> float:

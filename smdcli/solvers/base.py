@@ -178,7 +178,8 @@ def divergence_bound(model: Model, grid: np.ndarray, force: np.ndarray | None = 
     applied force on the grid, where the caller has it)."""
     scale = max(np.abs(model.x0).max(initial=0.0), np.abs(model.v0).max(initial=0.0), 1.0)
     if model.is_forced:
-        peak_force = finite_peak(model.applied_force(grid) if force is None else force)
+        loaded = np.flatnonzero(np.any(model.B != 0, axis=1))  # the rest of the force's columns are zero
+        peak_force = finite_peak((model.applied_force(grid) if force is None else force)[:, loaded])
         stiffness = np.abs(np.diag(model.K)).min(initial=0.0)
         scale = max(scale, peak_force / stiffness if stiffness > 0 else peak_force * (grid[-1] - grid[0]) ** 2)
     return GROWTH_BOUND * scale

@@ -13,7 +13,7 @@ import numpy as np
 
 from smdcli.errors import ScenarioError
 from smdcli.model import Model
-from smdcli.result import Result, all_finite, finite_peak
+from smdcli.result import Result, all_finite, extremes, finite_peak
 from smdcli.solvers.base import Solver, Tolerances, stated_rounding, stated_tolerance
 from smdcli.solvers.catalog import check_method_name
 from smdcli.solvers.ground import across_jumps, drift_note, ground_history
@@ -66,7 +66,8 @@ def solve(model: Model, grid: np.ndarray, method: str, tol: Tolerances, field: s
             result = solve_nonsmooth(solver, model, grid, tol)
         else:
             result = across_jumps(lambda piece, times: solver.solve(piece, times, tol), model, grid)
-    result = _refuse_non_finite(result)
+    x_extremes = extremes(result.displacement)  # one pass over the displacement for both checks below
+    result = _refuse_non_finite(result, x_extremes)
     notes = result.notes
     if model.ground is not None:
         history = ground_history(model, grid, solve)
@@ -78,17 +79,19 @@ def solve(model: Model, grid: np.ndarray, method: str, tol: Tolerances, field: s
                   f"the explicit {method} is held to tiny steps by stability: try 'exact', 'Radau' or 'auto'",)
     stats = result.stats
     if math.isnan(stats.stated_accuracy):
-        stats = dataclasses.replace(stats, stated_accuracy=_stated_accuracy(get_solver(stats.method), model, result))
+        peak = finite_peak(result.displacement, x_extremes)
+        stats = dataclasses.replace(stats, stated_accuracy=_stated_accuracy(get_solver(stats.method), model, result,
+                                                                            peak))
     if method != "auto":
         stats = dataclasses.replace(stats, requested_method=method,
                                     reason=stats.reason or f"requested: {solver.description}")
     return dataclasses.replace(result, stats=stats, notes=notes)
 
 
-def _stated_accuracy(solver: Solver, model: Model, result: Result) -> float:
-    """The error a run vouches for, relative to the peak, for methods that do not state it themselves."""
+def _stated_accuracy(solver: Solver, model: Model, result: Result, peak: float) -> float:
+    """The error a run vouches for, relative to the peak (the largest finite |displacement|), for methods that do not
+    state it themselves."""
     s = result.stats
-    peak = finite_peak(result.displacement)
     if solver.adaptive:
         return stated_tolerance(s.rtol, s.atol, peak)
     span = float(result.time[-1] - result.time[0]) if len(result.time) > 1 else 0.0
@@ -99,9 +102,10 @@ def _stated_accuracy(solver: Solver, model: Model, result: Result) -> float:
     return stated_rounding(steps)
 
 
-def _refuse_non_finite(result):
-    """A run that reports success but holds NaN or inf (numbers beyond double precision) is a failure."""
-    if not result.success or (all_finite(result.displacement) and all_finite(result.velocity)):
+def _refuse_non_finite(result, x_extremes):
+    """A run that reports success but holds NaN or inf (numbers beyond double precision) is a failure (x_extremes:
+    the displacement's, from extremes)."""
+    if not result.success or (all(map(math.isfinite, x_extremes)) and all_finite(result.velocity)):
         return result
     state = np.concatenate([result.displacement, result.velocity], axis=1)
     bad = ~np.isfinite(state).all(axis=1)
