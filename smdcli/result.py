@@ -150,7 +150,7 @@ def finite_peak(q: np.ndarray, known: tuple[float, float] | None = None) -> floa
     """The largest finite |q| (0 for none), without a temporary of q's size where every entry is finite; known: q's
     extremes, where the caller has them."""
     low, high = known or extremes(q)
-    if math.isfinite(low) and math.isfinite(high):
+    if all_finite(q, (low, high)):
         return max(high, -low)
     return float(np.abs(q[np.isfinite(q)]).max(initial=0.0))
 
@@ -160,9 +160,10 @@ def extremes(q: np.ndarray) -> tuple[float, float]:
     return (float(np.min(q)), float(np.max(q))) if q.size else (0.0, 0.0)
 
 
-def all_finite(q: np.ndarray) -> bool:
-    """Every entry of q finite (a NaN or an inf makes its minimum or maximum one)."""
-    return all(map(math.isfinite, extremes(q)))
+def all_finite(q: np.ndarray, known: tuple[float, float] | None = None) -> bool:
+    """Every entry of q finite (a NaN or an inf makes its minimum or maximum one); known: q's extremes, where the
+    caller has them."""
+    return all(map(math.isfinite, known or extremes(q)))
 
 
 def largest_energy(kinetic, strain, dissipated, work) -> float:
