@@ -190,11 +190,23 @@ class Result:
     energy: Energy | None = None
     nonsmooth: NonsmoothHistory | None = None  # a scene with hysteretic springs, friction or stops: their history
     origin: tuple | None = field(default=None, repr=False, compare=False)  # (Scenario, Model) it was solved from
+    # ((array, (min, max)), ...): extremes a solver found as it wrote the arrays (extremes_of), so that the checks
+    # after a run need not pass over them again
+    found_extremes: tuple = field(default=(), repr=False, compare=False)
 
     def absolute(self, quantity: str) -> np.ndarray:
         """displacement, velocity or acceleration measured from the fixed frame: relative plus the ground's."""
         relative = getattr(self, quantity)
         return relative if self.ground is None else relative + getattr(self.ground, quantity)[:, None]
+
+    def extremes_of(self, quantity: str) -> tuple[float, float]:
+        """(min, max) of one of the arrays (extremes): what the solver found as it wrote it, where it did and the array
+        is still the one it wrote, else one pass over it."""
+        q = getattr(self, quantity)
+        for array, found in self.found_extremes:
+            if array is q:
+                return found
+        return extremes(q)
 
     @property
     def success(self) -> bool:

@@ -158,6 +158,50 @@ def test_right_hand_side_and_jacobian_match_the_model(forced):
         assert np.allclose(J, model.jacobian(t, y), rtol=1e-13, atol=1e-12)
 
 
+def element_chain(n: int) -> str:
+    """n masses in a chain with a cubic spring and a quadratic damper midway and dampers at its ends."""
+    lines = ["[time]", "end = 1.0", "step = 0.01"]
+    lines += [f'[[mass]]\nname = "m{i}"\nm = {1.0 + 0.1 * i}' for i in range(n)]
+    lines += ["[[spring]]", 'connects = ["ground", "m0"]', "k = 100.0"]
+    lines += [f'[[spring]]\nconnects = ["m{i - 1}", "m{i}"]\nk = {100.0 + i}' for i in range(1, n)]
+    half = n // 2
+    lines += ["[[spring]]", f'connects = ["m{half - 1}", "m{half}"]', 'law = "cubic"', "k = 5.0", "k3 = 3000.0"]
+    lines += ["[[damper]]", f'connects = ["ground", "m{half}"]', 'law = "quadratic"', "c = 2.0"]
+    lines += ["[[damper]]", 'connects = ["ground", "m0"]', "c = 0.5", "[[damper]]", f'connects = ["m{n - 2}", "m{n - 1}"]',
+              "c = 0.3"]
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("scene", ["two masses, every force", "a 40-mass chain"])
+def test_the_stiffness_watchs_bound_takes_the_largest_row_and_bounds_every_eigenvalue(scene, forced):
+    """spectral_bound looks only at the rows elements reach and the linear rows' largest sums (worked out once):
+    the same bound as its formula over every row (c + sqrt(k), the largest row sums of |M^-1 K| and |M^-1 C| with
+    each element's tangent added at its DOFs twice), and above |lambda| of the model's own Jacobian."""
+    from smdcli.kernels.arrays import CUBIC_SPRING
+    from smdcli.kernels.erk import linear_norms, spectral_bound
+
+    model = forced[1] if scene.startswith("two") else model_of(element_chain(40))[1]
+    arrays, n = model_arrays(model), model.n
+    norms = linear_norms(arrays)
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        y = rng.normal(size=2 * n)
+        node = np.zeros(2 * n)
+        for law, a, b, coefficient in zip(arrays.el_law, arrays.el_a, arrays.el_b, arrays.el_coef):
+            offset = 0 if law == CUBIC_SPRING else n
+            d = (y[offset + a] if a >= 0 else 0.0) - (y[offset + b] if b >= 0 else 0.0)
+            slope = 3 * coefficient * d * d if law == CUBIC_SPRING else 2 * coefficient * abs(d)
+            for dof in (a, b):
+                if dof >= 0:
+                    node[offset + dof] += 2 * slope
+        minv = np.abs(model.Minv)
+        k = (np.abs(model.Minv @ model.K).sum(axis=1) + minv @ node[:n]).max()
+        c = (np.abs(model.Minv @ model.C).sum(axis=1) + minv @ node[n:]).max()
+        bound = spectral_bound(arrays, y, norms, np.zeros(2 * n))
+        assert bound == pytest.approx(c + np.sqrt(k), rel=1e-13)
+        assert bound >= np.abs(np.linalg.eigvals(model.jacobian(0.0, y))).max()
+
+
 @pytest.mark.parametrize("pair", ["RK45", "RK23", "DOP853"])
 def test_compiled_pairs_take_scipys_steps_on_every_force_type(forced, pair):
     """Same tableau, same step control: the two agree far inside the tolerance, step counts within a few %."""

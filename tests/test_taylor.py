@@ -279,3 +279,30 @@ def test_the_series_terms_are_zero_outside_the_span_a_step_works_out_and_reach_i
         lowest, highest = terms_span(first, last, k, 1, orders, n)
         moving = np.flatnonzero((Y[k, :n] != 0) | (Y[k, n:] != 0))
         assert (moving.min(), moving.max() + 1) == (lowest, highest), k
+
+
+@pytest.mark.parametrize("scene", ["a 200-mass chain, mostly at rest", "two masses, every force", "the book's damper"])
+def test_the_extremes_found_as_the_rows_are_written_are_the_arrays_own(scene):
+    """The kernel takes in each row's x and v as it writes them (and the zeros where the motion has not reached), so
+    that the checks after a run need no pass over them: their least and largest values are the arrays' own, exactly
+    (the same stored numbers compared). A run that fails finds none, and an array that is not the one written is
+    passed over."""
+    import dataclasses
+
+    from smdcli.result import extremes
+
+    if scene.startswith("the book"):
+        _, model, grid = load("one_dof_nonlinear_stiff")
+    else:
+        _, model, grid = model_of(long_chain_text("driven at its root") if "chain" in scene else smooth_forces())
+    ours = solve(model, grid, "taylor", Tolerances(rtol=1e-8, atol=1e-12))
+    assert ours.success, ours.stats.message
+    assert [array is getattr(ours, q) for (array, _), q in zip(ours.found_extremes, ("displacement", "velocity"))] \
+        == [True, True]
+    for quantity in ("displacement", "velocity"):
+        assert ours.extremes_of(quantity) == extremes(getattr(ours, quantity)), quantity
+    assert ours.extremes_of("displacement")[0] < 0.0 < ours.extremes_of("displacement")[1]
+    moved = dataclasses.replace(ours, displacement=ours.displacement + 1.0)
+    assert moved.extremes_of("displacement") == extremes(moved.displacement)
+    failed = Taylor().solve(model, grid, Tolerances(rtol=1e-8, atol=1e-12, max_steps=3))
+    assert not failed.success and failed.found_extremes == ()

@@ -5,9 +5,9 @@ seventh-order interpolant, stepped exactly as scipy.integrate's RK23, RK45 and D
 tableaus, initial step, error norms and step factors), so each is checked against scipy's in tests.
 The integration restarts at every cut (force discontinuity) as a new scipy solver would.
 
-The stiffness watch costs O(nonzeros) per step, not an eigenvalue problem: |lambda| of the Jacobian is
+The stiffness watch costs O(elements) per step, not an eigenvalue problem: |lambda| of the Jacobian is
 bounded by c + sqrt(k), the infinity norms of M^-1 C and M^-1 K with the nonlinear elements' tangents
-(rhs.spectral_bound). A step whose h |lambda| passes half the method's stability boundary is
+(spectral_bound; the linear rows' part worked out once, linear_norms). A step whose h |lambda| passes half the method's stability boundary is
 stability-limited. (Hairer's estimate from two stages at the same time was tried first: on the book's
 quadratic damper it read h |lambda| = 33 where the eigenvalues give 1.2, since the 1-DOF Jacobian
 [[0, 1], [-1000, -c]] is far from normal.)
@@ -24,7 +24,7 @@ import numpy as np
 from smdcli.kernels import tableaus as tb
 from smdcli.kernels.arrays import CUBIC_SPRING
 from smdcli.kernels.compiler import inlined, kernel, no_alloc
-from smdcli.kernels.rhs import linear_norms, spectral_bound, state_rhs, state_rhs_inlined
+from smdcli.kernels.rhs import state_rhs, state_rhs_inlined
 
 RK23, RK45, DOP853 = tb.RK23, tb.RK45, tb.DOP853
 # How a run ended (index 0 of the status array).
@@ -290,11 +290,77 @@ def attempt(m, method, t, y, h_abs, t_bound, mid, rtol, atol, fixed_h, K, y_new,
         counts[REJECTED] += 1
 
 
+@kernel
+def linear_norms(m):
+    """spectral_bound's linear part, which a run computes once: each row's sums of |M^-1 K| and |M^-1 C| ([0:n] and
+    [n:2n]), their largest ([2n] and [2n + 1]), and the rows nonlinear elements' tangents can add to (those of M^-1
+    that reach a DOF an element joins), each row's number after the maxima."""
+    n = m.n
+    joined = np.zeros(n, dtype=np.bool_)
+    for e in range(len(m.el_law)):
+        for dof in (m.el_a[e], m.el_b[e]):
+            if dof >= 0:
+                joined[dof] = True
+    rows = []
+    for i in range(n):
+        for q in range(m.mi_ptr[i], m.mi_ptr[i + 1]):
+            if joined[m.mi_idx[q]]:
+                rows.append(i)
+                break
+    norms = np.zeros(2 * n + 2 + len(rows))
+    for i in range(n):
+        for q in range(m.a_ptr[i], m.a_ptr[i + 1]):
+            norms[i + (n if m.a_idx[q] >= n else 0)] += abs(m.a_val[q])
+    for i in range(n):
+        norms[2 * n] = max(norms[2 * n], norms[i])
+        norms[2 * n + 1] = max(norms[2 * n + 1], norms[n + i])
+    for j in range(len(rows)):
+        norms[2 * n + 2 + j] = rows[j]
+    return norms
+
+
+@no_alloc
+def spectral_bound(m, y, norms, node):
+    """An upper bound on |lambda| of the Jacobian at y: |lambda|^2 <= c |lambda| + k gives |lambda| <= c + sqrt(k),
+    with k and c the infinity norms of M^-1 Kt and M^-1 Ct (tangents included). norms: linear_norms'; a row's tangent
+    only adds to its linear sum, so the largest row is the linear maximum's or one of the rows elements reach, and a
+    call costs O(elements and their rows), not O(n) (the 1,000-mass chain's stiffness watch took 0.55 ms of its
+    Taylor run). node is scratch of length 2n, zeros where no element joins: each DOF's tangent stiffness and damping
+    from nonlinear elements."""
+    n = m.n
+    for e in range(len(m.el_law)):
+        offset = 0 if m.el_law[e] == CUBIC_SPRING else n
+        for dof in (m.el_a[e], m.el_b[e]):
+            if dof >= 0:
+                node[offset + dof] = 0.0
+    for e in range(len(m.el_law)):
+        a, b = m.el_a[e], m.el_b[e]
+        offset = 0 if m.el_law[e] == CUBIC_SPRING else n
+        d = (y[offset + a] if a >= 0 else 0.0) - (y[offset + b] if b >= 0 else 0.0)
+        slope = 3 * m.el_coef[e] * d * d if m.el_law[e] == CUBIC_SPRING else 2 * m.el_coef[e] * abs(d)
+        if a >= 0:
+            node[offset + a] += 2 * slope
+        if b >= 0:
+            node[offset + b] += 2 * slope
+    k = norms[2 * n]
+    c = norms[2 * n + 1]
+    for j in range(2 * n + 2, len(norms)):
+        i = int(norms[j])
+        row_k = norms[i]
+        row_c = norms[n + i]
+        for q in range(m.mi_ptr[i], m.mi_ptr[i + 1]):
+            row_k += abs(m.mi_val[q]) * node[m.mi_idx[q]]
+            row_c += abs(m.mi_val[q]) * node[n + m.mi_idx[q]]
+        k = max(k, row_k)
+        c = max(c, row_c)
+    return c + math.sqrt(k)
+
+
 @no_alloc
 def held_by_stability(m, y, h, t, boundary, norms, node, ring, counts, floats):
     """The stiffness watch after a step of h to (t, y): record whether h |lambda| passed half the boundary, in the
     ring of the last WATCH_WINDOW steps and the counters; True (where it stopped, in floats) when WATCH_LIMIT of
-    them did. norms and node are spectral_bound's (rhs.linear_norms, scratch)."""
+    them did. norms and node are spectral_bound's (linear_norms, scratch)."""
     rho = h * spectral_bound(m, y, norms, node)
     floats[MAX_RHO] = max(floats[MAX_RHO], rho)
     limited = rho > 0.5 * boundary

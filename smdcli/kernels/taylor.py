@@ -22,12 +22,14 @@ import numpy as np
 from smdcli.kernels.arrays import COSINE, CUBIC_SPRING, FOURIER_SQUARE, SINE, TABLE_LINEAR
 from smdcli.kernels.compiler import inlined, kernel, no_alloc
 from smdcli.kernels.diagonals import banded_rows, diagonals, tridiagonal_rows
-from smdcli.kernels.erk import (ACCEPTED, NFEV, OK, STEP_BUDGET, STIFF, T_REACHED, TOO_SMALL_STEP, WATCH_WINDOW,
-                                held_by_stability, relative, rows_through, state_status)
-from smdcli.kernels.rhs import force_value, linear_norms
-from smdcli.kernels.series_rows import OUTPUT_SHARE, ROWS, acceleration_series, emit, order_sizes, summed
+from smdcli.kernels.erk import (ACCEPTED, NFEV, NOT_FINITE, OK, STEP_BUDGET, STIFF, T_REACHED, TOO_SMALL_STEP,
+                                WATCH_WINDOW, held_by_stability, linear_norms, relative, rows_through, state_status)
+from smdcli.kernels.rhs import force_value
+from smdcli.kernels.series_rows import OUTPUT_SHARE, ROWS, acceleration_series, emit, order_sizes, summed, widen
 
 SAFETY = 0.9
+EXTREMES = 5  # floats[5:9], after erk's: the least and largest x the rows hold, then v's
+FLOATS = EXTREMES + 4
 NEGLIGIBLE = 1e-6  # of the step's tolerance: a DOF whose x and v stay under it has not been reached yet
 SAMPLES = 4  # points of each step where a damper's velocity polynomial is checked for a reversal
 
@@ -324,7 +326,10 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
     at the DOFs the motion has reached (active_dofs) and those its terms reach from them (terms_span), and a row is
     summed there only; zeros elsewhere, written here unless the caller has `zeroed` out (a large out is zeroed faster
     in one pass than row by row). boundary > 0 watches for stiffness as erk.integrate does, h |lambda| against the
-    series' stability limit."""
+    series' stability limit. floats (FLOATS of them) receive erk's and, where the run ends OK, the extremes of x and v
+    over every row (row 0's from y0), so that the caller need not pass over out to find them."""
+    if len(floats) < FLOATS:  # its extremes are written past erk's floats
+        raise ValueError("taylor.integrate: floats must hold FLOATS numbers")
     n = m.n
     E = len(m.el_law)
     # the state's series, contiguous (its loops vectorize), and the acceleration's, the velocity's derivative; zero
@@ -348,6 +353,10 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
     peak_x, peak_v, peak_a = 0.0, 0.0, 0.0
     for i in range(n):
         peak_x, peak_v = max(peak_x, abs(y[i])), max(peak_v, abs(y[n + i]))
+    extremes = floats[EXTREMES:FLOATS]  # row 0's: y0, which holds the zeros the rows keep outside the span
+    extremes[0], extremes[1], extremes[2], extremes[3] = y[0], y[0], y[n], y[n]
+    widen(y[:n], extremes, 0)
+    widen(y[n:], extremes, 1)
     row = 1  # the first row not yet due; rows pending..row-1 wait for the next step's series
     pending = 1
     h_last = 0.0
@@ -358,7 +367,8 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
         t = ta
         while t < tb:
             lowest, highest = terms_span(moving, moved, p, width, orders, n)  # where its terms may not be zero
-            Y[0] = y
+            # y and Y[0] are zero beyond the span, which only widens
+            Y[0, lowest:highest], Y[0, n + lowest:n + highest] = y[lowest:highest], y[n + lowest:n + highest]
             force_series(m, t, ta, mid, p, U, stack)
             coefficients(m, band, spans, minv_diagonal, p, Y, U, D, D2, sign, peak_v, h_last, work, moving, moved,
                          width, orders)
@@ -384,7 +394,8 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
                 thresholds[0], thresholds[1] = OUTPUT_SHARE * tol_x, OUTPUT_SHARE * tol_v
                 thresholds[2] = OUTPUT_SHARE * max(atol + rtol * peak_a, 1e-300)
             if pending < row:  # the last step's second half, nearer this step's start
-                emit(Y, A, sizes, thresholds, powers, t, grid, pending, row, out, taus, sums, lowest, highest, zeroed)
+                emit(Y, A, sizes, thresholds, powers, t, grid, pending, row, out, taus, sums, lowest, highest, zeroed,
+                     extremes)
                 pending = row
             if t_new <= t or h < 10 * abs(np.nextafter(t, np.inf) - t):
                 floats[T_REACHED] = t
@@ -399,7 +410,8 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
             analytic = h == h_series and t_new < tb
             split = rows_through(grid, row, t + 0.5 * h) if analytic else last
             if split > row:
-                emit(Y, A, sizes, thresholds, powers, t, grid, row, split, out, taus, sums, lowest, highest, zeroed)
+                emit(Y, A, sizes, thresholds, powers, t, grid, row, split, out, taus, sums, lowest, highest, zeroed,
+                     extremes)
             pending, row = split, last
             h_last = h
             state_at(Y, h, y, lowest, highest)
@@ -408,14 +420,17 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
             if moved - moving < n:
                 moving, moved = active_dofs(y, moving, moved, lowest, highest, NEGLIGIBLE * tol_x, NEGLIGIBLE * tol_v)
             floats[T_REACHED] = t_new
-            status = state_status(y, bound)
+            status = state_status(y[lowest:highest], bound)  # x and v, as one state: zeros elsewhere
+            if status != NOT_FINITE:
+                beyond = state_status(y[n + lowest:n + highest], bound)
+                status = beyond if beyond != OK else status
             if status == OK and boundary > 0 and held_by_stability(m, y, h, t_new, boundary, norms, node, ring,
                                                                    counts, floats):
                 status = STIFF
             if status != OK:
                 if pending < row:
                     emit(Y, A, sizes, thresholds, powers, t, grid, pending, row, out, taus, sums, lowest, highest,
-                         zeroed)
+                         zeroed, extremes)
                 if status != STIFF:
                     out[:, row:] = np.nan
                 return status

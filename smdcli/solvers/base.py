@@ -115,15 +115,16 @@ def acceleration_accuracy(M: np.ndarray, C: np.ndarray, K: np.ndarray, stated, x
 
 def make_result(model: Model, grid: np.ndarray, x: np.ndarray, v: np.ndarray, stats: SolverStats,
                 t_failed: float | None = None, notes: tuple[str, ...] = (), force: np.ndarray | None = None,
-                acceleration: np.ndarray | None = None) -> Result:
-    """A Result from displacement and velocity on the grid; force and acceleration derived where not given."""
+                acceleration: np.ndarray | None = None, found_extremes: tuple = ()) -> Result:
+    """A Result from displacement and velocity on the grid; force and acceleration derived where not given;
+    found_extremes: Result's, where the solver found them."""
     if force is None:
         force = model.applied_force(grid) if model.is_forced else np.zeros_like(x)
     if acceleration is None:
         with np.errstate(all="ignore"):
             acceleration = model.acceleration(x, v, force)
     return Result(time=grid, dofs=model.dofs, displacement=x, velocity=v, acceleration=acceleration,
-                  force=force, stats=stats, t_failed=t_failed, notes=notes)
+                  force=force, stats=stats, t_failed=t_failed, notes=notes, found_extremes=found_extremes)
 
 
 def cuts(model: Model, grid: np.ndarray, breakpoints: bool = True) -> np.ndarray:

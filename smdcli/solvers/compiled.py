@@ -75,8 +75,10 @@ def _tiny_run(family: str) -> None:
         run_kernel(tiny, tableaus.RK45, grid, y0, 1e-3, np.full(2, 1e-6), 10, 1e8)
         return
     if family == "taylor":
+        from smdcli.kernels.taylor import FLOATS
+
         entry(model_arrays(tiny), 8, y0, grid, grid, 1e-3, 1e-6, 10, 1e8, 0.0, np.zeros((3, 2, 1)), False,
-              np.zeros(5, dtype=np.int64), np.zeros(5))
+              np.zeros(5, dtype=np.int64), np.zeros(FLOATS))
         return
     if family == "return_mapping":
         from smdcli.kernels.rhs import work_size
@@ -321,14 +323,17 @@ class Taylor(Solver):
         if zeroed:
             out.fill(0.0)
         out[0, 0], out[1, 0] = model.x0, model.v0
-        counts, floats = np.zeros(5, dtype=np.int64), np.zeros(5)
+        counts, floats = np.zeros(5, dtype=np.int64), np.zeros(taylor.FLOATS)
         status = taylor.integrate(model_arrays(model), order, y0, np.asarray(grid, dtype=float),
                                   cuts(model, grid, tol.breakpoints), float(tol.rtol) * TAYLOR_STEP_SHARE,
                                   float(tol.atol) * TAYLOR_STEP_SHARE, int(max_steps), float(bound), float(boundary),
                                   out, zeroed, counts, floats)
         stats, t_failed = explicit_outcome(self, status, counts, floats, time.perf_counter() - start, tol, max_steps,
                                            bound)
-        return make_result(model, grid, out[0], out[1], stats, t_failed=t_failed, force=force, acceleration=out[2])
+        x, v, (x_low, x_high, v_low, v_high) = out[0], out[1], floats[taylor.EXTREMES:taylor.FLOATS].tolist()
+        found = ((x, (x_low, x_high)), (v, (v_low, v_high))) if status == taylor.OK else ()
+        return make_result(model, grid, x, v, stats, t_failed=t_failed, force=force, acceleration=out[2],
+                           found_extremes=found)
 
 
 def _compiled(name: str, method: int, order: int, boundary: float, text: str):

@@ -13,7 +13,7 @@ import numpy as np
 
 from smdcli.errors import ScenarioError
 from smdcli.model import Model
-from smdcli.result import Result, all_finite, extremes, finite_peak
+from smdcli.result import Result, all_finite, finite_peak
 from smdcli.solvers.base import Solver, Tolerances, stated_rounding, stated_tolerance
 from smdcli.solvers.catalog import check_method_name
 from smdcli.solvers.ground import across_jumps, drift_note, ground_history
@@ -66,7 +66,7 @@ def solve(model: Model, grid: np.ndarray, method: str, tol: Tolerances, field: s
             result = solve_nonsmooth(solver, model, grid, tol)
         else:
             result = across_jumps(lambda piece, times: solver.solve(piece, times, tol), model, grid)
-    x_extremes = extremes(result.displacement)  # one pass over the displacement for both checks below
+    x_extremes = result.extremes_of("displacement")  # for both checks below
     result = _refuse_non_finite(result, x_extremes)
     notes = result.notes
     if model.ground is not None:
@@ -104,8 +104,9 @@ def _stated_accuracy(solver: Solver, model: Model, result: Result, peak: float) 
 
 def _refuse_non_finite(result, x_extremes):
     """A run that reports success but holds NaN or inf (numbers beyond double precision) is a failure (x_extremes:
-    the displacement's, from extremes)."""
-    if not result.success or (all_finite(result.displacement, x_extremes) and all_finite(result.velocity)):
+    the displacement's, from Result.extremes_of)."""
+    finite = all_finite(result.displacement, x_extremes) and all_finite(result.velocity, result.extremes_of("velocity"))
+    if not result.success or finite:
         return result
     state = np.concatenate([result.displacement, result.velocity], axis=1)
     bad = ~np.isfinite(state).all(axis=1)
