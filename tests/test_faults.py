@@ -132,6 +132,39 @@ def test_settling_keeps_the_first_signal_and_no_later_one_kills_the_process():
     assert _python_prints(code) == [str(int(signal.SIGINT)), "alive"]
 
 
+def test_in_threads_keeps_its_pool_runs_the_first_task_here_and_nested_calls_in_turn():
+    """The kernels' thread pool is started once: results in order, the first task in the calling thread, the others
+    on the kept pool's threads, a task's own in_threads run in turn on its thread (waiting on the pool from the pool
+    could wait forever), and a task's error raised in the caller."""
+    import threading
+
+    from smdcli import interrupts
+
+    def where(task):
+        return task, threading.get_ident()
+
+    first = interrupts.in_threads(where, [0, 1, 2])
+    pool = interrupts._shared_pool()
+    second = interrupts.in_threads(where, [3, 4, 5])
+    assert [task for task, _ in first + second] == [0, 1, 2, 3, 4, 5]
+    assert first[0][1] == second[0][1] == threading.get_ident()
+    workers = {thread.ident for thread in pool._threads}
+    assert {ident for _, ident in first[1:] + second[1:]} <= workers and interrupts._shared_pool() is pool
+    nested = interrupts.in_threads(lambda task: (threading.get_ident(), interrupts.in_threads(where, [task, -task])),
+                                   list(range(8)))
+    for task, (ident, inner) in enumerate(nested[1:], start=1):  # the pool's tasks: their own tasks there
+        assert inner == [(task, ident), (-task, ident)]
+    assert nested[0][1][0] == (0, threading.get_ident())  # the caller's: its own first task here, the other pooled
+
+    def fails(task):
+        if task == 2:
+            raise ValueError("task 2")
+        return task
+
+    with pytest.raises(ValueError, match="task 2"):
+        interrupts.in_threads(fails, [0, 1, 2])
+
+
 @pytest.mark.parametrize("pool", ["run_threads", "in_threads"])
 def test_thread_pools_end_or_raise_whenever_an_interrupt_lands(pool):
     """Ctrl-C at random moments of a thread pool's life, 400 times in one process: each run ends or raises
