@@ -167,8 +167,8 @@ def element_chain(n: int) -> str:
     half = n // 2
     lines += ["[[spring]]", f'connects = ["m{half - 1}", "m{half}"]', 'law = "cubic"', "k = 5.0", "k3 = 3000.0"]
     lines += ["[[damper]]", f'connects = ["ground", "m{half}"]', 'law = "quadratic"', "c = 2.0"]
-    lines += ["[[damper]]", 'connects = ["ground", "m0"]', "c = 0.5", "[[damper]]", f'connects = ["m{n - 2}", "m{n - 1}"]',
-              "c = 0.3"]
+    lines += ["[[damper]]", 'connects = ["ground", "m0"]', "c = 0.5"]
+    lines += ["[[damper]]", f'connects = ["m{n - 2}", "m{n - 1}"]', "c = 0.3"]
     return "\n".join(lines) + "\n"
 
 

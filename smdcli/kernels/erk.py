@@ -7,8 +7,8 @@ The integration restarts at every cut (force discontinuity) as a new scipy solve
 
 The stiffness watch costs O(elements) per step, not an eigenvalue problem: |lambda| of the Jacobian is
 bounded by c + sqrt(k), the infinity norms of M^-1 C and M^-1 K with the nonlinear elements' tangents
-(spectral_bound; the linear rows' part worked out once, linear_norms). A step whose h |lambda| passes half the method's stability boundary is
-stability-limited. (Hairer's estimate from two stages at the same time was tried first: on the book's
+(spectral_bound; the linear rows' part worked out once, linear_norms). A step whose h |lambda| passes
+half the method's stability boundary is stability-limited. (Hairer's estimate from two stages at the same time was tried first: on the book's
 quadratic damper it read h |lambda| = 33 where the eigenvalues give 1.2, since the 1-DOF Jacobian
 [[0, 1], [-1000, -c]] is far from normal.)
 
@@ -292,31 +292,26 @@ def attempt(m, method, t, y, h_abs, t_bound, mid, rtol, atol, fixed_h, K, y_new,
 
 @kernel
 def linear_norms(m):
-    """spectral_bound's linear part, which a run computes once: each row's sums of |M^-1 K| and |M^-1 C| ([0:n] and
-    [n:2n]), their largest ([2n] and [2n + 1]), and the rows nonlinear elements' tangents can add to (those of M^-1
-    that reach a DOF an element joins), each row's number after the maxima."""
+    """spectral_bound's linear part, which a run computes once: (sums, rows). sums: each row's sums of |M^-1 K| and
+    |M^-1 C| ([0:n] and [n:2n]) and their largest ([2n] and [2n + 1]); rows: those nonlinear elements' tangents can
+    add to (the rows of M^-1 that reach a DOF an element joins)."""
     n = m.n
     joined = np.zeros(n, dtype=np.bool_)
     for e in range(len(m.el_law)):
         for dof in (m.el_a[e], m.el_b[e]):
             if dof >= 0:
                 joined[dof] = True
-    rows = []
+    reached = np.zeros(n, dtype=np.bool_)
+    sums = np.zeros(2 * n + 2)
     for i in range(n):
         for q in range(m.mi_ptr[i], m.mi_ptr[i + 1]):
-            if joined[m.mi_idx[q]]:
-                rows.append(i)
-                break
-    norms = np.zeros(2 * n + 2 + len(rows))
-    for i in range(n):
+            reached[i] = reached[i] or joined[m.mi_idx[q]]
         for q in range(m.a_ptr[i], m.a_ptr[i + 1]):
-            norms[i + (n if m.a_idx[q] >= n else 0)] += abs(m.a_val[q])
+            sums[i + (n if m.a_idx[q] >= n else 0)] += abs(m.a_val[q])
     for i in range(n):
-        norms[2 * n] = max(norms[2 * n], norms[i])
-        norms[2 * n + 1] = max(norms[2 * n + 1], norms[n + i])
-    for j in range(len(rows)):
-        norms[2 * n + 2 + j] = rows[j]
-    return norms
+        sums[2 * n] = max(sums[2 * n], sums[i])
+        sums[2 * n + 1] = max(sums[2 * n + 1], sums[n + i])
+    return sums, np.nonzero(reached)[0]
 
 
 @no_alloc
@@ -326,8 +321,9 @@ def spectral_bound(m, y, norms, node):
     only adds to its linear sum, so the largest row is the linear maximum's or one of the rows elements reach, and a
     call costs O(elements and their rows), not O(n) (the 1,000-mass chain's stiffness watch took 0.55 ms of its
     Taylor run). node is scratch of length 2n, zeros where no element joins: each DOF's tangent stiffness and damping
-    from nonlinear elements."""
+    from nonlinear elements, zeroed at the elements' DOFs before any is added to (elements share DOFs)."""
     n = m.n
+    sums, rows = norms
     for e in range(len(m.el_law)):
         offset = 0 if m.el_law[e] == CUBIC_SPRING else n
         for dof in (m.el_a[e], m.el_b[e]):
@@ -342,12 +338,11 @@ def spectral_bound(m, y, norms, node):
             node[offset + a] += 2 * slope
         if b >= 0:
             node[offset + b] += 2 * slope
-    k = norms[2 * n]
-    c = norms[2 * n + 1]
-    for j in range(2 * n + 2, len(norms)):
-        i = int(norms[j])
-        row_k = norms[i]
-        row_c = norms[n + i]
+    k = sums[2 * n]
+    c = sums[2 * n + 1]
+    for i in rows:
+        row_k = sums[i]
+        row_c = sums[n + i]
         for q in range(m.mi_ptr[i], m.mi_ptr[i + 1]):
             row_k += abs(m.mi_val[q]) * node[m.mi_idx[q]]
             row_c += abs(m.mi_val[q]) * node[n + m.mi_idx[q]]

@@ -105,8 +105,8 @@ def _stated_accuracy(solver: Solver, model: Model, result: Result, peak: float) 
 def _refuse_non_finite(result, x_extremes):
     """A run that reports success but holds NaN or inf (numbers beyond double precision) is a failure (x_extremes:
     the displacement's, from Result.extremes_of)."""
-    finite = all_finite(result.displacement, x_extremes) and all_finite(result.velocity, result.extremes_of("velocity"))
-    if not result.success or finite:
+    if not result.success or (all_finite(result.displacement, x_extremes)
+                              and all_finite(result.velocity, result.extremes_of("velocity"))):
         return result
     state = np.concatenate([result.displacement, result.velocity], axis=1)
     bad = ~np.isfinite(state).all(axis=1)
