@@ -59,6 +59,35 @@ def test_a_signal_while_writing_leaves_no_partial_file(tmp_path, signum, code, w
     assert earlier.read_bytes() == b"an earlier result"
 
 
+SIGNAL_AS_THE_FILE_APPEARS = """
+import os, signal, sys, tempfile
+made = tempfile.mkstemp
+def mkstemp(*args, **kwargs):
+    fd, name = made(*args, **kwargs)
+    os.kill(os.getpid(), signal.SIGINT)  # the file is there; its name not yet returned
+    return fd, name
+tempfile.mkstemp = mkstemp
+from smdcli.cli import main
+sys.argv = ["smd"] + sys.argv[1:]
+main()
+"""
+
+
+def test_a_signal_as_the_temporary_file_appears_leaves_nothing(tmp_path):
+    """The signal lands between the temporary file's creation and the return of its name (where CI's loaded machine
+    once sent one, and the file stayed): exit 130, no temporary file, the earlier result untouched."""
+    out = tmp_path / "out"
+    out.mkdir()
+    earlier = out / "one_dof_undamped.h5"
+    earlier.write_bytes(b"an earlier result")
+    args = ["simulate", str(SCENARIOS / "one_dof_undamped.toml"), "-o", str(out), "--no-plots"]
+    ran = subprocess.run([sys.executable, "-c", SIGNAL_AS_THE_FILE_APPEARS, *args], capture_output=True, text=True,
+                         cwd=ROOT, timeout=120)
+    assert ran.returncode == 130 and "Traceback" not in ran.stderr, ran.stderr
+    assert sorted(p.name for p in out.iterdir()) == [earlier.name]
+    assert earlier.read_bytes() == b"an earlier result"
+
+
 def test_an_output_that_cannot_be_written_is_one_line_exit_2(cli, tmp_path):
     out = tmp_path / "out"
     (out / "one_dof_undamped.h5").mkdir(parents=True)  # the final name is taken by a folder

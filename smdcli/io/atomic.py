@@ -70,12 +70,14 @@ def atomic_path(final: Path):
     if final.is_dir():
         raise UsageError(f"{final}: cannot write: a folder has that name; expected a file name")
     output_folder(final.parent)
+    tmp = None
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".part", dir=final.parent)
-    except OSError as exc:
-        raise UsageError(f"{final}: cannot write: {exc.strerror or exc}") from None
-    os.close(fd)
-    try:
+        # A signal is only recorded while the file is made: raised there, after the file appeared and before its name
+        # came back, it left the file behind. It raises below, where the file is discarded.
+        with interrupts.deferred(raise_after=False):
+            fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".part", dir=final.parent)
+            os.close(fd)
+        interrupts.raise_if_received()
         yield Path(tmp)
         # mkstemp makes the file private (0600); the result gets what the user's umask gives any new file.
         umask = os.umask(0)
@@ -86,10 +88,13 @@ def atomic_path(final: Path):
         else:
             _commit([(tmp, final)])
     except OSError as exc:
+        if tmp is None:
+            raise UsageError(f"{final}: cannot write: {exc.strerror or exc}") from None
         _discard([tmp])
         raise UsageError(f"{final}: cannot write: {_reason(exc, tmp)}") from None
     except BaseException:
-        _discard([tmp])
+        if tmp is not None:
+            _discard([tmp])
         raise
 
 
