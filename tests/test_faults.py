@@ -194,6 +194,51 @@ def test_in_threads_keeps_its_pool_runs_the_first_task_here_and_nested_calls_in_
         interrupts.in_threads(fails, [0, 1, 2])
 
 
+def test_threads_are_as_many_as_the_cores_a_containers_quota_allows(tmp_path, monkeypatch):
+    """A container's CPU quota (cgroup v2's cpu.max, v1's CFS quota and period) caps the cores smd's threads use,
+    where os.cpu_count() counts the host's; a spectrum's threads are also at most one per LANES oscillators, and
+    its ordinates the same however they are shared."""
+    import math
+
+    import numpy as np
+
+    from smdcli import interrupts
+    from smdcli.kernels import oscillator
+
+    v2 = tmp_path / "v2"
+    v2.mkdir()
+    (v2 / "cpu.max").write_text("150000 100000\n")
+    assert interrupts.cgroup_cpu_quota(str(v2)) == 1.5
+    (v2 / "cpu.max").write_text("max 100000\n")
+    assert interrupts.cgroup_cpu_quota(str(v2)) is None
+    v1 = tmp_path / "v1"
+    (v1 / "cpu").mkdir(parents=True)
+    (v1 / "cpu" / "cpu.cfs_quota_us").write_text("200000\n")
+    (v1 / "cpu" / "cpu.cfs_period_us").write_text("100000\n")
+    assert interrupts.cgroup_cpu_quota(str(v1)) == 2.0
+    (v1 / "cpu" / "cpu.cfs_quota_us").write_text("-1\n")  # v1's "no quota"
+    assert interrupts.cgroup_cpu_quota(str(v1)) is None
+    assert interrupts.cgroup_cpu_quota(str(tmp_path / "absent")) is None
+
+    affinity = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    for quota, expected in ((None, affinity), (0.5, 1), (1.5, min(affinity, 2)), (1000.0, affinity)):
+        monkeypatch.setattr(interrupts, "_usable_cores", None)
+        monkeypatch.setattr(interrupts, "cgroup_cpu_quota", lambda quota=quota: quota)
+        assert interrupts.usable_cores() == expected, quota
+
+    shares = []
+    monkeypatch.setattr(interrupts, "_usable_cores", 64)
+    monkeypatch.setattr(interrupts, "in_threads", lambda function, tasks: shares.append(len(tasks)) or
+                        [function(task) for task in tasks])
+    t = np.linspace(0.0, 2.0, 201)
+    a = np.sin(7.0 * t) + 0.3 * np.cos(31.0 * t)
+    omega = 2 * math.pi / np.logspace(-1.5, 0.5, 70)
+    zeta = np.full(70, 0.05)
+    shared = oscillator.extremes(a, 0.01, omega, zeta, oscillator.DISPLACEMENT)
+    assert shares == [math.ceil(70 / oscillator.LANES)]
+    assert np.array_equal(shared, oscillator.extremes(a, 0.01, omega, zeta, oscillator.DISPLACEMENT, threads=1))
+
+
 @pytest.mark.parametrize("pool", ["run_threads", "in_threads"])
 def test_thread_pools_end_or_raise_whenever_an_interrupt_lands(pool):
     """Ctrl-C at random moments of a thread pool's life, 400 times in one process: each run ends or raises

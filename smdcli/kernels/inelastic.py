@@ -203,13 +203,11 @@ def inelastic_peaks(acceleration, dt, omega, zeta, uy, hardening, out):
 def peaks(acceleration: np.ndarray, dt: float, omega, zeta, uy, hardening, threads: int = 0) -> np.ndarray:
     """(O, 4): max u, min u, final plastic deformation and yield events per oscillator (arrays broadcast to O);
     oscillators shared among threads."""
-    import os
-
     a = np.ascontiguousarray(acceleration, dtype=float)
     omega, zeta, uy, hardening = (np.ascontiguousarray(x, dtype=float) for x in
                                   np.broadcast_arrays(omega, zeta, uy, hardening))
     out = np.empty((len(omega), 4))
-    threads = threads or min(len(omega), os.cpu_count() or 1)
+    threads = threads or min(len(omega), interrupts.usable_cores())
     if threads <= 1:
         inelastic_peaks(a, dt, omega, zeta, uy, hardening, out)
         return out

@@ -302,14 +302,13 @@ def oscillator_extremes(acceleration, dt, omega, zeta, kind, tail_periods, out):
 
 def extremes(acceleration: np.ndarray, dt: float, omega: np.ndarray, zeta: np.ndarray, kind: int,
              tail_periods: float = 0.0, threads: int = 0) -> np.ndarray:
-    """(O, 4) largest q, its time, smallest q, its time per oscillator; oscillators shared among threads."""
-    import os
-
+    """(O, 4) largest q, its time, smallest q, its time per oscillator; oscillators shared among threads, at most one
+    for each LANES of them (a group of fewer lanes takes as long as a full one)."""
     a = np.ascontiguousarray(acceleration, dtype=float)
     omega = np.ascontiguousarray(omega, dtype=float)
     zeta = np.ascontiguousarray(zeta, dtype=float)
     out = np.empty((len(omega), 4))
-    threads = threads or min(len(omega), os.cpu_count() or 1)
+    threads = threads or min(-(-len(omega) // LANES), interrupts.usable_cores())
     if threads <= 1:
         oscillator_extremes(a, dt, omega, zeta, kind, tail_periods, out)
         return out

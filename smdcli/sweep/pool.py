@@ -137,9 +137,4 @@ def run_pool(function: Callable, tasks: list, workers: int, progress: Callable[[
 
 def default_workers() -> int:
     """The number of cores this process may use."""
-    import os
-
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:
-        return os.cpu_count() or 1
+    return interrupts.usable_cores()
