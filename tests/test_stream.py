@@ -1,6 +1,7 @@
 """Streamed sweeps: members solved in chunks and written as they finish, --keep metrics, --resume after an
 interrupt (in-process and after SIGKILL), and the refusals around them."""
 
+import json
 import os
 import signal
 import subprocess
@@ -237,3 +238,51 @@ def test_a_cluster_sweep_stopped_by_sigterm_says_one_line_and_resumes_on_the_clu
     assert code == 143, stderr
     assert stderr.count("\n") == 1 and "--resume finishes it" in stderr and "Traceback" not in stderr, stderr
     _resume_matches_a_whole_run(cli, command, out, whole_big_sweep)
+
+
+def _end_of_allocation_cut_short(path, fraction: float) -> None:
+    """What a run killed while HDF5 wrote its structure leaves: the superblock's end-of-allocation address (version
+    0's, at byte 40; no checksum) short of objects written after it, so reading them back fails (addr overflow)."""
+    with open(path, "r+b") as f:
+        head = f.read(48)
+        assert head[:8] == b"\x89HDF\r\n\x1a\n" and head[8] == 0, "a version 0 superblock"
+        end = int.from_bytes(head[40:48], "little")
+        f.seek(40)
+        f.write(int(end * fraction).to_bytes(8, "little"))
+
+
+@pytest.mark.parametrize("damage", ["end of allocation cut short", "not HDF5"])
+def test_a_partial_file_damaged_where_the_run_was_killed_is_started_over_by_resume(cli, tmp_path, small_chunks,
+                                                                                   damage):
+    """--resume on a partial file it cannot read back whole (CI once killed a sweep with SIGKILL as HDF5 wrote its
+    structure, and --resume then ended in an internal error) says so and starts over: exit 0, the data of a whole
+    run. A partial file of another sweep is still refused (exit 2), not overwritten."""
+    scene = write(tmp_path, one_dof(0.5, end=4.0, step=0.01))
+    args = ["sweep", scene, "--param", "damper[0].c", "--values", "linspace(0.1, 20, 30)", "--no-plots", "--json"]
+    assert cli(*args, "-o", tmp_path / "whole").exit_code == 0
+    out = tmp_path / "killed"
+    out.mkdir()
+    partial = out / "scene_sweep.partial.h5"
+    (tmp_path / "whole" / "scene_sweep.h5").rename(partial)
+    if damage == "not HDF5":
+        partial.write_bytes(b"\0" * 4096)
+    else:
+        _end_of_allocation_cut_short(partial, 0.5)
+        with pytest.raises(Exception):  # the damage is what CI saw: the file opens, its objects do not read back
+            with h5py.File(partial, "r") as f:
+                f.visititems(lambda name, obj: None)
+    resumed = cli(*args, "-o", out, "--resume")
+    assert resumed.exit_code == 0, resumed.output
+    assert "could not be read back" in json.loads(resumed.stdout)["restarted"]
+    assert not partial.exists()
+    assert cli(*args, "-o", tmp_path / "again").exit_code == 0
+    same = cli("diff", tmp_path / "again" / "scene_sweep.h5", out / "scene_sweep.h5", "--rtol", "0")
+    assert same.exit_code == 0, same.output
+
+    other = tmp_path / "other"
+    other.mkdir()
+    with h5py.File(other / "scene_sweep.partial.h5", "w") as f:
+        f.attrs["sweep_identity"] = "another sweep"
+    refused = cli(*args, "-o", other, "--resume")
+    assert refused.exit_code == 2 and "different sweep" in refused.stderr
+    assert (other / "scene_sweep.partial.h5").exists()

@@ -41,6 +41,7 @@ class SweepRun:
     traces: dict = field(default_factory=dict)  # member -> (time, quantity, success): the overlay's lines
     response: FrequencyResponse | None = None
     resumed_from: int = 0  # members a partial file already held
+    restarted: str = ""  # why --resume could not read the partial file back and started over
     outputs: list = field(default_factory=list)
 
 
@@ -105,7 +106,7 @@ def _time_family(run: SweepRun, out_dir, method: str | None, keep: str | None, r
     """Solve the family chunk by chunk, each chunk's rows written as it finishes to `<stem>_sweep.partial.h5`,
     renamed `<stem>_sweep.h5` when complete; an interrupted run leaves the partial file for --resume. Chunks are
     solved here, or on a Dask cluster with a scheduler."""
-    from smdcli.io.sweep_hdf5 import IncompatiblePartial, SweepFile
+    from smdcli.io.sweep_hdf5 import DamagedPartial, IncompatiblePartial, SweepFile
     from smdcli.sweep.stream import chunk_plan, identity
 
     family = run.family
@@ -119,12 +120,15 @@ def _time_family(run: SweepRun, out_dir, method: str | None, keep: str | None, r
     if resume and not partial.exists():
         raise UsageError(f"--resume: no {partial} to finish (it is left by an interrupted sweep into {out_dir})")
     with _cluster(scheduler, workers) as cluster:  # reached before any file is written: unreachable is exit 2
+        stream = None
         if resume:
             try:
                 stream = SweepFile.resume(partial, family, keep, digest)
             except IncompatiblePartial as exc:
                 raise UsageError(str(exc)) from None
-        else:
+            except DamagedPartial as exc:
+                run.restarted = str(exc)
+        if stream is None:
             stream = SweepFile.create(partial, family, keep, grid, length, digest)
         try:
             for members in plan:
@@ -324,6 +328,8 @@ def summary(run: SweepRun) -> dict:
         data["keep"] = run.keep
         if run.resumed_from:
             data["resumed_from"] = run.resumed_from
+        if run.restarted:
+            data["restarted"] = run.restarted
         data["failed"] = run.failed
         data["failed_count"] = run.failed_count
         data["metric"] = {"name": family.spec.metric, "units": METRIC_UNITS[family.spec.metric],
@@ -352,6 +358,8 @@ def format_summary(data: dict) -> str:
         lines.append("  kept: the metrics and status of each member (--keep metrics), no time histories")
     if data.get("resumed_from"):
         lines.append(f"  resumed: {data['resumed_from']} members were already done")
+    if data.get("restarted"):
+        lines.append(f"  started over: {data['restarted']}")
     for failed in data.get("failed", []):
         lines.append(f"  failed: {failed}")
     if data.get("failed_count", 0) > len(data.get("failed", [])):

@@ -4,6 +4,8 @@ Must not import: commands, cli."""
 
 from __future__ import annotations
 
+from contextlib import suppress
+
 from pathlib import Path
 
 import numpy as np
@@ -76,7 +78,12 @@ CHUNK_BYTES = 1 << 20  # an HDF5 chunk of a growing data set: about 1 MB
 
 
 class IncompatiblePartial(ValueError):
-    """A partial file that is not the sweep asked for (another scenario, grid, method or --keep), or unreadable."""
+    """A partial file that is not the sweep asked for (another scenario, grid, method or --keep)."""
+
+
+class DamagedPartial(Exception):
+    """A partial file that cannot be read back whole: a run killed (SIGKILL, power loss) while HDF5 wrote its
+    structure leaves one. Nothing in it can be trusted, so the sweep starts over."""
 
 
 class SweepFile:
@@ -148,25 +155,32 @@ class SweepFile:
         when the run was cut, are dropped)."""
         import h5py
 
+        f = None
         try:
             f = h5py.File(path, "r+")
-        except OSError as exc:
-            raise IncompatiblePartial(f"{path}: cannot be read ({exc}); run without --resume to start over") from None
-        if f.attrs.get("sweep_identity") != identity:
-            kept = f.attrs.get("keep")
-            f.close()
-            why = f" (it keeps {kept}, not {keep})" if kept and kept != keep else ""
-            raise IncompatiblePartial(f"{path}: is from a different sweep (scenario, members, grid, method or --keep "
-                                      f"differ){why}; run without --resume to start over")
-        sweep = cls(f, len(family))
-        done = sweep.done
-        for ds in sweep._growing_sets():
-            if ds.shape[0] < done:
+            found = f.attrs.get("sweep_identity")
+            if found is not None and found != identity:
+                kept = f.attrs.get("keep")
                 f.close()
-                raise IncompatiblePartial(f"{path}: {ds.name} holds {ds.shape[0]} members, fewer than the "
-                                          f"{done} it says are done; run without --resume to start over")
-            ds.resize(done, axis=0)
-        return sweep
+                why = f" (it keeps {kept}, not {keep})" if kept and kept != keep else ""
+                raise IncompatiblePartial(f"{path}: is from a different sweep (scenario, members, grid, method or "
+                                          f"--keep differ){why}; run without --resume to start over")
+            sweep = cls(f, len(family))
+            done = sweep.done
+            for ds in sweep._growing_sets():
+                if ds.shape[0] < done:
+                    raise DamagedPartial(f"{ds.name} holds {ds.shape[0]} members, fewer than the {done} it says are "
+                                         "done")
+                ds.resize(done, axis=0)
+            return sweep
+        except IncompatiblePartial:
+            raise
+        except Exception as exc:  # h5py raises OSError, RuntimeError, KeyError or ValueError for a damaged file
+            if f is not None:
+                with suppress(Exception):
+                    f.close()
+            why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise DamagedPartial(f"{path} could not be read back ({why}); the sweep started over") from None
 
     @property
     def done(self) -> int:
