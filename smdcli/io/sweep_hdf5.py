@@ -5,7 +5,6 @@ Must not import: commands, cli."""
 from __future__ import annotations
 
 from contextlib import suppress
-
 from pathlib import Path
 
 import numpy as np
