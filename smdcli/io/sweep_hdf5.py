@@ -157,8 +157,8 @@ class SweepFile:
         f = None
         try:
             f = h5py.File(path, "r+")
-            found = f.attrs.get("sweep_identity")
-            if found is not None and found != identity:
+            found = f.attrs["sweep_identity"]  # none: the file was cut as it began, read below as damage
+            if found != identity:
                 kept = f.attrs.get("keep")
                 f.close()
                 why = f" (it keeps {kept}, not {keep})" if kept and kept != keep else ""
@@ -167,9 +167,8 @@ class SweepFile:
             sweep = cls(f, len(family))
             done = sweep.done
             for ds in sweep._growing_sets():
-                if ds.shape[0] < done:
-                    raise DamagedPartial(f"{ds.name} holds {ds.shape[0]} members, fewer than the {done} it says are "
-                                         "done")
+                if ds.shape[0] < done:  # a ValueError as h5py's own: read below as damage
+                    raise ValueError(f"{ds.name} holds {ds.shape[0]} members, fewer than the {done} it says are done")
                 ds.resize(done, axis=0)
             return sweep
         except IncompatiblePartial:

@@ -8,9 +8,9 @@ The integration restarts at every cut (force discontinuity) as a new scipy solve
 The stiffness watch costs O(elements) per step, not an eigenvalue problem: |lambda| of the Jacobian is
 bounded by c + sqrt(k), the infinity norms of M^-1 C and M^-1 K with the nonlinear elements' tangents
 (spectral_bound; the linear rows' part worked out once, linear_norms). A step whose h |lambda| passes
-half the method's stability boundary is stability-limited. (Hairer's estimate from two stages at the same time was tried first: on the book's
-quadratic damper it read h |lambda| = 33 where the eigenvalues give 1.2, since the 1-DOF Jacobian
-[[0, 1], [-1000, -c]] is far from normal.)
+half the method's stability boundary is stability-limited. (Hairer's estimate from two stages at the
+same time was tried first: on the book's quadratic damper it read h |lambda| = 33 where the eigenvalues
+give 1.2, since the 1-DOF Jacobian [[0, 1], [-1000, -c]] is far from normal.)
 
 Must not import: solvers, sweep, io, plots, commands, cli.
 """
