@@ -62,6 +62,10 @@ class Signal:
         """Exosystem state just after t."""
         raise NotImplementedError
 
+    def exo_states(self, t: np.ndarray) -> np.ndarray:
+        """exo_state at each of the times t, (len(t), its size)."""
+        return np.array([self.exo_state(float(time)) for time in t]).reshape(len(t), -1)
+
 
 class Constant(Signal):
     def __init__(self, amplitude: float):
@@ -279,6 +283,12 @@ class Table(Signal):
         i = int(np.searchsorted(self.t, t, side="right")) - 1
         slope = self.slopes[i] if 0 <= i < len(self.slopes) else 0.0
         return np.array([float(self.value(t)), slope])
+
+    def exo_states(self, t: np.ndarray) -> np.ndarray:
+        """exo_state at each of the times t, (len(t), 2)."""
+        i = np.searchsorted(self.t, t, side="right") - 1
+        held = np.append(self.slopes, 0.0)  # before the first sample and past the last the value is held
+        return np.stack([self.value(t), held[np.where((i >= 0) & (i < len(self.slopes)), i, -1)]], axis=1)
 
 
 class ExpressionSignal(Signal):

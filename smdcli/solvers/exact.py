@@ -30,6 +30,7 @@ from smdcli.result import Result, SolverStats
 from smdcli.solvers.accurate_expm import expm_times, needed
 from smdcli.solvers.base import Solver, Tolerances, make_result, segments, stated_rounding
 from smdcli.solvers.harmonic import from_rest_less, split
+from smdcli.solvers import sampled
 from smdcli.solvers.action import ACTION_DOFS, Action, action_cost, solve_action
 from smdcli.solvers.modal import modal_applies, solve_modal
 from smdcli.text import plural
@@ -178,11 +179,18 @@ class Exact(Solver):
 
 
 def _solve_linear(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:
-    """x, v, stated accuracy and a description, by the cheapest exact path: modal, the sparse action or dense."""
+    """x, v, stated accuracy and a description, by the cheapest exact path: modal, the sparse action, blocks of
+    steps between a table's samples (sampled.py) or dense."""
     if modal_applies(model):
         return solve_modal(model, grid)
     action = sparse_action(model, grid)
-    return solve_action(model, grid, action) if action is not None else solve_dense(model, grid)
+    if action is not None:
+        return solve_action(model, grid, action)
+    if sampled.applies(model):
+        found = sampled.solve_sampled(model, grid, *augmented(model))
+        if found is not None:
+            return found
+    return solve_dense(model, grid)
 
 
 def solve_dense(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:

@@ -170,13 +170,18 @@ class PiecewiseRun:
         Z = np.empty((count + 1, len(z)))  # each step's start (after a kink's reseeding)
         Z[0] = z
         ends = np.empty((count, len(z)))  # each step's end, as the flow left it
+        # the generators restart at each kink (their states read at all at once): the step after it runs on the next
+        # segment
+        seeds = [(lo, hi, signal.exo_states(ahead[:count])) for lo, hi, signal, _ in self.scene.blocks] if reseed \
+            else []
         clear, done = count, 0  # steps before the first that a guard may end; steps taken
         while done < clear:  # in chunks, so that an event near the start wastes little
             chunk = range(done, min(done + CHUNK, count))
             for i in chunk:
                 ends[i] = Z[i + 1] = E @ Z[i] + shift
-                if i in reseed:  # the generators restart at the kink: the step after it runs on the next segment
-                    self.scene.reseed(Z[i + 1], float(ahead[i]))
+                if i in reseed:
+                    for lo, hi, states_at in seeds:
+                        Z[i + 1, lo:hi] = states_at[i]
             starts, stops = Z[chunk.start:chunk.stop], ends[chunk.start:chunk.stop]
             for _, guard, row, const in mode.guards:
                 rate_row, rate_const = row @ mode.A, float(row @ mode.b)
