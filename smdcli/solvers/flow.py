@@ -9,6 +9,10 @@ from __future__ import annotations
 import numpy as np
 
 GAUSS_POINTS = 8
+# A guard's value along a step as a polynomial in tau (the flow's Taylor series), for event location: so many terms
+# that where the step's omega h is at most SERIES_REACH the dropped ones are far below rounding (2^31 / 31!)
+SERIES_TERMS = 30
+SERIES_REACH = 2.0
 SPECTRAL_CONDITION = 1e4  # eigenvector condition up to which arbitrary steps are taken from the eigenvectors
 _LEGENDRE = np.polynomial.legendre.leggauss(GAUSS_POINTS)
 NODES, WEIGHTS = (_LEGENDRE[0] + 1) / 2, _LEGENDRE[1] / 2  # Gauss-Legendre on [0, 1]
@@ -24,6 +28,8 @@ class Flow:
         self.big[:s, :s] = A
         self.big[:s, s:] = np.eye(s)
         self.cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        self.row_powers: dict[bytes, np.ndarray] = {}  # a guard's row times the series' powers
+        self._series_powers = None
         self.nodes: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         values, vectors = np.linalg.eig(A) if s else (np.zeros(0), np.zeros((0, 0)))
         self.omega = float(np.abs(values).max(initial=0.0))
@@ -56,8 +62,23 @@ class Flow:
         """z after h."""
         if h == 0:
             return z.copy()
+        if not keep and h not in self.cache:  # a step of its own length (to an event, a target): its series
+            series = self.state_series(z, b, h)
+            if series is not None:
+                return h ** np.arange(SERIES_TERMS + 1) @ series
         E, Phi = self.operators(h, keep)
         return E @ z + Phi @ b
+
+    def gauss_states(self, Z0: np.ndarray, b: np.ndarray, h: float, keep: bool) -> np.ndarray:
+        """The flow from each row of Z0 (m, s) at the Gauss-Legendre nodes of [0, h]: (m, GAUSS_POINTS, s); a single
+        state's on a step not kept from its Taylor polynomial where that is good to rounding (eight exponentials
+        otherwise: a step cut short by an event)."""
+        if len(Z0) == 1 and not keep:
+            series = self.state_series(Z0[0], b, h)
+            if series is not None:
+                return (np.vander(NODES * h, SERIES_TERMS + 1, increasing=True) @ series)[None]
+        E, Phi = self.gauss_operators(h, keep)
+        return np.einsum("gij,mj->mgi", E, Z0) + (Phi @ b)[None]
 
     def gauss_operators(self, h: float, keep: bool) -> tuple[np.ndarray, np.ndarray]:
         """(E, Phi) at the Gauss-Legendre nodes of [0, h], (GAUSS_POINTS, s, s) each."""
@@ -68,3 +89,52 @@ class Flow:
         if keep:
             self.nodes[h] = found
         return found
+
+    @property
+    def series_powers(self) -> np.ndarray:
+        """A^k / (k + 1)!, k < SERIES_TERMS, (SERIES_TERMS, s, s): z(tau) = z + sum_k tau^(k+1) A^k / (k + 1)! (A z + b)
+        on the flow of z' = A z + b."""
+        if self._series_powers is None:
+            A = self.big[:self.s, :self.s]
+            powers = np.empty((SERIES_TERMS, self.s, self.s))
+            powers[0] = np.eye(self.s)
+            for k in range(1, SERIES_TERMS):
+                powers[k] = powers[k - 1] @ A / (k + 1)
+            self._series_powers = powers
+        return self._series_powers
+
+    def state_series(self, z: np.ndarray, b: np.ndarray, h: float) -> np.ndarray | None:
+        """Coefficients c_k (SERIES_TERMS + 1, s) of z(tau) = sum c_k tau^k on [0, h], or None where they are no good
+        to rounding there: omega h past SERIES_REACH, terms not yet small at the end, or terms whose sum's rounding
+        passes 64 ulps of the state's size."""
+        if self.omega * h > SERIES_REACH:
+            return None
+        series = np.concatenate([z[None], self.series_powers @ (self.big[:self.s, :self.s] @ z + b)])
+        sizes = np.abs(series).max(axis=1) * h ** np.arange(SERIES_TERMS + 1)
+        if sizes[-3:].max() > 1e-18 * sizes.max() or sizes.sum() > 64 * (np.abs(z).max() + np.abs(b).max() * h):
+            return None
+        return series
+
+    def guard_polynomial(self, z: np.ndarray, b: np.ndarray, row: np.ndarray, const: float, h: float):
+        """row z(tau) + const on [0, h] as a function of tau: the flow's Taylor polynomial (a few microseconds a
+        value, where the exponential takes tens), or None where it is no good to rounding there: omega h past
+        SERIES_REACH, terms not yet small at its end, or terms whose sum's rounding passes the guard's own
+        (64 ulps of row |z| + |const|, modes.at_level)."""
+        if self.omega * h > SERIES_REACH:
+            return None
+        powers = self.row_powers.get(key := row.tobytes())
+        if powers is None:
+            powers = self.row_powers[key] = row @ self.series_powers
+        coefficients = np.concatenate([[float(row @ z) + const], powers @ (self.big[:self.s, :self.s] @ z + b)])
+        sizes = np.abs(coefficients) * h ** np.arange(SERIES_TERMS + 1)
+        if sizes[-3:].max() > 1e-18 * sizes.max() or sizes.sum() > 64 * (float(np.abs(row) @ np.abs(z)) + abs(const)):
+            return None
+        highest_first = coefficients[::-1].tolist()
+
+        def value(tau: float) -> float:
+            total = 0.0
+            for c in highest_first:
+                total = total * tau + c
+            return total
+
+        return value

@@ -6,7 +6,10 @@ z' = A z + b, whose flow z(t) = E(t) z0 + Phi(t) b is one matrix exponential ([[
 is where a quantity linear in z crosses a level, found on the exact flow: the flow is sampled at substeps short
 enough to see every crossing (an eighth of the fastest mode's period, the output step at most), a crossing
 bracketed, a touch without a crossing caught where the quantity's slope changes sign, and the time found by
-Brent's method to rounding. The events' decisions (modes.consistent, modes.impact) set the next mode.
+Brent's method to rounding (crossings.py). The events' decisions (modes.consistent, modes.impact) set the next mode.
+Whole output steps are taken in batches until the first that may hold an event; a step where a guard below its level
+turns back is one only where its top reaches the level (a yield surface's every oscillation peak otherwise ended a
+batch: 450 batches instead of 137 for the 42 events of a 4,001-sample elastoplastic record, twice the time).
 
 A rigid stop's impacts that accumulate (a ball coming to rest) are ended by the rule a sequence of geometric
 flight times obeys: once successive flights shrink by the restitution (to 1e-6), or a flight would be shorter
@@ -29,25 +32,25 @@ import time
 import numpy as np
 
 from smdcli.elements import State
-from smdcli.elements.base import D, EVENT_KINDS, KINK, RATE
+from smdcli.elements.base import EVENT_KINDS, KINK
 from smdcli.model import Model
+from smdcli.solvers.crossings import Crossings
 from smdcli.solvers.flow import Flow
 from smdcli.solvers.decisions import accumulation, consistent, impact, project, touch, unresolved
-from smdcli.solvers.modes import TOUCH, Mode, Scene, at_level, event_root
+from smdcli.solvers.modes import TOUCH, Mode, Scene, at_level
 from smdcli.solvers.piecewise_record import Outputs, step_integrals
 
 MAX_EVENTS_AT_ONE_TIME = 200  # a mode that cannot settle at one instant is a scene smd cannot solve
 BATCH = 256  # output steps taken together where no event interrupts them
 CHUNK = 16  # checked for events together
 MAX_SUBSTEPS = 2_000_000  # substeps a run may take (about 100 us each): a mode faster than that is refused
-RETURN_SAMPLES = 32  # samples of a substep in which a guard left at its level may have come back and gone again
 
 
 class PiecewiseFailed(Exception):
     """A scene the event-driven solver cannot advance (chattering at one instant)."""
 
 
-class PiecewiseRun:
+class PiecewiseRun(Crossings):
     """One exact event-driven run over an output grid."""
 
     def __init__(self, model: Model, grid: np.ndarray):
@@ -189,9 +192,11 @@ class PiecewiseRun:
                 slope0 = guard.direction * (starts @ rate_row + rate_const)
                 slope1 = guard.direction * (stops @ rate_row + rate_const)
                 below = g0 <= at_level(np.abs(starts) @ np.abs(row), const)  # or at it: it may come back
-                hits = np.flatnonzero(below & ((g1 >= 0) | ((g1 < 0) & (slope0 > 0) & (slope1 < 0))))
-                if len(hits):
-                    clear = min(clear, chunk.start + int(hits[0]))
+                turning = below & (g1 < 0) & (slope0 > 0) & (slope1 < 0)
+                for i in np.flatnonzero(below & ((g1 >= 0) | turning)):  # a turn whose top stays below: no event
+                    if not turning[i] or self._touches(flow, mode, guard, row, const, starts[i], h_out):
+                        clear = min(clear, chunk.start + int(i))
+                        break
             done = chunk.stop
         if clear < 1:
             return None
@@ -212,75 +217,6 @@ class PiecewiseRun:
             outputs.store(k, z, states)
             k += 1
         return states, z, k
-
-    # ------------------------------------------------------------------------------------ crossings
-    def first_crossing(self, flow: Flow, mode: Mode, z0: np.ndarray, z1: np.ndarray, h: float):
-        """(tau, element, guard) of the earliest guard crossing in (0, h], or None."""
-        best = None
-        for e, guard, row, const in mode.guards:
-            g0, g1 = float(row @ z0 + const), float(row @ z1 + const)
-            s = guard.direction
-            tau = None
-            # at its level to rounding: of the terms it sums, or for a rate of the speeds it was computed from
-            size = float(np.abs(row) @ np.abs(z0))
-            level = at_level(max(size, self.v_scale) if guard.quantity == RATE else size, const)
-            at = abs(g0) <= level  # at its level (on either side of it by rounding)
-            if at and guard.quantity == D and s * float(row @ (mode.A @ z0 + mode.b)) > TOUCH * self.v_scale:
-                tau = 0.0  # leaving its level past it now (a spring yielding onto a stop it is at), however soon back
-            elif at and s * g1 >= 0:
-                tau = self._return(flow, mode, z0, row, const, s, h)
-            elif s * g0 < 0 <= s * g1:
-                tau = self._root(flow, mode, z0, row, const, 0.0, h)
-            elif s * g0 < -level and s * g1 < 0:  # a touch inside the substep, not at its start: where the slope turns
-                slope0 = float(row @ (mode.A @ z0 + mode.b))
-                slope1 = float(row @ (mode.A @ z1 + mode.b))
-                if s * slope0 > 0 > s * slope1:
-                    turn = self._root(flow, mode, z0, row @ mode.A, float(row @ mode.b), 0.0, h)
-                    if s * float(row @ flow.at(z0, mode.b, turn) + const) >= 0:
-                        tau = self._root(flow, mode, z0, row, const, 0.0, turn)
-            if tau is not None and (best is None or tau < best[0]):
-                best = (tau, e, guard)
-        return best
-
-    def _return(self, flow: Flow, mode: Mode, z0: np.ndarray, row: np.ndarray, const: float, s: float, h: float):
-        """Where a guard the event just taken left at its level comes back to it in (0, h], from the bottom of its
-        excursion below it (its slope's root; a dip right after the start found by halving towards it, the return
-        then bracketed by doubling; or the lowest of RETURN_SAMPLES samples). If it never went below, it goes on
-        past its level from here: an event now (a spring that yields where its stop is met, the two at one
-        instant); None where it only stays at its level to rounding (a spring on its surface held by a contact)."""
-        value = lambda tau: s * float(row @ flow.at(z0, mode.b, tau) + const)  # noqa: E731
-        rate = lambda z: s * float(row @ (mode.A @ z + mode.b))  # noqa: E731
-        lo, hi = None, h
-        leaving = rate(z0) < 0
-        if leaving and rate(flow.at(z0, mode.b, h)) > 0:  # one turn: the bottom where the slope changes sign
-            lo = self._root(flow, mode, z0, row @ mode.A, float(row @ mode.b), 0.0, h)
-        if leaving and (lo is None or value(lo) >= 0):  # a rebound that lands again long before the samples
-            lo = next((tau for tau in h * 0.5 ** np.arange(1, 60) if value(tau) < 0), None)
-            if lo is not None:
-                hi = next((tau for tau in lo * 2.0 ** np.arange(1, 60) if tau >= h or value(tau) >= 0), h)
-                hi = min(hi, h)
-        if lo is None or value(lo) >= 0:
-            taus = h * np.arange(1, RETURN_SAMPLES) / RETURN_SAMPLES
-            values = np.array([value(tau) for tau in taus])
-            if values.min() >= 0:
-                end = value(h)
-                return 0.0 if end > at_level(float(np.abs(row) @ np.abs(z0)), const) else None
-            lo = float(taus[int(np.argmin(values))])
-        return self._root(flow, mode, z0, row, const, lo, hi)
-
-    def _root(self, flow: Flow, mode: Mode, z0: np.ndarray, row: np.ndarray, const: float, lo: float,
-              hi: float) -> float:
-        """The root of row z(tau) + const in [lo, hi] (a sign change there), to rounding."""
-        def value(tau: float) -> float:
-            self.expm_count += 1
-            return float(row @ flow.at(z0, mode.b, tau) + const)
-
-        f_lo, f_hi = value(lo), value(hi)
-        if f_lo == 0:
-            return lo
-        if f_hi == 0 or f_lo * f_hi > 0:
-            return hi
-        return event_root(value, lo, hi, hi - lo)
 
     # ------------------------------------------------------------------------------------- events
     def record(self, t: float, element: int, kind: str) -> None:

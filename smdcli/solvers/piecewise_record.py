@@ -21,8 +21,7 @@ def step_integrals(run, flow: Flow, mode: Mode, states, Z0: np.ndarray, h: float
                    keep: bool) -> dict[str, np.ndarray]:
     """The energy each term gains over [0, h] of the flow from each row of Z0 (m, s): term -> (m,)."""
     scene, n, model = run.scene, run.n, run.model
-    E, Phi = flow.gauss_operators(h, keep)  # (G, s, s) each
-    Z = np.einsum("gij,mj->mgi", E, Z0) + (Phi @ mode.b)[None]  # (m, G, s)
+    Z = flow.gauss_states(Z0, mode.b, h, keep)  # (m, G, s)
     w = WEIGHTS * h
     v = Z[..., n:2 * n]
     out = {}
