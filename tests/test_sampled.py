@@ -133,3 +133,31 @@ def test_a_tables_states_at_many_times_are_its_states_at_each(interpolation):
     times = np.array([0.0, 0.5, 0.7, 1.0, 1.1, 1.25, 2.0, 3.0, 3.5])
     expected = np.array([signal.exo_state(float(t)) for t in times])
     np.testing.assert_array_equal(signal.exo_states(times), expected)
+
+
+def test_a_large_classically_damped_chain_under_a_record_steps_its_modes_in_blocks(monkeypatch, tmp_path):
+    """100 masses, damping proportional to stiffness, a ground acceleration record sampled twice as finely as the
+    output: every mode's steps in blocks against the modal path's step-by-step walk, within their stated accuracies,
+    in chunks of a few steps as in one (a chunk's end state carried to the next)."""
+    from smdcli.solvers import modal
+
+    rng = np.random.default_rng(3)
+    record = tmp_path / "record.csv"
+    times = np.round(np.arange(0, 801) * 0.005, 12)
+    record.write_text("".join(f"{float(t)!r},{float(a)!r}\n" for t, a in zip(times, rng.normal(size=len(times)))))
+    lines = ["[time]", "end = 4.0", "step = 0.01"]
+    for i in range(100):
+        lines += ["[[mass]]", f'name = "m{i}"', f"m = {1.0 + 0.01 * i!r}"]
+    for i in range(100):
+        left = "ground" if i == 0 else f"m{i - 1}"
+        lines += ["[[spring]]", f'connects = ["{left}", "m{i}"]', "k = 2000.0",
+                  "[[damper]]", f'connects = ["{left}", "m{i}"]', "c = 0.4"]
+    lines += ["[ground_motion]", 'quantity = "acceleration"', 'type = "table"', f'file = "{record}"', 'units = "g"']
+    _, model, grid = model_of("\n".join(lines) + "\n")
+    assert modal.modal_applies(model)
+    fast = solve(model, grid, "exact", Tolerances())
+    assert SAMPLED in fast.stats.message and "modal coordinates" in fast.stats.message
+    assert_agree(fast, dense(model, grid, monkeypatch))
+    monkeypatch.setattr(sampled, "CHUNK_ENTRIES", 2000)  # one block of 64 steps a chunk: 13 chunks
+    chunked = solve(model, grid, "exact", Tolerances())
+    assert np.abs(chunked.displacement - fast.displacement).max() <= 1e-14 * np.abs(fast.displacement).max()

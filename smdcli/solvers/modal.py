@@ -8,7 +8,8 @@ state w, propagated by expm of a (2 + m)-square matrix, w reseeded from its clos
 and split at force discontinuities. Cost O(n) per output step and O(n^3) once (the eigenvectors; O(n^2) for a
 chain, whose M^-1/2 K M^-1/2 is tridiagonal), against O(n^2) per step and a dense 2n-square exponential; the n
 small exponentials are one vectorized Pade evaluation (expm_stack), taken once for a uniform grid. x = Phi q at
-the end, one matrix product.
+the end, one matrix product. Where every force is a table on one even grid of knots (a record), all modes step
+from knot to knot in blocks instead (sampled.py).
 
 Must not import: sweep, io, plots, commands, cli.
 """
@@ -18,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from smdcli.model import Model
+from smdcli.solvers import sampled
 from smdcli.solvers.accurate_expm import NEEDED_NORM, expm_stack, expm_times
 from smdcli.solvers.base import segments, stated_rounding, walk
 from smdcli.text import plural
@@ -80,23 +82,35 @@ def solve_modal(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray,
         Eyy, Eyw, _ = phi(dt)
         return np.einsum("nij,nj->ni", Eyy, y) + Eyw @ w
 
-    q = np.empty((N, n))
-    qdot = np.empty((N, n))
     y = np.stack([shapes.T @ (model.M @ model.x0), shapes.T @ (model.M @ model.v0)], axis=1)  # (n, 2)
-    steps = 0
-    for t, dt, k in walk(model, grid):  # w reseeded from its closed form at every step: no drift in the forcing
-        if dt > 0:
-            y = step(y, w_at(t), dt)
-            steps += 1
-        if k is not None:
-            q[k], qdot[k] = y[:, 0], y[:, 1]
+    knots = sampled.uniform_knots(model, grid) if sampled.applies(model) else None
+    if knots is not None:  # tables on one even grid (a record): every mode's steps in blocks
+        times, read_at, rows = knots
+        dt = (float(times[-1]) - float(times[0])) / (len(times) - 1)
+        Eyy, Eyw, _ = phi(dt)
+        forced = (sampled.table_states(blocks, read_at[:-1], 0) @ Eyw.transpose(2, 0, 1).reshape(m, -1)).reshape(
+            len(times) - 1, n, 2)
+        states, chain = sampled.recurrence(Eyy, forced, y, rows)
+        q, qdot = states[:, :, 0], states[:, :, 1]
+        h, segs = dt, len(times) - 1
+        how = f"{plural(segs, 'step')} between the tables' samples and the output points, in blocks"
+    else:
+        q, qdot = np.empty((N, n)), np.empty((N, n))
+        chain = 0
+        for t, dt, k in walk(model, grid):  # w reseeded from its closed form at every step: no drift in the forcing
+            if dt > 0:
+                y = step(y, w_at(t), dt)
+                chain += 1
+            if k is not None:
+                q[k], qdot[k] = y[:, 0], y[:, 1]
+        segs = len(segments(model, grid))
+        chain += segs
+        how = plural(segs, 'force segment')
     x, v = q @ shapes.T, qdot @ shapes.T
     growth = float(norms.max(initial=0.0)) * h
     accurate = growth > NEEDED_NORM
-    segs = len(segments(model, grid))
-    stated = stated_rounding(steps + segs + n, 1.0 if accurate else growth)
+    stated = stated_rounding(chain + n, 1.0 if accurate else growth)
     message = (f"ok: modal coordinates ({n} classically damped modes from a symmetric eigensolver), "
-               f"{plural(segs, 'force segment')}, {len(cache)} batch"
-               f"{'es' if len(cache) != 1 else ''} of {n} exponentials of size {size}"
+               f"{how}, {len(cache)} batch{'es' if len(cache) != 1 else ''} of {n} exponentials of size {size}"
                + (" (the stiff modes' in double-double)" if accurate else ""))
     return x, v, stated, message

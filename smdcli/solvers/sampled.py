@@ -2,19 +2,18 @@
 one uniform grid of knots: the exact recurrence from knot to knot, taken in blocks.
 
 Between two knots every force is linear in time (a table's first-order hold) or constant (its previous-value hold),
-so one step is exact: y_(k+1) = E y_k + G w_k, with E and G from one exponential of the augmented system (exact.py)
-and w_k = (value, slope) each table's right limit at knot k. The dense path reseeds w at every breakpoint, one
-Python step per sample (15 ms for 2,001 samples of a 3-DOF frame, 78 ms to integrate a 4,001-sample record to the
-ground's displacement); here the steps run J at a time across all blocks at once (the forced part of each block),
-the blocks' starts one after another, and each block's free part as one product with the stacked powers E^j:
-about 2 sqrt(steps) Python steps. The rounding is the dense path's: powers up to E^J, a restart every block.
+so one step is exact: y_(k+1) = E y_k + G w_k, with E and G from one exponential of the augmented system (exact.py;
+for modal.py each mode's own) and w_k = (value, slope) each table's right limit at knot k. The dense and modal paths
+reseed w at every breakpoint, one Python step per sample (15 ms for 2,001 samples of a 3-DOF frame, 78 ms to
+integrate a 4,001-sample record to the ground's displacement); here the steps run J at a time across all blocks at
+once (the forced part of each block), the blocks' starts one after another, and each block's free part as one
+product with the stacked powers E^j: about 2 sqrt(steps) Python steps. The rounding is the dense path's: powers up
+to E^J, a restart every block.
 
 Must not import: sweep, io, plots, commands, cli.
 """
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 
@@ -24,6 +23,7 @@ from smdcli.solvers.accurate_expm import expm_times, needed
 from smdcli.text import plural
 
 BLOCK = 64  # steps a block takes at most
+CHUNK_ENTRIES = 1 << 21  # states (systems x state size) a chunk of steps holds: 16 MB an array
 
 
 def uniform_knots(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
@@ -55,6 +55,66 @@ def applies(model: Model) -> bool:
     return bool(model.signals) and all(isinstance(s, Table) for s in model.signals)
 
 
+def table_states(blocks, times: np.ndarray, offset: int) -> np.ndarray:
+    """The tables' generator states (value, slope) just after each time, (len(times), m); blocks: (lo, hi, signal)
+    with lo and hi counted from `offset`."""
+    w = np.empty((len(times), max((hi for _, hi, _ in blocks), default=offset) - offset))
+    for lo, hi, signal in blocks:
+        w[:, lo - offset:hi - offset] = signal.exo_states(times)
+    return w
+
+
+def applied(E: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """E_p y_p for each system p: E (P, s, s), y (..., P, s). One matrix product for one system; for many small ones
+    a multiply-add per state component over all of them (einsum took 2 ms a call on 1,000 modes)."""
+    if E.shape[0] == 1:
+        return y @ E[0].T
+    out = y[..., 0, None] * E[:, :, 0]
+    for t in range(1, E.shape[2]):
+        out += y[..., t, None] * E[:, :, t]
+    return out
+
+
+def recurrence(E: np.ndarray, forced: np.ndarray, start: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, int]:
+    """y_(k+1) = E y_k + forced_k from y_0 = start for independent systems side by side, at the steps `rows`
+    (increasing): (len(rows), P, s), and the longest chain of dependent products (the rounding's count). E (P, s, s),
+    forced (steps, P, s), start (P, s). Blocks of J steps: the forced part of every block from rest, step by step
+    across all blocks at once; the blocks' starts one after another; each block's free part one product with E^j.
+    Taken CHUNK_ENTRIES states at a time, so that many systems over many steps need no more."""
+    steps, P, s = forced.shape
+    J = min(BLOCK, max(steps, 1))
+    powers = np.empty((J + 1, P, s, s))
+    powers[0] = np.eye(s)
+    for j in range(J):
+        powers[j + 1] = powers[j] @ E
+    chunk = max(J, CHUNK_ENTRIES // (P * s * J) * J)
+    out = np.empty((len(rows), P, s))
+    y = np.array(start, dtype=float)
+    for first in range(0, max(steps, 1), chunk):
+        last = min(steps, first + chunk)
+        count = -(-(last - first) // J)
+        padded = np.zeros((count * J, P, s))
+        padded[:last - first] = forced[first:last]
+        padded = padded.reshape(count, J, P, s)
+        within = np.zeros((count, J + 1, P, s))  # each block's forced response from rest
+        for j in range(J):
+            within[:, j + 1] = applied(E, within[:, j]) + padded[:, j]
+        starts = np.empty((count + 1, P, s))
+        starts[0] = y
+        for b in range(count):
+            starts[b + 1] = applied(powers[J], starts[b]) + within[b, J]
+        states = within[:, :J].copy()
+        for j in range(J):
+            states[:, j] += applied(powers[j], starts[:count])
+        states = states.reshape(count * J, P, s)
+        wanted = (rows >= first) & ((rows < last) | (last == steps))
+        inside = rows[wanted] - first
+        out[wanted] = np.where((inside < count * J)[:, None, None], states[np.minimum(inside, count * J - 1)],
+                               starts[count])
+        y = starts[count]  # a chunk is whole blocks: its end is the next block's start
+    return out, 2 * J + -(-steps // J)
+
+
 def solve_sampled(model: Model, grid: np.ndarray, Aaug: np.ndarray, blocks) -> tuple | None:
     """x, v (N, n), the stated accuracy and a description, or None where the knots are not evenly spaced;
     Aaug and blocks: exact.augmented's."""
@@ -73,29 +133,10 @@ def solve_sampled(model: Model, grid: np.ndarray, Aaug: np.ndarray, blocks) -> t
     accurate = needed(norm_A * h, size)
     propagator = expm_times(Aaug, h) if accurate else expm(Aaug * h)
     E, G = propagator[:s, :s], propagator[:s, s:]
-    w = np.empty((steps, size - s))
-    for lo, hi, signal in blocks:
-        w[:, lo - s:hi - s] = signal.exo_states(read_at[:-1])
-    J = min(BLOCK, steps)
-    count = -(-steps // J)
-    forced = np.zeros((count * J, s))
-    forced[:steps] = w @ G.T
-    forced = forced.reshape(count, J, s)
-    within = np.zeros((count, J + 1, s))  # each block's forced response from rest
-    for j in range(J):
-        within[:, j + 1] = within[:, j] @ E.T + forced[:, j]
-    powers = np.empty((J + 1, s, s))
-    powers[0] = np.eye(s)
-    for j in range(J):
-        powers[j + 1] = powers[j] @ E
-    starts = np.empty((count + 1, s))
-    starts[0, :n], starts[0, n:] = model.x0, model.v0
-    for b in range(count):
-        starts[b + 1] = powers[J] @ starts[b] + within[b, J]
-    states = np.einsum("jst,bt->bjs", powers[:J], starts[:count]) + within[:, :J]
-    states = np.concatenate([states.reshape(count * J, s), starts[count:]])[rows]
-    stated = stated_rounding(2 * J + count, 1.0 if accurate else norm_A * h)
+    forced = table_states(blocks, read_at[:-1], s) @ G.T
+    states, chain = recurrence(E[None], forced[:, None], np.concatenate([model.x0, model.v0])[None], rows)
+    stated = stated_rounding(chain, 1.0 if accurate else norm_A * h)
     message = (f"ok: {plural(steps, 'step')} between the tables' samples and the output points, each exact for "
-               f"the tables' first-order hold, {math.ceil(steps / J)} blocks of {J} (one matrix exponential of size "
+               f"the tables' first-order hold, in blocks of {min(BLOCK, steps)} (one matrix exponential of size "
                f"{size}{' in double-double, a stiff scene' if accurate else ''})")
-    return states[:, :n].copy(), states[:, n:].copy(), stated, message
+    return states[:, 0, :n].copy(), states[:, 0, n:].copy(), stated, message
