@@ -1,5 +1,8 @@
 """The exact flow of a linear mode with constant forcing, z' = A z + b: z(t) = E(t) z + Phi(t) b from one matrix
-exponential of [[A, I], [0, 0]] t, cached by step, and Gauss-Legendre nodes on it for the energy integrals.
+exponential of [[A, I], [0, 0]] t, cached by step, and Gauss-Legendre nodes on it for the energy integrals. Steps of
+their own length (to an event, to a target) and event location take the flow's Taylor polynomial instead where it is
+good to rounding (omega h <= 2): a few microseconds a value where an exponential takes tens, a record's modes having
+no eigenvectors to step with (its generators' block is nilpotent).
 
 Must not import: sweep, io, plots, commands, cli.
 """
