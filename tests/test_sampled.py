@@ -75,7 +75,8 @@ def assert_agree(fast, slow):
 def test_a_records_double_integral_is_exact_rational_arithmetics_to_its_stated_accuracy():
     """The ground's displacement and velocity from the bundled record's accelerations (first-order hold, 2,001
     samples): against the same integrals in exact fractions of the samples, within the path's stated accuracy
-    (itself 1.4e-13); the dense path it replaces left 2.3e-14 there, this one 9.9e-15."""
+    (itself 1.9e-12, rounding's bound for 2,000 steps); the dense path it replaces left 2.3e-14 there, this one
+    9.9e-15."""
     sc = scenario.load(SCENARIOS / "shear_frame_record.toml")
     model, grid = build(sc), time_grid(sc.time)
     g = model.ground
@@ -87,7 +88,7 @@ def test_a_records_double_integral_is_exact_rational_arithmetics_to_its_stated_a
         u.append(u[-1] + h * v[-1] + h * h * (2 * a0 + a1) / 6)
         v.append(v[-1] + h * (a0 + a1) / 2)
     history = ground.ground_history(model, grid, solve)
-    assert 0 < history.integrated_accuracy <= 2e-13
+    assert 0 < history.integrated_accuracy <= 1e-11
     for found, exact in ((history.displacement, u), (history.velocity, v)):
         exact = np.array([float(x) for x in exact])
         assert np.abs(found - exact).max() / np.abs(exact).max() <= history.integrated_accuracy

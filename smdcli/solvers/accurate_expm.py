@@ -33,6 +33,26 @@ MAX_SIZE = 160  # beyond this the double-double products cost more than the scen
 NEEDED_NORM = 16.0  # ||A h||_1 above which double scaling and squaring loses digits worth keeping
 
 
+def propagator(A: np.ndarray, h: float) -> tuple[np.ndarray, float, bool]:
+    """(expm(A h), the balanced ||B h||_1, whether it took double-double). A is balanced first (scipy's
+    matrix_balance: a diagonal of powers of two, an exact similarity B = D^-1 A D): a scene's displacements and
+    velocities in their own units make ||A h||_1 about its squared frequency times h, where its flow grows as the
+    frequency (a 20-mass chain under a record: 160 balanced to 1.4), and it is ||B h||_1 that scaling and squaring
+    loses digits by. Double-double only where that is past NEEDED_NORM (a stiff scene); on that 20-mass chain the
+    double exponential of B is within 2.5e-16 of the double-double one entry by entry (in B's scale), and takes 0.4
+    ms instead of 37."""
+    from scipy.linalg import expm, matrix_balance
+
+    norm = float(np.abs(A).sum(axis=0).max(initial=0.0)) * h
+    if not needed(norm, len(A)):  # small enough as it is: no balancing (a third of a millisecond)
+        return expm(A * h), norm, False
+    B, (scale, _) = matrix_balance(A, permute=False, separate=True)
+    norm = float(np.abs(B).sum(axis=0).max(initial=0.0)) * h
+    accurate = needed(norm, len(A))
+    E = expm_times(B, h) if accurate else expm(B * h)
+    return E * scale[:, None] / scale[None, :], norm, accurate
+
+
 def needed(norm_Ah: float, size: int) -> bool:
     """Whether double precision's scaling and squaring loses digits here, and the size allows the remedy."""
     return norm_Ah > NEEDED_NORM and size <= MAX_SIZE

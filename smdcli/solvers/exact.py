@@ -27,7 +27,7 @@ import numpy as np
 from smdcli.model import Model
 from smdcli.model.forcing import Table
 from smdcli.result import Result, SolverStats
-from smdcli.solvers.accurate_expm import expm_times, needed
+from smdcli.solvers.accurate_expm import propagator
 from smdcli.solvers.base import Solver, Tolerances, make_result, segments, stated_rounding
 from smdcli.solvers.harmonic import from_rest_less, split
 from smdcli.solvers import sampled
@@ -196,21 +196,19 @@ def _solve_linear(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarra
 def solve_dense(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:
     """Displacement and velocity (N, n) by the dense exponential of the augmented system, the stated accuracy and
     a description."""
-    from scipy.linalg import expm
-
     Aaug, blocks = augmented(model)
     size = Aaug.shape[0]
     n, N = model.n, len(grid)
     h = (grid[-1] - grid[0]) / (N - 1) if N > 1 else 0.0
     cache: dict[float, np.ndarray] = {}
-    norm_A = float(np.abs(Aaug).sum(axis=0).max(initial=0.0))
-    accurate = needed(norm_A * h, size)  # a stiff scene: double scaling and squaring would lose digits
+    # a stiff scene: double scaling and squaring would lose digits (accurate_expm.propagator)
+    cache[h], growth, accurate = propagator(Aaug, h)
 
     def phi(dt: float) -> np.ndarray:
         if N > 1 and abs(dt - h) <= 1e-9 * h:
             dt = h  # a grid difference that is h up to the rounding of the grid times
         if dt not in cache:
-            cache[dt] = expm_times(Aaug, dt) if needed(norm_A * dt, size) else expm(Aaug * dt)
+            cache[dt] = propagator(Aaug, dt)[0]
         return cache[dt]
 
     J = _stacked_powers(size, N)
@@ -251,7 +249,7 @@ def solve_dense(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray,
         if not last and tb > t_cur:
             z = phi(tb - t_cur) @ z
             n_expm += 1
-    stated = stated_rounding(N + len(segs) + n_expm, 1.0 if accurate else norm_A * h)
+    stated = stated_rounding(N + len(segs) + n_expm, 1.0 if accurate else growth)
     message = (f"ok: {plural(len(segs), 'force segment')}, {plural(len(cache), 'matrix exponential')} "
                f"of size {size}" + (" in double-double (a stiff scene)" if accurate else ""))
     return out[:, :n].copy(), out[:, n:2 * n].copy(), stated, message
