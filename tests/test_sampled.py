@@ -162,3 +162,61 @@ def test_a_large_classically_damped_chain_under_a_record_steps_its_modes_in_bloc
     monkeypatch.setattr(sampled, "CHUNK_ENTRIES", 2000)  # one block of 64 steps a chunk: 13 chunks
     chunked = solve(model, grid, "exact", Tolerances())
     assert np.abs(chunked.displacement - fast.displacement).max() <= 1e-14 * np.abs(fast.displacement).max()
+
+
+def test_units_are_not_stiffness_a_balanced_exponential_matches_40_digits(tmp_path):
+    """Two 1,000 kg masses on 4e6 N/m springs under a record: ||A h||_1 = 120 from the units (the squared frequency
+    times h), 1.3 once balanced, so the exponential is taken in double, not double-double. Against the same steps
+    in 40-digit arithmetic (mpmath's exponential, the tables reseeded at every sample): within 1e-13 of the peak
+    (4.1e-15 measured; over 10 s, 8.4e-15 where double-double left 2.1e-15) and within the stated accuracy (5.0e-13)."""
+    import mpmath as mp
+
+    from smdcli.solvers.exact import augmented
+
+    rng = np.random.default_rng(11)
+    record = tmp_path / "record.csv"
+    times = np.round(np.arange(0, 301) * 0.01, 12)
+    record.write_text("".join(f"{float(t)!r},{float(a)!r}\n" for t, a in zip(times, rng.normal(size=len(times)))))
+    text = f"""
+[time]
+end = 3.0
+step = 0.01
+[[mass]]
+name = "a"
+m = 1000.0
+[[mass]]
+name = "b"
+m = 1000.0
+[[spring]]
+connects = ["ground", "a"]
+k = 4e6
+[[spring]]
+connects = ["a", "b"]
+k = 4e6
+[[damper]]
+connects = ["ground", "a"]
+c = 2000.0
+[ground_motion]
+quantity = "acceleration"
+type = "table"
+file = "{record}"
+units = "g"
+"""
+    _, model, grid = model_of(text)
+    Aaug, blocks = augmented(model)
+    assert np.abs(Aaug).sum(axis=0).max() * 0.01 > 100
+    result = solve(model, grid, "exact", Tolerances())
+    assert SAMPLED in result.stats.message and "double-double" not in result.stats.message
+    with mp.workdps(40):
+        step = mp.expm(mp.matrix(Aaug.tolist()) * mp.mpf(0.01))
+        z = mp.matrix([0] * len(Aaug))
+        reference = [[0.0, 0.0]]
+        for t in grid[:-1]:
+            for lo, hi, signal in blocks:
+                for i, value in enumerate(signal.exo_state(float(t))):
+                    z[lo + i] = mp.mpf(float(value))
+            z = step * z
+            reference.append([float(z[0]), float(z[1])])
+    reference = np.array(reference)
+    error = np.abs(result.displacement - reference).max() / np.abs(reference).max()
+    assert error <= 1e-13 and error <= result.stats.stated_accuracy, error
