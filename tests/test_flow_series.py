@@ -80,7 +80,7 @@ def test_a_batch_goes_on_past_a_turn_whose_top_stays_below_the_yield_level(monke
             batch = piecewise.PiecewiseRun.batch
             patch.setattr(piecewise.PiecewiseRun, "batch", lambda self, *a: calls.append(1) or batch(self, *a))
             if always_stop:
-                patch.setattr(Crossings, "_touches", lambda self, *a: True)
+                patch.setattr(Crossings, "turn_may_hold_event", lambda self, *a: True)
             run = piecewise.PiecewiseRun(model, grid)
             x, *_ = run.run()
             return x, sorted(run.events), len(calls)

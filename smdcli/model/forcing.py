@@ -280,6 +280,7 @@ class Table(Signal):
         return Exo(np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([1.0, 0.0]))
 
     def exo_state(self, t):
+        # exo_states at one time, written for one: a third of its cost in the per-step loops that call it
         i = int(np.searchsorted(self.t, t, side="right")) - 1
         slope = self.slopes[i] if 0 <= i < len(self.slopes) else 0.0
         return np.array([float(self.value(t)), slope])

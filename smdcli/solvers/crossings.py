@@ -18,10 +18,9 @@ RETURN_SAMPLES = 32  # samples of a substep in which a guard left at its level m
 
 
 class Crossings:
-    """The event location of PiecewiseRun (which holds v_scale, the run's speeds so far, and expm_count)."""
+    """The event location of PiecewiseRun (which holds v_scale, the run's speeds so far)."""
 
     v_scale: float
-    expm_count: int
 
     def first_crossing(self, flow: Flow, mode: Mode, z0: np.ndarray, z1: np.ndarray, h: float):
         """(tau, element, guard) of the earliest guard crossing in (0, h], or None."""
@@ -30,9 +29,7 @@ class Crossings:
             g0, g1 = float(row @ z0 + const), float(row @ z1 + const)
             s = guard.direction
             tau = None
-            # at its level to rounding: of the terms it sums, or for a rate of the speeds it was computed from
-            size = float(np.abs(row) @ np.abs(z0))
-            level = at_level(max(size, self.v_scale) if guard.quantity == RATE else size, const)
+            level = self._level(guard, row, const, z0)
             at = abs(g0) <= level  # at its level (on either side of it by rounding)
             if at and guard.quantity == D and s * float(row @ (mode.A @ z0 + mode.b)) > TOUCH * self.v_scale:
                 tau = 0.0  # leaving its level past it now (a spring yielding onto a stop it is at), however soon back
@@ -49,23 +46,33 @@ class Crossings:
                 best = (tau, e, guard)
         return best
 
+    def _level(self, guard, row: np.ndarray, const: float, z0: np.ndarray) -> float:
+        """How close to its level a guard's value at z0 is rounding of it: of the terms it sums, or for a rate of the
+        speeds it was computed from."""
+        size = float(np.abs(row) @ np.abs(z0))
+        return at_level(max(size, self.v_scale) if guard.quantity == RATE else size, const)
+
+    @staticmethod
+    def _along(flow: Flow, mode: Mode, z0: np.ndarray, row: np.ndarray, const: float, h: float):
+        """row z(tau) + const for tau in [0, h], as a function of tau: the guard's Taylor polynomial where it is good
+        to rounding, else the exponential's step to each tau."""
+        return flow.guard_polynomial(z0, mode.b, row, const, h) or \
+            (lambda tau: float(row @ flow.at(z0, mode.b, tau) + const))
+
     def _touch(self, flow: Flow, mode: Mode, z0: np.ndarray, row: np.ndarray, const: float, s: float, h: float):
         """Where a guard below its level at both ends of a step, rising at its start and falling at its end, reaches
         its level before its turn, or None where its top stays below."""
         turn = self._root(flow, mode, z0, row @ mode.A, float(row @ mode.b), 0.0, h)
-        along = flow.guard_polynomial(z0, mode.b, row, const, h)
-        if s * (along(turn) if along else float(row @ flow.at(z0, mode.b, turn) + const)) >= 0:
+        if s * self._along(flow, mode, z0, row, const, h)(turn) >= 0:
             return self._root(flow, mode, z0, row, const, 0.0, turn)
         return None
 
-    def _touches(self, flow: Flow, mode: Mode, guard, row: np.ndarray, const: float, z0: np.ndarray,
-                 h: float) -> bool:
+    def turn_may_hold_event(self, flow: Flow, mode: Mode, guard, row: np.ndarray, const: float, z0: np.ndarray,
+                            h: float) -> bool:
         """Whether first_crossing could find an event of this guard on a step from z0 that a batch flagged as a
         possible touch (below its level at both ends, its slope turning): a start at its level, or a top that
         reaches it. A top that stays below lets the batch go on where the single step would find nothing."""
-        size = float(np.abs(row) @ np.abs(z0))
-        level = at_level(max(size, self.v_scale) if guard.quantity == RATE else size, const)
-        if guard.direction * float(row @ z0 + const) >= -level:
+        if guard.direction * float(row @ z0 + const) >= -self._level(guard, row, const, z0):
             return True
         return self._touch(flow, mode, z0, row, const, guard.direction, h) is not None
 
@@ -75,8 +82,7 @@ class Crossings:
         then bracketed by doubling; or the lowest of RETURN_SAMPLES samples). If it never went below, it goes on
         past its level from here: an event now (a spring that yields where its stop is met, the two at one
         instant); None where it only stays at its level to rounding (a spring on its surface held by a contact)."""
-        along = flow.guard_polynomial(z0, mode.b, row, const, h) or \
-            (lambda tau: float(row @ flow.at(z0, mode.b, tau) + const))
+        along = self._along(flow, mode, z0, row, const, h)
         value = lambda tau: s * along(tau)  # noqa: E731
         rate = lambda z: s * float(row @ (mode.A @ z + mode.b))  # noqa: E731
         lo, hi = None, h
@@ -100,12 +106,7 @@ class Crossings:
     def _root(self, flow: Flow, mode: Mode, z0: np.ndarray, row: np.ndarray, const: float, lo: float,
               hi: float) -> float:
         """The root of row z(tau) + const in [lo, hi] (a sign change there), to rounding."""
-        def exponential(tau: float) -> float:
-            self.expm_count += 1
-            return float(row @ flow.at(z0, mode.b, tau) + const)
-
-        value = flow.guard_polynomial(z0, mode.b, row, const, hi) or exponential
-
+        value = self._along(flow, mode, z0, row, const, hi)
         f_lo, f_hi = value(lo), value(hi)
         if f_lo == 0:
             return lo

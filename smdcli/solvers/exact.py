@@ -29,8 +29,8 @@ from smdcli.model.forcing import Table
 from smdcli.result import Result, SolverStats
 from smdcli.solvers.accurate_expm import propagator
 from smdcli.solvers.base import Solver, Tolerances, make_result, segments, stated_rounding
-from smdcli.solvers.harmonic import from_rest_less, split
 from smdcli.solvers import sampled
+from smdcli.solvers.harmonic import from_rest_less, split
 from smdcli.solvers.action import ACTION_DOFS, Action, action_cost, solve_action
 from smdcli.solvers.modal import modal_applies, solve_modal
 from smdcli.text import plural
@@ -186,11 +186,8 @@ def _solve_linear(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarra
     action = sparse_action(model, grid)
     if action is not None:
         return solve_action(model, grid, action)
-    if sampled.applies(model):
-        found = sampled.solve_sampled(model, grid, *augmented(model))
-        if found is not None:
-            return found
-    return solve_dense(model, grid)
+    knots = sampled.uniform_knots(model, grid)
+    return sampled.solve_sampled(model, knots, *augmented(model)) if knots is not None else solve_dense(model, grid)
 
 
 def solve_dense(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:

@@ -31,7 +31,6 @@ class Flow:
         self.big[:s, :s] = A
         self.big[:s, s:] = np.eye(s)
         self.cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
-        self.row_powers: dict[bytes, np.ndarray] = {}  # a guard's row times the series' powers
         self._series_powers = None
         self.nodes: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         values, vectors = np.linalg.eig(A) if s else (np.zeros(0), np.zeros((0, 0)))
@@ -106,31 +105,33 @@ class Flow:
             self._series_powers = powers
         return self._series_powers
 
-    def state_series(self, z: np.ndarray, b: np.ndarray, h: float) -> np.ndarray | None:
-        """Coefficients c_k (SERIES_TERMS + 1, s) of z(tau) = sum c_k tau^k on [0, h], or None where they are no good
-        to rounding there: omega h past SERIES_REACH, terms not yet small at the end, or terms whose sum's rounding
-        passes 64 ulps of the state's size."""
+    def _taylor(self, z: np.ndarray, b: np.ndarray, h: float) -> np.ndarray | None:
+        """Coefficients c_k (SERIES_TERMS + 1, s) of z(tau) = sum c_k tau^k from z, or None where omega h is past
+        SERIES_REACH (whether they are good to rounding on [0, h] is the caller's to judge: good_to_rounding)."""
         if self.omega * h > SERIES_REACH:
             return None
-        series = np.concatenate([z[None], self.series_powers @ (self.big[:self.s, :self.s] @ z + b)])
-        sizes = np.abs(series).max(axis=1) * h ** np.arange(SERIES_TERMS + 1)
-        if sizes[-3:].max() > 1e-18 * sizes.max() or sizes.sum() > 64 * (np.abs(z).max() + np.abs(b).max() * h):
+        return np.concatenate([z[None], self.series_powers @ (self.big[:self.s, :self.s] @ z + b)])
+
+    def state_series(self, z: np.ndarray, b: np.ndarray, h: float) -> np.ndarray | None:
+        """Coefficients c_k (SERIES_TERMS + 1, s) of z(tau) = sum c_k tau^k on [0, h], or None where they are no good
+        to rounding there: omega h past SERIES_REACH, or good_to_rounding's tests against the state's size."""
+        series = self._taylor(z, b, h)
+        if series is None or not good_to_rounding(np.abs(series).max(axis=1), h,
+                                                  np.abs(z).max() + np.abs(b).max() * h):
             return None
         return series
 
     def guard_polynomial(self, z: np.ndarray, b: np.ndarray, row: np.ndarray, const: float, h: float):
         """row z(tau) + const on [0, h] as a function of tau: the flow's Taylor polynomial (a few microseconds a
         value, where the exponential takes tens), or None where it is no good to rounding there: omega h past
-        SERIES_REACH, terms not yet small at its end, or terms whose sum's rounding passes the guard's own
-        (64 ulps of row |z| + |const|, modes.at_level)."""
-        if self.omega * h > SERIES_REACH:
+        SERIES_REACH, or good_to_rounding's tests against the guard's own rounding (64 ulps of row |z| + |const|,
+        modes.at_level)."""
+        series = self._taylor(z, b, h)
+        if series is None:
             return None
-        powers = self.row_powers.get(key := row.tobytes())
-        if powers is None:
-            powers = self.row_powers[key] = row @ self.series_powers
-        coefficients = np.concatenate([[float(row @ z) + const], powers @ (self.big[:self.s, :self.s] @ z + b)])
-        sizes = np.abs(coefficients) * h ** np.arange(SERIES_TERMS + 1)
-        if sizes[-3:].max() > 1e-18 * sizes.max() or sizes.sum() > 64 * (float(np.abs(row) @ np.abs(z)) + abs(const)):
+        coefficients = series @ row
+        coefficients[0] += const
+        if not good_to_rounding(np.abs(coefficients), h, float(np.abs(row) @ np.abs(z)) + abs(const)):
             return None
         highest_first = coefficients[::-1].tolist()
 
@@ -141,3 +142,10 @@ class Flow:
             return total
 
         return value
+
+
+def good_to_rounding(sizes: np.ndarray, h: float, scale: float) -> bool:
+    """Whether a Taylor series whose coefficients are this large (by order) is good to rounding on [0, h]: its last
+    terms below 1e-18 of its largest there, and the rounding of their sum within 64 ulps of `scale`."""
+    terms = sizes * h ** np.arange(len(sizes))
+    return terms[-3:].max() <= 1e-18 * terms.max() and terms.sum() <= 64 * scale

@@ -83,16 +83,15 @@ def solve_modal(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray,
         return np.einsum("nij,nj->ni", Eyy, y) + Eyw @ w
 
     y = np.stack([shapes.T @ (model.M @ model.x0), shapes.T @ (model.M @ model.v0)], axis=1)  # (n, 2)
-    knots = sampled.uniform_knots(model, grid) if sampled.applies(model) else None
+    knots = sampled.uniform_knots(model, grid)
     if knots is not None:  # tables on one even grid (a record): every mode's steps in blocks
-        times, read_at, rows = knots
-        dt = (float(times[-1]) - float(times[0])) / (len(times) - 1)
-        Eyy, Eyw, _ = phi(dt)
-        forced = (sampled.table_states(blocks, read_at[:-1], 0) @ Eyw.transpose(2, 0, 1).reshape(m, -1)).reshape(
-            len(times) - 1, n, 2)
-        states, chain = sampled.recurrence(Eyy, forced, y, rows)
+        Eyy, Eyw, _ = phi(knots.step)
+        segs = len(knots.times) - 1
+        forced = (sampled.table_states(blocks, knots.read_at[:-1], 0) @ Eyw.transpose(2, 0, 1).reshape(m, -1)).reshape(
+            segs, n, 2)
+        states, chain = sampled.recurrence(Eyy, forced, y, knots.rows)
         q, qdot = states[:, :, 0], states[:, :, 1]
-        h, segs = dt, len(times) - 1
+        h = knots.step
         chain += segs  # the propagators' own rounding enters every step
         how = f"{plural(segs, 'step')} between the tables' samples and the output points, in blocks"
     else:

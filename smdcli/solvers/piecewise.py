@@ -63,7 +63,6 @@ class PiecewiseRun(Crossings):
         self.energy_terms = ("dissipated", "input", "hysteretic", "friction", "impact")
         self.cumulative = dict.fromkeys(self.energy_terms, 0.0)
         self.impacts: dict[int, list[tuple[float, float]]] = {}
-        self.expm_count = 0
         self.v_scale = float(np.abs(model.v0).max(initial=0.0))  # the run's speeds, as far as seen
         self.damped = bool(np.any(model.C))
 
@@ -194,7 +193,7 @@ class PiecewiseRun(Crossings):
                 below = g0 <= at_level(np.abs(starts) @ np.abs(row), const)  # or at it: it may come back
                 turning = below & (g1 < 0) & (slope0 > 0) & (slope1 < 0)
                 for i in np.flatnonzero(below & ((g1 >= 0) | turning)):  # a turn whose top stays below: no event
-                    if not turning[i] or self._touches(flow, mode, guard, row, const, starts[i], h_out):
+                    if not turning[i] or self.turn_may_hold_event(flow, mode, guard, row, const, starts[i], h_out):
                         clear = min(clear, chunk.start + int(i))
                         break
             done = chunk.stop

@@ -15,22 +15,35 @@ Must not import: sweep, io, plots, commands, cli.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from smdcli.model import Model
 from smdcli.model.forcing import Table
 from smdcli.solvers.accurate_expm import propagator
+from smdcli.solvers.base import stated_rounding
 from smdcli.text import plural
 
 BLOCK = 64  # steps a block takes at most
 CHUNK_ENTRIES = 1 << 21  # states (systems x state size) a chunk of steps holds: 16 MB an array
 
 
-def uniform_knots(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """(knots, the times just after which the forces are read at each, where the grid's points are among the knots):
-    the output points and the tables' samples between them, where they are evenly spaced; else None. A sample within
-    rounding of an output point is that point, the forces read at the later of the two: a previous-value hold's new
-    value, a first-order hold's new slope."""
+class Knots(NamedTuple):
+    """An even grid of knots holding the output points and the tables' samples."""
+
+    times: np.ndarray
+    read_at: np.ndarray  # the times just after which the forces are read at each knot
+    rows: np.ndarray  # where the output points are among the knots
+    step: float
+
+
+def uniform_knots(model: Model, grid: np.ndarray) -> Knots | None:
+    """The output points and the tables' samples between them, where every force is a table and they are evenly
+    spaced; else None. A sample within rounding of an output point is that point, the forces read at the later of
+    the two: a previous-value hold's new value, a first-order hold's new slope."""
+    if not model.signals or not all(isinstance(s, Table) for s in model.signals):
+        return None
     t0, t1 = float(grid[0]), float(grid[-1])
     samples = model.breakpoints(t0, t1)
     same = 8 * np.spacing(max(abs(t0), abs(t1)))  # a sample and an output point apart by the times' rounding
@@ -47,12 +60,7 @@ def uniform_knots(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarra
     nearest = np.where(below <= above, after - 1, after)[~apart]
     where = np.searchsorted(knots, grid[nearest])
     np.maximum.at(read_at, where, samples[~apart])
-    return knots, read_at, np.searchsorted(knots, grid)
-
-
-def applies(model: Model) -> bool:
-    """Every force a table."""
-    return bool(model.signals) and all(isinstance(s, Table) for s in model.signals)
+    return Knots(knots, read_at, np.searchsorted(knots, grid), h)
 
 
 def table_states(blocks, times: np.ndarray, offset: int) -> np.ndarray:
@@ -119,22 +127,14 @@ def recurrence(E: np.ndarray, forced: np.ndarray, start: np.ndarray, rows: np.nd
     return out, 2 * J + -(-steps // J)
 
 
-def solve_sampled(model: Model, grid: np.ndarray, Aaug: np.ndarray, blocks) -> tuple | None:
-    """x, v (N, n), the stated accuracy and a description, or None where the knots are not evenly spaced;
-    Aaug and blocks: exact.augmented's."""
-    from smdcli.solvers.base import stated_rounding
-
-    found = uniform_knots(model, grid)
-    if found is None:
-        return None
-    knots, read_at, rows = found
+def solve_sampled(model: Model, knots: Knots, Aaug: np.ndarray, blocks) -> tuple:
+    """x, v (N, n), the stated accuracy and a description; Aaug and blocks: exact.augmented's."""
     n, s, size = model.n, 2 * model.n, Aaug.shape[0]
-    steps = len(knots) - 1
-    h = (float(knots[-1]) - float(knots[0])) / steps
-    step, norm, accurate = propagator(Aaug, h)
+    steps = len(knots.times) - 1
+    step, norm, accurate = propagator(Aaug, knots.step)
     E, G = step[:s, :s], step[:s, s:]
-    forced = table_states(blocks, read_at[:-1], s) @ G.T
-    states, chain = recurrence(E[None], forced[:, None], np.concatenate([model.x0, model.v0])[None], rows)
+    forced = table_states(blocks, knots.read_at[:-1], s) @ G.T
+    states, chain = recurrence(E[None], forced[:, None], np.concatenate([model.x0, model.v0])[None], knots.rows)
     stated = stated_rounding(steps + chain, 1.0 if accurate else norm)  # E's own rounding enters every step
     message = (f"ok: {plural(steps, 'step')} between the tables' samples and the output points, each exact for "
                f"the tables' first-order hold, in blocks of {min(BLOCK, steps)} (one matrix exponential of size "
