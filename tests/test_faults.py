@@ -194,6 +194,46 @@ def test_in_threads_keeps_its_pool_runs_the_first_task_here_and_nested_calls_in_
         interrupts.in_threads(fails, [0, 1, 2])
 
 
+@pytest.mark.parametrize("cores", [1, 2])
+def test_alongside_does_its_chores_in_turn_on_the_pool_and_wait_returns_once_they_are_done(cores, monkeypatch):
+    """interrupts.alongside: the chores in turn on one of the kept pool's threads while the work runs here, wait(i)
+    returning once chores 0..i are done; on one core, or called from the pool's own threads, every chore first, here.
+    A chore's error raises in the caller once the work is done, and the work never waits for a chore after it."""
+    import threading
+    import time
+
+    from smdcli import interrupts
+
+    monkeypatch.setattr(interrupts, "_usable_cores", cores)
+    log, here = [], threading.get_ident()
+
+    def chore(i):
+        time.sleep(0.002 * (3 - i))  # the first slowest: a wait that returned early would see it missing
+        log.append((i, threading.get_ident()))
+
+    def work(wait):
+        seen = []
+        for i in range(3):
+            wait(i)
+            seen.append(sorted(task for task, _ in log))
+        return seen
+
+    seen = interrupts.alongside([lambda i=i: chore(i) for i in range(3)], work)
+    assert all(set(range(i + 1)) <= set(done) for i, done in enumerate(seen))
+    assert [task for task, _ in log] == [0, 1, 2]
+    threads = {ident for _, ident in log}
+    assert threads == {here} if cores == 1 else (len(threads) == 1 and here not in threads)
+    nested = interrupts.in_threads(lambda task: interrupts.alongside([lambda: log.append((task, threading.get_ident()))],
+                                                                     lambda wait: threading.get_ident()), [0, 1])
+    assert (1, nested[1]) in log  # the pool's task did its chore on its own thread
+
+    def fails():
+        raise ValueError("chore")
+
+    with pytest.raises(ValueError, match="chore"):
+        interrupts.alongside([fails, lambda: None], lambda wait: wait(1))
+
+
 def test_threads_are_as_many_as_the_cores_a_containers_quota_allows(tmp_path, monkeypatch):
     """A container's CPU quota (cgroup v2's cpu.max, v1's CFS quota and period) caps the cores smd's threads use,
     where os.cpu_count() counts the host's; a spectrum's threads are also at most one per LANES oscillators, and
@@ -239,13 +279,14 @@ def test_threads_are_as_many_as_the_cores_a_containers_quota_allows(tmp_path, mo
     assert np.array_equal(shared, oscillator.extremes(a, 0.01, omega, zeta, oscillator.DISPLACEMENT, threads=1))
 
 
-@pytest.mark.parametrize("pool", ["run_threads", "in_threads"])
+@pytest.mark.parametrize("pool", ["run_threads", "in_threads", "alongside"])
 def test_thread_pools_end_or_raise_whenever_an_interrupt_lands(pool):
     """Ctrl-C at random moments of a thread pool's life, 400 times in one process: each run ends or raises
     KeyboardInterrupt, and the next one runs. An interrupt raised inside pool.submit, while it held the pool's
     idle-thread semaphore, left the semaphore held: the workers waited on it and the shutdown on them, forever."""
     runs = {"run_threads": "run_threads(abs, list(range(200)), 2)",
-            "in_threads": "interrupts.in_threads(abs, [-1, -2])"}
+            "in_threads": "interrupts.in_threads(abs, [-1, -2])",
+            "alongside": "interrupts.alongside([int, int], lambda wait: wait(1))"}
     code = ("import random, signal\n"
             "from smdcli import interrupts\n"
             "from smdcli.solvers.compiled import warm\n"

@@ -156,3 +156,33 @@ def test_a_jump_inside_an_expression_is_restarted_at_as_a_step_force_is(method):
     step_run = solve(step_model, grid, method, tol)
     peak = np.abs(step_run.displacement).max()
     assert np.abs(expression_run.displacement - step_run.displacement).max() <= 1e-12 * peak
+
+
+@pytest.mark.parametrize("method", ["auto", "taylor", "exact", "RK45"])
+def test_the_applied_force_is_worked_out_where_first_read_and_is_the_models(method):
+    """Result.force may be held as the function that computes it (a Taylor run, read for its motion alone, never
+    needs the (N, n) array): read, it is model.applied_force on the grid; Result.changed keeps it unread,
+    dataclasses.replace and pickling read it, and the arrays are equal whichever way they were made."""
+    import dataclasses
+    import pickle
+
+    from conftest import SCENARIOS, model_of
+
+    text = (SCENARIOS / "three_dof_forced.toml").read_text()
+    if method in ("auto", "taylor"):  # nonlinear: auto's Taylor series
+        text += '[[spring]]\nconnects = ["ground", "m1"]\nlaw = "cubic"\nk = 0.0\nk3 = 100.0\n'
+    _, model, grid = model_of(text)
+    result = solve(model, grid, method, Tolerances())
+    assert result.success and result.stats.method == ("taylor" if method == "auto" else method)
+    expected = model.applied_force(grid)
+    assert np.abs(expected).max() > 0
+    deferred = callable(result.__dict__["force"])
+    assert deferred == (result.stats.method == "taylor")  # where the solver gives the acceleration, not derived
+    changed = result.changed(notes=("a note",))
+    assert callable(changed.__dict__["force"]) == deferred and changed.notes == ("a note",)
+    np.testing.assert_array_equal(changed.force, expected)
+    assert not callable(changed.__dict__["force"]) and changed.force is changed.force  # kept once worked out
+    np.testing.assert_array_equal(pickle.loads(pickle.dumps(result)).force, expected)
+    np.testing.assert_array_equal(dataclasses.replace(result, notes=()).force, expected)
+    with pytest.raises(TypeError, match="no field nonsense"):
+        result.changed(nonsense=1)

@@ -306,3 +306,73 @@ def test_the_extremes_found_as_the_rows_are_written_are_the_arrays_own(scene):
     assert moved.extremes_of("displacement") == extremes(moved.displacement)
     failed = Taylor().solve(model, grid, Tolerances(rtol=1e-8, atol=1e-12, max_steps=3))
     assert not failed.success and failed.found_extremes == ()
+
+
+def whole_and_chunked(model, grid, tol, monkeypatch, cores):
+    """A Taylor run written whole (its rows zeroed by the kernel), and one zeroed ahead a chunk at a time
+    (compiled.zeroed_ahead, as for an output larger than the caches) with this many cores."""
+    from smdcli import interrupts
+    from smdcli.solvers import compiled
+
+    whole = Taylor().solve(model, grid, tol)
+    monkeypatch.setattr(compiled, "ZEROED_IN_ONE_PASS", 0)
+    monkeypatch.setattr(interrupts, "_usable_cores", cores)
+    return whole, Taylor().solve(model, grid, tol)
+
+
+@pytest.mark.parametrize("cores", [1, 2])
+@pytest.mark.parametrize("case", ["driven midway, its tip displaced", "damped between masses"])
+def test_a_run_zeroed_ahead_in_chunks_is_the_run_written_whole(case, cores, monkeypatch):
+    """Zeroed ahead of the kernel in chunks (on a second core, or here first on one), the kernel stops before rows not
+    yet zeroed and goes on from the same state, the stopped step worked out again: the same operations in the same
+    order, so the same numbers in every row, the same extremes found and the same counts as the run written whole."""
+    _, model, grid = model_of(long_chain_text(case))
+    whole, chunked = whole_and_chunked(model, grid, Tolerances(rtol=1e-8, atol=1e-14), monkeypatch, cores)
+    assert whole.success and chunked.success, chunked.stats.message
+    for quantity in ("displacement", "velocity", "acceleration"):
+        assert np.array_equal(getattr(whole, quantity), getattr(chunked, quantity)), quantity
+        assert whole.extremes_of(quantity) == chunked.extremes_of(quantity)
+    assert (whole.stats.nfev, whole.stats.steps_accepted) == (chunked.stats.nfev, chunked.stats.steps_accepted)
+
+
+@pytest.mark.parametrize("cores", [1, 2])
+def test_a_run_zeroed_ahead_that_fails_is_nan_from_where_it_stopped_to_the_end(cores, monkeypatch):
+    """Its step budget spent partway, a run zeroed ahead in chunks stops where the run written whole stops: the rows
+    before are its rows, every row after is NaN, the chunks zeroed after the stop included."""
+    _, model, grid = model_of(long_chain_text("driven at its root"))
+    whole, chunked = whole_and_chunked(model, grid, Tolerances(rtol=1e-8, atol=1e-14, max_steps=4), monkeypatch, cores)
+    assert not whole.success and not chunked.success and whole.t_failed == chunked.t_failed < grid[-1]
+    stopped = np.isnan(whole.displacement).all(axis=1)
+    assert 1 < np.argmax(stopped) < len(grid) // 8 and stopped[np.argmax(stopped):].all()  # within the first chunk
+    for quantity in ("displacement", "velocity", "acceleration"):
+        np.testing.assert_array_equal(getattr(whole, quantity), getattr(chunked, quantity), quantity)
+
+
+def test_the_kernel_called_a_row_at_a_time_goes_on_where_it_stopped():
+    """taylor.integrate with one more row ready each call (NEED_ROWS until the last) sums the same rows as one call
+    with all of them ready: each stop keeps the whole state of the run (y, the series, the peaks, the span, the rows
+    due), and the step it stopped before is worked out again from it."""
+    from smdcli.kernels import taylor
+    from smdcli.kernels.arrays import model_arrays
+    from smdcli.solvers.base import cuts, divergence_bound
+
+    _, model, grid = model_of(long_chain_text("damped between masses"))
+    y0, p = np.concatenate([model.x0, model.v0]), 12
+    outs, stops = [], 0
+    for step in (len(grid), 1):
+        out = np.zeros((3, len(grid), model.n))
+        out[0, 0], out[1, 0] = model.x0, model.v0
+        run, counts, floats = taylor.start_run(y0, p), np.zeros(5, dtype=np.int64), np.zeros(taylor.FLOATS)
+        for ready in range(min(step + 1, len(grid)), len(grid) + step, step):
+            status = taylor.integrate(model_arrays(model), grid, cuts(model, grid), 1e-12, 1e-18, 10**6,
+                                      divergence_bound(model, grid), 0.0, out, True, min(ready, len(grid)), run,
+                                      counts, floats)
+            stops += status == taylor.NEED_ROWS
+            if status != taylor.NEED_ROWS:
+                break
+        assert status == taylor.OK
+        outs.append((out, counts.copy(), floats.copy()))
+    (whole, whole_counts, whole_floats), (rowwise, counts, floats) = outs
+    assert stops > len(grid) // 2  # most rows waited for
+    assert np.array_equal(whole, rowwise) and np.array_equal(whole_counts, counts)
+    assert np.array_equal(whole_floats, floats)

@@ -23,7 +23,6 @@ Must not import: commands, io, plots, cli.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import Callable
 
@@ -46,8 +45,8 @@ def with_physics(model: Model, result: Result) -> Result:
     with np.errstate(all="ignore"):  # a scene at the edge of double precision: judged by the figures, not warned
         elements = element_forces(model, result.displacement, result.velocity, result.nonsmooth)
     if result.nonsmooth is not None:  # the solver integrated the balance on its own pieces, modes known
-        return dataclasses.replace(result, elements=elements, energy=result.nonsmooth.balance())
-    return dataclasses.replace(result, elements=elements, energy=energy_balance(model, result, dense_output(model, result)))
+        return result.changed(elements=elements, energy=result.nonsmooth.balance())
+    return result.changed(elements=elements, energy=energy_balance(model, result, dense_output(model, result)))
 
 
 def dense_output(model: Model, result: Result) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None:

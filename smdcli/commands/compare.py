@@ -194,7 +194,7 @@ def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], to
     if reference.stats.method == "exact":  # a point on the chart too: timed as the runs are, median of repeats
         times = [reference.stats.wall_time_s] + [solve(model, grid, "exact", Tolerances()).stats.wall_time_s
                                                  for _ in range(max(1, repeats))]
-        reference = dataclasses.replace(reference, stats=dataclasses.replace(
+        reference = reference.changed(stats=dataclasses.replace(
             reference.stats, wall_time_s=statistics.median(times[1:])))
     omega_max = model.omega_max
     out = Comparison(sc, model, grid, reference, ref_name, ref_error, omega_max, breakpoints,

@@ -5,7 +5,6 @@ Must not import: cli.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -58,7 +57,7 @@ def solve_run(sc: Scenario, model: Model, grid: np.ndarray, options: Options = O
         from smdcli.analysis.energy import with_physics
 
         result = with_physics(model, result)
-    return dataclasses.replace(result, origin=(sc, model))
+    return result.changed(origin=(sc, model))
 
 
 def simulate(path: str | Path, out: str | Path, options: Options = Options()) -> Run:
@@ -69,7 +68,7 @@ def simulate(path: str | Path, out: str | Path, options: Options = Options()) ->
     if sc.sweep:
         note = ("this file's [sweep] table was not run: simulate solved the scene as written "
                 f"(its base member); `smd sweep {sc.path}` runs the family")
-        result = dataclasses.replace(result, notes=(note, *result.notes))
+        result = result.changed(notes=(note, *result.notes))
     run = Run(sc, model, result)
     from smdcli.io.hdf5 import write_simulation
 

@@ -16,6 +16,7 @@ Must not import: solvers, sweep, io, plots, commands, cli.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -26,6 +27,7 @@ from smdcli.kernels.erk import (ACCEPTED, NFEV, NOT_FINITE, OK, STEP_BUDGET, STI
                                 WATCH_WINDOW, held_by_stability, linear_norms, relative, rows_through, state_status)
 from smdcli.kernels.rhs import force_value
 from smdcli.kernels.series_rows import OUTPUT_SHARE, ROWS, acceleration_series, emit, order_sizes, summed, widen
+from smdcli.kernels.taylor_spans import active_dofs, coupling_orders, loaded_dofs, terms_span
 
 SAFETY = 0.9
 EXTREMES = 5  # floats[5:9], after erk's: the least and largest x the rows hold, then v's
@@ -153,74 +155,6 @@ def coefficients(m, band, spans, minv_diagonal, p, Y, U, D, D2, sign, scale_v, h
             work[i] = 0.0
 
 
-@inlined
-def terms_span(first, last, k, width, orders, n):
-    """The DOFs where order k of the series can be other than zero, (lowest, highest + 1), when order 0 and the loads
-    are zero outside DOFs first..last-1 and the rows couple DOFs within width of each other, a coupling each `orders`
-    orders (coupling_orders)."""
-    if first >= last:
-        return 0, 0
-    distance = (k + orders - 1) // orders * width
-    return max(first - distance, 0), min(last + distance, n)
-
-
-@no_alloc
-def coupling_orders(band, spans):
-    """The orders of the series it takes its terms to spread from a DOF to the next within the band (diagonals): 2
-    where the damping couples no two DOFs (x's order k + 1 is v's order k at the same DOF; v's takes the neighbours' x
-    of order k), else 1 (v's takes the neighbours' v too; and where the rows are not held as diagonals)."""
-    w = band.shape[1] // 2
-    if band.shape[1] == 0:
-        return 1
-    for j in range(band.shape[1]):
-        if j != w and spans[1, j, 0] < spans[1, j, 1]:
-            return 1
-    return 2
-
-
-@no_alloc
-def active_dofs(y, first, last, lowest, highest, floor_x, floor_v):
-    """The DOFs first..last-1 widened to every DOF within lowest..highest-1 where y's |x| or |v| passes its floor; y
-    zeroed in lowest..highest-1 outside them. A wave that has not reached a mass leaves its terms far under the step's
-    tolerance (the series spreads p DOFs a step ahead of the wave, at sizes that fall by orders of magnitude a DOF),
-    and the series skips them: a 1,000-mass chain driven at one end for 10 s works out 138 of them at most."""
-    n = len(y) // 2
-    if first >= last:
-        first, last = highest, lowest
-    for i in range(lowest, min(first, highest)):
-        if abs(y[i]) > floor_x or abs(y[n + i]) > floor_v:
-            first = i
-            break
-    for i in range(highest - 1, max(last, lowest) - 1, -1):
-        if abs(y[i]) > floor_x or abs(y[n + i]) > floor_v:
-            last = i + 1
-            break
-    if first >= last:
-        first, last = lowest, lowest
-    for i in range(lowest, first):
-        y[i], y[n + i] = 0.0, 0.0
-    for i in range(max(last, lowest), highest):
-        y[i], y[n + i] = 0.0, 0.0
-    return (first, last) if first < last else (0, 0)
-
-
-@no_alloc
-def loaded_dofs(m, y):
-    """The span of DOFs that move or are loaded at the start, (first, last + 1): y's x or v not zero, a force or an
-    element acting; (0, n) where the ground is forced (the load is on every DOF), (0, 0) for none."""
-    n = m.n
-    first, last = n, 0
-    for j in range(len(m.f_dof)):
-        if m.f_dof[j] < 0:
-            return 0, n
-        first, last = min(first, m.f_dof[j]), max(last, m.f_dof[j] + 1)
-    for e in range(len(m.el_a)):
-        for dof in (m.el_a[e], m.el_b[e]):
-            if dof >= 0:
-                first, last = min(first, dof), max(last, dof + 1)
-    return active_dofs(y, first, last, 0, n, 0.0, 0.0)
-
-
 @no_alloc
 def state_at(Y, h, y, lowest, highest):
     """y = the state's series Y summed at h, at DOFs lowest..highest-1 (x and v; the rest of y as it is)."""
@@ -314,11 +248,43 @@ def aligned_empty(size):
     return buffer[skip:skip + size]
 
 
+class Run(NamedTuple):
+    """A Taylor run's state between calls of integrate, which stops before a step that would write rows the caller has
+    not made ready and goes on from here: the state y = [x, v] (y0 at the start), the series (zero where the motion
+    has not reached), the stiffness watch's ring, place (PLACE: whether it started, the stretch between cuts, the
+    DOFs moving..moved-1, the first row not yet due, the first row waiting for the next step's series) and at (AT: t,
+    the peaks of |x|, |v| and |a|, the last step)."""
+
+    y: np.ndarray
+    Y: np.ndarray
+    A: np.ndarray
+    ring: np.ndarray
+    place: np.ndarray
+    at: np.ndarray
+
+
+STARTED, SEGMENT, MOVING, MOVED, ROW, PENDING = range(6)
+T, PEAK_X, PEAK_V, PEAK_A, H_LAST = range(5)
+NEED_ROWS = 6  # after erk's statuses: integrate stopped before rows past rows_ready
+
+
+def start_run(y0, p):
+    """A Run at the start, from y0 = [x, v], for series of order p."""
+    n = len(y0) // 2
+    Y = aligned_empty((p + 1) * 2 * n).reshape((p + 1, 2 * n))  # contiguous, so that its loops vectorize
+    A = aligned_empty(p * n).reshape((p, n))  # the acceleration's series, the velocity's derivative
+    Y[:, :], A[:, :] = 0.0, 0.0
+    return Run(np.array(y0, dtype=float), Y, A, np.zeros(WATCH_WINDOW, dtype=np.bool_), np.zeros(6, dtype=np.int64),
+               np.zeros(5))
+
+
 @kernel
-def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out, zeroed, counts, floats):
-    """Sum the Taylor series of order p from y0 over the grid into out's blocks x, v and a, (3, N, n) (row 0's x and v
-    are the caller's), restarting at each cut; a status (erk's OK, ...). The acceleration's series is the velocity's
-    derivative, whose terms are M^-1 (u - f_nl - K x - C v) order by order: equilibrium's, to order p - 1.
+def integrate(m, grid, cuts, rtol, atol, max_steps, bound, boundary, out, zeroed, rows_ready, run, counts, floats):
+    """Sum the Taylor series (of run.Y's order p) from run.y over the grid into out's blocks x, v and a, (3, N, n)
+    (row 0's x and v are the caller's), restarting at each cut; a status (erk's OK, ...), or NEED_ROWS where the next
+    step would write rows past rows_ready: the run is kept in `run`, and a call with more rows ready goes on from
+    there, that step worked out again. The acceleration's series is the velocity's derivative, whose terms are
+    M^-1 (u - f_nl - K x - C v) order by order: equilibrium's, to order p - 1.
     Tolerances scale with the running peaks of |x|, |v| and |a| (the error is stated relative to the peak); an output
     row drops the terms that add up to less than OUTPUT_SHARE of them, and the rows past the middle of a step that ends
     where the motion stays analytic (not at a cut or a damper's reversal) are summed from the next step's series,
@@ -327,17 +293,14 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
     summed there only; zeros elsewhere, written here unless the caller has `zeroed` out (a large out is zeroed faster
     in one pass than row by row). boundary > 0 watches for stiffness as erk.integrate does, h |lambda| against the
     series' stability limit. floats (FLOATS of them) receive erk's and, where the run ends OK, the extremes of x and v
-    over every row (row 0's from y0), so that the caller need not pass over out to find them."""
+    over every row (row 0's from y0), so that the caller need not pass over out to find them. A run that fails writes
+    NaN to its rows from where it stopped up to rows_ready."""
     if len(floats) < FLOATS:  # its extremes are written past erk's floats
         raise ValueError("taylor.integrate: floats must hold FLOATS numbers")
     n = m.n
     E = len(m.el_law)
-    # the state's series, contiguous (its loops vectorize), and the acceleration's, the velocity's derivative; zero
-    # where the motion has not reached, as their terms there are never written
-    Y = aligned_empty((p + 1) * 2 * n).reshape((p + 1, 2 * n))
-    A = aligned_empty(p * n).reshape((p, n))
-    Y[:, :] = 0.0
-    A[:, :] = 0.0
+    y, Y, A, place, at = run.y, run.Y, run.A, run.place, run.at
+    p = Y.shape[0] - 1
     sizes, thresholds, powers = np.zeros((3, p + 1)), np.zeros(3), np.zeros(p + 1)
     U = np.zeros((p + 1, len(m.f_kind)))
     D, D2 = np.zeros((p + 1, max(E, 1))), np.zeros((p + 1, max(E, 1)))
@@ -347,24 +310,25 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
     width = band.shape[1] // 2 if band.shape[1] > 0 else n  # CSR rows: every DOF may couple to every other
     orders = coupling_orders(band, spans)
     norms = linear_norms(m)
-    y = y0.copy()
-    moving, moved = loaded_dofs(m, y)  # the DOFs moving..moved-1 hold every x and v that is not zero
-    ring = np.zeros(WATCH_WINDOW, dtype=np.bool_)
-    peak_x, peak_v, peak_a = 0.0, 0.0, 0.0
-    for i in range(n):
-        peak_x, peak_v = max(peak_x, abs(y[i])), max(peak_v, abs(y[n + i]))
     extremes = floats[EXTREMES:FLOATS]  # row 0's: y0, which holds the zeros the rows keep outside the span
-    extremes[0], extremes[1], extremes[2], extremes[3] = y[0], y[0], y[n], y[n]
-    widen(y[:n], extremes, 0)
-    widen(y[n:], extremes, 1)
-    row = 1  # the first row not yet due; rows pending..row-1 wait for the next step's series
-    pending = 1
-    h_last = 0.0
-    floats[T_REACHED] = grid[0]
-    for seg in range(len(cuts) - 1):
+    if place[STARTED] == 0:
+        place[STARTED] = 1
+        place[MOVING], place[MOVED] = loaded_dofs(m, y)  # the DOFs moving..moved-1 hold every x and v not zero
+        place[ROW], place[PENDING] = 1, 1  # the first row not yet due; rows pending..row-1 wait for the next series
+        for i in range(n):
+            at[PEAK_X], at[PEAK_V] = max(at[PEAK_X], abs(y[i])), max(at[PEAK_V], abs(y[n + i]))
+        extremes[0], extremes[1], extremes[2], extremes[3] = y[0], y[0], y[n], y[n]
+        widen(y[:n], extremes, 0)
+        widen(y[n:], extremes, 1)
+        floats[T_REACHED] = at[T] = grid[0]
+    moving, moved, row, pending = place[MOVING], place[MOVED], place[ROW], place[PENDING]
+    peak_x, peak_v, peak_a, h_last = at[PEAK_X], at[PEAK_V], at[PEAK_A], at[H_LAST]
+    t = at[T]
+    last_ready = min(rows_ready, len(grid))
+    for seg in range(place[SEGMENT], len(cuts) - 1):
         ta, tb = cuts[seg], cuts[seg + 1]
         mid = 0.5 * (ta + tb)
-        t = ta
+        t = max(t, ta)
         while t < tb:
             lowest, highest = terms_span(moving, moved, p, width, orders, n)  # where its terms may not be zero
             # y and Y[0] are zero beyond the span, which only widens
@@ -372,7 +336,6 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
             force_series(m, t, ta, mid, p, U, stack)
             coefficients(m, band, spans, minv_diagonal, p, Y, U, D, D2, sign, peak_v, h_last, work, moving, moved,
                          width, orders)
-            counts[NFEV] += p
             order_sizes(Y, sizes, p - 2, p, lowest, highest)  # what the step needs (x's and v's last two orders);
             # the rest where a row needs it
             tol_x, tol_v = max(atol + rtol * peak_x, 1e-300), max(atol + rtol * peak_v, 1e-300)
@@ -382,6 +345,12 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
                 h = reversal(m, D, sign, h)
             t_new = tb if h >= tb - t else t + h
             last = rows_through(grid, row, t_new)
+            if last > last_ready:  # rows the caller has not made ready: this step again in the next call
+                place[SEGMENT], place[ROW], place[PENDING] = seg, row, pending
+                place[MOVING], place[MOVED] = moving, moved
+                at[T], at[PEAK_X], at[PEAK_V], at[PEAK_A], at[H_LAST] = t, peak_x, peak_v, peak_a, h_last
+                return NEED_ROWS
+            counts[NFEV] += p
             start = row == 1 and t == grid[0]
             series_a = pending < row or last > row or start  # the acceleration's series only where a row needs it
             if series_a:
@@ -399,11 +368,11 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
                 pending = row
             if t_new <= t or h < 10 * abs(np.nextafter(t, np.inf) - t):
                 floats[T_REACHED] = t
-                out[:, row:] = np.nan
+                out[:, row:last_ready] = np.nan
                 return TOO_SMALL_STEP
             counts[ACCEPTED] += 1
             if counts[ACCEPTED] > max_steps:
-                out[:, row:] = np.nan
+                out[:, row:last_ready] = np.nan
                 return STEP_BUDGET
             h = t_new - t
             # a step that ends where the motion stays analytic leaves its second half's rows to the next series
@@ -424,7 +393,7 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
             if status != NOT_FINITE:
                 beyond = state_status(y[n + lowest:n + highest], bound)
                 status = beyond if beyond != OK else status
-            if status == OK and boundary > 0 and held_by_stability(m, y, h, t_new, boundary, norms, node, ring,
+            if status == OK and boundary > 0 and held_by_stability(m, y, h, t_new, boundary, norms, node, run.ring,
                                                                    counts, floats):
                 status = STIFF
             if status != OK:
@@ -432,7 +401,7 @@ def integrate(m, p, y0, grid, cuts, rtol, atol, max_steps, bound, boundary, out,
                     emit(Y, A, sizes, thresholds, powers, t, grid, pending, row, out, taus, sums, lowest, highest,
                          zeroed, extremes)
                 if status != STIFF:
-                    out[:, row:] = np.nan
+                    out[:, row:last_ready] = np.nan
                 return status
             t = t_new
     return OK

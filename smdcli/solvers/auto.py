@@ -90,7 +90,7 @@ class Auto(Solver):
                 reason += f" (estimated error {result.stats.stated_accuracy:.2g} of the peak, rtol {tol.rtol:g})"
         stats = dataclasses.replace(result.stats, requested_method=self.name, reason=reason,
                                     wall_time_s=result.stats.wall_time_s + abandoned_s)
-        return dataclasses.replace(result, stats=stats)
+        return result.changed(stats=stats)
 
     def choose(self, model: Model, grid: np.ndarray) -> tuple[Solver | None, str]:
         """The solver for a model on a grid and the reason, or (None, '') where the trajectory must decide."""

@@ -5,14 +5,15 @@ Must not import: sweep, io, plots, commands, cli.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from collections.abc import Iterator
+from dataclasses import dataclass
+from functools import partial
 from typing import Callable, ClassVar
 
 import numpy as np
 
 from smdcli.model import Model, mass_solve
-from smdcli.result import Result, SolverStats, finite_peak
+from smdcli.result import NonsmoothHistory, Result, SolverStats, finite_peak
 
 
 # A state larger than this (relative to the initial and forced scale) has diverged.
@@ -115,16 +116,20 @@ def acceleration_accuracy(M: np.ndarray, C: np.ndarray, K: np.ndarray, stated, x
 
 def make_result(model: Model, grid: np.ndarray, x: np.ndarray, v: np.ndarray, stats: SolverStats,
                 t_failed: float | None = None, notes: tuple[str, ...] = (), force: np.ndarray | None = None,
-                acceleration: np.ndarray | None = None, found_extremes: tuple = ()) -> Result:
-    """A Result from displacement and velocity on the grid; force and acceleration derived where not given;
-    found_extremes: Result's, where the solver found them."""
-    if force is None:
-        force = model.applied_force(grid) if model.is_forced else np.zeros_like(x)
+                acceleration: np.ndarray | None = None, found_extremes: tuple = (),
+                nonsmooth: NonsmoothHistory | None = None) -> Result:
+    """A Result from displacement and velocity on the grid; acceleration derived where not given, and the applied
+    force too, where first read unless the acceleration needs it; found_extremes: Result's, where the solver found
+    them."""
     if acceleration is None:
+        force = model.applied_force(grid) if force is None else force
         with np.errstate(all="ignore"):
             acceleration = model.acceleration(x, v, force)
+    elif force is None:
+        force = partial(model.applied_force, grid)  # Result.force: computed where first read
     return Result(time=grid, dofs=model.dofs, displacement=x, velocity=v, acceleration=acceleration,
-                  force=force, stats=stats, t_failed=t_failed, notes=notes, found_extremes=found_extremes)
+                  force=force, stats=stats, t_failed=t_failed, notes=notes, found_extremes=found_extremes,
+                  nonsmooth=nonsmooth)
 
 
 def cuts(model: Model, grid: np.ndarray, breakpoints: bool = True) -> np.ndarray:
@@ -174,13 +179,12 @@ def force_function(model: Model, ta: float, tb: float) -> Callable[[float], np.n
     return u
 
 
-def divergence_bound(model: Model, grid: np.ndarray, force: np.ndarray | None = None) -> float:
-    """GROWTH_BOUND times a size a bounded response stays within: initial state and static deflection (force: the
-    applied force on the grid, where the caller has it)."""
+def divergence_bound(model: Model, grid: np.ndarray) -> float:
+    """GROWTH_BOUND times a size a bounded response stays within: initial state and static deflection."""
     scale = max(np.abs(model.x0).max(initial=0.0), np.abs(model.v0).max(initial=0.0), 1.0)
     if model.is_forced:
-        loaded = np.flatnonzero(np.any(model.B != 0, axis=1))  # the rest of the force's columns are zero
-        peak_force = finite_peak((model.applied_force(grid) if force is None else force)[:, loaded])
+        loaded = np.flatnonzero(np.any(model.B != 0, axis=1))  # the other DOFs' forces are zero
+        peak_force = finite_peak(model.forces(grid) @ model.B[loaded].T)
         stiffness = np.abs(np.diag(model.K)).min(initial=0.0)
         scale = max(scale, peak_force / stiffness if stiffness > 0 else peak_force * (grid[-1] - grid[0]) ** 2)
     return GROWTH_BOUND * scale

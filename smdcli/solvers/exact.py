@@ -166,16 +166,14 @@ class Exact(Solver):
             stats = SolverStats(method=self.name, requested_method=self.name, reason="", success=False,
                                 message=f"failed: {exc}", wall_time_s=time.perf_counter() - start)
             nan = np.full((len(grid), model.n), np.nan)
-            return dataclasses.replace(make_result(model, grid, nan, nan, stats), t_failed=float(grid[0]))
+            return make_result(model, grid, nan, nan, stats, t_failed=float(grid[0]))
         if held:
             stated = max(stated, hold_error(original, grid, held))
             message += f"; first-order hold on the output grid for {', '.join(held)} (error O(step^2))"
         stats = SolverStats(method=self.name, requested_method=self.name, reason="", nlu=0,
                             steps_accepted=max(len(grid) - 1, 0), wall_time_s=time.perf_counter() - start,
                             message=message, stated_accuracy=stated)
-        force = model.applied_force(grid) if model.is_forced else np.zeros_like(x)
-        return Result(time=grid, dofs=model.dofs, displacement=x, velocity=v, acceleration=a, force=force,
-                      stats=stats, nonsmooth=history)
+        return make_result(model, grid, x, v, stats, acceleration=a, nonsmooth=history)
 
 
 def _solve_linear(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:

@@ -98,7 +98,7 @@ def meet_balance(run: Callable[[Tolerances], Result], tol: Tolerances) -> Result
             + ", ".join(f"{t.rtol:.3g}" for t, _, _ in tried[1:]) + failed + f"; kept the run at rtol {used.rtol:.3g}, "
             f"atol {used.atol:.3g}: balance {balance:.3g} rtol" + ("" if balance <= BALANCE_RTOLS else ", still above"))
     stats = dataclasses.replace(best.stats, rtol=tol.rtol, atol=tol.atol, **spent)
-    return dataclasses.replace(best, stats=stats, notes=(*best.notes, note))
+    return best.changed(stats=stats, notes=(*best.notes, note))
 
 
 def _balance_rtols(result: Result, tol: Tolerances) -> float:

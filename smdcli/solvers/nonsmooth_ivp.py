@@ -27,7 +27,7 @@ import numpy as np
 from smdcli.kernels.arrays import INTERIOR
 from smdcli.model import Model
 from smdcli.result import NonsmoothHistory, Result, SolverStats
-from smdcli.solvers.base import MAX_STEPS, Tolerances, divergence_bound, diverged, force_function
+from smdcli.solvers.base import MAX_STEPS, Tolerances, divergence_bound, diverged, force_function, make_result
 from smdcli.solvers.compiled_events import ACCUMULATED, COMPILED_EVENT_METHODS, CompiledModes
 from smdcli.solvers.modes import at_level, event_root
 from smdcli.solvers.piecewise import MAX_EVENTS_AT_ONE_TIME, PiecewiseRun
@@ -381,6 +381,5 @@ def solve_events(model: Model, grid: np.ndarray, tol: Tolerances, name: str) -> 
                                  + (" (compiled)" if name in COMPILED_EVENT_METHODS else "")
                                  if failure is None else f"failed at t = {t_reached:.6g} s: {failure}"),
                         **driver.counts)
-    force = model.applied_force(grid) if model.is_forced else np.zeros_like(x)
-    return Result(time=grid, dofs=model.dofs, displacement=x, velocity=v, acceleration=a, force=force, stats=stats,
-                  t_failed=None if failure is None else t_reached, nonsmooth=history)
+    return make_result(model, grid, x, v, stats, t_failed=None if failure is None else t_reached, acceleration=a,
+                       nonsmooth=history)

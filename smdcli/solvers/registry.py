@@ -71,7 +71,7 @@ def solve(model: Model, grid: np.ndarray, method: str, tol: Tolerances, field: s
     notes = result.notes
     if model.ground is not None:
         history = ground_history(model, grid, solve)
-        result = dataclasses.replace(result, ground=history)
+        result = result.changed(ground=history)
         notes += tuple(note for note in (drift_note(model, history),) if note)
     explicit = method not in ("auto", "closed_form", "exact") and not solver.implicit
     if explicit and model.is_linear and model.is_stiff:
@@ -85,7 +85,7 @@ def solve(model: Model, grid: np.ndarray, method: str, tol: Tolerances, field: s
     if method != "auto":
         stats = dataclasses.replace(stats, requested_method=method,
                                     reason=stats.reason or f"requested: {solver.description}")
-    return dataclasses.replace(result, stats=stats, notes=notes)
+    return result.changed(stats=stats, notes=notes)
 
 
 def _stated_accuracy(solver: Solver, model: Model, result: Result, peak: float) -> float:
@@ -116,4 +116,4 @@ def _refuse_non_finite(result, x_extremes):
     stats = dataclasses.replace(result.stats, success=False,
                                 message=f"failed at t = {t_bad:.6g} s: the solution is not finite (NaN or inf): "
                                         "the scene's numbers overflow double precision")
-    return dataclasses.replace(result, stats=stats, t_failed=t_bad)
+    return result.changed(stats=stats, t_failed=t_bad)

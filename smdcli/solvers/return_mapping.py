@@ -26,7 +26,7 @@ from smdcli.elements.bouc_wen import BoucWen
 from smdcli.elements.elastoplastic import Elastoplastic
 from smdcli.model import Model
 from smdcli.result import NonsmoothHistory, Result, SolverStats
-from smdcli.solvers.base import MAX_STEPS, Tolerances, cuts, divergence_bound
+from smdcli.solvers.base import MAX_STEPS, Tolerances, cuts, divergence_bound, make_result
 
 NEWMARK_FAMILY = ("newmark", "hht", "generalized_alpha", "central_difference")
 
@@ -116,9 +116,8 @@ def solve_return_mapping(model: Model, grid: np.ndarray, tol: Tolerances, solver
     if failure:
         for q in (x_g, v_g, a_g):
             q[grid > t] = np.nan
-    force = model.applied_force(grid) if model.is_forced else np.zeros_like(x_g)
-    return Result(time=grid, dofs=model.dofs, displacement=x_g, velocity=v_g, acceleration=a_g, force=force,
-                  stats=stats, t_failed=None if failure is None else t, nonsmooth=history)
+    return make_result(model, grid, x_g, v_g, stats, t_failed=None if failure is None else t, acceleration=a_g,
+                       nonsmooth=history)
 
 
 def on_grid(grid: np.ndarray, model: Model, R: np.ndarray, t, x, v, a, T, internal, energies):
