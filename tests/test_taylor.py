@@ -362,7 +362,8 @@ def test_the_kernel_called_a_row_at_a_time_goes_on_where_it_stopped():
     for step in (len(grid), 1):
         out = np.zeros((3, len(grid), model.n))
         out[0, 0], out[1, 0] = model.x0, model.v0
-        run, counts, floats = taylor.start_run(y0, p), np.zeros(5, dtype=np.int64), np.zeros(taylor.FLOATS)
+        run = taylor.start_run(model_arrays(model), y0, p)
+        counts, floats = np.zeros(5, dtype=np.int64), np.zeros(taylor.FLOATS)
         for ready in range(min(step + 1, len(grid)), len(grid) + step, step):
             status = taylor.integrate(model_arrays(model), grid, cuts(model, grid), 1e-12, 1e-18, 10**6,
                                       divergence_bound(model, grid), 0.0, out, True, min(ready, len(grid)), run,

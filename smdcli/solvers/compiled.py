@@ -77,8 +77,9 @@ def _tiny_run(family: str) -> None:
     if family == "taylor":
         from smdcli.kernels.taylor import FLOATS, start_run
 
-        entry(model_arrays(tiny), grid, grid, 1e-3, 1e-6, 10, 1e8, 0.0, np.zeros((3, 2, 1)), False, len(grid),
-              start_run(y0, 8), np.zeros(5, dtype=np.int64), np.zeros(FLOATS))
+        arrays = model_arrays(tiny)
+        entry(arrays, grid, grid, 1e-3, 1e-6, 10, 1e8, 0.0, np.zeros((3, 2, 1)), False, len(grid),
+              start_run(arrays, y0, 8), np.zeros(5, dtype=np.int64), np.zeros(FLOATS))
         return
     if family == "return_mapping":
         from smdcli.kernels.rhs import work_size
@@ -317,8 +318,9 @@ class Taylor(Solver):
         boundary = taylor_boundary(order) if self.watching else 0.0
         out = taylor.aligned_empty(3 * len(grid) * n).reshape((3, len(grid), n))  # x, v, a
         out[0, 0], out[1, 0] = model.x0, model.v0  # and a's row 0, the kernel
-        counts, floats, run = np.zeros(5, dtype=np.int64), np.zeros(taylor.FLOATS), taylor.start_run(y0, order)
-        arguments = (model_arrays(model), np.asarray(grid, dtype=float), cuts(model, grid, tol.breakpoints),
+        arrays = model_arrays(model)
+        counts, floats, run = np.zeros(5, dtype=np.int64), np.zeros(taylor.FLOATS), taylor.start_run(arrays, y0, order)
+        arguments = (arrays, np.asarray(grid, dtype=float), cuts(model, grid, tol.breakpoints),
                      float(tol.rtol) * TAYLOR_STEP_SHARE, float(tol.atol) * TAYLOR_STEP_SHARE, int(max_steps),
                      float(bound), float(boundary), out)
         # the kernel writes zeros where the motion has not reached, unless out is larger than the caches: then its
@@ -341,7 +343,7 @@ def zeroed_ahead(out: np.ndarray, integrate, need_rows: int) -> int:
     """integrate(rows_ready) over out's rows 1.. (its second axis; row 0 is the caller's and the kernel's) zeroed ahead
     of it a chunk at a time: the first here, the others on a pool thread (interrupts.alongside) while the kernel sums
     into the rows before them, so that a large out's zeros take the second core's time (the 1,000-mass chain's 24 MB:
-    0.6 ms of its 2.4). The kernel stops with need_rows before rows not yet zeroed and goes on in the next call; the
+    0.6 ms of its 2.6). The kernel stops with need_rows before rows not yet zeroed and goes on in the next call; the
     status, with NaN from where a failed run stopped to the end."""
     from smdcli.interrupts import alongside
     from smdcli.kernels.erk import OK, STIFF
@@ -349,9 +351,6 @@ def zeroed_ahead(out: np.ndarray, integrate, need_rows: int) -> int:
     rows = out.shape[1]
     ends = sorted({min(max(2, rows // share), rows) for share in (8, 4, 2, 1)})
     out[:, 1:ends[0]] = 0.0
-
-    def zero(start, end):
-        out[:, start:end] = 0.0
 
     def work(wait):
         for i, ready in enumerate(ends):
@@ -362,7 +361,7 @@ def zeroed_ahead(out: np.ndarray, integrate, need_rows: int) -> int:
                 break
         return status, ready
 
-    status, ready = alongside([functools.partial(zero, a, b) for a, b in zip(ends, ends[1:])], work)
+    status, ready = alongside([functools.partial(out[:, a:b].fill, 0.0) for a, b in zip(ends, ends[1:])], work)
     if status not in (OK, STIFF):  # the kernel wrote NaN up to the rows it had
         out[:, ready:] = np.nan
     return status
