@@ -251,8 +251,8 @@ def aligned_empty(size):
 class Run(NamedTuple):
     """A Taylor run's state between calls of integrate, which stops before a step that would write rows the caller has
     not made ready and goes on from here: the state y = [x, v] (y0 at the start), the series (zero where the motion
-    has not reached), the stiffness watch's ring, place (whether it started, the stretch between cuts, the DOFs
-    moving..moved-1, the first row not yet due, the first row waiting for the next step's series) and at (t, the
+    has not reached), the stiffness watch's ring, place (the stretch between cuts, the DOFs moving..moved-1, the
+    first row not yet due (0 before the start), the first row waiting for the next step's series) and at (t, the
     peaks of |x|, |v| and |a|, the last step); and what a run works out of the model once (the linear rows as
     diagonals, the stiffness watch's norms: 42 us a call on the 1,000-mass chain)."""
 
@@ -268,7 +268,7 @@ class Run(NamedTuple):
     norms: tuple
 
 
-STARTED, SEGMENT, MOVING, MOVED, ROW, PENDING = range(6)
+SEGMENT, MOVING, MOVED, ROW, PENDING = range(5)
 T, PEAK_X, PEAK_V, PEAK_A, H_LAST = range(5)
 NEED_ROWS = 6  # after erk's statuses: integrate stopped before rows past rows_ready
 
@@ -279,7 +279,7 @@ def start_run(m, y0, p):
     Y = aligned_empty((p + 1) * 2 * n).reshape((p + 1, 2 * n))  # contiguous, so that its loops vectorize
     A = aligned_empty(p * n).reshape((p, n))  # the acceleration's series, the velocity's derivative
     Y[:, :], A[:, :] = 0.0, 0.0
-    return Run(np.array(y0, dtype=float), Y, A, np.zeros(WATCH_WINDOW, dtype=np.bool_), np.zeros(6, dtype=np.int64),
+    return Run(np.array(y0, dtype=float), Y, A, np.zeros(WATCH_WINDOW, dtype=np.bool_), np.zeros(5, dtype=np.int64),
                np.zeros(5), *diagonals(m), linear_norms(m))
 
 
@@ -315,8 +315,7 @@ def integrate(m, grid, cuts, rtol, atol, max_steps, bound, boundary, out, zeroed
     width = band.shape[1] // 2 if band.shape[1] > 0 else n  # CSR rows: every DOF may couple to every other
     orders = coupling_orders(band, spans)
     extremes = floats[EXTREMES:FLOATS]  # row 0's: y0, which holds the zeros the rows keep outside the span
-    if place[STARTED] == 0:
-        place[STARTED] = 1
+    if place[ROW] == 0:  # the start
         place[MOVING], place[MOVED] = loaded_dofs(m, y)  # the DOFs moving..moved-1 hold every x and v not zero
         place[ROW], place[PENDING] = 1, 1  # the first row not yet due; rows pending..row-1 wait for the next series
         for i in range(n):

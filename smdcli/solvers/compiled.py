@@ -255,7 +255,7 @@ class CompiledRK(Solver):
 # accuracy: a ten-thousandth, not a hundredth, takes the 100-mass chain at rtol 1e-6 to 1.7e-12 of its peak (was
 # 6.5e-10) with order 17 and 122 steps instead of 13 and 144, about a tenth more time.
 TAYLOR_STEP_SHARE = 1e-4
-ZEROED_IN_ONE_PASS = 8 << 20  # bytes of a Taylor run's output past which it is zeroed before the run, not row by row
+ZEROED_IN_ONE_PASS = 8 << 20  # bytes of a Taylor run's output past which zeroed_ahead zeroes it ahead of the kernel
 
 
 def taylor_order(rtol: float) -> int:
@@ -327,8 +327,7 @@ class Taylor(Solver):
         # zeros are written in one pass a chunk, ahead of it (the 1,000-mass chain's 24 MB: 0.6 ms, where its rows'
         # own zeros took 1.5 ms)
         if out.nbytes > ZEROED_IN_ONE_PASS:
-            status = zeroed_ahead(out, lambda ready: taylor.integrate(*arguments, True, ready, run, counts, floats),
-                                  taylor.NEED_ROWS)
+            status = zeroed_ahead(out, lambda ready: taylor.integrate(*arguments, True, ready, run, counts, floats))
         else:
             status = taylor.integrate(*arguments, False, len(grid), run, counts, floats)
         stats, t_failed = explicit_outcome(self, status, counts, floats, time.perf_counter() - start, tol, max_steps,
@@ -339,14 +338,14 @@ class Taylor(Solver):
                            found_extremes=found)
 
 
-def zeroed_ahead(out: np.ndarray, integrate, need_rows: int) -> int:
+def zeroed_ahead(out: np.ndarray, integrate) -> int:
     """integrate(rows_ready) over out's rows 1.. (its second axis; row 0 is the caller's and the kernel's) zeroed ahead
     of it a chunk at a time: the first here, the others on a pool thread (interrupts.alongside) while the kernel sums
     into the rows before them, so that a large out's zeros take the second core's time (the 1,000-mass chain's 24 MB:
-    0.6 ms of its 2.6). The kernel stops with need_rows before rows not yet zeroed and goes on in the next call; the
+    0.6 ms of its 2.6). The kernel stops with NEED_ROWS before rows not yet zeroed and goes on in the next call; the
     status, with NaN from where a failed run stopped to the end."""
     from smdcli.interrupts import alongside
-    from smdcli.kernels.erk import OK, STIFF
+    from smdcli.kernels.taylor import NEED_ROWS, OK, STIFF
 
     rows = out.shape[1]
     ends = sorted({min(max(2, rows // share), rows) for share in (8, 4, 2, 1)})
@@ -357,7 +356,7 @@ def zeroed_ahead(out: np.ndarray, integrate, need_rows: int) -> int:
             if i:
                 wait(i - 1)
             status = integrate(ready)
-            if status != need_rows:
+            if status != NEED_ROWS:
                 break
         return status, ready
 
