@@ -16,6 +16,8 @@ def main() -> None:
     interrupts.install()
     try:
         from smdcli.cli import main as command_line
+
+        command_line()  # from its first lines on, it reports an interrupt itself; this covers the import before
     except KeyboardInterrupt:
         import os
 
@@ -24,7 +26,6 @@ def main() -> None:
               file=sys.stderr)
         sys.stderr.flush()
         os._exit(interrupts.exit_code(signum or 2))
-    command_line()
 
 
 if __name__ == "__main__":

@@ -354,8 +354,11 @@ def run(args: list[str]) -> int:
 
 def main() -> None:
     """Console-script entry point."""
-    interrupts.install()
-    code = run(sys.argv[1:])
+    try:
+        interrupts.install()
+        code = run(sys.argv[1:])
+    except KeyboardInterrupt:  # one outside run's own handling: in its first imports, or in a handler of its own
+        code = 1  # recorded all the same: settle() returns it and it decides the exit code
     # A signal that came at any point decides, even one whose exception was swallowed or that typer turned into
     # a silent exit 130; from here on signals are only recorded, so a later one changes nothing.
     signum = interrupts.settle()

@@ -88,6 +88,30 @@ def test_a_signal_as_the_temporary_file_appears_leaves_nothing(tmp_path):
     assert earlier.read_bytes() == b"an earlier result"
 
 
+SIGNAL_AS_THE_RUN_BEGINS = """
+import os, signal, sys
+from smdcli import interrupts, provenance
+original = provenance.set_command_line
+def set_command_line(line):
+    os.kill(os.getpid(), int(sys.argv.pop()))  # before the run's own handling begins: where CI's loaded machine sent one
+    original(line)
+provenance.set_command_line = set_command_line
+from smdcli.__main__ import main
+main()
+"""
+
+
+@pytest.mark.parametrize("signum, code, word", [(signal.SIGINT, 130, "interrupted"), (signal.SIGTERM, 143, "terminated")])
+def test_a_signal_before_the_command_runs_is_an_interrupt_not_a_traceback(tmp_path, signum, code, word):
+    """The signal lands in the command line's first lines, before its commands' own handling: one line, 130/143."""
+    args = ["simulate", str(SCENARIOS / "one_dof_undamped.toml"), "-o", str(tmp_path / "out"), "--no-plots"]
+    ran = subprocess.run([sys.executable, "-c", SIGNAL_AS_THE_RUN_BEGINS, *args, str(int(signum))], capture_output=True,
+                         text=True, cwd=ROOT, timeout=120)
+    assert ran.returncode == code and "Traceback" not in ran.stderr, ran.stderr
+    assert ran.stderr.strip().splitlines() == [f"smd: {word}; no partial file was left under a final name"]
+    assert not (tmp_path / "out").exists()
+
+
 def test_an_output_that_cannot_be_written_is_one_line_exit_2(cli, tmp_path):
     out = tmp_path / "out"
     (out / "one_dof_undamped.h5").mkdir(parents=True)  # the final name is taken by a folder
