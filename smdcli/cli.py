@@ -354,14 +354,15 @@ def run(args: list[str]) -> int:
 
 def main() -> None:
     """Console-script entry point."""
+    # A signal that came at any point decides, even one whose exception was swallowed or that typer turned into
+    # a silent exit 130; once settled, signals are only recorded, so a later one changes nothing. Settling is inside
+    # the try: a signal that lands after run returns, before the handlers are switched, is caught like any other.
     try:
         interrupts.install()
         code = run(sys.argv[1:])
-    except KeyboardInterrupt:  # one outside run's own handling: in its first imports, or in a handler of its own
-        code = 1  # recorded all the same: settle() returns it and it decides the exit code
-    # A signal that came at any point decides, even one whose exception was swallowed or that typer turned into
-    # a silent exit 130; from here on signals are only recorded, so a later one changes nothing.
-    signum = interrupts.settle()
+        signum = interrupts.settle()
+    except KeyboardInterrupt:  # one outside run's own handling: in its first imports, in a handler, after it
+        code, signum = 1, interrupts.settle()  # recorded all the same: the signal decides the exit code
     if signum is not None:
         import os
 

@@ -88,28 +88,42 @@ def test_a_signal_as_the_temporary_file_appears_leaves_nothing(tmp_path):
     assert earlier.read_bytes() == b"an earlier result"
 
 
-SIGNAL_AS_THE_RUN_BEGINS = """
+SIGNAL_AROUND_THE_RUN = """
 import os, signal, sys
 from smdcli import interrupts, provenance
-original = provenance.set_command_line
-def set_command_line(line):
-    os.kill(os.getpid(), int(sys.argv.pop()))  # before the run's own handling begins: where CI's loaded machine sent one
-    original(line)
-provenance.set_command_line = set_command_line
+where, signum = sys.argv.pop(), int(sys.argv.pop())
+if where == "before":  # in the command line's first lines, before its own handling: where CI's loaded machine sent one
+    original = provenance.set_command_line
+    def set_command_line(line):
+        os.kill(os.getpid(), signum)
+        original(line)
+    provenance.set_command_line = set_command_line
+else:  # the run has returned; the handlers are not yet switched
+    settle, sent = interrupts.settle, []
+    def signal_then_settle():
+        if not sent:
+            sent.append(signum)
+            os.kill(os.getpid(), signum)
+        return settle()
+    interrupts.settle = signal_then_settle
 from smdcli.__main__ import main
 main()
 """
 
 
+@pytest.mark.parametrize("where", ["before", "after"])
 @pytest.mark.parametrize("signum, code, word", [(signal.SIGINT, 130, "interrupted"), (signal.SIGTERM, 143, "terminated")])
-def test_a_signal_before_the_command_runs_is_an_interrupt_not_a_traceback(tmp_path, signum, code, word):
-    """The signal lands in the command line's first lines, before its commands' own handling: one line, 130/143."""
-    args = ["simulate", str(SCENARIOS / "one_dof_undamped.toml"), "-o", str(tmp_path / "out"), "--no-plots"]
-    ran = subprocess.run([sys.executable, "-c", SIGNAL_AS_THE_RUN_BEGINS, *args, str(int(signum))], capture_output=True,
-                         text=True, cwd=ROOT, timeout=120)
+def test_a_signal_around_the_command_is_an_interrupt_not_a_traceback(tmp_path, signum, code, word, where):
+    """The signal lands outside the commands' own handling, before the run or just after it: one line, 130/143,
+    and the run's files all there (after) or none of them (before)."""
+    out = tmp_path / "out"
+    args = ["simulate", str(SCENARIOS / "one_dof_undamped.toml"), "-o", str(out), "--no-plots"]
+    ran = subprocess.run([sys.executable, "-c", SIGNAL_AROUND_THE_RUN, *args, str(int(signum)), where],
+                         capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert ran.returncode == code and "Traceback" not in ran.stderr, ran.stderr
     assert ran.stderr.strip().splitlines() == [f"smd: {word}; no partial file was left under a final name"]
-    assert not (tmp_path / "out").exists()
+    left = sorted(p.name for p in out.iterdir()) if out.exists() else []
+    assert left == ([] if where == "before" else ["one_dof_undamped.h5"])
 
 
 def test_an_output_that_cannot_be_written_is_one_line_exit_2(cli, tmp_path):
