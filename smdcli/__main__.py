@@ -13,8 +13,8 @@ from smdcli import interrupts
 
 def main() -> None:
     """Console-script entry point."""
-    interrupts.install()
     try:
+        interrupts.install()
         from smdcli.cli import main as command_line
 
         command_line()  # from its first lines on, it reports an interrupt itself; this covers the import before
