@@ -222,36 +222,69 @@ def in_threads(function, tasks: list) -> list:
         return [first] + [future.result() for future in futures]
 
 
-def alongside(chores: list, work):
-    """work(wait) here while a pool thread does the chores (callables) in turn, its result once both are done; wait(i)
-    returns once chores 0..i are done. For memory-bound chores a compiled kernel can overlap: output rows zeroed on the
-    second core ahead of the kernel that sums into them. In turn, before work, where one core is all there is or this
-    is a pool thread."""
+@contextmanager
+def alongside(chores: list):
+    """A pool thread does the chores (callables) in turn while the block runs here; the block gets ready, and ready(i)
+    returns once chores 0..i are done: it does here the first of them not yet begun and, while it waits for one under
+    way, the last ones not begun, so that the block waits for nothing the two threads could do; it returns the last
+    chore k >= i with 0..k done. The block ends once the chores are done too. Memory-bound chores overlap a compiled
+    kernel this way: output rows zeroed on the second core ahead of the kernel that sums into them. In turn, before
+    the block, where one core is all there is or this is a pool thread."""
     from concurrent.futures import wait
 
+    last = len(chores) - 1
     if not chores or usable_cores() < 2 or threading.current_thread().name.startswith(POOL_PREFIX):
         for chore in chores:
             chore()
-        return work(lambda i: None)
+        yield lambda i: last
+        return
     done = [threading.Event() for _ in chores]
+    open_ends, claiming = [0, len(chores)], threading.Lock()  # the chores not begun: open_ends[0] .. open_ends[1] - 1
+
+    def claim(needed: int) -> int | None:
+        """The first chore not begun if it is at most needed, else the last one not begun: now this thread's."""
+        with claiming:
+            first, end = open_ends
+            if first >= end:
+                return None
+            if first <= needed:
+                open_ends[0] = first + 1
+                return first
+            open_ends[1] = end - 1
+            return end - 1
+
+    def do(i: int) -> None:
+        chores[i]()
+        done[i].set()
 
     def in_turn():
         try:
-            for chore, event in zip(chores, done):
-                chore()
-                event.set()
-        finally:  # a chore that raised: work waits no longer, and the raise comes after it
+            while (i := claim(last)) is not None:
+                do(i)
+        finally:  # a chore that raised: the block waits no longer, and the raise comes after it
             for event in done:
                 event.set()
+
+    def ready(i: int) -> int:
+        while not done[i].is_set():
+            j = claim(i)
+            if j is None:
+                done[i].wait()
+            else:
+                do(j)
+        for event in done[:i]:
+            event.wait()
+        while i < last and done[i + 1].is_set():
+            i += 1
+        return i
 
     with deferred():
         future = _shared_pool().submit(in_turn)
         try:
-            out = work(lambda i: done[i].wait())
+            yield ready
         finally:
             wait([future])
         future.result()
-        return out
 
 
 def settled(future) -> None:

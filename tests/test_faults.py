@@ -233,43 +233,72 @@ def test_in_threads_keeps_its_pool_runs_the_first_task_here_and_nested_calls_in_
 
 
 @pytest.mark.parametrize("cores", [1, 2])
-def test_alongside_does_its_chores_in_turn_on_the_pool_and_wait_returns_once_they_are_done(cores, monkeypatch):
-    """interrupts.alongside: the chores in turn on one of the kept pool's threads while the work runs here, wait(i)
-    returning once chores 0..i are done; on one core, or called from the pool's own threads, every chore first, here.
-    A chore's error raises in the caller once the work is done, and the work never waits for a chore after it."""
+def test_alongside_does_its_chores_in_turn_and_ready_returns_once_they_are_done(cores, monkeypatch):
+    """interrupts.alongside: the chores in turn on one of the kept pool's threads while the block runs here; ready(i)
+    returns once chores 0..i are done, and the last chore k >= i with 0..k done; a chore the pool has not begun when
+    the block needs it is done here, and while the block waits for one under way it does the last ones not begun. On
+    one core, or called from the pool's own threads, every chore first, here. A chore's error raises in the caller
+    once the block is done, and the block never waits for a chore after those it asked for."""
     import threading
     import time
 
     from smdcli import interrupts
 
     monkeypatch.setattr(interrupts, "_usable_cores", cores)
-    log, here = [], threading.get_ident()
+    log, here, begun = [], threading.get_ident(), threading.Event()
 
     def chore(i):
-        time.sleep(0.002 * (3 - i))  # the first slowest: a wait that returned early would see it missing
+        if i == 0:  # the first slowest: a ready that returned early would see it missing
+            begun.set()
+            time.sleep(0.05)
         log.append((i, threading.get_ident()))
 
-    def work(wait):
+    chores = 5
+    with interrupts.alongside([lambda i=i: chore(i) for i in range(chores)]) as ready:
+        begun.wait()  # the pool is on chore 0: the block, waiting for it, does the others from the last
         seen = []
-        for i in range(3):
-            wait(i)
-            seen.append(sorted(task for task, _ in log))
-        return seen
+        for i in range(chores):
+            k = ready(i)
+            seen.append((i, k))
+            assert set(range(k + 1)) <= {task for task, _ in log}
+    assert all(k >= i for i, k in seen) and sorted(task for task, _ in log) == list(range(chores))
+    if cores == 1:
+        assert log == [(i, here) for i in range(chores)]
+    else:
+        assert log == [(4, here), (3, here), (2, here), (1, here), (0, log[-1][1])] and log[-1][1] != here
+        assert seen[0] == (0, chores - 1)
 
-    seen = interrupts.alongside([lambda i=i: chore(i) for i in range(3)], work)
-    assert all(set(range(i + 1)) <= set(done) for i, done in enumerate(seen))
-    assert [task for task, _ in log] == [0, 1, 2]
-    threads = {ident for _, ident in log}
-    assert threads == {here} if cores == 1 else (len(threads) == 1 and here not in threads)
-    nested = interrupts.in_threads(lambda task: interrupts.alongside([lambda: log.append((task, threading.get_ident()))],
-                                                                     lambda wait: threading.get_ident()), [0, 1])
+    if cores == 2:  # a chore the pool has not begun when the block needs it: the block does it
+        del log[:]
+        begun.clear()
+        gate = threading.Event()
+        first = lambda: begun.set() or gate.wait(60)  # noqa: E731
+        second = lambda: log.append(threading.get_ident()) or gate.set()  # noqa: E731
+        with interrupts.alongside([first, second]) as ready:
+            begun.wait()
+            assert ready(1) == 1
+        assert log == [here]
+
+    nested = interrupts.in_threads(lambda task: _alongside_here(task, log), [0, 1])
     assert (1, nested[1]) in log  # the pool's task did its chore on its own thread
 
     def fails():
         raise ValueError("chore")
 
     with pytest.raises(ValueError, match="chore"):
-        interrupts.alongside([fails, lambda: None], lambda wait: wait(1))
+        with interrupts.alongside([fails, lambda: None]) as ready:
+            ready(1)
+
+
+def _alongside_here(task, log):
+    """alongside from a pool thread: its chore done first, on that thread; the thread's id."""
+    import threading
+
+    from smdcli import interrupts
+
+    with interrupts.alongside([lambda: log.append((task, threading.get_ident()))]) as ready:
+        ready(0)
+    return threading.get_ident()
 
 
 def test_threads_are_as_many_as_the_cores_a_containers_quota_allows(tmp_path, monkeypatch):
@@ -324,7 +353,7 @@ def test_thread_pools_end_or_raise_whenever_an_interrupt_lands(pool):
     idle-thread semaphore, left the semaphore held: the workers waited on it and the shutdown on them, forever."""
     runs = {"run_threads": "run_threads(abs, list(range(200)), 2)",
             "in_threads": "interrupts.in_threads(abs, [-1, -2])",
-            "alongside": "interrupts.alongside([int, int], lambda wait: wait(1))"}
+            "alongside": "alongside_ready(1)"}
     code = ("import random, signal\n"
             "from smdcli import interrupts\n"
             "from smdcli.solvers.compiled import warm\n"
@@ -333,6 +362,9 @@ def test_thread_pools_end_or_raise_whenever_an_interrupt_lands(pool):
             "interrupts.install()\n"
             "signal.signal(signal.SIGALRM, lambda *a: signal.raise_signal(signal.SIGINT))\n"
             "rng, ends = random.Random(1), set()\n"
+            "def alongside_ready(i):\n"
+            "    with interrupts.alongside([int, int]) as ready:\n"
+            "        return ready(i)\n"
             f"run = lambda: {runs[pool]}\n"
             "for trial in range(400):\n"
             "    interrupts._received = None\n"

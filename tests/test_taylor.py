@@ -14,7 +14,7 @@ from test_kernels import FORCES
 
 from smdcli.solvers import solve
 from smdcli.solvers.base import Tolerances
-from smdcli.solvers.compiled import Taylor, taylor_boundary, taylor_order
+from smdcli.solvers.taylor_series import Taylor, taylor_boundary, taylor_order
 
 TIGHT = Tolerances(rtol=1e-13, atol=1e-16)
 
@@ -310,12 +310,12 @@ def test_the_extremes_found_as_the_rows_are_written_are_the_arrays_own(scene):
 
 def whole_and_chunked(model, grid, tol, monkeypatch, cores):
     """A Taylor run written whole (its rows zeroed by the kernel), and one zeroed ahead a chunk at a time
-    (compiled.zeroed_ahead, as for an output larger than the caches) with this many cores."""
+    (taylor_series.zeroed_ahead, as for an output larger than the caches) with this many cores."""
     from smdcli import interrupts
-    from smdcli.solvers import compiled
+    from smdcli.solvers import taylor_series
 
     whole = Taylor().solve(model, grid, tol)
-    monkeypatch.setattr(compiled, "ZEROED_IN_ONE_PASS", 0)
+    monkeypatch.setattr(taylor_series, "ZEROED_IN_ONE_PASS", 0)
     monkeypatch.setattr(interrupts, "_usable_cores", cores)
     return whole, Taylor().solve(model, grid, tol)
 

@@ -252,7 +252,7 @@ def info(path: str | Path, state_space: Path | None = None) -> dict:
         ratio0 = float(re.max() / re.min()) if len(re) else 1.0
         data["linearized_at_start"] = {"eigenvalues": [[float(e.real), float(e.imag)] for e in lam],
                                        "stiffness_ratio": ratio0}
-        from smdcli.solvers.compiled import Taylor
+        from smdcli.solvers.taylor_series import Taylor
 
         unsupported = Taylor.unsupported(model)
         explicit = "DOP853" if unsupported else "taylor"

@@ -15,7 +15,8 @@ from smdcli.solvers.base import Solver, Tolerances
 from smdcli.solvers.closed_form import ClosedForm
 from smdcli.solvers.exact import Exact, sparse_action
 from smdcli.solvers.modal import modal_applies
-from smdcli.solvers.compiled import DOP853, Radau, StiffnessDetected, Taylor, taylor_boundary, taylor_order
+from smdcli.solvers.compiled import DOP853, Radau, StiffnessDetected
+from smdcli.solvers.taylor_series import Taylor, taylor_boundary, taylor_order
 
 
 def _force_kinds(model: Model, exact: bool | None = None) -> str:

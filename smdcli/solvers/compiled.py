@@ -8,8 +8,6 @@ Must not import: sweep, io, plots, commands, cli.
 
 from __future__ import annotations
 
-import functools
-import math
 import sys
 import time
 from dataclasses import dataclass
@@ -248,122 +246,6 @@ class CompiledRK(Solver):
                                            bound)
         n = model.n
         return make_result(model, grid, out[:, :n], out[:, n:], stats, t_failed=t_failed)
-
-
-# A Taylor step's tolerance: this share of rtol and atol. The steps' errors add up over a run (the global error is
-# about 10 times the step's on the bundled nonlinear scenes), and the series' cost grows only with the log of its
-# accuracy: a ten-thousandth, not a hundredth, takes the 100-mass chain at rtol 1e-6 to 1.7e-12 of its peak (was
-# 6.5e-10) with order 17 and 122 steps instead of 13 and 144, about a tenth more time.
-TAYLOR_STEP_SHARE = 1e-4
-ZEROED_IN_ONE_PASS = 8 << 20  # bytes of a Taylor run's output past which zeroed_ahead zeroes it ahead of the kernel
-
-
-def taylor_order(rtol: float) -> int:
-    """The series' order for a run's tolerance: about 0.7 ln(1/(step's tolerance)), between 8 and 30 (an order costs
-    about a right-hand side; higher orders take longer steps)."""
-    return int(min(30, max(8, math.ceil(0.7 * math.log(1 / max(rtol * TAYLOR_STEP_SHARE, 1e-16))))))
-
-
-@functools.lru_cache(maxsize=None)
-def taylor_boundary(order: int) -> float:
-    """Where on the negative real axis the order's truncated exponential sum_k z^k / k! first reaches 1 in size."""
-    series = 1.0 / np.cumprod(np.concatenate([[1.0], np.arange(1.0, order + 1)]))  # 1 / k!, rising powers of z
-    crossings = [root.real for level in (1.0, -1.0) for root in np.roots((series - np.eye(order + 1)[0] * level)[::-1])
-                 if abs(root.imag) < 1e-9 and root.real < -1e-9]
-    return float(-max(crossings))
-
-
-class Taylor(Solver):
-    """Taylor series of the motion, its coefficients by recurrence, summed compiled (smdcli.kernels.taylor)."""
-
-    name = "taylor"
-    family = "compiled Taylor series"
-    description = ("Taylor series of order 8-30 (by the tolerance), coefficients by recurrence, compiled; for smooth "
-                   "scenes with cubic springs, quadratic dampers and forces other than chirps and expressions")
-    compiled = True
-    order = None
-    watch: Watch | None = None
-
-    def __init__(self, watch: bool = False):
-        self.watching = watch
-
-    @staticmethod
-    def unsupported(model: Model) -> str | None:
-        """What in the scene has no series here (nonsmooth elements, a chirp or expression force), or None."""
-        from smdcli.model.forcing import Chirp, ExpressionSignal
-
-        if model.nonsmooth:
-            return "nonsmooth elements"
-        for signal in model.signals:
-            if isinstance(signal, (Chirp, ExpressionSignal)):
-                return f"a {'chirp' if isinstance(signal, Chirp) else 'expression'} force"
-        return None
-
-    def refuse(self, model: Model) -> str | None:
-        """Scenes with something that has no series: say what, and what to use instead."""
-        what = self.unsupported(model)
-        return f"'taylor' has no series for {what}; try 'DOP853' or 'auto'" if what else None
-
-    def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
-        from smdcli.kernels import taylor
-        from smdcli.kernels.arrays import model_arrays
-
-        warm("taylor")
-        start = time.perf_counter()
-        n = model.n
-        y0 = np.concatenate([model.x0, model.v0]).astype(float)
-        bound = divergence_bound(model, grid)
-        max_steps = tol.max_steps or MAX_STEPS
-        order = taylor_order(tol.rtol)
-        boundary = taylor_boundary(order) if self.watching else 0.0
-        out = taylor.aligned_empty(3 * len(grid) * n).reshape((3, len(grid), n))  # x, v, a
-        out[0, 0], out[1, 0] = model.x0, model.v0  # and a's row 0, the kernel
-        arrays = model_arrays(model)
-        counts, floats, run = np.zeros(5, dtype=np.int64), np.zeros(taylor.FLOATS), taylor.start_run(arrays, y0, order)
-        arguments = (arrays, np.asarray(grid, dtype=float), cuts(model, grid, tol.breakpoints),
-                     float(tol.rtol) * TAYLOR_STEP_SHARE, float(tol.atol) * TAYLOR_STEP_SHARE, int(max_steps),
-                     float(bound), float(boundary), out)
-        # the kernel writes zeros where the motion has not reached, unless out is larger than the caches: then its
-        # zeros are written in one pass a chunk, ahead of it (the 1,000-mass chain's 24 MB: 0.6 ms, where its rows'
-        # own zeros took 1.5 ms)
-        if out.nbytes > ZEROED_IN_ONE_PASS:
-            status = zeroed_ahead(out, lambda ready: taylor.integrate(*arguments, True, ready, run, counts, floats))
-        else:
-            status = taylor.integrate(*arguments, False, len(grid), run, counts, floats)
-        stats, t_failed = explicit_outcome(self, status, counts, floats, time.perf_counter() - start, tol, max_steps,
-                                           bound)
-        x, v, (x_low, x_high, v_low, v_high) = out[0], out[1], floats[taylor.EXTREMES:taylor.FLOATS].tolist()
-        found = ((x, (x_low, x_high)), (v, (v_low, v_high))) if status == taylor.OK else ()
-        return make_result(model, grid, x, v, stats, t_failed=t_failed, acceleration=out[2],
-                           found_extremes=found)
-
-
-def zeroed_ahead(out: np.ndarray, integrate) -> int:
-    """integrate(rows_ready) over out's rows 1.. (its second axis; row 0 is the caller's and the kernel's) zeroed ahead
-    of it a chunk at a time: the first here, the others on a pool thread (interrupts.alongside) while the kernel sums
-    into the rows before them, so that a large out's zeros take the second core's time (the 1,000-mass chain's 24 MB:
-    0.6 ms of its 2.6). The kernel stops with NEED_ROWS before rows not yet zeroed and goes on in the next call; the
-    status, with NaN from where a failed run stopped to the end."""
-    from smdcli.interrupts import alongside
-    from smdcli.kernels.taylor import NEED_ROWS, OK, STIFF
-
-    rows = out.shape[1]
-    ends = sorted({min(max(2, rows // share), rows) for share in (8, 4, 2, 1)})
-    out[:, 1:ends[0]] = 0.0
-
-    def work(wait):
-        for i, ready in enumerate(ends):
-            if i:
-                wait(i - 1)
-            status = integrate(ready)
-            if status != NEED_ROWS:
-                break
-        return status, ready
-
-    status, ready = alongside([functools.partial(out[:, a:b].fill, 0.0) for a, b in zip(ends, ends[1:])], work)
-    if status not in (OK, STIFF):  # the kernel wrote NaN up to the rows it had
-        out[:, ready:] = np.nan
-    return status
 
 
 def _compiled(name: str, method: int, order: int, boundary: float, text: str):

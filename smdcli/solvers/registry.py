@@ -27,10 +27,11 @@ def _solvers() -> dict[str, type[Solver]]:
     from smdcli.solvers.exact import Exact
     from smdcli.solvers.sparse_newmark import SparseNewmark
     from smdcli.solvers.fixed_step import HHT, RK4, CentralDifference, Euler, GeneralizedAlpha, Newmark
-    from smdcli.solvers.compiled import (BDF, DOP853, RK23, RK45, Radau, Taylor, ode15s, ode23, ode23s, ode23t, ode23tb,
+    from smdcli.solvers.compiled import (BDF, DOP853, RK23, RK45, Radau, ode15s, ode23, ode23s, ode23t, ode23tb,
                                          ode45)
     from smdcli.solvers.ivp import (LSODA, Ode113, ScipyBDF, ScipyDOP853, ScipyOde23s, ScipyOde23t, ScipyOde23tb,
                                     ScipyRadau, ScipyRK23, ScipyRK45)
+    from smdcli.solvers.taylor_series import Taylor
 
     classes = (Auto, ClosedForm, Exact, RK45, RK23, DOP853, Taylor, Radau, BDF, LSODA, ode45, ode23, Ode113, ode15s,
                ode23s, ode23t, ode23tb, Newmark, SparseNewmark, HHT, GeneralizedAlpha, CentralDifference, Euler, RK4,
