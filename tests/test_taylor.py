@@ -343,7 +343,7 @@ def test_a_run_zeroed_ahead_that_fails_is_nan_from_where_it_stopped_to_the_end(c
     whole, chunked = whole_and_chunked(model, grid, Tolerances(rtol=1e-8, atol=1e-14, max_steps=4), monkeypatch, cores)
     assert not whole.success and not chunked.success and whole.t_failed == chunked.t_failed < grid[-1]
     stopped = np.isnan(whole.displacement).all(axis=1)
-    assert 1 < np.argmax(stopped) < len(grid) // 8 and stopped[np.argmax(stopped):].all()  # within the first chunk
+    assert 1 < np.argmax(stopped) < len(grid) // 8 and stopped[np.argmax(stopped):].all()  # early: most chunks after
     for quantity in ("displacement", "velocity", "acceleration"):
         np.testing.assert_array_equal(getattr(whole, quantity), getattr(chunked, quantity), quantity)
 

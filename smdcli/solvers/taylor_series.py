@@ -98,8 +98,7 @@ class Taylor(Solver):
             arguments = (arrays, np.asarray(grid, dtype=float), cuts(model, grid, tol.breakpoints),
                          float(tol.rtol) * TAYLOR_STEP_SHARE, float(tol.atol) * TAYLOR_STEP_SHARE, int(max_steps),
                          float(bound), float(boundary), out)
-            status = run_zeroed(lambda zeroed, ready: taylor.integrate(*arguments, zeroed, min(ready, len(grid)), run,
-                                                                       counts, floats))
+            status = run_zeroed(lambda zeroed, ready: taylor.integrate(*arguments, zeroed, ready, run, counts, floats))
         stats, t_failed = explicit_outcome(self, status, counts, floats, time.perf_counter() - start, tol, max_steps,
                                            bound)
         x, v, (x_low, x_high, v_low, v_high) = out[0], out[1], floats[taylor.EXTREMES:taylor.FLOATS].tolist()
