@@ -126,7 +126,9 @@ class CompiledModes:
                     skip_guard = g
         # on through the force discontinuities (a restart each, in the kernel) up to the next jump of the ground
         last = min(segment + 1, len(cuts) - 1)
-        while last + 1 < len(cuts) and cuts[last][1] is None:
+        # where something is held, back at each discontinuity: a force's jump may pass a stuck contact's breakaway
+        # or pull a stop away, and the modes are decided there (EventDriver.cross_break)
+        while last + 1 < len(cuts) and cuts[last][1] is None and mode.hold is None:
             last += 1
         times = np.array([c[0] for c in cuts[segment:last + 1]] or [t, t], dtype=float)
         spacing = driver.held_spacing(mode)

@@ -68,7 +68,9 @@ def consistent(scene: Scene, states: list[State], z: np.ndarray, t: float, on_ev
                     changed = True
             elif table == "friction" and state.mode in (SLIP_PLUS, SLIP_MINUS):
                 sign = 1.0 if state.mode == SLIP_PLUS else -1.0
-                if sign * rate[e] < -tolerance and e not in stopping:  # reversed by a jump of the velocities
+                # reversed by a jump of the velocities; a contact that has just broken away has no speed but its
+                # rounding (the rate a stuck contact kept, which may read -1e-19 where nothing has moved yet)
+                if sign * rate[e] < -tolerance and e not in stopping and e not in breaking:
                     states[e] = State(SLIP_MINUS if sign > 0 else SLIP_PLUS)
                     on_event(e, "slip")
                     changed = True

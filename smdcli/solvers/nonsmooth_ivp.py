@@ -119,9 +119,9 @@ class EventDriver(PiecewiseRun):
                 segment += 1
             if segment + 1 < len(cuts) and t == cuts[segment + 1][0]:
                 jump = cuts[segment + 1][1]
-                if jump is not None:
-                    scene.now = t
-                    states, y = self.cross_break(states, y, t, jump)
+                scene.now = t
+                scene.force = self.force_on(cuts, segment + 1)  # right limits: the modes are decided after the jump
+                states, y = self.cross_break(states, y, t, jump)
                 if k < len(grid) and grid[k] == t:
                     outputs.store(k, t, y, states)
                     k += 1

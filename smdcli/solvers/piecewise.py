@@ -112,7 +112,7 @@ class PiecewiseRun(Crossings):
             if h_sub == h_out:  # whole output steps: as many as no event interrupts, at once
                 batch = self.batch(flow, mode, states, z, t, k, breaks, b_next, h_out, outputs)
                 if batch is not None:
-                    z, t, k = batch
+                    states, z, t, k = batch
                     continue
             lands = target - t <= h_sub * (1 + 1e-9)
             step = target - t if lands else h_sub
@@ -177,6 +177,7 @@ class PiecewiseRun(Crossings):
         seeds = [(lo, hi, signal.exo_states(ahead[:count])) for lo, hi, signal, _ in self.scene.blocks] if reseed \
             else []
         clear, done = count, 0  # steps before the first that a guard may end; steps taken
+        jumped_to = set()  # steps whose start a force's jump put past a guard's level (a stuck contact's breakaway)
         while done < clear:  # in chunks, so that an event near the start wastes little
             chunk = range(done, min(done + CHUNK, count))
             for i in chunk:
@@ -190,7 +191,13 @@ class PiecewiseRun(Crossings):
                 g0, g1 = guard.direction * (starts @ row + const), guard.direction * (stops @ row + const)
                 slope0 = guard.direction * (starts @ rate_row + rate_const)
                 slope1 = guard.direction * (stops @ rate_row + rate_const)
-                below = g0 <= at_level(np.abs(starts) @ np.abs(row), const)  # or at it: it may come back
+                level = at_level(np.abs(starts) @ np.abs(row), const)
+                below = g0 <= level  # or at it: it may come back
+                for i in np.flatnonzero(g0 > level):  # a start past its level, reseeded there: a jump passed it
+                    if chunk.start + int(i) - 1 in reseed:
+                        clear = min(clear, chunk.start + int(i))
+                        jumped_to.add(chunk.start + int(i))
+                        break
                 turning = below & (g1 < 0) & (slope0 > 0) & (slope1 < 0)
                 for i in np.flatnonzero(below & ((g1 >= 0) | turning)):  # a turn whose top stays below: no event
                     if not turning[i] or self.turn_may_hold_event(flow, mode, guard, row, const, starts[i], h_out):
@@ -206,7 +213,11 @@ class PiecewiseRun(Crossings):
             cumulative[term] = self.cumulative[term] + steps
             self.cumulative[term] = float(cumulative[term][-1])
         outputs.store_many(k, Z[1:clear + 1], states, cumulative)
-        return Z[clear].copy(), float(grid[k + clear - 1]), k + clear
+        z, t = Z[clear].copy(), float(grid[k + clear - 1])
+        if clear in jumped_to:  # the modes after the jump, decided at it (cross_break does so off the batch)
+            states = self.settle(states, z, t)
+            z = self.project(states, z)
+        return states, z, t, k + clear
 
     def land(self, states, z, t, k, target, break_time, breaks, b_next, outputs):
         """At a target: a break crossed (right limits), an output point stored."""
@@ -226,7 +237,11 @@ class PiecewiseRun(Crossings):
     def settle(self, states, z: np.ndarray, t: float, stopping: tuple[int, ...] = (),
                breaking: tuple[int, ...] = ()):
         """The consistent modes at (t, z), events recorded."""
-        self.v_scale = max(self.v_scale, float(np.abs(z[self.n:2 * self.n]).max(initial=0.0)))
+        # the run's speeds, or where nothing has moved yet, what its accelerations give in an output step: a rate
+        # of 1e-19 m/s left by rounding on a contact at rest is no motion
+        span = float(self.grid[-1] - self.grid[0]) / max(self.N - 1, 1)
+        self.v_scale = max(self.v_scale, float(np.abs(z[self.n:2 * self.n]).max(initial=0.0)),
+                           float(self.scene.acceleration_size(states, z).max(initial=0.0)) * span)
         return consistent(self.scene, states, z, t, lambda e, kind: self.record(t, e, kind), stopping,
                           self.v_scale, breaking)
 
@@ -313,6 +328,11 @@ class PiecewiseRun(Crossings):
         """At a break: the generators reseeded (a force's jump), or the state jumped (the ground's)."""
         z = z.copy()
         self.scene.reseed(z, t)
+        if jump is None and any(el.law.piece(s).held for el, s in zip(self.scene.elements, states)):
+            # a force's jump may pass a stuck contact's breakaway or pull a held stop away: its guard is not
+            # crossed along a flow but jumped over here
+            states = self.settle(states, z, t)
+            z = self.project(states, z)
         if jump is not None:  # the wall ends of the elements to ground jump: the ground does that work
             dx, dv = jump
             before = sum(self.stored(states, z))
