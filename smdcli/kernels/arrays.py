@@ -122,7 +122,8 @@ def _force_row(signal: Signal) -> tuple[int, list[float], list[float], list[int]
     if isinstance(signal, Chirp):
         return CHIRP, [signal.amplitude, signal.f0, signal.rate, signal.phase], [], []
     if isinstance(signal, Table):
-        return (TABLE_PREVIOUS if signal.previous else TABLE_LINEAR), [], [*signal.t, *signal.v], []
+        times, values = signal.kernel_knots()
+        return (TABLE_PREVIOUS if signal.previous else TABLE_LINEAR), [], [*times, *values], []
     if isinstance(signal, ExpressionSignal):
         codes, constants, depth = signal.expression.program()
         return EXPRESSION, [float(depth)], constants, codes

@@ -42,16 +42,17 @@ def _search(times, t, right):
 
 @kernel
 def _table(times, values, t, previous, left):
-    """A table force: first-order hold (numpy.interp, ends held) or previous value."""
+    """A table force: first-order hold (numpy.interp, ends held) or previous value. A last time given twice is a jump
+    there (a record that ends: Table.kernel_knots), its left limit the first copy's value."""
     count = len(times)
     if previous:
         i = _search(times, t, not left) - 1
         return values[max(i, 0)]
     if t <= times[0]:
         return values[0]
-    if t >= times[count - 1]:
+    if t > times[count - 1] or (t == times[count - 1] and not left):
         return values[count - 1]
-    i = _search(times, t, True) - 1
+    i = _search(times, t, not left) - 1
     s = (t - times[i]) / (times[i + 1] - times[i])
     return values[i] + s * (values[i + 1] - values[i])
 

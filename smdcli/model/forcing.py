@@ -251,12 +251,14 @@ class Chirp(Signal):
 
 
 class Table(Signal):
-    """Tabulated force: linear interpolation (first-order hold) or previous value; ends held."""
+    """Tabulated force: linear interpolation (first-order hold) or previous value; the first value held before the
+    table, the last held after it, or, `ended`, zero from the last sample on (a record that is over)."""
 
-    def __init__(self, times, values, interpolation: str):
+    def __init__(self, times, values, interpolation: str, ended: bool = False):
         self.t = np.asarray(times, dtype=float)
         self.v = np.asarray(values, dtype=float)
         self.previous = interpolation == "previous"
+        self.ended = ended
         slopes = np.diff(self.v) / np.diff(self.t) if len(self.t) > 1 else np.empty(0)
         self.slopes = np.zeros_like(slopes) if self.previous else slopes
 
@@ -264,14 +266,24 @@ class Table(Signal):
         t = np.asarray(t, dtype=float)
         if self.previous:
             idx = np.searchsorted(self.t, t, side="right") - 1
-            return self.v[np.clip(idx, 0, None)]
-        return np.interp(t, self.t, self.v)
+            held = self.v[np.clip(idx, 0, None)]
+        else:
+            held = np.interp(t, self.t, self.v)
+        return np.where(t >= self.t[-1], 0.0, held) if self.ended else held
 
     def value_left(self, t):
+        t = np.asarray(t, dtype=float)
         if not self.previous:
-            return self.value(t)
-        idx = np.searchsorted(self.t, np.asarray(t, dtype=float), side="left") - 1
-        return self.v[np.clip(idx, 0, None)]
+            held = np.interp(t, self.t, self.v)
+        else:
+            idx = np.searchsorted(self.t, t, side="left") - 1
+            held = self.v[np.clip(idx, 0, None)]
+        return np.where(t > self.t[-1], 0.0, held) if self.ended else held
+
+    @property
+    def end(self) -> float:
+        """The last sample's time."""
+        return float(self.t[-1])
 
     def breakpoints(self, t0, t1):
         return self.t[(self.t > t0) & (self.t < t1)]
@@ -284,6 +296,13 @@ class Table(Signal):
         i = int(np.searchsorted(self.t, t, side="right")) - 1
         slope = self.slopes[i] if 0 <= i < len(self.slopes) else 0.0
         return np.array([float(self.value(t)), slope])
+
+    def kernel_knots(self) -> tuple[np.ndarray, np.ndarray]:
+        """(times, values) as the compiled kernels read them (ends held): an ended table's last sample doubled,
+        its second copy zero (the kernels take the left limit at the first copy)."""
+        if not self.ended:
+            return self.t, self.v
+        return np.append(self.t, self.t[-1]), np.append(self.v, 0.0)
 
     def exo_states(self, t: np.ndarray) -> np.ndarray:
         """exo_state at each of the times t, (len(t), 2)."""

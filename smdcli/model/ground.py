@@ -88,6 +88,8 @@ def _ground_motion(spec: GroundMotionSpec, start: float, end: float) -> GroundMo
         given = ExpressionSignal(text)
     jumps: dict[float, list[float]] = {}
     if spec.quantity == "acceleration":
+        if isinstance(given, Table) and not spec.hold:  # a record is over at its last sample
+            given = Table(given.t, given.v, "previous" if given.previous else "linear", ended=True)
         velocity, acceleration, u0, v0 = None, given, 0.0, 0.0
     elif spec.quantity == "velocity":
         velocity = given

@@ -106,7 +106,8 @@ def _read_shape(t: _Table, index: int, on: str, others: tuple[str, ...]) -> Forc
 
 
 PROCESSING_KEYS = ("baseline", "filter", "filter_order")  # a recorded acceleration's processing (smd record's)
-GROUND_KEYS = ("quantity", "units", "scale", "shift") + PROCESSING_KEYS + tuple(k for k in _ANY_FORCE_KEYS if k != "on")
+GROUND_KEYS = ("quantity", "units", "scale", "shift", "hold") + PROCESSING_KEYS + tuple(k for k in _ANY_FORCE_KEYS
+                                                                                    if k != "on")
 
 
 def _read_ground_motion(t: _Table) -> GroundMotionSpec:
@@ -115,8 +116,12 @@ def _read_ground_motion(t: _Table) -> GroundMotionSpec:
         raise t.missing("quantity", "displacement, velocity or acceleration")
     quantity = t.string("quantity", choices=GROUND_QUANTITIES)
     allowed = GROUND_UNITS[quantity]
-    units = t.string("units", next(u for u in allowed if u != "g"), choices=tuple(allowed))
+    units = t.string("units", next(u for u in allowed if u != "g"), choices=tuple(allowed), suggest=False)
     table = t.data.get("type") == "table"
+    if t.has("hold") and not (table and quantity == "acceleration"):
+        raise t.fail("hold", 'only a recorded ground acceleration (quantity = "acceleration", type = "table") ends '
+                             "at its last sample; hold keeps its last value instead")
+    hold = t.boolean("hold", False)
     for key in ("scale", "shift"):
         if t.has(key) and not table:
             raise t.fail(key, 'only a table ground motion has scale and shift (type = "table"); '
@@ -133,7 +138,7 @@ def _read_ground_motion(t: _Table) -> GroundMotionSpec:
         raise t.fail("filter_order", "expected it with filter = [LOW, HIGH]")
     if order > 10:
         raise t.fail("filter_order", f"expected a Butterworth order from 1 to 10, found {order}")
-    shape = _read_shape(t, 0, GROUND, ("quantity", "units", "scale", "shift") + PROCESSING_KEYS)
+    shape = _read_shape(t, 0, GROUND, ("quantity", "units", "scale", "shift", "hold") + PROCESSING_KEYS)
     factor = allowed[units]
     if shape.type == "table":
         shape = replace(shape, values=tuple((v * scale + shift) * factor for v in shape.values))
@@ -150,7 +155,7 @@ def _read_ground_motion(t: _Table) -> GroundMotionSpec:
     elif not math.isfinite(shape.amplitude):
         raise t.fail("amplitude", f"the amplitude in {si_units} overflows double precision once converted; "
                                   "expected a finite value")
-    return GroundMotionSpec(quantity=quantity, shape=shape, units=units)
+    return GroundMotionSpec(quantity=quantity, shape=shape, units=units, hold=hold)
 
 
 def _processed(t: _Table, shape: ForceSpec, baseline: str, band, order: int) -> ForceSpec:

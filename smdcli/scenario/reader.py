@@ -118,6 +118,15 @@ class _Table:
             raise self.fail(key, f"expected a number >= {minimum:g}, found {value:g}")
         return value
 
+    def boolean(self, key: str, default: bool) -> bool:
+        """true or false."""
+        if not self.has(key):
+            return default
+        value = self.raw(key)
+        if not isinstance(value, bool):
+            raise self.fail(key, f"expected true or false, found {_kind(value)}")
+        return value
+
     def integer(self, key: str, default: Any = ..., *, minimum: int = 0) -> int:
         """A whole number >= minimum."""
         if not self._given(key, default, "a whole number"):
@@ -131,15 +140,17 @@ class _Table:
             raise self.fail(key, f"expected a whole number <= {MAX_INTEGER:.0e}, found {_short(value)}")
         return value
 
-    def string(self, key: str, default: Any = ..., *, choices: tuple[str, ...] | None = None) -> str:
-        """A string, optionally one of `choices` (control characters were refused for the whole document)."""
+    def string(self, key: str, default: Any = ..., *, choices: tuple[str, ...] | None = None,
+               suggest: bool = True) -> str:
+        """A string, optionally one of `choices` (control characters were refused for the whole document); a near
+        spelling suggested unless `suggest` is off (units: a near spelling is another magnitude)."""
         if not self._given(key, default, "a string"):
             return default
         value = self.raw(key)
         if not isinstance(value, str):
             raise self.fail(key, f"expected a string, found {_kind(value)}")
         if choices is not None and value not in choices:
-            hint = difflib.get_close_matches(value, choices, n=1)
+            hint = difflib.get_close_matches(value, choices, n=1) if suggest else None
             extra = f" (did you mean {hint[0]!r}?)" if hint else ""
             raise self.fail(key, f"expected one of {', '.join(choices)}, found {value!r}{extra}")
         return value

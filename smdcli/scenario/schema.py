@@ -39,7 +39,7 @@ SPECIAL = {
     "omega": {"anyOf": [NUMBER, NUMBERS]}, "modal": {"anyOf": [NUMBER, NUMBERS]},
     "units": {"enum": sorted({u for units in GROUND_UNITS.values() for u in units} | {"g"})},
     "dof": STRING, "baseline": {"enum": ["none", "linear", "quadratic"]}, "filter": {**NUMBERS, "minItems": 2, "maxItems": 2},
-    "filter_order": INTEGER,
+    "filter_order": INTEGER, "hold": BOOLEAN,
 }
 
 

@@ -103,8 +103,12 @@ class ForceSpec:
 GROUND_QUANTITIES = ("displacement", "velocity", "acceleration")
 STANDARD_GRAVITY = 9.80665  # m/s^2 per g
 # The units each ground-motion quantity may be given in, and their size in SI.
-GROUND_UNITS = {"displacement": {"m": 1.0}, "velocity": {"m/s": 1.0},
-                "acceleration": {"g": STANDARD_GRAVITY, "m/s^2": 1.0}}
+# Each is a known scaling of SI, accepted and converted: never read as a near spelling of another magnitude (cm/s^2
+# is not "did you mean m/s^2?", a 100x error); gal (Gal) is cm/s^2, as seismological records use it.
+GROUND_UNITS = {"displacement": {"m": 1.0, "cm": 0.01, "mm": 1e-3, "in": 0.0254, "ft": 0.3048},
+                "velocity": {"m/s": 1.0, "cm/s": 0.01, "mm/s": 1e-3, "in/s": 0.0254, "ft/s": 0.3048},
+                "acceleration": {"g": STANDARD_GRAVITY, "m/s^2": 1.0, "cm/s^2": 0.01, "mm/s^2": 1e-3, "gal": 0.01,
+                                 "Gal": 0.01, "in/s^2": 0.0254, "ft/s^2": 0.3048}}
 
 
 @dataclass(frozen=True)
@@ -117,6 +121,7 @@ class GroundMotionSpec:
     quantity: str  # displacement | velocity | acceleration
     shape: ForceSpec
     units: str
+    hold: bool = False  # a recorded acceleration held at its last value past its end, not ended there
 
 
 @dataclass(frozen=True)

@@ -109,3 +109,17 @@ def drift_note(model: Model, history: GroundHistory) -> str | None:
     if model.ground is None or not model.ground.record:
         return None
     return velocity_drift("ground_motion", history.velocity, history.displacement)
+
+
+def record_end_note(model: Model, grid: np.ndarray) -> str | None:
+    """A warning where a record ends before the run does: what the ground does after it, and the other choice."""
+    g = model.ground
+    if g is None or not g.record or not len(grid) or g.given.end >= float(grid[-1]):
+        return None
+    end, last = g.given.end, float(g.given.v[-1])
+    if g.given.ended:
+        return (f"warning: ground_motion: the record ends at t = {end:g} s, before the run's end at "
+                f"{float(grid[-1]):g} s: zero ground acceleration from then on (its last sample {last:.4g} m/s^2), the "
+                "ground moving on at the velocity it reached; hold = true in [ground_motion] holds the last value")
+    return (f"warning: ground_motion: the record ends at t = {end:g} s, before the run's end at {float(grid[-1]):g} s: "
+            f"its last value {last:.4g} m/s^2 held to the end (hold = true)")

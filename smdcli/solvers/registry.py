@@ -16,7 +16,7 @@ from smdcli.model import Model
 from smdcli.result import Result, all_finite, finite_peak
 from smdcli.solvers.base import Solver, Tolerances, stated_rounding, stated_tolerance
 from smdcli.solvers.catalog import check_method_name
-from smdcli.solvers.ground import across_jumps, drift_note, ground_history
+from smdcli.solvers.ground import across_jumps, drift_note, ground_history, record_end_note
 from smdcli.solvers.nonsmooth import nonsmooth_refusal, solve_nonsmooth
 
 
@@ -73,7 +73,7 @@ def solve(model: Model, grid: np.ndarray, method: str, tol: Tolerances, field: s
     if model.ground is not None:
         history = ground_history(model, grid, solve)
         result = result.changed(ground=history)
-        notes += tuple(note for note in (drift_note(model, history),) if note)
+        notes += tuple(note for note in (record_end_note(model, grid), drift_note(model, history)) if note)
     explicit = method not in ("auto", "closed_form", "exact") and not solver.implicit
     if explicit and model.is_linear and model.is_stiff:
         notes += (f"warning: this scene is stiff (stiffness ratio {model.stiffness_ratio:.3g}); "
