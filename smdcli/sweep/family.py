@@ -230,13 +230,36 @@ def _validated(doc: dict, sc: Scenario, what: str) -> Scenario:
     return member
 
 
-def _coefficients(model: Model) -> dict[str, np.ndarray]:
-    """The arrays a structural member differs in: matrices, initial state and nonlinear coefficients."""
+def _coefficients(model: Model, modal: bool = False) -> dict[str, np.ndarray]:
+    """The arrays a structural member differs in: matrices, initial state and nonlinear coefficients. C is the
+    elements' alone where [damping] is modal: that part is not affine in M and K (modal_damped adds it)."""
     arrays = {name: getattr(model, name) for name in ("M", "C", "K", "x0", "v0")}
+    if modal:
+        arrays["C"] = model.C - model.added_damping
     for name in ("cubic", "quadratic"):
         if getattr(model, name) is not None:
             arrays[f"{name}_coef"] = getattr(model, name).coef
     return arrays
+
+
+def _modal(sc: Scenario) -> bool:
+    """Whether [damping] is modal ratios: its C a function of the modes, not affine in M and K."""
+    return sc.damping is not None and bool(sc.damping.modal)
+
+
+def _modal_damped(sc: Scenario, base: Model, stacks: dict[str, np.ndarray]) -> None:
+    """Each member's modal damping from its own M and K (at rest), added to its elements' interpolated C: the
+    C of model.damping.added_damping, M Phi diag(2 zeta w) Phi^T M, for all members at once (M = L L^T, the modes
+    from the symmetric L^-1 K L^-T)."""
+    from smdcli.model.system import initial_stiffness
+
+    K = np.stack([initial_stiffness(k, base.nonsmooth) for k in stacks["K"]]) if base.nonsmooth else stacks["K"]
+    L = np.linalg.cholesky(stacks["M"])
+    inner = np.linalg.solve(L, np.swapaxes(np.linalg.solve(L, K), -1, -2))
+    squared, V = np.linalg.eigh(0.5 * (inner + np.swapaxes(inner, -1, -2)))
+    ratios = np.broadcast_to(np.asarray(sc.damping.modal, dtype=float), squared.shape)
+    left = L @ V  # M Phi with Phi = L^-T V mass-normalized
+    stacks["C"] += (left * (2 * ratios * np.sqrt(np.maximum(squared, 0.0)))[:, None, :]) @ np.swapaxes(left, -1, -2)
 
 
 def _stack(models: list[Model]) -> dict[str, np.ndarray]:
@@ -308,14 +331,17 @@ def build_family(sc: Scenario, spec: SweepSpec) -> Family:
     for pick in np.ndindex(*(2,) * len(low)):
         corner = np.where(np.array(pick) == 1, high, low)
         corners[pick] = build(member(corner)).dense()
-    origin = _coefficients(corners[(0,) * len(low)])
+    modal = _modal(sc)
+    origin = _coefficients(corners[(0,) * len(low)], modal)
     stacks = {name: np.broadcast_to(value, (len(combos),) + value.shape).copy() for name, value in origin.items()}
     for i in range(len(low)):
         if high[i] == low[i]:
             continue
-        far = _coefficients(corners[tuple(1 if j == i else 0 for j in range(len(low)))])
+        far = _coefficients(corners[tuple(1 if j == i else 0 for j in range(len(low)))], modal)
         weight = (combos[:, i] - low[i]) / (high[i] - low[i])
         for name in stacks:
             delta = far[name] - origin[name]
             stacks[name] += weight.reshape((-1,) + (1,) * delta.ndim) * delta
+    if modal:
+        _modal_damped(sc, base, stacks)
     return Family(sc, spec, labels, combos, shape, base, **stacks)
