@@ -200,6 +200,15 @@ def _read_system(t: _Table) -> MatrixSystem:
 DAMPING_KEYS = ("alpha", "beta", "zeta", "omega", "modal")
 
 
+def _check_ratio(t: _Table, key: str, ratio: float, which: str) -> None:
+    """A damping ratio of at most 1: above it every such mode is overdamped, and a ratio written as a percentage
+    (modal = 5 for 5 %) is the usual cause."""
+    if ratio > 1.0:
+        hint = f"; did you mean {ratio / 100:g} ({ratio:g} %)?" if ratio <= 100 else ""
+        raise t.fail(key, f"expected a damping ratio from 0 to 1 (a fraction of critical; above 1 every such mode is "
+                          f"overdamped), found {which}{ratio:g}{hint}")
+
+
 def _read_damping(t: _Table, n: int) -> DampingSpec:
     """[damping]: alpha and/or beta, or zeta with omega = [w1, w2] (rad/s), or modal (one ratio or one per mode)."""
     given = [key for key in DAMPING_KEYS if t.has(key)]
@@ -216,6 +225,8 @@ def _read_damping(t: _Table, n: int) -> DampingSpec:
             ratios = t.numbers("modal", length=n, minimum=0.0)
         else:
             ratios = (t.number("modal", minimum=0.0),)
+        for i, ratio in enumerate(ratios):
+            _check_ratio(t, "modal", ratio, f"modal[{i}] = " if isinstance(raw, list) else "")
         t.finish(DAMPING_KEYS)
         return DampingSpec(modal=tuple(ratios), given="modal")
     if "zeta" in given or "omega" in given:
@@ -224,6 +235,7 @@ def _read_damping(t: _Table, n: int) -> DampingSpec:
                 raise t.fail(key, "required with " + ("omega" if key == "zeta" else "zeta") + " (Rayleigh damping "
                                   "through a damping ratio at two frequencies)")
         zeta = t.number("zeta", minimum=0.0)
+        _check_ratio(t, "zeta", zeta, "")
         w1, w2 = t.numbers("omega", length=2)
         if not (w1 > 0 and w2 > 0 and w1 != w2):
             raise t.fail("omega", f"expected two distinct positive frequencies in rad/s, found [{w1!r}, {w2!r}]")
