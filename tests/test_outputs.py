@@ -294,9 +294,16 @@ def test_the_api_tour_example_runs(tmp_path):
     here = os.getcwd()
     os.chdir(tmp_path)
     try:
-        runpy.run_path(str(ROOT / "examples" / "api_tour.py"), run_name="__main__")
+        tour = runpy.run_path(str(ROOT / "examples" / "api_tour.py"), run_name="__main__")
     finally:
         os.chdir(here)
+    # what the tour prints is what the API gives: the linear scene exact, its energy closed to rounding, the
+    # tighter integrator within its tolerance of it, and a file written whole
+    assert tour["result"].stats.method == "exact"
+    assert tour["energy"].max_relative_residual <= 1e-10
+    assert 0 < tour["error"] <= 1e-6
+    assert set(tour["data"]) >= {"time", "displacement", "velocity", "acceleration"}
+    assert tour["path"].name == "two_dof_forced.h5"
 
 
 # ------------------------------------------------------------------------------------------------ state space

@@ -28,14 +28,24 @@ SETTINGS = settings(max_examples=int(__import__("os").environ.get("SMD_HYPOTHESI
 
 
 def load_fully(text: str) -> None:
-    """What simulate does before solving: parse, assemble, make the grid."""
+    """What simulate does before solving: parse, assemble, make the grid. A refusal is one line naming the file; a
+    scene that loads is one the solvers can take: an increasing finite grid, finite matrices, M symmetric and
+    positive definite."""
+    import numpy as np
+
     try:
         sc = scenario.parse(text, "random.toml")
         model = build(sc)
         grid = time_grid(sc.time)
-    except ScenarioError:
+    except ScenarioError as exc:
+        line = str(exc)
+        assert line.startswith("random.toml") and "\n" not in line, line
         return
-    assert len(grid) >= 2 and model.n >= 1
+    assert len(grid) >= 2 and np.isfinite(grid).all() and np.all(np.diff(grid) > 0)
+    dense = model.dense()
+    for matrix in (dense.M, dense.C, dense.K):
+        assert np.isfinite(matrix).all()
+    assert np.array_equal(dense.M, dense.M.T) and np.linalg.eigvalsh(dense.M).min() > 0
 
 
 def dumps(doc) -> str | None:

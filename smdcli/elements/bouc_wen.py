@@ -15,6 +15,8 @@ T = alpha k d + (1 - alpha) k z with dz/dt = A d' - beta |d'| |z|^(n-1) z - gamm
 hysteretic variable z as an internal state: integrators take it (the ODE family and the Newmark family, the
 latter by a trapezoidal update of z inside each step's Newton iteration: smdcli.kernels.return_mapping.z_step). The energy (1 - alpha) k z z' is
 stored, the rest of (1 - alpha) k z d' dissipated: hysteretic.
+
+Must not import: scenario, model, solvers, sweep, io, plots, commands, cli.
 """
 
 from __future__ import annotations

@@ -13,6 +13,8 @@ Modes: elastic (T = k (d - d_p)), plastic+ (T = fy, d_p = d - fy/k follows d), p
 the elastic tension reaches +-fy; unloading where d' turns back (then elastic with d_p frozen). The plastic work
 fy |d d_p| is the hysteretic energy. The return mapping of a step (return_map) is what the Newmark family uses,
 with its consistent tangent (k elastic, 0 plastic).
+
+Must not import: scenario, model, solvers, sweep, io, plots, commands, cli.
 """
 
 from __future__ import annotations

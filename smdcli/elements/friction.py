@@ -15,6 +15,8 @@ tension is whatever holds it there (the constraint's force, solved for with ever
 it slips when that would pass Fs. A slipping contact whose velocity reaches zero sticks if the force that
 holds it is at most Fs, else slides on the other way. Coulomb friction (no Stribeck, no regularization) is
 linear in each mode: scenes of it are solved exactly, event to event.
+
+Must not import: scenario, model, solvers, sweep, io, plots, commands, cli.
 """
 
 from __future__ import annotations

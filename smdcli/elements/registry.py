@@ -1,4 +1,7 @@
-"""Which class reads and runs each element law: by the [[spring]] law name, or by the table."""
+"""Which class reads and runs each element law: by the [[spring]] law name, or by the table.
+
+Must not import: scenario, model, solvers, sweep, io, plots, commands, cli.
+"""
 
 from __future__ import annotations
 

@@ -13,6 +13,8 @@ accumulates (a ball coming to rest: impacts whose flight times shrink by e each,
 they are, then persistent contact), the stop holds d at its limit, its tension whatever keeps it there, until
 that tension would pull (separation). Compliant: while d is past the limit, T = k (d - limit) + c d', the spring's
 energy is the contact term and the damper's loss the impact term. Both are linear between events.
+
+Must not import: scenario, model, solvers, sweep, io, plots, commands, cli.
 """
 
 from __future__ import annotations
