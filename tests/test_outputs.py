@@ -469,3 +469,44 @@ def test_a_large_model_keeps_its_modes_in_data_sets_not_attributes(tmp_path, cli
         assert all(np.size(value) <= 256 for value in modes.attrs.values())
         assert modes["natural_frequencies_rad_s"].shape == (n,) and modes["regimes"].shape == (n,)
         assert modes["regimes"][0].decode() == "undamped"
+
+
+@pytest.mark.parametrize("stem", ["friction_isolated_building", "elastoplastic_record", "bouncing_ball",
+                                  "vibro_impact_gap"])
+def test_export_holds_every_time_series_of_the_file_and_its_energy_balances(tmp_path, cli, stem):
+    """Every data set on the time axis (friction and stop forces, hysteretic, friction, impact and contact energy,
+    plastic deformation, the ground's motion) is a column equal to the file's, and the energy columns close the
+    balance the file states: input = the stored terms' change + every dissipated term + residual. The export used
+    to drop every nonsmooth data set, so its energy columns did not balance."""
+    assert cli("simulate", SCENARIOS / f"{stem}.toml", "-o", tmp_path, "--no-plots", "-q").exit_code == 0
+    h5 = tmp_path / f"{stem}.h5"
+    assert cli("export", h5).exit_code == 0
+    csv = tmp_path / f"{stem}.csv"
+    header = csv.read_text().splitlines()[1].split(",")
+    table = np.loadtxt(csv, delimiter=",", skiprows=2, ndmin=2)
+    exported = set()
+    with h5py.File(h5) as f:
+        steps = len(f["time"])
+
+        def check(path, obj):
+            if not isinstance(obj, h5py.Dataset) or path == "time" or obj.shape[:1] != (steps,) or \
+                    path.split("/")[0] in ("model", "events") or obj.dtype.kind != "f" or obj.size == 0:
+                return
+            from smdcli.commands.export import SERIES
+
+            name = next((n for n, p, _ in SERIES if p == path), path.replace("/", "."))
+            columns = [i for i, h in enumerate(header) if h == name or h.startswith(name + ".") and
+                       h.count(".") == name.count(".") + 1]
+            assert columns, f"{path} is not exported"
+            assert np.array_equal(table[:, columns], obj[()].reshape(steps, -1)), path
+            exported.add(path)
+
+        f.visititems(check)
+        terms = {name.split(".", 1)[1]: table[:, i] for i, name in enumerate(header) if name.startswith("energy.")}
+        stored = sum(terms.get(name, 0.0) for name in ("kinetic", "strain", "contact"))
+        lost = sum(terms.get(name, 0.0) for name in ("dissipated", "hysteretic", "friction", "impact"))
+        balance = stored - stored[0] + lost - terms["input"]
+        scale = max(np.abs(terms["input"]).max(), np.abs(stored).max())
+        assert np.abs(balance - terms["residual"]).max() <= 1e-12 * scale
+    assert any(p.startswith("energy/") and p.split("/")[1] not in ("kinetic", "strain", "dissipated", "input",
+                                                                     "residual") for p in exported)

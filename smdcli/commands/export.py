@@ -34,9 +34,34 @@ def _names(f, path: str) -> list[str]:
     return [v.decode() if isinstance(v, bytes) else str(v) for v in f[path][()]]
 
 
+def _time_series(f) -> dict[str, tuple[str, str | None]]:
+    """Every time series of a simulate file (a data set whose first axis is the time's, outside model/ and
+    events/): SERIES first, in its order, then the rest as the file holds them (friction and stop forces, the
+    hysteretic, friction, impact and contact energy, plastic deformation, the ground's motion...), each named by
+    its path with dots and its columns by the scale on its second axis."""
+    import h5py
+
+    present = {name: (path, labels) for name, path, labels in SERIES if path in f}
+    known = {path for path, _ in present.values()}
+    steps = len(f["time"])
+    found: list[str] = []
+
+    def visit(path, obj):
+        if isinstance(obj, h5py.Dataset) and path not in known and path != "time" and obj.ndim in (1, 2) \
+                and obj.shape[0] == steps and obj.dtype.kind == "f" and path.split("/")[0] not in ("model", "events"):
+            found.append(path)
+
+    f.visititems(visit)
+    for path in found:
+        scales = f[path].dims[1] if f[path].ndim == 2 else ()
+        labels = scales[0].name.lstrip("/") if len(scales) else None
+        present[path.replace("/", ".")] = (path, labels)
+    return present
+
+
 def _simulate_table(f, wanted: list[str] | None) -> tuple[list[str], list[str], list[np.ndarray]]:
     """Header, units and columns of a simulate file's time series."""
-    present = {name: (path, labels) for name, path, labels in SERIES if path in f}
+    present = _time_series(f)
     chosen = list(present) if wanted is None else _chosen(wanted, present)
     header, units, columns = ["time"], ["s"], [f["time"][()]]
     for name in chosen:
