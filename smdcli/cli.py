@@ -52,6 +52,8 @@ def simulate(
                                       "to OUT/<stem>_partial.h5, marked failed."),
     junit: Optional[Path] = typer.Option(None, "--junit", help="Write the scenarios' \\[\\[expect]] checks as a JUnit "
                                          "XML report, a test case per check."),
+    strict: bool = typer.Option(False, "--strict", help="Exit 1 where a run is suspect: a dissipated energy "
+                                "that decreases, a law's rule broken, an energy balance beyond its stated accuracy."),
 ):
     """Solve each scenario; write OUT/<stem>.h5 and OUT/<stem>_response.png, _phase.png, _energy.png."""
     from smdcli.commands.simulate import Options, failed_summary, format_summary
@@ -69,7 +71,8 @@ def simulate(
         if as_json:  # a script still gets its entry per file
             _print_json([failed_summary(path, _message(exc), code) for path in scenarios])
         raise typer.Exit(code)
-    options = Options(method=method, rtol=rtol, atol=atol, plots=not no_plots, save_partial=save_partial)
+    options = Options(method=method, rtol=rtol, atol=atol, plots=not no_plots, save_partial=save_partial,
+                      strict=strict)
     worst = 0
     summaries, suites = [], []
     with bar("simulating", len(scenarios), len(scenarios) > 1 and progress_wanted(quiet, as_json),

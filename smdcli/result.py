@@ -32,6 +32,8 @@ class SolverStats:
     # The largest error of the trajectories this run vouches for, relative to each quantity's peak: rounding
     # for exact methods, the tolerances for adaptive ones, the step's truncation for fixed-step ones.
     stated_accuracy: float = float("nan")
+    # Why the run's numbers break its own physics (analysis.guards), "; "-joined; "" where they hold
+    suspect: str = ""
 
     def as_attrs(self) -> dict:
         """Flat attributes for HDF5 and JSON; None becomes NaN (tolerances) or -1."""

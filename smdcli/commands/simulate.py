@@ -31,6 +31,7 @@ class Options:
     atol: float | None = None
     plots: bool = True
     save_partial: bool = False  # on a solver failure, write what was computed to <stem>_partial.h5
+    strict: bool = False  # a suspect run (its physics broken along the solution) exits 1
 
 
 @dataclass
@@ -42,6 +43,7 @@ class Run:
     result: Result
     outputs: list[Path] = field(default_factory=list)
     checks: tuple = ()  # the [[expect]] verdicts (commands.expect.Check)
+    strict: bool = False  # --strict: a suspect run exits 1
 
 
 def prepare(path: str | Path) -> tuple[Scenario, Model, np.ndarray]:
@@ -55,8 +57,15 @@ def solve_run(sc: Scenario, model: Model, grid: np.ndarray, options: Options = O
     result = solve_scenario(sc, model, grid, options.method, options.rtol, options.atol)
     if result.success:
         from smdcli.analysis.energy import with_physics
+        from smdcli.analysis.guards import suspicions
 
         result = with_physics(model, result)
+        reasons = suspicions(model, result)
+        if reasons:
+            from dataclasses import replace
+
+            result = result.changed(stats=replace(result.stats, suspect="; ".join(reasons)),
+                                    notes=(*result.notes, *(f"warning: suspect: {reason}" for reason in reasons)))
     return result.changed(origin=(sc, model))
 
 
@@ -69,7 +78,7 @@ def simulate(path: str | Path, out: str | Path, options: Options = Options()) ->
         note = ("this file's [sweep] table was not run: simulate solved the scene as written "
                 f"(its base member); `smd sweep {sc.path}` runs the family")
         result = result.changed(notes=(note, *result.notes))
-    run = Run(sc, model, result)
+    run = Run(sc, model, result, strict=options.strict)
     from smdcli.io.hdf5 import write_simulation
 
     if result.success and sc.expect:
@@ -109,9 +118,12 @@ def summary(run: Run) -> dict:
     """The facts a user wants after a run, as plain data (printed, or as JSON)."""
     s = run.result.stats
     failed = sum(not check.passed for check in run.checks)
+    suspect = bool(s.suspect)
     return {
         "scenario": run.scenario.path,
-        "status": "expect failed" if failed else "ok", "exit_code": 1 if failed else 0,
+        "status": "expect failed" if failed else "suspect" if suspect else "ok",
+        "exit_code": 1 if failed or (suspect and run.strict) else 0,
+        "suspect": [reason for reason in s.suspect.split("; ") if reason],
         "title": run.scenario.title,
         "method": s.method,
         "requested_method": s.requested_method,

@@ -133,3 +133,9 @@ class Law:
     def stored(self, state: State, d: float) -> tuple[str, float]:
         """(energy term, energy) this element stores: strain for springs, contact for compliant stops."""
         return "", 0.0
+
+    def excess(self, d, rate, tension):
+        """How far each sample (arrays d, d', T along a run) lies outside what the law allows, >= 0 where it does
+        (a stuck contact holding more than its breakaway, a yield surface passed, a rigid stop passed), with the
+        scale it is measured by and what the law says: (excess, scale, rule); None where the law bounds nothing."""
+        return None

@@ -92,6 +92,14 @@ class Elastoplastic(Law):
     def internal_values(self, state: State, d: float) -> tuple[float, ...]:
         return (self.plastic_deformation(state, d),)
 
+    def excess(self, d, rate, tension):
+        """Its force, less the linear part b k d of a bilinear spring, never passes the yield force of its core."""
+        import numpy as np
+
+        core = self.core
+        return (np.abs(tension - self.linear_stiffness * d) - core.fy, core.fy,
+                f"its yield surface (|T - b k d| <= {core.fy:g} N) is never passed")
+
     def dissipation(self, state: State, d: float, rate: float, tension: float) -> tuple[str, float]:
         core = self.core
         return "hysteretic", (core.fy * abs(rate) if state.mode != ELASTIC else 0.0)

@@ -116,6 +116,15 @@ class Friction(Law):
             return State(PLUS if tension > 0 else MINUS)
         return State(STICK)  # "stick": a candidate; the scene's resolution decides (see solvers.decisions)
 
+    def excess(self, d, rate, tension):
+        """Its force never passes its breakaway (or, regularized, its kinetic force), less the viscous part."""
+        import numpy as np
+
+        bound = self.force if self.regularization is not None else self.static
+        return (np.abs(tension) - self.viscous * np.abs(rate) - bound, bound,
+                f"its force stays within {'the kinetic' if self.regularization else 'its static'} force "
+                f"{bound:g} N")
+
     def dissipation(self, state: State, d: float, rate: float, tension: float) -> tuple[str, float]:
         return "friction", (tension * rate if state.mode != STICK else 0.0)
 

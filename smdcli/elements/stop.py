@@ -102,6 +102,20 @@ class Stop(Law):
             return State(AT_MIN if self.nearest(d) == self.min else AT_MAX)
         return State(FREE)  # an impact with e > 0: free again, moving away
 
+    def excess(self, d, rate, tension):
+        """A rigid stop is never passed: d within [min, max] (a compliant one is, by its penetration)."""
+        import numpy as np
+
+        if not self.rigid:
+            return None
+        over = np.full(np.shape(d), -np.inf)
+        if self.max is not None:
+            over = np.maximum(over, d - self.max)
+        if self.min is not None:
+            over = np.maximum(over, self.min - d)
+        limits = [abs(v) for v in (self.min, self.max) if v is not None]
+        return over, max(max(limits), float(np.max(np.abs(d), initial=0.0))), "a rigid stop is never passed"
+
     def dissipation(self, state: State, d: float, rate: float, tension: float) -> tuple[str, float]:
         if state.mode == FREE or self.rigid:
             return "", 0.0

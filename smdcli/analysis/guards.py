@@ -1,0 +1,64 @@
+"""The run's own physics, checked along its solution: every dissipated energy (damping, hysteretic, friction,
+impact) never decreases, every law keeps its own rules (a stuck contact within its breakaway force, a yield
+surface never passed, a rigid stop never passed: Law.excess), and the energy balance closes within what the run
+states. A run that breaks one is 'suspect': the reasons go to the summary, the notes and the file.
+
+Must not import: sweep, io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from smdcli.model import Model
+from smdcli.result import Result
+
+SLACK = 10.0  # times the run's stated accuracy: what a check allows beyond it
+FLOOR = 1e-12  # relative: rounding of the sums the checks read
+DISSIPATED = ("dissipated", "hysteretic", "friction", "impact")
+
+
+def allowance(result: Result) -> float:
+    """The relative departure a check allows: SLACK times the run's stated accuracy, at least rounding."""
+    stated = result.stats.stated_accuracy
+    return max(SLACK * stated, FLOOR) if math.isfinite(stated) else 1e-6
+
+
+def suspicions(model: Model, result: Result) -> tuple[str, ...]:
+    """Why the run's numbers break its own physics, one line a reason; () where they hold."""
+    if not result.success or result.energy is None:
+        return ()
+    allowed = allowance(result)
+    reasons = []
+    energy, time = result.energy, result.time
+    largest = energy.largest
+    for name in DISSIPATED:
+        series = getattr(energy, name)
+        if series is None or not len(series):
+            continue
+        fall = np.maximum.accumulate(series) - series
+        worst = int(np.argmax(fall))
+        if fall[worst] > allowed * largest:
+            reasons.append(f"the {'damping' if name == 'dissipated' else name} energy decreases by "
+                           f"{fall[worst]:.3g} J by t = {time[worst]:.6g} s ({fall[worst] / largest:.2g} of the "
+                           "largest energy): an element creates energy")
+    if energy.max_relative_residual > max(allowed, 1e-10):
+        reasons.append(f"the energy balance is off by {energy.max_relative_residual:.2g} of the largest energy, "
+                       f"beyond the {allowed:.2g} the run states")
+    if result.nonsmooth is not None:
+        history = result.nonsmooth
+        for element in model.nonsmooth:
+            if element.path not in history.paths:
+                continue
+            d = result.displacement @ element.row
+            rate = result.velocity @ element.row + element.belt
+            found = element.law.excess(d, rate, history.tension[:, history.paths.index(element.path)])
+            if found is None:
+                continue
+            over, scale, rule = found
+            worst = int(np.argmax(over))
+            if over[worst] > allowed * scale:
+                reasons.append(f"{element.path}: {rule}, but is past it by {over[worst]:.3g} at t = {time[worst]:.6g} s")
+    return tuple(reasons)
