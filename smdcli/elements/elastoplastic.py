@@ -19,6 +19,8 @@ Must not import: scenario, model, solvers, sweep, io, plots, commands, cli.
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -50,7 +52,12 @@ class Elastoplastic(Law):
         return self
 
     def start(self, d: float, rate: float) -> State:
-        state = State(ELASTIC, {"dp": 0.0, "work": 0.0})
+        """Deformed past its yield at the start (an initial displacement beyond fy / k), it yielded on the way there:
+        it starts on its yield surface with that plastic deformation, never holding more than its yield force."""
+        core = self.core
+        trial = core.k * d
+        dp = d - math.copysign(core.fy / core.k, trial) if abs(trial) > core.fy else 0.0
+        state = State(ELASTIC, {"dp": dp, "work": 0.0})
         return self._settle(state, d, rate)
 
     def _settle(self, state: State, d: float, rate: float) -> State:

@@ -26,7 +26,7 @@ from smdcli.model.ground import MAX_JUMPS, GroundMotion, ground_motion, state_ju
 from smdcli.model.checks import check_finite, check_forces, check_matrices_finite
 from smdcli.model.mass import mass_solve
 from smdcli.model.modes import RIGID_BODY, Modes, modal_eigenvalues, regime, signed
-from smdcli.model.nonsmooth import NonsmoothElement, initial_stiffness, nonsmooth_elements
+from smdcli.model.nonsmooth import NonsmoothElement, check_initial_state, initial_stiffness, nonsmooth_elements
 from smdcli.model.sparse import assembled, cheapest, gershgorin_omega, is_sparse_scene, lowest_modes, rows_times
 from smdcli.scenario import Scenario
 
@@ -398,6 +398,7 @@ def build(scenario: Scenario) -> Model:
                    ((range(n), range(n), masses), stamps["spring"], stamps["damper"]))
         cubic, quadratic = incidence(cubic_rows), incidence(quad_rows)
     nonsmooth = nonsmooth_elements(scenario, dofs)
+    check_initial_state(scenario, nonsmooth, x0, v0)
     check_finite(scenario, dofs, K=K, C=C)
     check_matrices_finite(M, C, initial_stiffness(K, nonsmooth), scenario, dofs)  # before [damping]'s modes
     with np.errstate(all="ignore"):

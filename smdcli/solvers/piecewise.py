@@ -217,6 +217,7 @@ class PiecewiseRun(Crossings):
         if clear in jumped_to:  # the modes after the jump, decided at it (cross_break does so off the batch)
             states = self.settle(states, z, t)
             z = self.project(states, z)
+            outputs.store(k + clear - 1, z, states)  # the point at the jump: its right limits, in the new modes
         return states, z, t, k + clear
 
     def land(self, states, z, t, k, target, break_time, breaks, b_next, outputs):

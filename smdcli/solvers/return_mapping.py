@@ -44,7 +44,7 @@ def refusal(method: str, model: Model) -> str | None:
 
 def spring_table(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The hysteretic springs as the compiled kernel takes them: rows R (d = R x), law codes, parameters and the
-    initial committed states (plastic deformation 0, Bouc-Wen's z0)."""
+    initial committed states (plastic deformation as the law starts it, Bouc-Wen's z0)."""
     from smdcli.kernels import return_mapping as kernel
 
     elements = model.nonsmooth
@@ -60,6 +60,7 @@ def spring_table(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.n
             committed[i] = law.z0
         else:
             par[i, :2] = (law.core.k, law.core.fy)
+            committed[i] = law.start(float(e.row @ model.x0), 0.0).internal["dp"]  # past yield at the start: on it
     return R, laws, par, committed
 
 
