@@ -35,7 +35,8 @@ def spectrum(
     law: Optional[str] = typer.Option(None, "--law", help="Inelastic spectra: elastoplastic (default) or bilinear."),
     hardening: Optional[float] = typer.Option(None, "--hardening", help="Bilinear: post-yield stiffness ratio b, "
                                               "0 <= b < 1."),
-    units: str = typer.Option("g", "--units", help="The record's units: g or m/s^2."),
+    units: str = typer.Option("g", "--units", help="The record's units: g, m/s^2, cm/s^2, mm/s^2, gal (cm/s^2), "
+                              "in/s^2 or ft/s^2."),
     scale: float = typer.Option(1.0, "--scale", help="Multiply the record's values by this."),
     shift: float = typer.Option(0.0, "--shift", help="Then add this (in the record's units)."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
@@ -66,7 +67,8 @@ def record(
     band: Optional[str] = typer.Option(None, "--filter", help="LOW,HIGH in Hz: zero-phase Butterworth band-pass "
                                        "(0 for an open end: 0,25 low-pass, 0.1,0 high-pass)."),
     order: int = typer.Option(4, "--order", help="The Butterworth filter's order (applied forwards and backwards)."),
-    units: str = typer.Option("g", "--units", help="The record's units: g or m/s^2."),
+    units: str = typer.Option("g", "--units", help="The record's units: g, m/s^2, cm/s^2, mm/s^2, gal (cm/s^2), "
+                              "in/s^2 or ft/s^2."),
     scale: float = typer.Option(1.0, "--scale", help="Multiply the record's values by this."),
     shift: float = typer.Option(0.0, "--shift", help="Then add this (in the record's units)."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),

@@ -120,7 +120,7 @@ def test_a_record_whose_velocity_drifts_gets_a_warning(cli, tmp_path):
     ("0,1\n0.02,2\n0.01,3\n", (), "strictly increasing times"),
     ("0,1\n0.01,nan\n0.02,3\n", (), "expected finite numbers"),
     ("0,1\n0.01\n0.02,3\n", (), "expected two columns"),
-    ("0,1\n0.01,2\n0.02,3\n", ("--units", "ft/s^2"), "units: expected one of 'g', 'm/s^2'"),
+    ("0,1\n0.01,2\n0.02,3\n", ("--units", "furlong/s^2"), "units: expected one of 'g', 'm/s^2', 'cm/s^2', 'mm/s^2', 'gal'"),
     ("0,1\n0.01,2\n0.03,3\n", (), "expected uniformly sampled times"),
     ("0,1\n0.01,2\n0.02,3\n", ("--periods", "-1,2"), "--periods: expected positive periods"),
     ("0,1\n0.01,2\n0.02,3\n", ("--damping", "0.05,-0.1"), "--damping: expected damping ratios >= 0"),

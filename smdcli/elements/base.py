@@ -134,6 +134,16 @@ class Law:
         """(energy term, energy) this element stores: strain for springs, contact for compliant stops."""
         return "", 0.0
 
+    @property
+    def dissipation_never_decreases(self) -> bool:
+        """Whether the energy this law books as dissipated can only grow (its power never negative): what the
+        run's check of its physics may hold it to."""
+        return True
+
+    def warning(self) -> str | None:
+        """A line on parameters that are accepted but ask for care (a hysteresis that is not bounded), or None."""
+        return None
+
     def excess(self, d, rate, tension):
         """How far each sample (arrays d, d', T along a run) lies outside what the law allows, >= 0 where it does
         (a stuck contact holding more than its breakaway, a yield surface passed, a rigid stop passed), with the

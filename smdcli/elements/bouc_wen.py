@@ -60,10 +60,32 @@ class BoucWen(Law):
             raise t.fail("n", f"expected n >= 1 (the sharpness of the yield), found {n:g}")
         beta, gamma = t.number("beta"), t.number("gamma")
         A = t.number("A", 1.0, positive=True)
-        if beta + gamma <= 0:
-            raise t.fail("beta", f"expected beta + gamma > 0 (z bounded by (A / (beta + gamma))^(1/n)), found "
-                                 f"beta = {beta:g}, gamma = {gamma:g}")
+        if beta - gamma < 0 and beta + gamma < 0:
+            raise t.fail("beta", f"expected beta + gamma > 0 or beta - gamma >= 0 (z grows without bound on loading "
+                                 f"and on unloading otherwise), found beta = {beta:g}, gamma = {gamma:g}")
         return cls(k=k, alpha=alpha, beta=beta, gamma=gamma, n=n, A=A, z0=t.number("z0", 0.0))
+
+    @property
+    def dissipation_never_decreases(self) -> bool:
+        """With (1 - alpha) k z^2 / 2 stored, the power booked as hysteretic is (1 - alpha) k |d'| |z|^(n+1)
+        (beta + gamma sign(d' z)): never negative only where beta >= |gamma|. Elsewhere (the Noel-Schoukens benchmark:
+        beta = 800, gamma = -1100) the law itself gives some back on loading; the balance still closes."""
+        return self.beta >= abs(self.gamma)
+
+    def warning(self) -> str | None:
+        """With beta + gamma <= 0 (the Noel-Schoukens benchmark's identified law, for one) z is not bounded: loading
+        on, it grows the faster the larger it is. The run stays bounded while the deformation stays below where
+        that growth takes over: (A / |beta + gamma|)^(1/n) / A, where the growth term equals A."""
+        c = self.beta + self.gamma
+        if c > 0:
+            return None
+        if c == 0:
+            return ("beta + gamma = 0: z grows in proportion to the deformation on loading (no yield: a linear "
+                    "spring of stiffness k beyond the linear part)")
+        scale = (self.A / -c) ** (1 / self.n) / self.A
+        return (f"beta + gamma = {c:g} < 0: z is not bounded; on loading it grows the faster the larger it is, "
+                f"taking over beyond a deformation of about {scale:.3g} m (z then {'e-folds' if self.n == 1 else 'doubles'} "
+                f"within about that much more): bounded only while the motion stays well below it")
 
     @property
     def linear_stiffness(self) -> float:

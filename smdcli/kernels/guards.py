@@ -38,6 +38,8 @@ def watch_scratch(m, size):
             np.zeros(1), np.zeros((1, size)))
 
 
+SKIP_EVERY_KINK = -2  # skip_guard: every guard crossing at skip_t is a kink just left (_fired_again)
+
 @no_alloc
 def interpolate(m, method, t_old, h, y_old, y_new, K, F, Q, times, k, j, out, mid, work, jwork, arg):
     """Rows k..j-1 of out at `times` from the step's interpolant."""
@@ -99,8 +101,10 @@ def _rounding(value, level):
 @no_alloc
 def _fired_again(g, root, skip_guard, skip_t):
     """Whether guard g's root is the event just taken (skip_guard at skip_t), read again on the far side of its
-    own rounding: within 16 ulps of its time."""
-    return g == skip_guard and root - skip_t <= 16 * np.spacing(max(abs(skip_t), 1e-300))
+    own rounding: within 16 ulps of its time. skip_guard = SKIP_EVERY_KINK: every guard is, there (smooth laws'
+    kinks left at one instant, several at once: a Bouc-Wen spring at rest, d' and z both 0)."""
+    return (g == skip_guard or skip_guard == SKIP_EVERY_KINK) and \
+        root - skip_t <= 16 * np.spacing(max(abs(skip_t), 1e-300))
 
 
 @no_alloc

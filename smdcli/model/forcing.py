@@ -252,7 +252,8 @@ class Chirp(Signal):
 
 class Table(Signal):
     """Tabulated force: linear interpolation (first-order hold) or previous value; the first value held before the
-    table, the last held after it, or, `ended`, zero from the last sample on (a record that is over)."""
+    table, the last held after it, or, `ended`, zero after the last sample (a record that is over: its last sample
+    is its value there, the jump to zero its right limit, as exo_state gives it)."""
 
     def __init__(self, times, values, interpolation: str, ended: bool = False):
         self.t = np.asarray(times, dtype=float)
@@ -269,7 +270,7 @@ class Table(Signal):
             held = self.v[np.clip(idx, 0, None)]
         else:
             held = np.interp(t, self.t, self.v)
-        return np.where(t >= self.t[-1], 0.0, held) if self.ended else held
+        return np.where(t > self.t[-1], 0.0, held) if self.ended else held
 
     def value_left(self, t):
         t = np.asarray(t, dtype=float)
@@ -293,6 +294,8 @@ class Table(Signal):
 
     def exo_state(self, t):
         # exo_states at one time, written for one: a third of its cost in the per-step loops that call it
+        if self.ended and t >= self.t[-1]:  # right limits: over
+            return np.zeros(2)
         i = int(np.searchsorted(self.t, t, side="right")) - 1
         slope = self.slopes[i] if 0 <= i < len(self.slopes) else 0.0
         return np.array([float(self.value(t)), slope])
@@ -308,7 +311,10 @@ class Table(Signal):
         """exo_state at each of the times t, (len(t), 2)."""
         i = np.searchsorted(self.t, t, side="right") - 1
         held = np.append(self.slopes, 0.0)  # before the first sample and past the last the value is held
-        return np.stack([self.value(t), held[np.where((i >= 0) & (i < len(self.slopes)), i, -1)]], axis=1)
+        states = np.stack([self.value(t), held[np.where((i >= 0) & (i < len(self.slopes)), i, -1)]], axis=1)
+        if self.ended:  # right limits: over from the last sample on
+            states[np.asarray(t) >= self.t[-1]] = 0.0
+        return states
 
 
 class ExpressionSignal(Signal):

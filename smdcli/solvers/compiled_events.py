@@ -118,12 +118,16 @@ class CompiledModes:
         arrays = self.modes.get(mode.key)
         if arrays is None:
             arrays = self.modes[mode.key] = mode_arrays(self.base, scene, mode, states)
+        from smdcli.kernels.guards import SKIP_EVERY_KINK
+
         skip_t, skip_guard = -np.inf, -1
         if driver.fired is not None:
             skip_t = driver.fired[0]
             for g, (e, guard, _, _) in enumerate(mode.guards):
                 if (e, guard) == driver.fired[1:]:
                     skip_guard = g
+            if driver.kinks_left == skip_t:
+                skip_guard = SKIP_EVERY_KINK
         # on through the force discontinuities (a restart each, in the kernel) up to the next jump of the ground
         last = min(segment + 1, len(cuts) - 1)
         # where something is held, back at each discontinuity: a force's jump may pass a stuck contact's breakaway

@@ -24,6 +24,7 @@ import time
 
 import numpy as np
 
+from smdcli.elements.base import KINK
 from smdcli.kernels.arrays import INTERIOR
 from smdcli.model import Model
 from smdcli.result import NonsmoothHistory, Result, SolverStats
@@ -68,6 +69,9 @@ class EventDriver(PiecewiseRun):
         self.counts = {"nfev": 0, "njev": 0, "nlu": 0, "steps_accepted": 0, "steps_rejected": -1}
         self.max_steps = tol.max_steps or (PYTHON_STEPS if self.kernel_method is None else MAX_STEPS)
         self.fired = None  # (time, element, guard) of the last event
+        # the time at which kinks of smooth laws fired one after another (a Bouc-Wen spring at rest: d' and z both 0,
+        # each kink left at once): every guard crossing there is one left, not an event (compiled_events.advance)
+        self.kinks_left = None
         self.fastest_force = None  # rad/s, once asked (held_spacing)
 
     def run(self):
@@ -101,6 +105,9 @@ class EventDriver(PiecewiseRun):
                 break
             if event is not None:
                 t_event, element, guard = event
+                if guard.kind == KINK and self.fired is not None and self.fired[0] == t_event and \
+                        self.fired[2].kind == KINK:
+                    self.kinks_left = t_event  # a second kink at one instant: each only left there
                 self.fired = event
                 same = same + 1 if t_event == last else 0
                 last = t_event
@@ -239,8 +246,8 @@ class EventDriver(PiecewiseRun):
                 return self.guard_values(guards, states, t, dense(t))[j]
 
             def fired_again(root, e=e, guard=guard):  # the guard that just fired, read on the far side of its rounding
-                return self.fired is not None and self.fired[1:] == (e, guard) and \
-                    root - self.fired[0] <= 16 * np.spacing(max(abs(self.fired[0]), 1e-300))
+                return self.fired is not None and (self.fired[1:] == (e, guard) or self.kinks_left == self.fired[0]) \
+                    and root - self.fired[0] <= 16 * np.spacing(max(abs(self.fired[0]), 1e-300))
 
             root = None
             for i in range(len(times) - 1):

@@ -69,7 +69,8 @@ def solve(model: Model, grid: np.ndarray, method: str, tol: Tolerances, field: s
             result = across_jumps(lambda piece, times: solver.solve(piece, times, tol), model, grid)
     x_extremes = result.extremes_of("displacement")  # for both checks below
     result = _refuse_non_finite(result, x_extremes)
-    notes = result.notes
+    notes = result.notes + tuple(f"warning: {element.path}: {element.law.warning()}" for element in model.nonsmooth
+                                 if element.law.warning())
     if model.ground is not None:
         history = ground_history(model, grid, solve)
         result = result.changed(ground=history)
