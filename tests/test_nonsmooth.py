@@ -719,12 +719,17 @@ def test_compare_solvers_on_the_bouncing_ball_charts_which_methods_fail_and_wher
     assert time.perf_counter() - start < 120
     data = json.loads(result.stdout)
     assert data["reference"].startswith("exact (event to event")
-    verdicts = ("missed", "chattered", "energy", "wrong law", "diverged", "failed", "skipped")
+    verdicts = ("missed", "chattered", "energy", "wrong law", "diverged", "failed", "skipped",
+                "converges to another law", "cannot represent: stop[0]")
     for run in data["runs"]:
         if run["success"]:  # a run called good is good: events counted and the error at its tolerance
-            assert run["error"] <= (0.05 if "/" in run["method"] else max(1e3 * run["rtol"], 1e-9)), run
+            assert run["error"] <= max(1e3 * run["rtol"], 1e-9), run
         else:
             assert run["message"].startswith(verdicts), run
+    penalty = [run for run in data["runs"] if run["method"].endswith("/penalty") and run["adaptive"]]
+    # penalty contact sits 1.7e-2 off the exact ball at every tolerance: never "ok"
+    assert penalty and all(not run["success"] and run["message"].startswith("converges to another law (the penalty "
+                                                                             "law)") for run in penalty), penalty
     assert any(not run["success"] for run in data["runs"])  # the chart has something to show
     assert {p.name for p in tmp_path.iterdir()} >= {"bouncing_ball_failures.png", "bouncing_ball_work_precision.png"}
 

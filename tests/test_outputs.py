@@ -510,3 +510,16 @@ def test_export_holds_every_time_series_of_the_file_and_its_energy_balances(tmp_
         assert np.abs(balance - terms["residual"]).max() <= 1e-12 * scale
     assert any(p.startswith("energy/") and p.split("/")[1] not in ("kinetic", "strain", "dissipated", "input",
                                                                      "residual") for p in exported)
+
+
+@pytest.mark.parametrize("stem", ["shear_frame_bilinear", "elastoplastic_record", "bouc_wen_multisine"])
+def test_model_K_of_a_hysteretic_scene_is_the_scene_at_rest_as_its_modes_are(tmp_path, cli, stem):
+    """/model/K held only the stamped linear part (a bilinear spring's b k, nothing of an elastoplastic one) while
+    smd info and /model/modes use the elastic k: its eigenvalues now are the modes the file lists."""
+    assert cli("simulate", SCENARIOS / f"{stem}.toml", "-o", tmp_path, "--no-plots", "-q").exit_code == 0
+    with h5py.File(tmp_path / f"{stem}.h5") as f:
+        K, M = f["model/K"][()], f["model/M"][()]
+        listed = f["model/modes/natural_frequencies_rad_s"][()]
+        assert "at rest" in f["model/K"].attrs["description"]
+    omegas = np.sort(np.sqrt(np.linalg.eigvals(np.linalg.solve(M, K)).real))
+    np.testing.assert_allclose(omegas, np.sort(listed), rtol=1e-10)

@@ -415,3 +415,25 @@ def test_bad_sweep_input_is_exit_2_and_writes_nothing(cli, tmp_path, args, messa
     if message:
         assert message in result.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_a_sweep_of_another_kind_into_the_same_folder_says_what_it_replaced_and_leaves_no_stale_plot(tmp_path, cli):
+    """A parameter sweep written where a frequency response was replaced its file silently and left the
+    magnitude-and-phase plot of a response the folder no longer held."""
+    import json
+
+    scene = SCENARIOS / "one_dof_harmonic.toml"
+    assert cli("sweep", scene, "--frequency", "0:10:0.5", "-o", tmp_path, "-q").exit_code == 0
+    assert (tmp_path / "one_dof_harmonic_sweep_frequency.png").exists()
+    ran = cli("sweep", scene, "--param", "spring[0].k", "--values", "20,30", "-o", tmp_path, "--json")
+    assert ran.exit_code == 0, ran.output
+    replaced = json.loads(ran.stdout)["replaced"]
+    assert "held a frequency sweep, now this parameter sweep" in replaced
+    assert "one_dof_harmonic_sweep_frequency.png" in replaced
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["one_dof_harmonic_sweep.h5",
+                                                          "one_dof_harmonic_sweep_displacement.png",
+                                                          "one_dof_harmonic_sweep_metric.png"]
+    with h5py.File(tmp_path / "one_dof_harmonic_sweep.h5") as f:
+        assert f.attrs["sweep_kind"] == "parameter"
+    again = cli("sweep", scene, "--param", "spring[0].k", "--values", "20,40", "-o", tmp_path, "--json")
+    assert "replaced" not in json.loads(again.stdout)  # the same kind again: nothing to say

@@ -49,7 +49,16 @@ def refusals(model: Model, candidates, methods) -> dict[str, str]:
     if not model.nonsmooth:
         return {}
     why = {m: nonsmooth_refusal(m, model) for m in candidates if m not in methods}
-    return {m: reason for m, reason in why.items() if reason}
+    return {m: cannot_represent(reason) for m, reason in why.items() if reason}
+
+
+def cannot_represent(refusal: str) -> str:
+    """A method's refusal of a scene as compare-solvers words it: 'cannot represent: <element>: why', naming the
+    element the refusal names (or 'refused: why' where it names none)."""
+    import re
+
+    found = re.search(r"\b(?:spring|damper|friction|stop)\[\d+\]", refusal)
+    return f"cannot represent: {found.group(0)}: {refusal}" if found else f"refused: {refusal}"
 
 
 # A run is a failure, whatever its integrator says, where its answer is not one: an energy balance off by more

@@ -4,6 +4,8 @@ Must not import: cli."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import math
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -43,6 +45,7 @@ class SweepRun:
     resumed_from: int = 0  # members a partial file already held
     restarted: str = ""  # why --resume could not read the partial file back and started over
     outputs: list = field(default_factory=list)
+    replaced: str = ""  # what an earlier <stem>_sweep.h5 of another kind held, and the stale plots removed
 
 
 def run_and_write(path, out, cli: dict[str, Any], workers: int | None = None, plots: bool = True,
@@ -72,6 +75,7 @@ def run_and_write(path, out, cli: dict[str, Any], workers: int | None = None, pl
         check_address(scheduler)  # before the output folder is made: an address smd cannot use writes nothing
     out_dir = output_folder(out)
     run = SweepRun(family)
+    earlier = _earlier_kind(out_dir / f"{sc.stem}_sweep.h5")
     with together():  # the files appear together, or none of them
         if spec.frequency is not None:
             _frequency_response(run, out_dir, workers, progress)
@@ -79,7 +83,37 @@ def run_and_write(path, out, cli: dict[str, Any], workers: int | None = None, pl
             _time_family(run, out_dir, spec.method, keep, resume, workers, progress, scheduler)
         if plots:
             _plots(run, out_dir, spec)
+    _remove_stale_plots(run, out_dir, sc.stem, earlier)
     return run
+
+
+def _earlier_kind(h5: Path) -> str | None:
+    """What sweep an existing <stem>_sweep.h5 holds (its sweep_kind: frequency, parameter, ...), or None."""
+    import h5py
+
+    if not h5.exists():
+        return None
+    try:
+        with h5py.File(h5, "r") as f:
+            return str(f.attrs.get("sweep_kind", "sweep"))
+    except OSError:
+        return "sweep"
+
+
+def _remove_stale_plots(run: SweepRun, out_dir: Path, stem: str, earlier: str | None) -> None:
+    """The plots of the sweep whose <stem>_sweep.h5 this run replaced, not written again by it, are stale: removed,
+    and the summary says what was replaced (a parameter sweep into a folder holding a frequency response left its
+    magnitude-and-phase plot beside a file that no longer held it)."""
+    if earlier is None:
+        return
+    written = {Path(p).name for p in run.outputs}
+    stale = sorted(p for p in out_dir.glob(f"{stem}_sweep_*.png") if p.name not in written)
+    for path in stale:
+        path.unlink(missing_ok=True)
+    kind = "frequency" if run.response is not None else run.family.spec.kind
+    if stale or earlier != kind:
+        run.replaced = (f"{out_dir / f'{stem}_sweep.h5'} held a {earlier} sweep, now this {kind} sweep"
+                        + (f"; its plots removed: {', '.join(p.name for p in stale)}" if stale else ""))
 
 
 def _frequency_response(run: SweepRun, out_dir, workers, progress: bool) -> None:
@@ -324,6 +358,8 @@ def summary(run: SweepRun) -> dict:
     data: dict[str, Any] = {"scenario": family.scenario.path, "kind": family.spec.kind, "members": len(family),
                             "parameters": list(family.spec.parameters), "outputs": [str(p) for p in run.outputs],
                             "how": run.how, "wall_time_s": run.wall_time_s}
+    if run.replaced:
+        data["replaced"] = run.replaced
     if run.response is None:
         data["keep"] = run.keep
         if run.resumed_from:
@@ -360,6 +396,8 @@ def format_summary(data: dict) -> str:
         lines.append(f"  resumed: {data['resumed_from']} members were already done")
     if data.get("restarted"):
         lines.append(f"  started over: {data['restarted']}")
+    if data.get("replaced"):
+        lines.append(f"  replaced: {data['replaced']}")
     for failed in data.get("failed", []):
         lines.append(f"  failed: {failed}")
     if data.get("failed_count", 0) > len(data.get("failed", [])):

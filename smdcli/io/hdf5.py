@@ -14,6 +14,7 @@ from smdcli import __version__, provenance
 from smdcli.io.atomic import atomic_path
 from smdcli.model import Model
 from smdcli.model.accuracy import derived_accuracy, evaluation_accuracy, matrix_accuracy, modes_accuracy
+from smdcli.model.nonsmooth import initial_stiffness
 from smdcli.result import Result
 from smdcli.scenario import Scenario
 from smdcli.solvers.base import acceleration_accuracy
@@ -315,13 +316,20 @@ def write_matrices(group, model_or_family, dof, member=None) -> None:
     accuracy = matrix_accuracy(model_or_family if member is None else model_or_family.base)
     names = list(dof.asstr()[()])  # rows and columns need their own names: a dimension appears once per array
     rows, columns = axis(group, "dof_row", names), axis(group, "dof_col", names)
+    base = model_or_family if member is None else model_or_family.base
     for name, units in (("M", "kg"), ("C", "N s/m"), ("K", "N/m")):
         matrix = getattr(model_or_family, name)
+        if name == "K" and base.nonsmooth:  # the scene at rest, as info and /model/modes take it
+            matrix = base.initial_K if member is None else np.stack([initial_stiffness(k, base.nonsmooth)
+                                                                     for k in matrix])
         if isinstance(matrix, np.ndarray):
             ds = group.create_dataset(name, data=matrix)
         else:
             ds = _sparse_dataset(group, name, matrix)
         ds.attrs["units"] = units
+        if name == "K" and base.nonsmooth:
+            ds.attrs["description"] = ("at rest: every hysteretic spring at its elastic stiffness k (a bilinear "
+                                       "spring's b k after it yields is in /elements)")
         axes = (rows, columns) if member is None else (member, rows, columns)
         with_scales(ds, *axes)
         stated(ds, accuracy[name])

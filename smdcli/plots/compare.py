@@ -195,16 +195,18 @@ def stability_figure(comparison, title: str, limits: dict[str, float]):
 
 # What each verdict looks like on the failure map of a nonsmooth scene.
 VERDICTS = (("ok", "#4c9a5b"), ("missed", "#d62728"), ("chattered", "#ff7f0e"), ("energy", "#9467bd"),
-            ("wrong law", "#e377c2"), ("diverged", "#8c564b"), ("too many steps", "#bcbd22"), ("failed", "#7f7f7f"),
-            ("refused", "#e6e6e6"))
+            ("wrong law", "#e377c2"), ("another law", "#17becf"), ("diverged", "#8c564b"),
+            ("too many steps", "#bcbd22"), ("failed", "#7f7f7f"), ("cannot represent", "#e6e6e6"))
 
 
 def _verdict(run) -> str:
     if run.success:
         return "ok"
-    for word in ("missed", "chattered", "energy", "wrong law", "diverged", "refused"):
+    for word in ("missed", "chattered", "energy", "wrong law", "diverged", "cannot represent"):
         if run.message.startswith(word):
             return word
+    if run.message.startswith("converges to another law"):
+        return "another law"
     if run.message.startswith("skipped: needs") or "steps" in run.message:
         return "too many steps"
     return "failed"
@@ -232,9 +234,10 @@ def failure_map_figure(comparison, title: str):
             kind = _verdict(r)
             ax.add_patch(Rectangle((j, i), 1, 1, facecolor=colours[kind], edgecolor="white"))
             text = f"{r.error:.0e}\n{r.steps_accepted} st" if kind == "ok" else \
-                kind.replace("too many ", "too many\n") + (f"\n{r.error:.0e}" if kind == "wrong law" else "")
+                kind.replace("too many ", "too many\n").replace("cannot ", "cannot\n").replace("another ", "another\n") \
+                + (f"\n{r.error:.0e}" if kind in ("wrong law", "another law") else "")
             ax.text(j + 0.5, i + 0.5, text, ha="center", va="center", fontsize=6.5,
-                    color="white" if kind not in ("refused",) else "0.3")
+                    color="white" if kind not in ("cannot represent",) else "0.3")
     ax.set_xlim(0, len(settings))
     ax.set_ylim(len(methods), 0)
     ax.set_xticks([j + 0.5 for j in range(len(settings))])
@@ -248,10 +251,11 @@ def failure_map_figure(comparison, title: str):
     if comparison.refused:  # methods that cannot take the scene at all, grouped by why
         groups: dict[str, list[str]] = {}
         for method, reason in comparison.refused.items():
-            why = reason.split(";")[0].split(":")[0].removeprefix(repr(method)).strip()
-            groups.setdefault(why, []).append(method)
+            element, _, why = reason.removeprefix("cannot represent: ").partition(": ")
+            why = why.split(";")[0].split(":")[0].removeprefix(repr(method)).strip()
+            groups.setdefault(f"{why} ({element})", []).append(method)
         text = "; ".join(f"{', '.join(methods)} {why}" for why, methods in groups.items())
-        fig.text(0.02, 0.1 / height, _wrap(f"refused (exit 2, not run): {text}", int(width * 17)), fontsize=7,
+        fig.text(0.02, 0.1 / height, _wrap(f"cannot represent it (not run): {text}", int(width * 17)), fontsize=7,
                  va="bottom")
     events = len(comparison.reference.nonsmooth.events) if comparison.reference.nonsmooth is not None else 0
     fig.suptitle(f"{title}\nwhere each method fails, against the exact event-driven solution ({events} events); "

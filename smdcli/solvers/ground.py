@@ -102,13 +102,19 @@ def ground_history(model: Model, grid: np.ndarray, solve: Callable[..., Result])
 
 
 def drift_note(model: Model, history: GroundHistory) -> str | None:
-    """A warning where a record's integrated velocity or displacement ends far from rest (a baseline left
-    uncorrected)."""
+    """A warning where a ground acceleration's integrated velocity or displacement ends far from rest: a record's
+    baseline left uncorrected, or a shape given as an acceleration whose mean from rest is not zero (a sine from
+    rest has mean velocity a / omega: the ground walks away)."""
     from smdcli.scenario.records import velocity_drift
 
-    if model.ground is None or not model.ground.record:
+    if model.ground is None or model.ground.quantity != "acceleration":
         return None
-    return velocity_drift("ground_motion", history.velocity, history.displacement)
+    line = velocity_drift("ground_motion", history.velocity, history.displacement)
+    if line is None or model.ground.record:
+        return line
+    return (line.split(": a baseline")[0].replace("from the record", "from the ground acceleration") + f"; a {model.ground.kind} ground acceleration from rest has a mean "
+            "velocity, so the ground drifts: give it as a displacement (quantity = \"displacement\") if the ground "
+            "should oscillate in place")
 
 
 def record_end_note(model: Model, grid: np.ndarray) -> str | None:
