@@ -128,8 +128,10 @@ def test_a_large_model_is_summarized_on_the_terminal(cli, tmp_path):
     data = json.loads(cli("simulate", path, "-o", tmp_path, "--no-plots", "--json").stdout)
     assert len(data[0]["peak_displacement_m"]) == 100
     with h5py.File(tmp_path / "chain.h5") as f:
-        assert max(data[0]["peak_displacement_m"].values()) == pytest.approx(np.abs(f["displacement"][:]).max(),
-                                                                             rel=1e-15)
+        sampled = np.abs(f["displacement"][:]).max(axis=0)
+    located = np.array(list(data[0]["peak_displacement_m"].values()))
+    # located between samples (analysis.peaks): never below the samples, above them by the curvature's share
+    assert np.all(located >= sampled) and np.all(located <= sampled * (1 + 1e-3))
 
 
 def test_help_does_not_import_heavy_modules():

@@ -116,10 +116,15 @@ def response_figure(result: Result, title: str):
         ax.grid(True, alpha=0.4)
         if window is not None and name.endswith("acceleration"):
             _zoom_inset(ax, result, data, window, drawn)
+    legends = []
     if forced:
-        _legend(axes[0], shaded["force"])
-    _legend(axes[1 if forced or ground is not None else 0],  # the DOFs' legend once, with the first shading's colour
-            next((shaded[name] for name, _ in rows if name not in ("force", "ground") and shaded[name]), None))
+        legends.append(_legend(axes[0], shaded["force"]))
+    dof_axes = 1 if forced or ground is not None else 0
+    legends.append(_legend(axes[dof_axes], shaded[rows[dof_axes][0]]))  # the DOFs' legend once
+    for ax, (name, _) in zip(axes, rows):  # every other shaded panel says what its shading is, beside it
+        if shaded.get(name) and ax is not axes[dof_axes] and not (forced and ax is axes[0]):
+            legends.append(_legend(ax, shaded[name], lines=False))
+    _beside(fig, legends)
     if not (np.any(result.displacement) or np.any(result.velocity) or np.any(result.force)) and ground is None:
         axes[0].text(0.5, 0.5, "at rest for the whole run: zero initial conditions and no force\n(a [sweep] table's "
                      "initial conditions run with smd sweep)", transform=axes[0].transAxes, ha="center",
@@ -134,6 +139,11 @@ def _draw(ax, t: np.ndarray, y: np.ndarray, color, label: str, style: str = "-")
     """One series: its line, or for an oscillation too fast to draw, its range shaded and its running mean.
     True when shaded."""
     band = _band(t, y)
+    # the ripple: a bucket's range less what its running mean moves across it (a slow swing fills a bucket too)
+    ripple = None if band is None else band[2] - band[1] - np.abs(np.gradient(band[3]))
+    if ripple is not None and np.max(ripple) < 0.01 * max(float(np.ptp(y)), 1e-300):
+        ax.plot(band[0], band[3], ls=style, lw=1.1, color=color, label=label)  # a ripple thinner than the line
+        return False
     if band is None:
         ax.plot(*envelope(t, y), ls=style, lw=1.1, color=color, label=label)
         return False
@@ -142,15 +152,23 @@ def _draw(ax, t: np.ndarray, y: np.ndarray, color, label: str, style: str = "-")
     return True
 
 
-def _legend(ax, banded: str | None) -> None:
-    """The axes' legend, with what the shading means where a series was shaded (`banded`: its colour)."""
-    handles, labels = ax.get_legend_handles_labels()
+def _legend(ax, banded: str | None, lines: bool = True):
+    """The axes' legend beside it (inside, it hid the lines: the F3 step at the top of the force panel), with what
+    the shading means only where this panel's series was shaded (`banded`: its colour); `lines` off: that alone."""
+    handles, labels = ax.get_legend_handles_labels() if lines else ([], [])
     if banded:
         from matplotlib.patches import Patch
 
         handles.append(Patch(color=banded, alpha=0.22, lw=0))  # as _draw shades
-        labels.append("shaded: range of an oscillation too fast to draw (line: its running mean)")
-    ax.legend(handles, labels, loc="upper right", fontsize=8, framealpha=0.85)
+        labels.append("shaded: range of an\noscillation too fast\nto draw (line: its\nrunning mean)")
+    return ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+
+
+def _beside(fig, legends) -> None:
+    """The axes narrowed so that the widest legend beside them ends inside the figure."""
+    renderer = fig.canvas.get_renderer()
+    widest = max((legend.get_window_extent(renderer).width / fig.bbox.width for legend in legends), default=0.0)
+    fig.subplots_adjust(right=min(0.97, 0.98 - widest - 0.01))
 
 
 def _zoom_inset(ax, result: Result, data: np.ndarray, window: tuple[float, float], drawn: np.ndarray) -> None:
