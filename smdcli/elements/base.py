@@ -140,6 +140,11 @@ class Law:
         run's check of its physics may hold it to."""
         return True
 
+    def start_excess(self, d: float):
+        """How far a start at deformation d lies outside anything the law can be in (a rigid stop passed), as
+        excess gives it, or None: a spring deformed past yield starts on its surface, a contact stuck or slipping."""
+        return None
+
     def warning(self) -> str | None:
         """A line on parameters that are accepted but ask for care (a hysteresis that is not bounded), or None."""
         return None

@@ -102,6 +102,12 @@ class Stop(Law):
             return State(AT_MIN if self.nearest(d) == self.min else AT_MAX)
         return State(FREE)  # an impact with e > 0: free again, moving away
 
+    def start_excess(self, d: float):
+        """A rigid stop cannot start passed."""
+        import numpy as np
+
+        return self.excess(np.array([d]), np.zeros(1), np.zeros(1))
+
     def excess(self, d, rate, tension):
         """A rigid stop is never passed: d within [min, max] (a compliant one is, by its penetration)."""
         import numpy as np

@@ -66,15 +66,14 @@ def initial_stiffness(K: np.ndarray, elements: tuple[NonsmoothElement, ...]) -> 
     return K
 
 
-def check_initial_state(scenario: Scenario, elements: tuple[NonsmoothElement, ...], x0: np.ndarray,
-                        v0: np.ndarray) -> None:
-    """The initial state within every element's rule (Law.excess at rest, no force held): a mass that starts past a
-    rigid stop is an input error, not a run that passes through it."""
+def check_initial_state(scenario: Scenario, elements: tuple[NonsmoothElement, ...], x0: np.ndarray) -> None:
+    """The initial state within what every element can be in (Law.start_excess): a mass that starts past a rigid
+    stop is an input error, not a run that passes through it."""
     from smdcli.errors import ScenarioError
 
     for e in elements:
         d = float(e.row @ x0)
-        found = e.law.excess(np.array([d]), np.array([float(e.row @ v0) + e.belt]), np.zeros(1))
+        found = e.law.start_excess(d)
         if found is not None and found[0][0] > 1e-12 * max(found[1], 1e-300):
             raise ScenarioError(scenario.path, e.path, f"the initial state puts it {found[0][0]:.4g} past its limit "
                                 f"(d = {d:.6g} m; {found[2]}): expected x0 within its limits")

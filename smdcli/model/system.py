@@ -398,7 +398,7 @@ def build(scenario: Scenario) -> Model:
                    ((range(n), range(n), masses), stamps["spring"], stamps["damper"]))
         cubic, quadratic = incidence(cubic_rows), incidence(quad_rows)
     nonsmooth = nonsmooth_elements(scenario, dofs)
-    check_initial_state(scenario, nonsmooth, x0, v0)
+    check_initial_state(scenario, nonsmooth, x0)
     check_finite(scenario, dofs, K=K, C=C)
     check_matrices_finite(M, C, initial_stiffness(K, nonsmooth), scenario, dofs)  # before [damping]'s modes
     with np.errstate(all="ignore"):
