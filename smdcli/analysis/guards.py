@@ -46,6 +46,11 @@ def suspicions(model: Model, result: Result) -> tuple[str, ...]:
     """Why the run's numbers break its own physics, one line a reason; () where they hold."""
     if not result.success or result.energy is None:
         return ()
+    with np.errstate(all="ignore"):  # a scene at the edge of double precision: judged by the figures, not warned
+        return _suspicions(model, result)
+
+
+def _suspicions(model: Model, result: Result) -> tuple[str, ...]:
     allowed = allowance(result)
     reasons = []
     energy, time = result.energy, result.time
