@@ -24,7 +24,7 @@ from smdcli.model import Model
 from smdcli.progress import bar, silent
 from smdcli.result import Result
 from smdcli.scenario import Scenario
-from smdcli.solvers.base import Tolerances
+from smdcli.solvers.base import Tolerances, stated_tolerance
 from smdcli.commands.compare_nonsmooth import (NONSMOOTH_RTOLS, VARIANTS, cannot_represent, nonsmooth_defaults,
                                                refusals, run_energy, smoothed, split_variant, verdict)
 
@@ -237,7 +237,8 @@ def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], to
         growth = float(computed.max() / peak) if computed.size else math.nan
         error = float(np.abs(result.displacement - reference.displacement).max() / peak) if s.success else math.nan
         energy = run_energy(scene, result).max_relative_residual if s.success else math.nan
-        failure = verdict(result, error, energy, growth, reference, variant) if s.success else s.message
+        within = CONVERGENCE_SLACK * stated_tolerance(tol.rtol, tol.atol, peak) if adaptive else 0.0
+        failure = verdict(result, error, energy, growth, reference, variant, within) if s.success else s.message
         out.runs.append(Run(
             method=method, adaptive=adaptive, rtol=tol.rtol, atol=tol.atol, dt=tol.dt or math.nan,
             h_omega=(tol.dt * omega_max) if tol.dt else math.nan, error=error, energy_residual=energy, growth=growth,
@@ -257,7 +258,6 @@ def _judge_convergence(runs: list[Run], peak: float) -> None:
     and no nearer than at its loosest, converges to something else (a smoothed law, a missed event's branch): each
     of its runs is failed, saying so, never 'ok' (penalty contact on the bouncing ball sat at 1.7e-2 from rtol 1e-3
     to 1e-9)."""
-    from smdcli.solvers.base import stated_tolerance
 
     by_method: dict[str, list[int]] = {}
     for i, r in enumerate(runs):

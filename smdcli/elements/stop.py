@@ -9,8 +9,8 @@
 
 Rigid: at contact the relative velocity d' jumps to -e d', by an impulse along the element that conserves the
 momentum of the masses involved (the energy lost is the impact term). With e = 0, or once a sequence of impacts
-accumulates (a ball coming to rest: impacts whose flight times shrink by e each, summed as the geometric series
-they are, then persistent contact), the stop holds d at its limit, its tension whatever keeps it there, until
+accumulates (a ball coming to rest: its flights followed until those left rise together less than the rounding
+of the scene's length, then summed as the geometric series they are, and persistent contact), the stop holds d at its limit, its tension whatever keeps it there, until
 that tension would pull (separation). Compliant: while d is past the limit, T = k (d - limit) + c d', the spring's
 energy is the contact term and the damper's loss the impact term. Both are linear between events.
 

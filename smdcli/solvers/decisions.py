@@ -14,8 +14,6 @@ import numpy as np
 from smdcli.elements import State
 from smdcli.solvers.modes import TOUCH, Scene, at_level
 
-ACCUMULATION_RATIO = 1e-6  # successive flight times within this of e (relative): a geometric sequence
-ACCUMULATION_FLIGHT = 1e-10  # of the run: a flight this short is summed with the rest, not stepped
 MAX_IMPACTS_IN_A_SEQUENCE = 10_000
 
 
@@ -225,14 +223,16 @@ def touch(scene: Scene, states: list[State], z: np.ndarray, element: int, resolu
     return "graze" if (tension > 0 if at_min else tension < 0) else "rest"
 
 
-def unresolved(scene: Scene, states: list[State], z: np.ndarray, element: int) -> bool:
-    """Whether the rebound an impact leaves at element rises less than the rounding of its deformation before
-    the motion brings it back (a rebound of 1e-9 m/s against an acceleration of 18 m/s^2 rises 3e-20 m): a
-    flight no solver can see, so the stop holds from here on, as at the end of an accumulation."""
+def remaining_flights(scene: Scene, states: list[State], z: np.ndarray, element: int, e: float):
+    """The flights an impact at element leaves, if the motion brings it back: (their heights together, their times
+    together), each rebound rising against the pull the motion has now and coming back at e times its speed (the
+    geometric series a ball coming to rest obeys), or None where the rebound is not pulled back."""
     n, row = scene.n, scene.R[element]
     rebound = float(row @ z[n:2 * n]) + scene.belts[element]
     pull = float(row @ scene.evaluate(states, z)[3])
-    return rebound * pull < 0 and rebound * rebound <= 2 * abs(pull) * at_level(float(np.abs(row) @ np.abs(z[:n])), 0.0)
+    if rebound * pull >= 0 or e >= 1.0:
+        return None
+    return rebound * rebound / (2 * abs(pull)) / (1 - e * e), 2 * abs(rebound / pull) / (1 - e)
 
 
 def project(scene: Scene, states: list[State], z: np.ndarray, v_scale: float) -> np.ndarray:
@@ -264,16 +264,15 @@ def project(scene: Scene, states: list[State], z: np.ndarray, v_scale: float) ->
     return z
 
 
-def accumulation(history, e: float, span: float) -> float | None:
-    """When an accumulating sequence of impacts ends (its remaining flights summed), or None while it does not
-    accumulate yet: history holds the sequence's (time, speed), e is the restitution, span the run's length."""
-    if e >= 1.0 or len(history) < 3:
+def accumulation(remaining, length: float, t: float, span: float, impacts: int) -> float | None:
+    """When a sequence of impacts ends (persistent contact from then on), or None while its flights are still to be
+    followed: once the flights left (remaining_flights) rise together less than the rounding of the scene's length
+    scale, or take together less than the rounding of the time, they are summed, not stepped (a ball from 50 m,
+    e = 0.8, bounces 72 times before its flights rise less than 7e-13 m). A sequence of MAX_IMPACTS_IN_A_SEQUENCE
+    impacts ends too."""
+    if remaining is None:
         return None
-    (t0, _), (t1, _), (t2, _) = history[-3:]
-    last, before = t2 - t1, t1 - t0
-    geometric = len(history) >= 24 and abs(last - e * before) <= ACCUMULATION_RATIO * e * before
-    short = e * last < ACCUMULATION_FLIGHT * max(span, 1e-300)
-    if geometric or short or len(history) >= MAX_IMPACTS_IN_A_SEQUENCE:
-        return t2 + last * e / (1 - e)
-    return None
+    heights, duration = remaining
+    unseen = heights <= at_level(length, 0.0) or duration <= at_level(abs(t) + span, 0.0)
+    return t + duration if unseen or impacts >= MAX_IMPACTS_IN_A_SEQUENCE else None
 

@@ -11,11 +11,10 @@ Whole output steps are taken in batches until the first that may hold an event; 
 turns back is one only where its top reaches the level (a yield surface's every oscillation peak otherwise ended a
 batch: 450 batches instead of 137 for the 42 events of a 4,001-sample elastoplastic record, twice the time).
 
-A rigid stop's impacts that accumulate (a ball coming to rest) are ended by the rule a sequence of geometric
-flight times obeys: once successive flights shrink by the restitution (to 1e-6), or a flight would be shorter
-than 1e-10 of the run, the remaining flights sum to the last one times e / (1 - e); the stop then holds
-(persistent contact) from that accumulation time, recorded as "rest". A rebound that would rise less than the
-rounding of the stop's deformation ends the sequence there too (PiecewiseRun.unresolved).
+A rigid stop's impacts that accumulate (a ball coming to rest) are followed one by one while the flights left could
+be seen: once they rise together less than the rounding of the scene's length scale, or take less than the rounding
+of the time, they are summed as the geometric series they are (decisions.accumulation) and the stop holds
+(persistent contact) from that accumulation time, recorded as "rest".
 
 The energy balance is integrated on the same pieces (Gauss-Legendre, 8 nodes a substep, exact for the
 quadratic powers of a linear flow): dissipated by dampers, hysteretic (yielding), friction, impact (lost at
@@ -36,7 +35,7 @@ from smdcli.elements.base import EVENT_KINDS, KINK
 from smdcli.model import Model
 from smdcli.solvers.crossings import Crossings
 from smdcli.solvers.flow import Flow
-from smdcli.solvers.decisions import accumulation, consistent, impact, project, touch, unresolved
+from smdcli.solvers.decisions import accumulation, consistent, impact, project, remaining_flights, touch
 from smdcli.solvers.modes import TOUCH, Mode, Scene, at_level
 from smdcli.solvers.piecewise_record import Outputs, step_integrals
 
@@ -64,6 +63,7 @@ class PiecewiseRun(Crossings):
         self.cumulative = dict.fromkeys(self.energy_terms, 0.0)
         self.impacts: dict[int, list[tuple[float, float]]] = {}
         self.v_scale = float(np.abs(model.v0).max(initial=0.0))  # the run's speeds, as far as seen
+        self.x_scale = float(np.abs(model.x0).max(initial=0.0))  # and its positions
         self.damped = bool(np.any(model.C))
 
     def flow(self, mode: Mode, t: float) -> Flow:
@@ -241,6 +241,7 @@ class PiecewiseRun(Crossings):
         # the run's speeds, or where nothing has moved yet, what its accelerations give in an output step: a rate
         # of 1e-19 m/s left by rounding on a contact at rest is no motion
         span = float(self.grid[-1] - self.grid[0]) / max(self.N - 1, 1)
+        self.x_scale = max(self.x_scale, float(np.abs(z[:self.n]).max(initial=0.0)))
         self.v_scale = max(self.v_scale, float(np.abs(z[self.n:2 * self.n]).max(initial=0.0)),
                            float(self.scene.acceleration_size(states, z).max(initial=0.0)) * span)
         return consistent(self.scene, states, z, t, lambda e, kind: self.record(t, e, kind), stopping,
@@ -281,9 +282,12 @@ class PiecewiseRun(Crossings):
             z = impact(scene, states, z, element, law.restitution)
             self.record(t, element, "impact")
             history.append((t, speed))
-            rest_at = accumulation(history, law.restitution, float(self.grid[-1] - self.grid[0]))
-            resting = law.restitution == 0 or rest_at is not None or speed <= 1e-14 * max(history[0][1], 1e-300) or \
-                unresolved(scene, states, z, element)
+            remaining = remaining_flights(scene, states, z, element, law.restitution)
+            pull = abs(float(scene.R[element] @ scene.evaluate(states, z)[3]))
+            # the scene's length: its positions so far, and the rise of the sequence's first flight
+            length = max(self.x_scale, history[0][1] ** 2 / (2 * pull) if pull > 0 else 0.0)
+            rest_at = accumulation(remaining, length, t, float(self.grid[-1] - self.grid[0]), len(history))
+            resting = law.restitution == 0 or rest_at is not None or speed <= 1e-14 * max(history[0][1], 1e-300)
         states = list(states)
         if resting:
             states[element] = law.event(states[element], "rest", float(scene.R[element] @ z[:n]), 0.0, 0.0)
