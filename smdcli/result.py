@@ -60,7 +60,8 @@ class GroundHistory:
 class NonsmoothHistory:
     """The nonsmooth elements along a run (hysteretic springs, friction contacts, stops): each one's tension on
     the grid (N, E), its internal variables ("spring[0].plastic_deformation" -> (N,)), the events (time, element,
-    kind) and the energy terms they bring: hysteretic, friction, impact (cumulative), contact (stored)."""
+    kind), each event's state, and the energy terms they bring: hysteretic, friction, impact (cumulative), contact
+    (stored)."""
 
     paths: tuple[str, ...]
     kinds: tuple[str, ...]  # spring | friction | stop
@@ -68,6 +69,18 @@ class NonsmoothHistory:
     internal: dict[str, np.ndarray]
     events: tuple[tuple[float, str, str], ...]
     energy: dict[str, np.ndarray]  # per term, (N,): as the solver integrated them on its own pieces
+    # the state at each event as its solver located it: x and v (events, n), each element's tension (events, E);
+    # None where the method does not locate events (the Newmark family's return mapping)
+    event_x: np.ndarray | None = None
+    event_v: np.ndarray | None = None
+    event_tension: np.ndarray | None = None
+
+    def event_state(self):
+        """(times, x, v, tension) of the events with their states (empty arrays where none were located)."""
+        if self.event_x is None or not len(self.events):
+            E = len(self.paths)
+            return np.zeros(0), np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, E))
+        return np.array([t for t, _, _ in self.events], dtype=float), self.event_x, self.event_v, self.event_tension
 
     def balance(self) -> Energy:
         """The run's energy balance from the terms its solver integrated: stored (kinetic, strain, contact) less its

@@ -130,7 +130,7 @@ def test_a_large_model_is_summarized_on_the_terminal(cli, tmp_path):
     with h5py.File(tmp_path / "chain.h5") as f:
         sampled = np.abs(f["displacement"][:]).max(axis=0)
     located = np.array(list(data[0]["peak_displacement_m"].values()))
-    # located between samples (analysis.peaks): never below the samples, above them by the curvature's share
+    # located between samples (solvers.peaks): never below the samples, above them by the curvature's share
     assert np.all(located >= sampled) and np.all(located <= sampled * (1 + 1e-3))
 
 

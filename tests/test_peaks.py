@@ -1,4 +1,4 @@
-"""Peaks in the summary and --json are located between samples (analysis.peaks: the quintic Hermite of x, v and a
+"""Peaks in the summary and --json are located between samples (solvers.peaks: the quintic Hermite of x, v and a
 on the intervals beside each sample maximum), not read off the samples; against the same scene solved exactly on
 an output grid 50 times finer, whose sample maxima bracket the true peaks within |x''| (h / 50)^2 / 8."""
 
@@ -50,7 +50,7 @@ def test_summary_peaks_are_located_between_samples(stem, located_within, tmp_pat
 
 
 def test_a_coarse_grid_or_an_event_keeps_the_sample():
-    from smdcli.analysis.peaks import located_peaks
+    from smdcli.solvers.peaks import located_peaks
 
     w = 7.3
     t = np.arange(0.0, 3.0, 0.5) + 0.0037  # w h = 3.7: no interpolant to trust
@@ -60,3 +60,74 @@ def test_a_coarse_grid_or_an_event_keeps_the_sample():
     x, v, a = np.cos(w * t)[:, None], -w * np.sin(w * t)[:, None], -w * w * np.cos(w * t)[:, None]
     assert abs(located_peaks(t, x, v, a)[0] - 1.0) < 1e-12
     assert located_peaks(t, x, v, a, events=t)[0] == np.abs(x).max()  # every interval holds an event
+
+
+BOUNCING_ON_A_STOP = """
+[time]
+end = 1.0
+step = 0.01
+[[mass]]
+name = "m"
+m = 1.0
+[[spring]]
+connects = ["ground", "m"]
+k = 1000.0
+[[force]]
+on = "m"
+type = "constant"
+amplitude = 7.0
+[[stop]]
+connects = ["ground", "m"]
+max = 0.004
+restitution = 1.0
+"""
+
+
+@pytest.mark.parametrize("method", ["exact", "DOP853", "Radau"])
+def test_a_peak_at_an_event_is_the_event_state(method, tmp_path, cli):
+    """A mass pushed onto a stop at 0.004 m that rebounds elastically: its peak is the stop, reached only at the
+    impacts, between samples (the samples' largest was 0.0039338 m). The events' located states join the
+    candidates; the stop is never passed, so nothing above it is reported either."""
+    scene = tmp_path / "bounce.toml"
+    scene.write_text(BOUNCING_ON_A_STOP)
+    result = cli("simulate", scene, "--method", method, "-o", tmp_path / "out", "--json")
+    assert result.exit_code == 0, result.output
+    peak = json.loads(result.stdout)[0]["peak_displacement_m"]["m"]
+    run = smdcli.simulate(scene, method=method)
+    assert np.abs(run.displacement).max() < 0.004 - 1e-5  # the samples miss it
+    assert abs(peak - 0.004) <= 1e-12
+
+
+def test_sweep_peaks_are_located_between_samples(tmp_path):
+    """A sweep's peak_displacement metric is located between the samples as simulate's summary is: each member
+    against its own scene solved exactly on a grid 50 times finer (its sample maxima within |x''| (h / 50)^2 / 8
+    below the true peak)."""
+    import tomllib
+
+    import tomli_w
+
+    from smdcli import scenario
+    from smdcli.sweep import build_family, metrics, read_spec, set_parameter, solve_family
+
+    text = (SCENARIOS / "one_dof_underdamped.toml").read_text()
+    doc = tomllib.loads(text)
+    doc["time"].pop("points", None)
+    doc["time"]["step"] = 0.05
+    doc["mass"][0].update(x0=0.0, v0=1.0)  # the peak inside the run, not the start
+    sc = scenario.parse(tomli_w.dumps(doc), "coarse.toml")
+    family = build_family(sc, read_spec(sc, {"parameter": ("spring[0].k",), "values": ("20, 45, 80",)}))
+    result = solve_family(family)
+    found = metrics(family, result)["peak_displacement"][:, 0]
+    gained = []
+    for s, k in enumerate(family.values[:, 0]):
+        member = tomllib.loads(tomli_w.dumps(doc))
+        set_parameter(member, "spring[0].k", float(k))
+        member["time"]["step"] = 0.05 / 50
+        fine = tmp_path / f"fine{s}.toml"
+        fine.write_text(tomli_w.dumps(member))
+        run = smdcli.simulate(fine)
+        true_low = np.abs(run.displacement[:, 0]).max()
+        slack = np.abs(run.acceleration[:, 0]).max() * (0.05 / 50) ** 2 / 8
+        assert true_low - 1e-12 <= found[s] <= true_low + slack + 1e-12, (s, found[s], true_low, slack)
+        gained.append(found[s] - np.abs(result.displacement[s, :, 0]).max())
+    assert max(gained) > 1e-4 * found.max()  # the samples alone were short

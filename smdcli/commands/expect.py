@@ -1,6 +1,7 @@
 """[[expect]]: acceptance checks written in the scenario, evaluated after `smd simulate`, and their JUnit report.
 
-peak_displacement, rms_displacement and settling_time are measured as `smd sweep` measures them (one code);
+rms_displacement and settling_time are measured as `smd sweep` measures them (one code); peak_displacement is the
+summary's, located between samples and at events;
 natural_frequency is the undamped mode's, rad/s; energy_residual the balance's max_relative_residual; golden
 compares every trajectory both files hold, sample by sample, within atol + rtol |golden|.
 
@@ -68,6 +69,10 @@ def _evaluate(spec: ExpectSpec, model, result: Result) -> Check:
         value = float(model.modes.natural_frequencies[spec.mode - 1])
     elif spec.quantity == "energy_residual":
         value = float(result.energy.max_relative_residual)
+    elif spec.quantity == "peak_displacement":  # located between samples and at events, as the summary's
+        from smdcli.solvers.peaks import result_peaks
+
+        value = float(result_peaks(result)[result.dofs.index(spec.dof)])
     else:
         from smdcli.sweep.members import measures
 

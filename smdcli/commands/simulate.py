@@ -16,6 +16,7 @@ from smdcli.errors import SolverFailed, UsageError
 from smdcli.io.folders import output_folder
 from smdcli.model import GROUND_DOF, Model, build, time_grid
 from smdcli.model.sparse import SPARSE_DOFS
+from smdcli.solvers.peaks import result_peaks
 from smdcli.result import Result
 from smdcli.scenario import Scenario
 from smdcli.solvers.checked import failure_message, solve_scenario
@@ -133,32 +134,14 @@ def summary(run: Run) -> dict:
         "nfev": s.nfev, "njev": s.njev, "nlu": s.nlu,
         "wall_time_s": s.wall_time_s,
         "success": s.success, "message": s.message,
-        "peak_displacement_m": dict(zip(run.result.dofs, map(float, _peaks(run.result, absolute=False)))),
+        "peak_displacement_m": dict(zip(run.result.dofs, map(float, result_peaks(run.result, absolute=False)))),
         "energy_residual": None if run.result.energy is None else run.result.energy.max_relative_residual,
         "notes": list(run.result.notes),
         "expect": [check.as_dict() for check in run.checks],
         "outputs": [str(p) for p in run.outputs],
     } | ({} if run.result.ground is None else {"peak_absolute_displacement_m": dict(zip(
-        run.result.dofs, map(float, _peaks(run.result, absolute=True))))}) \
+        run.result.dofs, map(float, result_peaks(run.result, absolute=True))))}) \
       | ({} if run.result.nonsmooth is None else _events(run.result.nonsmooth))
-
-
-def _peaks(result: Result, absolute: bool) -> np.ndarray:
-    """Each DOF's largest |x| (relative, or absolute under ground motion), located between the samples."""
-    from smdcli.analysis.peaks import located_peaks
-
-    quantities = [result.absolute(q) if absolute else getattr(result, q)
-                  for q in ("displacement", "velocity", "acceleration")]
-    # where the acceleration or the state jumps (events, a force's discontinuities, the ground's jumps) the
-    # interpolant does not hold: those intervals keep their samples
-    events = [t for t, _, _ in result.nonsmooth.events] if result.nonsmooth is not None else []
-    if result.origin is not None and len(result.time) > 1:
-        model = result.origin[1]
-        for signal in model.signals:  # a force's jumps (its kinks leave the acceleration continuous)
-            times = signal.breakpoints(float(result.time[0]), float(result.time[-1]))
-            events += [float(t) for t in times[signal.value(times) != signal.value_left(times)]]
-        events += [float(t) for t, _, _ in model.jumps]
-    return located_peaks(result.time, *quantities, events=np.array(events, dtype=float))
 
 
 def _events(history) -> dict:

@@ -132,7 +132,7 @@ class EventDriver(PiecewiseRun):
                 if k < len(grid) and grid[k] == t:
                     outputs.store(k, t, y, states)
                     k += 1
-        self.events.sort(key=lambda event: event[0])
+        self.sort_events()
         return outputs.finish(), failure, t_reached
 
     # ----------------------------------------------------------------------------------- the steps
@@ -367,7 +367,7 @@ class _Outputs:
         energy = dict(self.energy, quadrature="the powers integrated with the motion under the method's own error "
                                              "control, restarted at events")
         return self.x, self.v, self.a, NonsmoothHistory(paths, kinds, self.tension, self.internal,
-                                                         tuple(run.events), energy)
+                                                         tuple(run.events), energy, **run.event_arrays())
 
 
 def solve_events(model: Model, grid: np.ndarray, tol: Tolerances, name: str) -> Result:

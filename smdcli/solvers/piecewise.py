@@ -59,6 +59,7 @@ class PiecewiseRun(Crossings):
         self.N = len(grid)
         self.flows: dict[tuple, Flow] = {}
         self.events: list[tuple[float, str, str]] = []
+        self.event_points: list = []  # (x, v, tension) at each event
         self.energy_terms = ("dissipated", "input", "hysteretic", "friction", "impact")
         self.cumulative = dict.fromkeys(self.energy_terms, 0.0)
         self.impacts: dict[int, list[tuple[float, float]]] = {}
@@ -145,7 +146,7 @@ class PiecewiseRun(Crossings):
                 states, z, k = self.land(states, z, t, k, target, break_time, breaks, b_next, outputs)
             else:
                 t += step
-        self.events.sort(key=lambda event: event[0])
+        self.sort_events()
         return outputs.finish()
 
     def batch(self, flow: Flow, mode: Mode, states, z: np.ndarray, t: float, k: int, breaks, b_next: int,
@@ -234,6 +235,7 @@ class PiecewiseRun(Crossings):
         """An event on /events."""
         assert kind in EVENT_KINDS, kind
         self.events.append((t, self.scene.elements[element].path, kind))
+        self.event_points.append(None)  # its state, once the decisions settle (place_events)
 
     def settle(self, states, z: np.ndarray, t: float, stopping: tuple[int, ...] = (),
                breaking: tuple[int, ...] = ()):
@@ -244,8 +246,37 @@ class PiecewiseRun(Crossings):
         self.x_scale = max(self.x_scale, float(np.abs(z[:self.n]).max(initial=0.0)))
         self.v_scale = max(self.v_scale, float(np.abs(z[self.n:2 * self.n]).max(initial=0.0)),
                            float(self.scene.acceleration_size(states, z).max(initial=0.0)) * span)
-        return consistent(self.scene, states, z, t, lambda e, kind: self.record(t, e, kind), stopping,
-                          self.v_scale, breaking)
+        states = consistent(self.scene, states, z, t, lambda e, kind: self.record(t, e, kind), stopping,
+                            self.v_scale, breaking)
+        self.place_events(states, z)
+        return states
+
+    def place_events(self, states, z: np.ndarray) -> None:
+        """The state of the events recorded since the last settled: positions, velocities and the elements' tensions
+        as the decisions left them (a yield's corner, an impact's contact point), for what samples miss."""
+        if self.event_points and self.event_points[-1] is None:
+            n = self.n
+            point = (z[:n].copy(), z[n:2 * n].copy(), np.array(self.scene.evaluate(states, z)[2], dtype=float))
+            for i in range(len(self.event_points) - 1, -1, -1):
+                if self.event_points[i] is not None:
+                    break
+                self.event_points[i] = point
+
+    def event_arrays(self) -> dict:
+        """The events' states as NonsmoothHistory's event_x, event_v, event_tension."""
+        n, E = self.n, len(self.scene.elements)
+        placed = [p for p in self.event_points if p is not None]
+        if len(placed) != len(self.event_points):  # an event never settled (a failed run): no states to give
+            return {}
+        return {"event_x": np.array([p[0] for p in placed]).reshape(-1, n),
+                "event_v": np.array([p[1] for p in placed]).reshape(-1, n),
+                "event_tension": np.array([p[2] for p in placed]).reshape(-1, E)}
+
+    def sort_events(self) -> None:
+        """The events in time order, their states with them."""
+        order = sorted(range(len(self.events)), key=lambda i: self.events[i][0])
+        self.events = [self.events[i] for i in order]
+        self.event_points = [self.event_points[i] for i in order]
 
     def apply(self, states, z: np.ndarray, t: float, element: int, kind: str):
         """The modes and state after an event of element: (states, z)."""

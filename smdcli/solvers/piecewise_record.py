@@ -111,5 +111,6 @@ class Outputs:
         run = self.run
         paths = tuple(e.path for e in run.scene.elements)
         kinds = tuple(e.kind for e in run.scene.elements)
-        history = NonsmoothHistory(paths, kinds, self.tension, self.internal, tuple(run.events), self.energy)
+        history = NonsmoothHistory(paths, kinds, self.tension, self.internal, tuple(run.events), self.energy,
+                                   **run.event_arrays())
         return self.x, self.v, self.a, history
