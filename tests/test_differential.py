@@ -5,7 +5,8 @@ square, table), damping form (dampers, Rayleigh, modal), support motion (a sine,
 and initial state. For each: `exact` against an implicit and an explicit integrator at tight tolerance, every
 run's own physics (analysis.guards: dissipation never decreasing, friction within its static force, stops never
 passed, yield surfaces never exceeded, the energy balance), the CLI's file against the API, and the export
-against the file. Agreement within the stated accuracies, or a reported failure (a solver that says it failed, a
+against the file, and a sweep of the first spring's k (its law's k where it is hysteretic) against simulate of each
+member. Agreement within the stated accuracies, or a reported failure (a solver that says it failed, a
 run marked suspect): never a silent difference.
 
 Seeded (derandomized), SMD_DIFFERENTIAL_EXAMPLES scenes (default 60, under a minute); `SMD_DIFFERENTIAL_EXAMPLES=600
@@ -142,6 +143,39 @@ def check_scene(text: str, tmp_path) -> None:
             series = getattr(exact.energy, name)
             if series is not None:
                 assert np.diff(series).min(initial=0.0) >= -1e-9 * max(exact.energy.largest, 1e-300), name
+    check_sweep(text, tmp_path)
+
+
+def check_sweep(text: str, tmp_path) -> None:
+    """A sweep of the first spring's k (whatever its law) against simulate of each member's own scene."""
+    import tomllib
+
+    import tomli_w
+
+    import smdcli
+    from smdcli import scenario
+    from smdcli.sweep import build_family, read_spec, set_parameter, solve_family
+
+    sc = scenario.parse(text, str(tmp_path / "scene.toml"))
+    k = float(tomllib.loads(text)["spring"][0]["k"])
+    family = build_family(sc, read_spec(sc, {"parameter": ("spring[0].k",), "values": (f"{0.7 * k!r}, {1.4 * k!r}",)}))
+    result = solve_family(family)
+    for s in range(len(family)):
+        doc = tomllib.loads(text)
+        set_parameter(doc, "spring[0].k", float(family.values[s][0]))
+        member = tmp_path / f"member{s}.toml"
+        member.write_text(tomli_w.dumps(doc))
+        try:
+            alone = smdcli.simulate(member)
+        except SolverFailed:
+            assert not result.success[s], f"member {s} succeeded where simulate failed\n{text}"
+            continue
+        if not result.success[s] or alone.stats.suspect:
+            continue  # reported
+        peak = max(float(np.abs(alone.displacement).max()), 1e-9)
+        allowed = 10 * (alone.stats.stated_accuracy + float(result.stated_accuracy[s])) * peak + 1e-12 * peak
+        difference = float(np.abs(result.displacement[s] - alone.displacement).max())
+        assert difference <= allowed, f"sweep member {s} differs from simulate by {difference / peak:.3g}\n{text}"
 
 
 @SETTINGS

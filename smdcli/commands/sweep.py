@@ -36,6 +36,7 @@ class SweepRun:
     family: Family
     keep: str = "full"
     how: str = ""
+    methods: set = field(default_factory=set)  # the methods the members were solved by (the plots' titles)
     wall_time_s: float = 0.0
     failed: list[str] = field(default_factory=list)  # "label: message" of the first LISTED failed members
     failed_count: int = 0
@@ -279,6 +280,7 @@ def _note(run: SweepRun, chunk) -> None:
     """Keep what the summary and the plots need from a chunk."""
     family = run.family
     run.how = chunk.how
+    run.methods.update(chunk.methods)
     failed = np.flatnonzero(~chunk.success)
     run.failed_count += len(failed)
     for row in failed[:max(0, LISTED - len(run.failed))]:
@@ -341,8 +343,10 @@ def _plots(run: SweepRun, out_dir, spec) -> None:
         figures.append(("frequency", frequency_figure(family, run.response, title, spec.frequency_unit,
                                                                spec.normalized)))
     else:
+        solved = ", ".join(sorted(run.methods)) or "exact"
+        solved = "each solved exactly" if solved == "exact" else f"solved by {solved}"
         figures.append((spec.quantity, overlay_figure(family, run.traces, family.base.dofs, spec.quantity, title,
-                                                      run.how)))
+                                                      solved)))
         if len(family) > 1 and spec.kind == "parameter":
             name = "heatmap" if len(spec.parameters) == 2 else "metric"
             figures.append((name, metric_figure(family, run.metric, spec.metric, family.base.dofs, title)))

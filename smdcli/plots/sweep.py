@@ -31,7 +31,7 @@ def _member_colors(count: int):
     return [cmap(i / max(count - 1, 1)) for i in range(count)], cmap
 
 
-def overlay_figure(family, traces: dict, dofs, quantity: str, title: str, how: str):
+def overlay_figure(family, traces: dict, dofs, quantity: str, title: str, solved: str):
     """One panel per DOF, one line per member drawn (traces: member -> (time, quantity (N, n), success)), with a
     legend (or a colour bar for many)."""
     S, n = len(family), len(dofs)
@@ -77,10 +77,10 @@ def overlay_figure(family, traces: dict, dofs, quantity: str, title: str, how: s
             axes[0].legend(keys, [f"{name} = {level:g} {units}".strip() for level in levels], loc="upper right",
                            fontsize=7, framealpha=0.85, title="line style", title_fontsize=7)
         elif second is not None:
-            how += f"; colour: {family.spec.parameters[0]} ({family.spec.parameters[1]}, {len(levels)} values, " \
-                   "is not told apart: see the heat map)"
+            solved += f"; colour: {family.spec.parameters[0]} ({family.spec.parameters[1]}, {len(levels)} values, " \
+                      "is not told apart: see the heat map)"
     shown = f" ({len(drawn)} of them drawn, evenly spaced)" if len(drawn) < S else ""
-    fig.suptitle(_wrap(f"{title}\n{S} runs{shown}: {how}", 100), fontsize=10)
+    fig.suptitle(_wrap(f"{title}\n{S} runs{shown}: {solved}", 100), fontsize=10)
     return fig
 
 
