@@ -74,6 +74,7 @@ class NonsmoothHistory:
     event_x: np.ndarray | None = None
     event_v: np.ndarray | None = None
     event_tension: np.ndarray | None = None
+    event_v_before: np.ndarray | None = None  # v just before each event: an impact's jump from it to event_v
 
     def event_state(self):
         """(times, x, v, tension) of the events with their states (empty arrays where none were located)."""
@@ -244,6 +245,18 @@ class Result:
         self.force  # noqa: B018  (computed, so that a pickle holds no function)
         return self.__dict__
 
+    def with_events(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(t, x, v) of the samples with each located event's state merged in time order, an impact as its jump
+        (the velocity before it, then after, at one position): what a phase portrait draws, whose samples alone
+        cut a stick's corner or an impact's jump."""
+        if self.nonsmooth is None or self.nonsmooth.event_x is None or not len(self.nonsmooth.events):
+            return self.time, self.displacement, self.velocity
+        t_event, x_event, v_event, _ = self.nonsmooth.event_state()
+        if self.nonsmooth.event_v_before is not None:
+            t_event, x_event = np.repeat(t_event, 2), np.repeat(x_event, 2, axis=0)
+            v_event = np.stack([self.nonsmooth.event_v_before, v_event], axis=1).reshape(-1, v_event.shape[1])
+        return merged(self.time, (self.displacement, self.velocity), t_event, (x_event, v_event))
+
     def absolute(self, quantity: str) -> np.ndarray:
         """displacement, velocity or acceleration measured from the fixed frame: relative plus the ground's."""
         relative = getattr(self, quantity)
@@ -287,3 +300,12 @@ class Result:
         """Largest |x| per DOF over the finite part of the run."""
         x = np.where(np.isfinite(self.displacement), np.abs(self.displacement), 0.0)
         return x.max(axis=0) if len(x) else np.zeros(len(self.dofs))
+
+
+def merged(time: np.ndarray, samples: tuple, t_event: np.ndarray, at_events: tuple) -> tuple:
+    """(time, *samples) with the events' values merged in time order (an event at a sample's time after it)."""
+    if not len(t_event):
+        return (time, *samples)
+    order = np.argsort(np.concatenate([time, t_event]), kind="stable")
+    return (np.concatenate([time, t_event])[order],
+            *(np.concatenate([a, b])[order] for a, b in zip(samples, at_events)))

@@ -793,10 +793,16 @@ def test_phase_hysteresis_draws_force_against_deformation_of_each_hysteretic_spr
         loop = f["curves/000"]
         d, force = loop["deformation"][()], loop["force"][()]
         assert loop["force"].attrs["units"] == "N" and loop.attrs["label"].startswith("spring[0] (elastoplastic")
-    assert np.array_equal(d, run.displacement[:, 0])  # d = x(m) - x(ground)
+    # d = x(m) - x(ground) at the samples, and at every event (yield, unload) between them: corners are corners
+    t_event, x_event, _, tension_event = run.nonsmooth.event_state()
+    assert len(d) == len(run.time) + len(t_event) == len(force) and len(t_event) == 42
+    assert set(run.displacement[:, 0]) <= set(d) and set(x_event[:, 0]) <= set(d)
     assert np.abs(force).max() == pytest.approx(1067.0, rel=1e-12)  # capped at the yield force, and reached
+    # each yield and unloading is on the yield surface, exactly where the loop turns its corner
+    assert np.abs(np.abs(tension_event[:, 0]) - 1067.0).max() <= 1e-9 * 1067.0
     dp = run.elements.internal["spring[0].plastic_deformation"]
-    assert np.abs(force - 157913.67041742973 * (d - dp)).max() <= 1e-9 * 1067.0  # elastic about the plastic offset
+    samples = np.isin(d, run.displacement[:, 0])
+    assert np.abs(force[samples] - 157913.67041742973 * (d[samples] - dp)).max() <= 1e-9 * 1067.0
     assert (tmp_path / "elastoplastic_record_hysteresis.png").stat().st_size > 10_000
 
 
@@ -806,3 +812,48 @@ def test_phase_hysteresis_refuses_what_it_cannot_draw(args, says, cli, tmp_path)
     result = cli("phase", SCENARIOS / args[0], *args[1:], "--hysteresis", "-o", tmp_path)
     assert result.exit_code == 2 and says in result.stderr and result.stderr.count("\n") == 1
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("method", ["exact", "DOP853", "Radau"])
+def test_each_event_state_is_on_its_law(method):
+    """The state kept at each event (what peaks and hysteresis loops take between samples) is where the law puts it:
+    a bilinear storey's yield or unloading on its surface, T - b k d = +-(1 - b) fy, its whole force (the linear
+    b k d with the law's core)."""
+    sc, model, grid = bundled("shear_frame_bilinear")
+    run = with_physics(model, solve(model, grid, method, Tolerances() if method == "exact" else Tolerances(rtol=1e-10, atol=1e-13)))
+    t, x, _, tension = run.nonsmooth.event_state()
+    d = np.column_stack([x[:, 0], x[:, 1] - x[:, 0], x[:, 2] - x[:, 1]])
+    k, fy, b = np.array([3e8, 2.4e8, 1.6e8]), np.array([1.5e6, 1.13e6, 6.2e5]), 0.05
+    which = [run.nonsmooth.paths.index(path) for _, path, _ in run.nonsmooth.events]
+    assert len(which) > 40
+    for i, e in enumerate(which):
+        assert abs(abs(tension[i, e] - b * k[e] * d[i, e]) - (1 - b) * fy[e]) <= 1e-9 * fy[e]
+    # and the positions are the run's: on the quintic through the samples either side, to its error
+    from smdcli.solvers.peaks import quintic_at
+
+    for j in range(3):
+        between = quintic_at(grid, run.displacement[:, j], run.velocity[:, j], run.acceleration[:, j], t)
+        assert np.abs(between - x[:, j]).max() <= 0.05 * np.abs(run.displacement[:, j]).max()
+
+
+def test_a_phase_portrait_draws_each_impact_as_its_jump(cli, tmp_path):
+    """The portrait's curves hold every impact as two points at one position: the velocities just before and just
+    after, whose relative velocity across the stop reverses by its restitution (the samples alone drew a slanted
+    chord across each jump)."""
+    result = cli("phase", SCENARIOS / "vibro_impact_gap.toml", "-o", tmp_path)
+    assert result.exit_code == 0, result.output
+    sc, model, grid = bundled("vibro_impact_gap")
+    run = solve(model, grid, "auto", Tolerances())
+    impacts = [i for i, (_, _, kind) in enumerate(run.nonsmooth.events) if kind == "impact"]
+    assert len(impacts) > 20
+    with h5py.File(tmp_path / "vibro_impact_gap_portrait.h5") as f:
+        x = np.column_stack([f[f"curves/{i:03d}/displacement"][()] for i in range(2)])
+        v = np.column_stack([f[f"curves/{i:03d}/velocity"][()] for i in range(2)])
+        t = f["curves/000/time"][()]
+    for i in impacts:
+        when = run.nonsmooth.events[i][0]
+        at = np.flatnonzero(t == when)
+        assert len(at) >= 2 and np.array_equal(x[at[0]], x[at[-1]])
+        before, after = v[at[0]], v[at[-1]]
+        relative_before, relative_after = before[1] - before[0], after[1] - after[0]
+        assert relative_after == pytest.approx(-0.5 * relative_before, rel=1e-9)

@@ -65,11 +65,13 @@ def _runs(sc: Scenario, ics: tuple[str, ...]) -> list[tuple[str, Scenario]]:
     return [(family.labels[s], family.member_scenario(s)) for s in range(len(family))]
 
 
-def _solve(sc: Scenario, method: str | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _solve(sc: Scenario, method: str | None, events: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, x, v) of a run; with `events`, each located event's state merged in time order (a stop's contact point,
+    a stick's corner: the samples alone cut them)."""
     from smdcli.solvers.checked import solve_checked
 
     result = solve_checked(sc, method)
-    return result.time, result.displacement, result.velocity
+    return result.with_events() if events else (result.time, result.displacement, result.velocity)
 
 
 def hysteretic_springs(sc: Scenario) -> list:
@@ -82,15 +84,23 @@ def _loops(sc: Scenario, method: str | None, label: str | None) -> list[Curve]:
     from smdcli.model import build
     from smdcli.solvers.checked import solve_checked
     from smdcli.analysis.energy import with_physics
+    from smdcli.result import merged
 
     result = with_physics(build(sc), solve_checked(sc, method))
     forces, index = result.elements, {name: j for j, name in enumerate(sc.dof_names)}
+    t_event, x_event, _, tension_event = result.nonsmooth.event_state()
     loops = []
     for spring in hysteretic_springs(sc):
-        a, b = (result.displacement[:, index[n]] if n in index else np.zeros(len(result.time)) for n in spring.connects)
+        def deformation(x):
+            a, b = (x[:, index[n]] if n in index else np.zeros(len(x)) for n in spring.connects)
+            return b - a
+
         tension = forces.spring[:, forces.spring_names.index(spring.path)]
+        # the yield and unloading corners: each event's state, where the samples would draw a chord
+        t, d, force = merged(result.time, (deformation(result.displacement), tension), t_event,
+                                  (deformation(x_event), tension_event[:, result.nonsmooth.paths.index(spring.path)]))
         name = f"{spring.path} ({spring.law}, {' - '.join(spring.connects)})"
-        loops.append(Curve(f"{label}: {name}" if label else name, result.time, b - a, tension))
+        loops.append(Curve(f"{label}: {name}" if label else name, t, d, force))
     return loops
 
 
@@ -161,7 +171,7 @@ def portraits(paths: list[Path], out: Path, dofs: str | None = None, ics: tuple[
                                      "use --periods")
                 sampled = dataclasses.replace(member, time=TimeSpec(member.time.start,
                                                                     member.time.start + count * period, step=period))
-                ts, xs, vs = _solve(sampled, method)
+                ts, xs, vs = _solve(sampled, method, events=False)
                 advance(1, f"{label}: Poincare")
                 keep = slice(min(skip_periods, len(ts) - 1), None)
                 for dof in dofs:

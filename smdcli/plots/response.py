@@ -195,7 +195,8 @@ def _zoom_inset(ax, result: Result, data: np.ndarray, window: tuple[float, float
 def phase_figure(result: Result, title: str):
     """Phase portrait of a run: velocity against displacement per DOF, start and direction marked."""
     drawn, note = drawn_dofs(len(result.dofs))
-    curves = [(result.dofs[j], result.displacement[:, j], result.velocity[:, j]) for j in drawn]
+    _, x, v = result.with_events()  # a stick's corner, an impact's jump: the samples alone cut them
+    curves = [(result.dofs[j], x[:, j], v[:, j]) for j in drawn]
     return portrait_figure(curves, f"{title}\nphase portrait{note}")
 
 

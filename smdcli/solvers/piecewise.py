@@ -60,6 +60,7 @@ class PiecewiseRun(Crossings):
         self.flows: dict[tuple, Flow] = {}
         self.events: list[tuple[float, str, str]] = []
         self.event_points: list = []  # (x, v, tension) at each event
+        self.velocity_before: dict[int, np.ndarray] = {}  # an impact's velocities before its jump, by event index
         self.energy_terms = ("dissipated", "input", "hysteretic", "friction", "impact")
         self.cumulative = dict.fromkeys(self.energy_terms, 0.0)
         self.impacts: dict[int, list[tuple[float, float]]] = {}
@@ -256,20 +257,26 @@ class PiecewiseRun(Crossings):
         as the decisions left them (a yield's corner, an impact's contact point), for what samples miss."""
         if self.event_points and self.event_points[-1] is None:
             n = self.n
-            point = (z[:n].copy(), z[n:2 * n].copy(), np.array(self.scene.evaluate(states, z)[2], dtype=float))
+            d, _, tension, _ = self.scene.evaluate(states, z)
+            linear = np.array([element.law.linear_stiffness for element in self.scene.elements], dtype=float)
+            # the whole force, as the outputs store it: a hysteretic spring's linear part with its law's
+            point = (z[:n].copy(), z[n:2 * n].copy(), np.asarray(tension, dtype=float) + linear * np.asarray(d))
             for i in range(len(self.event_points) - 1, -1, -1):
                 if self.event_points[i] is not None:
                     break
                 self.event_points[i] = point
 
     def event_arrays(self) -> dict:
-        """The events' states as NonsmoothHistory's event_x, event_v, event_tension."""
+        """The events' states as NonsmoothHistory's event_x, event_v (and event_v_before), event_tension."""
         n, E = self.n, len(self.scene.elements)
         placed = [p for p in self.event_points if p is not None]
         if len(placed) != len(self.event_points):  # an event never settled (a failed run): no states to give
             return {}
-        return {"event_x": np.array([p[0] for p in placed]).reshape(-1, n),
-                "event_v": np.array([p[1] for p in placed]).reshape(-1, n),
+        v = np.array([p[1] for p in placed]).reshape(-1, n)
+        before = v.copy()
+        for i, jumped_from in self.velocity_before.items():
+            before[i] = jumped_from
+        return {"event_x": np.array([p[0] for p in placed]).reshape(-1, n), "event_v": v, "event_v_before": before,
                 "event_tension": np.array([p[2] for p in placed]).reshape(-1, E)}
 
     def sort_events(self) -> None:
@@ -277,6 +284,8 @@ class PiecewiseRun(Crossings):
         order = sorted(range(len(self.events)), key=lambda i: self.events[i][0])
         self.events = [self.events[i] for i in order]
         self.event_points = [self.event_points[i] for i in order]
+        position = {old: new for new, old in enumerate(order)}
+        self.velocity_before = {position[i]: v for i, v in self.velocity_before.items()}
 
     def apply(self, states, z: np.ndarray, t: float, element: int, kind: str):
         """The modes and state after an event of element: (states, z)."""
@@ -310,8 +319,10 @@ class PiecewiseRun(Crossings):
         history = self.impacts.setdefault(element, [])
         rest_at, resting = None, True  # met at rest, pressed on: persistent contact, no impact
         if met == "impact":
+            v_before = z[n:2 * n].copy()
             z = impact(scene, states, z, element, law.restitution)
             self.record(t, element, "impact")
+            self.velocity_before[len(self.events) - 1] = v_before  # the jump, for what draws the state
             history.append((t, speed))
             remaining = remaining_flights(scene, states, z, element, law.restitution)
             pull = abs(float(scene.R[element] @ scene.evaluate(states, z)[3]))
