@@ -122,6 +122,27 @@ def test_a_schematic_gives_units_and_says_what_it_cannot_draw():
     assert any("N s²/m²" in e.label for e in layout(quadratic).elements)
 
 
+@pytest.mark.parametrize("stem, says", [("vibro_impact_gap", ["stop1, e = 0.5\nmin -0.005 m, max 0.005 m"]),
+                                        ("stick_slip_belt", ["friction1\nF = 2 N, static 3 N\nbelt 0.1 m/s"])])
+def test_a_schematic_draws_friction_contacts_and_stops(stem, says):
+    """The elements that define a nonsmooth scene are drawn and labelled with their law's numbers (the schematic
+    used to say 'not drawn: 1 friction contact, 1 stop'), no label run into the wall."""
+    from smdcli import scenario
+    from smdcli.plots.schematic import WALL_GAP, layout, schematic_figure
+
+    sc = scenario.load(SCENARIOS / f"{stem}.toml")
+    plan = layout(sc)
+    assert [e.label for e in plan.elements if e.kind in ("friction", "stop")] == says
+    fig = schematic_figure(sc)
+    texts = [t.get_text() for ax in fig.axes for t in ax.texts] + [t.get_text() for t in fig.texts]
+    assert not any("not drawn" in t for t in texts) and all(label in texts for label in says)
+    renderer = fig.canvas.get_renderer()
+    ax = fig.axes[0]
+    wall = ax.transData.transform((-WALL_GAP, 0))[0]
+    for text in ax.texts:  # none runs into the wall
+        assert text.get_window_extent(renderer).x0 >= wall, text.get_text()
+
+
 def test_a_mistyped_option_is_matched_by_its_name_not_its_dashes(cli):
     bogus = cli("simulate", SCENARIOS / "one_dof_underdamped.toml", "--bogus")
     assert bogus.exit_code == 2 and "No such option: --bogus" in bogus.stderr and "--out" not in bogus.stderr

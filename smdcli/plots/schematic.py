@@ -21,9 +21,10 @@ WALL_GAP = 0.9  # wall to the nearest mass centre
 UNITS = {"k": "N/m", "c": "N s/m"}
 @dataclass(frozen=True)
 class Element:
-    """A spring or damper between two nodes (a DOF index or "left"/"right" wall), labelled."""
+    """A spring, damper, friction contact or stop between two nodes (a DOF index or "left"/"right" wall),
+    labelled."""
 
-    kind: str  # "spring" | "damper"
+    kind: str  # "spring" | "damper" | "friction" | "stop"
     a: int | str
     b: int | str
     label: str
@@ -54,13 +55,16 @@ def layout(sc: Scenario) -> Layout:
     elements = []
     if sc.system is None:
         masses = tuple(m.m for m in sc.masses)
-        for e in sc.springs + sc.dampers:
+        for e in sc.springs + sc.dampers + sc.frictions + sc.stops:
             ends = [index[node] if node != GROUND else None for node in e.connects]
             if None in ends:
                 i = ends[0] if ends[0] is not None else ends[1]
                 a, b = (_wall(i, n), i) if _wall(i, n) == "left" else (i, _wall(i, n))
             else:
                 a, b = sorted(ends)
+            if e.kind in ("friction", "stop"):
+                elements.append(Element(e.kind, a, b, _contact_label(e), True))
+                continue
             symbol = "k" if e.kind == "spring" else "c"
             units = "N/m" if e.kind == "spring" else "N s²/m²" if e.law == "quadratic" else "N s/m"
             label = f"{symbol}{e.index + 1} = {e.coef:g} {units}"
@@ -87,6 +91,54 @@ def layout(sc: Scenario) -> Layout:
     forces = tuple((index[f.on], _force_label(f)) for f in sc.forces)
     walls = {e.a for e in elements} | {e.b for e in elements}
     return Layout(names, masses, tuple(elements), forces, "left" in walls, "right" in walls)
+
+
+def _contact_label(e) -> str:
+    """A friction contact's or a stop's label: what its law holds."""
+    law = e.nonsmooth
+    if e.kind == "friction":
+        parts = [f"F = {law.force:g} N"]
+        if law.static is not None and law.static != law.force:
+            parts.append(f"static {law.static:g} N")
+        if law.belt_velocity:
+            parts.append(f"belt {law.belt_velocity:g} m/s")
+        lines = [f"friction{e.index + 1}"]
+        for part in parts:  # lines short enough for the gap between a wall and a mass
+            if len(lines) > 1 and len(lines[-1]) + len(part) <= 20:
+                lines[-1] += f", {part}"
+            else:
+                lines.append(part)
+        return "\n".join(lines)
+    limits = ", ".join(f"{side} {value:g} m" for side, value in (("min", law.min), ("max", law.max))
+                       if value is not None)
+    contact = f"e = {law.restitution:g}" if law.k is None else f"k = {law.k:g} N/m"
+    return f"stop{e.index + 1}, {contact}\n{limits}"
+
+
+def _friction_pad(ax, x0: float, x1: float, y: float, color) -> None:
+    """A friction contact: a shoe pressed on a hatched sliding surface."""
+    from matplotlib.patches import Rectangle
+
+    mid = 0.5 * (x0 + x1)
+    width = min(0.2, 0.5 * (x1 - x0))
+    h = 0.035
+    ax.plot([x0, mid - width / 2], [y, y], color=color, lw=1.4)
+    ax.add_patch(Rectangle((mid - width / 2, y - h), width, 2 * h, facecolor="white", edgecolor=color, lw=1.4,
+                           hatch="////", zorder=2))
+    ax.plot([mid - width / 2 - 0.03, mid + width / 2 + 0.03], [y - h - 0.012] * 2, color=color, lw=2.0)
+    ax.plot([mid + width / 2, x1], [y - h - 0.012, y - h - 0.012], color=color, lw=1.4)
+    ax.plot([x1, x1], [y - h - 0.012, y], color=color, lw=1.4)
+
+
+def _stop_gap(ax, x0: float, x1: float, y: float, color) -> None:
+    """A stop: two plates facing across the clearance."""
+    mid = 0.5 * (x0 + x1)
+    gap = min(0.08, 0.3 * (x1 - x0))
+    h = 0.05
+    ax.plot([x0, mid - gap / 2], [y, y], color=color, lw=1.4)
+    ax.plot([mid - gap / 2] * 2, [y - h, y + h], color=color, lw=2.4)
+    ax.plot([mid + gap / 2] * 2, [y - h, y + h], color=color, lw=2.4)
+    ax.plot([mid + gap / 2, x1], [y, y], color=color, lw=1.4)
 
 
 def _force_label(f) -> str:
@@ -171,11 +223,16 @@ def draw(ax, plan: Layout, displacement: np.ndarray | None = None, scale: float 
         if e.kind == "spring":
             xs, ys = _zigzag(x0, x1, y)
             ax.plot(xs, ys, color=color, lw=1.4)
+        elif e.kind == "friction":
+            _friction_pad(ax, x0, x1, y, color)
+        elif e.kind == "stop":
+            _stop_gap(ax, x0, x1, y, color)
         else:
             _dashpot(ax, x0, x1, y, color)
-        if labels:
-            ax.text(0.5 * (x0 + x1), y + (0.06 if y >= 0 else -0.06), e.label, ha="center",
-                    va="bottom" if y >= 0 else "top", fontsize=7, color=color)
+        if labels:  # below the row, a lower lane's label is under the floor line, not across it
+            ax.text(0.5 * (x0 + x1), y + 0.06 if y >= 0 else -half - 0.05, e.label, ha="center",
+                    va="bottom" if y >= 0 else "top", fontsize=7 if len(e.label) <= 30 else 6, color=color,
+                    linespacing=1.1)
     for i, x in enumerate(positions):
         ax.add_patch(Rectangle((x - half, -half), BLOCK, BLOCK, facecolor="#9ecae1", edgecolor="k", lw=1.3, zorder=3))
         text = plan.names[i] + (f"\n{plan.masses[i]:g} kg" if labels else "")
@@ -208,8 +265,6 @@ def schematic_figure(sc: Scenario):
         d = sc.damping
         notes.append("plus [damping]: " + (f"modal ratios {', '.join(f'{z:g}' for z in d.modal)}" if d.modal else
                                            f"Rayleigh C = {d.alpha:g} M + {d.beta:g} K"))
-    if sc.frictions or sc.stops:
-        notes.append(f"not drawn: {len(sc.frictions)} friction contact(s), {len(sc.stops)} stop(s)")
     if notes:
         fig.text(0.5, 0.03, "\n".join(notes), ha="center", va="bottom", fontsize=8, color="0.25")
     return fig
