@@ -76,3 +76,56 @@ def test_no_plot_cuts_its_text(name, tmp_path, saved_figures):
     assert saved_figures, "no figure was saved"
     clipped = [(path.split("/")[-1], outside) for path, outside in saved_figures if outside]
     assert not clipped, clipped
+
+
+@pytest.mark.parametrize("periods", ["linspace(0.2,1.5,60)", "logspace(-2,1,200)"])
+def test_a_spectrum_labels_guide_lines_where_its_curve_is(periods, tmp_path):
+    """Every Sa and Sd guide line through the curve's own range has its label somewhere on the frame: a narrow band
+    gets 1-2-5 lines (the curve at 0.3-0.7 g with only 1 g and 0.1 g drawn could not be read), and a label the
+    frame would cut at the line's exit is moved along the line, not dropped."""
+    import math
+    import re
+
+    import numpy as np
+
+    from smdcli.analysis.spectrum import response_spectrum
+    from smdcli.plots.spectrum import spectrum_figure
+    from smdcli.scenario.records import read_record
+    from smdcli.scenario.spec import STANDARD_GRAVITY as G
+    from smdcli.sweep.spec import parse_values
+
+    record = read_record(RECORD, units="g")
+    spectrum = response_spectrum(record.time, record.acceleration, parse_values(periods), np.array([0.05]))
+    fig = spectrum_figure(spectrum, record, "spectrum")
+    labels = [t.get_text() for t in fig.axes[0].texts]
+    sa_drawn = sorted(float(m.group(1)) for t in labels if (m := re.fullmatch(r"Sa (\S+) g", t)))
+    sa = 2 * math.pi * spectrum.Sv[0] / spectrum.period / G
+    inside = [v for v in sa_drawn if sa.min() <= v <= sa.max()]
+    assert inside, (sa.min(), sa.max(), sa_drawn)
+    sd_drawn = [t for t in labels if t.startswith("Sd ")]
+    assert len(sd_drawn) >= 3 and len(sa_drawn) >= 3
+
+
+def test_a_phase_axis_is_labelled_as_far_as_its_lags_reach(tmp_path, monkeypatch):
+    """Three masses lag up to 5π/2 behind a force on the first: the phase axis is labelled in steps of π/2 past the
+    largest lag (it stopped at 2π where the curve reached 3π)."""
+    import math
+
+    import h5py
+    import numpy as np
+    from matplotlib.figure import Figure
+
+    from smdcli.cli import run as smd
+
+    seen = []
+    original = Figure.savefig
+    monkeypatch.setattr(Figure, "savefig", lambda fig, *a, **k: (seen.append(fig), original(fig, *a, **k))[1])
+    assert smd(["sweep", str(SCENARIOS / "three_dof_forced.toml"), "--frequency", "linspace(1,60,300)",
+                "-o", str(tmp_path), "--quiet"]) == 0
+    with h5py.File(tmp_path / "three_dof_forced_sweep.h5") as f:
+        lag = float(np.nanmax(f["phase"][()]))
+    phase_axis = seen[0].axes[1]
+    ticks = phase_axis.get_yticks()
+    assert lag > 2 * math.pi and ticks.max() >= lag and ticks.max() - lag < math.pi / 2
+    labels = [t.get_text() for t in phase_axis.get_yticklabels()]
+    assert labels[-1] == "5π/2" and labels[:5] == ["0", "π/2", "π", "3π/2", "2π"]

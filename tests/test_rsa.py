@@ -148,3 +148,23 @@ def test_a_spectrum_that_misses_a_period_is_refused(tmp_path):
     done = CliRunner().invoke(app, ["rsa", str(SCENE), "--spectrum", str(short), "-o", str(tmp_path / "o")])
     assert done.exit_code == 2 and "outside the spectrum's periods" in done.output
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("combination", ["cqc", "srss"])
+def test_the_chosen_combination_is_drawn_on_top_and_the_others_say_how_far(tmp_path, combination):
+    """The plot's chosen rule is solid and above the others (CQC used to lie hidden under SRSS's markers, the two
+    0.1 % apart); each other rule is drawn beneath with open markers, its label saying how far it is."""
+    from smdcli.commands.rsa import rsa
+    from smdcli.plots.rsa import rsa_figure
+
+    run = rsa(SCENE, DESIGN, tmp_path, combination=combination, plots=False)
+    peaks = rsa_figure(run).axes[1]
+    lines = {line.get_label(): line for line in peaks.get_lines()}
+    chosen = lines[f"{combination.upper()} (chosen)"]
+    others = [line for label, line in lines.items() if "from" in label]
+    assert len(others) == 2 and all(chosen.get_zorder() > line.get_zorder() for line in others)
+    assert all(line.get_markerfacecolor() == "none" for line in others)
+    for line in others:  # the stated distance is the drawn one
+        stated = float(line.get_label().split("(")[1].split("%")[0]) / 100
+        drawn = np.abs(line.get_xdata() - chosen.get_xdata()).max() / np.abs(chosen.get_xdata()).max()
+        assert abs(stated - drawn) <= 0.0005 + 1e-12

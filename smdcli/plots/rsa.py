@@ -30,10 +30,19 @@ def rsa_figure(run):
     shapes_ax.set_xlabel("Mode shape (largest entry 1)")
     shapes_ax.set_title("Modes", fontsize=10)
     fig.legend(*shapes_ax.get_legend_handles_labels(), fontsize=8, loc="outside lower center", ncol=3)
+    chosen = a.combined(run.combination)["displacement"]
+    top = float(np.abs(chosen).max()) or 1.0
     for j, rule in enumerate(COMBINATIONS):
         peaks = a.combined(rule)["displacement"]
-        peaks_ax.plot(np.concatenate([[0.0], peaks]), np.concatenate([[0], level]), marker="os^"[j], ms=5,
-                      label=rule.upper() + (" (chosen)" if rule == run.combination else ""))
+        y = np.concatenate([[0], level])
+        if rule == run.combination:  # on top, solid: a rule that lies on it cannot hide it
+            peaks_ax.plot(np.concatenate([[0.0], peaks]), y, marker="os^"[j], ms=5, lw=2.2, zorder=4,
+                          color=f"C{j}", label=f"{rule.upper()} (chosen)")
+        else:  # beneath, open markers, saying how far from the chosen it is
+            apart = float(np.abs(peaks - chosen).max()) / top
+            peaks_ax.plot(np.concatenate([[0.0], peaks]), y, marker="os^"[j], ms=8, lw=1.0, zorder=3,
+                          color=f"C{j}", mfc="none", mew=1.2, ls="--",
+                          label=f"{rule.upper()} ({apart:.1%} from {run.combination.upper()} at most)")
     peaks_ax.set_yticks(np.concatenate([[0], level]), ["ground", *run.dofs])
     peaks_ax.set_xlabel("Peak displacement relative to the ground [m]")
     peaks_ax.set_title(f"Combined peaks, {a.used} modes", fontsize=10)

@@ -14,9 +14,13 @@ from smdcli.scenario.spec import STANDARD_GRAVITY as G  # guide lines of constan
 
 
 def _decades(low: float, high: float) -> list[float]:
-    """The powers of ten in [low, high]."""
-    values = [10.0**e for e in range(math.floor(math.log10(low)), math.ceil(math.log10(high)) + 1)]
-    return [v for v in values if low <= v <= high]
+    """The powers of ten in [low, high]; where fewer than four are, 1, 2 and 5 times them (a narrow frame's guide
+    lines near its curve, not only the decades beyond it)."""
+    exponents = range(math.floor(math.log10(low)), math.ceil(math.log10(high)) + 1)
+    values = [v for v in (10.0**e for e in exponents) if low <= v <= high]
+    if len(values) < 4:
+        values = [v for v in (m * 10.0**e for e in exponents for m in (1.0, 2.0, 5.0)) if low <= v <= high]
+    return values
 
 
 def spectrum_figure(spectrum, record, title: str):
@@ -50,16 +54,22 @@ def spectrum_figure(spectrum, record, title: str):
 
     def label(text: str, exit_t: float, entry_t: float, v_at, slope: int) -> None:
         """Inside the frame where the line leaves it through the bottom (Sd) or top (Sa), else where it enters."""
-        t = exit_t / 1.4 if exit_t < t_high else entry_t * 1.4
-        if t_low < t < t_high:
+        # along the line inside the frame, from where it leaves (or enters) toward the other end: the first spot
+        # where the label is whole and on no other label
+        first, last = max(min(exit_t, entry_t), t_low), min(max(exit_t, entry_t), t_high)
+        if not first < last:
+            return
+        spots = np.geomspace(first, last, 12)
+        for t in spots[::-1] if exit_t < t_high else spots:  # from the exit where it is in the frame
+            t = float(t)
             shown = ax.text(t, v_at(t), text, fontsize=7, color="0.35", rotation=angle(slope), rotation_mode="anchor",
                             ha="center", va="bottom", clip_on=True)
             box = shown.get_window_extent(fig.canvas.get_renderer())
             inside = ax.get_window_extent().padded(-2)
-            if not (inside.contains(*box.p0) and inside.contains(*box.p1)) or any(box.overlaps(b) for b in placed):
-                shown.remove()  # a label the frame would cut, or on another label, is none: the line speaks for itself
-            else:
+            if inside.contains(*box.p0) and inside.contains(*box.p1) and not any(box.overlaps(b) for b in placed):
                 placed.append(box)
+                return
+            shown.remove()  # a label the frame would cut, or on another label: the next spot along the line
 
     for sd in sd_values:
         ax.plot(span, 2 * math.pi * sd / span, color="0.6", lw=0.6, ls="--", zorder=1)

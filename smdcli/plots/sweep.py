@@ -209,9 +209,13 @@ def frequency_figure(family, response, title: str, unit: str = "rad/s", normaliz
     if pool.size:
         ax_a.set_ylim(max(pool.min() / 2, pool.max() * 1e-6), pool.max() * 2)
     ax_p.set_ylabel("Phase lag θ [rad]")
-    ticks = 5 if np.nanmax(response.phase, initial=0) > 3.3 else 3  # to 2 pi where a lag passes pi
-    ax_p.set_yticks([i * math.pi / 2 for i in range(ticks)])
-    ax_p.set_yticklabels(["0", "π/2", "π", "3π/2", "2π"][:ticks])
+    every_phase = np.concatenate([np.ravel(response.phase)] + [np.ravel(p) for _, p in response.measured.values()])
+    finite_phase = every_phase[np.isfinite(every_phase)]
+    low = min(0.0, float(finite_phase.min(initial=0.0)))
+    high = max(math.pi, float(finite_phase.max(initial=0.0)))  # a lag of n DOFs reaches n pi: every one labelled
+    steps = range(math.floor(low / (math.pi / 2) + 1e-9), math.ceil(high / (math.pi / 2) - 1e-9) + 1)
+    ax_p.set_yticks([i * math.pi / 2 for i in steps])
+    ax_p.set_yticklabels([_half_pi(i) for i in steps])
     for ax in (ax_a, ax_p):
         ax.grid(True, which="both", alpha=0.35)
     if cmap is None:
@@ -223,3 +227,14 @@ def frequency_figure(family, response, title: str, unit: str = "rad/s", normaliz
     extra = f"; measured vs exact: {response.difference:.1e} of the peak" if response.difference is not None else ""
     fig.suptitle(f"{title}\nfrequency response, {kind}{extra}", fontsize=10)
     return fig
+
+
+def _half_pi(i: int) -> str:
+    """i pi / 2 written as a reader writes it: 0, π/2, π, 3π/2, 2π, -π/2 ..."""
+    if i == 0:
+        return "0"
+    sign = "-" if i < 0 else ""
+    i = abs(i)
+    if i % 2 == 0:
+        return f"{sign}{'' if i == 2 else i // 2}π"
+    return f"{sign}{'' if i == 1 else i}π/2"
