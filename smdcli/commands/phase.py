@@ -97,8 +97,10 @@ def _loops(sc: Scenario, method: str | None, label: str | None) -> list[Curve]:
 
         tension = forces.spring[:, forces.spring_names.index(spring.path)]
         # the yield and unloading corners: each event's state, where the samples would draw a chord
-        t, d, force = merged(result.time, (deformation(result.displacement), tension), t_event,
-                                  (deformation(x_event), tension_event[:, result.nonsmooth.paths.index(spring.path)]))
+        t, d, force = result.time, deformation(result.displacement), tension
+        if len(t_event):
+            t, d, force = merged(t, (d, force), t_event,
+                                 (deformation(x_event), tension_event[:, result.nonsmooth.paths.index(spring.path)]))
         name = f"{spring.path} ({spring.law}, {' - '.join(spring.connects)})"
         loops.append(Curve(f"{label}: {name}" if label else name, t, d, force))
     return loops
