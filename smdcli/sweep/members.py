@@ -38,6 +38,7 @@ class FamilyResult:
     how: str
     wall_time_s: float
     stated_accuracy: np.ndarray | None = None  # (S,) each member's vouched error relative to its peaks
+    located_peak: np.ndarray | None = None  # (S, n) each member's peak |x| located by its own run (events too)
 
     @property
     def acceleration(self) -> np.ndarray:
@@ -53,9 +54,12 @@ def _histories(result) -> tuple:
 
 
 def _status(result) -> tuple:
-    """A member's success, message (with the failure time), method and stated accuracy."""
+    """A member's success, message (with the failure time), method, stated accuracy and peak |x| per DOF located
+    between samples and at its events (solvers.peaks.result_peaks: a stop's contact point, a yield's corner)."""
+    from smdcli.solvers.peaks import result_peaks
+
     message = "ok" if result.success else f"{result.stats.message} (t = {result.t_failed:g} s)"
-    return result.success, message, result.stats.method, result.stats.stated_accuracy
+    return result.success, message, result.stats.method, result.stats.stated_accuracy, result_peaks(result)
 
 
 def _solve_member(args: tuple[Scenario, str | None]) -> tuple:
@@ -143,13 +147,13 @@ def solve_family(family: Family, method: str | None = None, workers: int | None 
             for name, data in zip(QUANTITIES, histories):
                 stacks[name][s, :len(t)] = data
         statuses = [status for _, status in outcomes]
-    success, messages, methods, stated = zip(*statuses)
+    success, messages, methods, stated, peaks = zip(*statuses)
     pool = "threads" if threaded else "process pool"
     how = f"{pool} of {min(workers, S)} workers" if workers > 1 and S > 1 else "one process"
     return FamilyResult(grid if same_grid else times, family.base.dofs, stacks["displacement"],
                         stacks["velocity"], stacks["acceleration"], stacks["force"],
                         np.array(success), list(messages), list(methods), how, time.perf_counter() - start,
-                        np.array(stated))
+                        np.array(stated), located_peak=np.array(peaks, dtype=float).reshape(S, n))
 
 
 def _batched_stated(family: Family, grid: np.ndarray) -> np.ndarray:
@@ -201,9 +205,9 @@ def metrics(family: Family, result: FamilyResult, errors: dict | None = None) ->
     if given: settling_time, how far (s) each may be off because of the members' errors of x."""
     S, N, n = result.displacement.shape
     tied = _ground_elements(family)
-    # peaks located between samples where the motion is smooth between them but at the base's jumps (a nonsmooth
-    # member's events are not kept: its peaks stay the samples', which a contact's corner makes short)
-    locate = not family.base.nonsmooth and result.time.ndim == 1 and N > 2
+    # peaks located between samples where the motion is smooth between them but at the base's jumps; members solved
+    # one by one bring their own (result.located_peak), at their events too
+    locate = not family.base.nonsmooth and result.time.ndim == 1 and N > 2 and result.located_peak is None
     jumps = _jump_times(family.base, result.time) if locate else np.empty(0)
     measured = {name: np.empty((S, n)) for name in METRICS + ("settling_time_error",)}
     block = max(1, METRIC_SAMPLES // (N * n))
@@ -219,6 +223,9 @@ def metrics(family: Family, result: FamilyResult, errors: dict | None = None) ->
         if locate:
             measured["peak_displacement"][members] = np.fmax(
                 measured["peak_displacement"][members], _located(t, result, members, jumps))
+        if result.located_peak is not None:  # members solved one by one located their own, at their events too
+            measured["peak_displacement"][members] = np.fmax(measured["peak_displacement"][members],
+                                                             result.located_peak[members])
     settling_error = measured.pop("settling_time_error")
     if errors is not None:
         errors["settling_time"] = settling_error
