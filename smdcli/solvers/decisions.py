@@ -225,14 +225,14 @@ def touch(scene: Scene, states: list[State], z: np.ndarray, element: int, resolu
 
 def remaining_flights(scene: Scene, states: list[State], z: np.ndarray, element: int, e: float):
     """The flights an impact at element leaves, if the motion brings it back: (their heights together, their times
-    together), each rebound rising against the pull the motion has now and coming back at e times its speed (the
-    geometric series a ball coming to rest obeys), or None where the rebound is not pulled back."""
+    together, the pull), each rebound rising against the pull the motion has now and coming back at e times its
+    speed (the geometric series a ball coming to rest obeys), or None where the rebound is not pulled back."""
     n, row = scene.n, scene.R[element]
     rebound = float(row @ z[n:2 * n]) + scene.belts[element]
     pull = float(row @ scene.evaluate(states, z)[3])
     if rebound * pull >= 0 or e >= 1.0:
         return None
-    return rebound * rebound / (2 * abs(pull)) / (1 - e * e), 2 * abs(rebound / pull) / (1 - e)
+    return rebound * rebound / (2 * abs(pull)) / (1 - e * e), 2 * abs(rebound / pull) / (1 - e), abs(pull)
 
 
 def project(scene: Scene, states: list[State], z: np.ndarray, v_scale: float) -> np.ndarray:
@@ -272,7 +272,7 @@ def accumulation(remaining, length: float, t: float, span: float, impacts: int) 
     impacts ends too."""
     if remaining is None:
         return None
-    heights, duration = remaining
+    heights, duration, _ = remaining
     unseen = heights <= at_level(length, 0.0) or duration <= at_level(abs(t) + span, 0.0)
     return t + duration if unseen or impacts >= MAX_IMPACTS_IN_A_SEQUENCE else None
 

@@ -116,6 +116,16 @@ def row_peaks(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray,
     return peaks
 
 
+def jump_times(model, grid: np.ndarray) -> np.ndarray:
+    """Where a scene's acceleration or state jumps within the grid: its forces' discontinuities (a kink leaves the
+    acceleration continuous) and the ground's jumps."""
+    times = [float(t) for t, _, _ in model.jumps]
+    for signal in model.signals:
+        at = signal.breakpoints(float(grid[0]), float(grid[-1]))
+        times += [float(t) for t in at[signal.value(at) != signal.value_left(at)]]
+    return np.array(times, dtype=float)
+
+
 def result_peaks(result, absolute: bool = False) -> np.ndarray:
     """Each DOF's largest |x| (relative, or absolute under ground motion), located between the samples and at the
     events (a yield's corner, a stop's contact point: where the samples cut the corner)."""
@@ -125,11 +135,7 @@ def result_peaks(result, absolute: bool = False) -> np.ndarray:
     # interpolant does not hold: those intervals keep their samples, and the events' own states join them
     events = [t for t, _, _ in result.nonsmooth.events] if result.nonsmooth is not None else []
     if result.origin is not None and len(result.time) > 1:
-        model = result.origin[1]
-        for signal in model.signals:  # a force's jumps (its kinks leave the acceleration continuous)
-            times = signal.breakpoints(float(result.time[0]), float(result.time[-1]))
-            events += [float(t) for t in times[signal.value(times) != signal.value_left(times)]]
-        events += [float(t) for t, _, _ in model.jumps]
+        events += list(jump_times(result.origin[1], result.time))
     peaks = located_peaks(result.time, *quantities, events=np.array(events, dtype=float))
     if result.nonsmooth is not None:
         t_event, x_event, _, _ = result.nonsmooth.event_state()

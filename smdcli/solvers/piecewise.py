@@ -325,9 +325,8 @@ class PiecewiseRun(Crossings):
             self.velocity_before[len(self.events) - 1] = v_before  # the jump, for what draws the state
             history.append((t, speed))
             remaining = remaining_flights(scene, states, z, element, law.restitution)
-            pull = abs(float(scene.R[element] @ scene.evaluate(states, z)[3]))
             # the scene's length: its positions so far, and the rise of the sequence's first flight
-            length = max(self.x_scale, history[0][1] ** 2 / (2 * pull) if pull > 0 else 0.0)
+            length = self.x_scale if remaining is None else max(self.x_scale, history[0][1] ** 2 / (2 * remaining[2]))
             rest_at = accumulation(remaining, length, t, float(self.grid[-1] - self.grid[0]), len(history))
             resting = law.restitution == 0 or rest_at is not None or speed <= 1e-14 * max(history[0][1], 1e-300)
         states = list(states)

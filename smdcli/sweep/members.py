@@ -14,6 +14,7 @@ import numpy as np
 from smdcli.errors import UsageError
 from smdcli.model import build, mass_solve, time_grid
 from smdcli.scenario import Scenario
+from smdcli.solvers.peaks import jump_times, result_peaks, row_peaks
 from smdcli.sweep.batched import batched_exact, shared_signal_recurrence
 from smdcli.sweep.family import Family
 from smdcli.sweep.pool import default_workers, run_pool, run_threads
@@ -56,8 +57,6 @@ def _histories(result) -> tuple:
 def _status(result) -> tuple:
     """A member's success, message (with the failure time), method, stated accuracy and peak |x| per DOF located
     between samples and at its events (solvers.peaks.result_peaks: a stop's contact point, a yield's corner)."""
-    from smdcli.solvers.peaks import result_peaks
-
     message = "ok" if result.success else f"{result.stats.message} (t = {result.t_failed:g} s)"
     return result.success, message, result.stats.method, result.stats.stated_accuracy, result_peaks(result)
 
@@ -208,7 +207,7 @@ def metrics(family: Family, result: FamilyResult, errors: dict | None = None) ->
     # peaks located between samples where the motion is smooth between them but at the base's jumps; members solved
     # one by one bring their own (result.located_peak), at their events too
     locate = not family.base.nonsmooth and result.time.ndim == 1 and N > 2 and result.located_peak is None
-    jumps = _jump_times(family.base, result.time) if locate else np.empty(0)
+    jumps = jump_times(family.base, result.time) if locate else np.empty(0)
     measured = {name: np.empty((S, n)) for name in METRICS + ("settling_time_error",)}
     block = max(1, METRIC_SAMPLES // (N * n))
     for start in range(0, S, block):
@@ -232,19 +231,8 @@ def metrics(family: Family, result: FamilyResult, errors: dict | None = None) ->
     return measured
 
 
-def _jump_times(model, grid: np.ndarray) -> np.ndarray:
-    """Where the base scene's acceleration or state jumps: its forces' discontinuities and the ground's jumps."""
-    times = [float(t) for t, _, _ in model.jumps]
-    for signal in model.signals:
-        at = signal.breakpoints(float(grid[0]), float(grid[-1]))
-        times += [float(t) for t in at[signal.value(at) != signal.value_left(at)]]
-    return np.array(times, dtype=float)
-
-
 def _located(t: np.ndarray, result: FamilyResult, members: slice, jumps: np.ndarray) -> np.ndarray:
     """Each member's peak |x| per DOF (s, n), located between samples on the quintic Hermite (solvers.peaks)."""
-    from smdcli.solvers.peaks import row_peaks
-
     x, v, a = (q[members] for q in (result.displacement, result.velocity, result.acceleration))
     s, N, n = x.shape
     rows = lambda q: q.transpose(0, 2, 1).reshape(s * n, N)  # noqa: E731 (member and DOF by time)
