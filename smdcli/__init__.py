@@ -10,7 +10,7 @@ path, exit 2), SolverFailed (exit 1).
 from smdcli.errors import ScenarioError, SmdError, SolverFailed, UsageError
 
 __version__ = "0.1.0"
-_ANALYSES = ("read_record", "build", "response_spectrum", "constant_ductility", "constant_strength",
+_ANALYSES = ("read_record", "build", "read_matrix", "response_spectrum", "constant_ductility", "constant_strength",
              "shock_response_spectrum", "process_record", "modal_participation", "response_spectrum_analysis")
 __all__ = ["load", "simulate", "write", *_ANALYSES, "SmdError", "ScenarioError", "UsageError", "SolverFailed",
            "__version__"]

@@ -16,6 +16,7 @@ commands run, exposed here by name:
     smdcli.process_record(t, a, baseline, band, order)     # corrected, integrated, measured
     smdcli.modal_participation(M, K, C) and smdcli.response_spectrum_analysis(M, K, C, Sa_of_T_zeta, ...)
     smdcli.build(scenario)                                # the Model: M, C, K, dofs, modes
+    smdcli.read_matrix(h5file["model/K"])                 # a result's M, C or K: dense, or CSR where stored sparse
 
 Errors are exceptions: ScenarioError for bad input (the CLI's exit 2), SolverFailed when a method fails (exit 1).
 Must not import: cli.
@@ -69,6 +70,7 @@ def write(result: Result, path: str | Path) -> Path:
 ANALYSES = {
     "read_record": ("smdcli.scenario.records", "read_record"),
     "build": ("smdcli.model", "build"),
+    "read_matrix": ("smdcli.io.hdf5", "read_matrix"),
     "response_spectrum": ("smdcli.analysis.spectrum", "response_spectrum"),
     "constant_ductility": ("smdcli.analysis.inelastic", "constant_ductility"),
     "constant_strength": ("smdcli.analysis.inelastic", "constant_strength"),

@@ -52,6 +52,42 @@ law = "{law}"
 """
 
 
+def chain_matrices(n: int, m: float = 1.0, k: float = 100.0, c: float = 0.5):
+    """M, C, K (CSR) of an n-mass chain fixed at one end, m a mass, k and c a link: the element-form chain of
+    test_large.chain() as a finite-element program would write it."""
+    import numpy as np
+    from scipy.sparse import diags
+
+    def banded(value):
+        main = np.full(n, 2 * value)
+        main[-1] = value
+        return diags([main, np.full(n - 1, -value), np.full(n - 1, -value)], [0, 1, -1]).tocsr()
+    return diags(np.full(n, m)).tocsr(), banded(c), banded(k)
+
+
+def chain_files(folder: Path, n: int, suffix: str = ".mtx", *, end: float = 1.0, step: float = 0.01,
+                name: str = "chain") -> Path:
+    """An n-mass chain as [system] with M, C, K in files of one format (.mtx, .npz or .mat) beside its scenario,
+    a 10 N sine at 5 rad/s on the first DOF (x1); returns the scenario's path."""
+    import scipy.io
+    import scipy.sparse
+
+    folder.mkdir(parents=True, exist_ok=True)
+    for key, matrix in zip("MCK", chain_matrices(n)):
+        path = folder / f"{name}_{key}{suffix}"
+        if suffix == ".mtx":
+            scipy.io.mmwrite(path, matrix, symmetry="symmetric")
+        elif suffix == ".npz":
+            scipy.sparse.save_npz(path, matrix)
+        else:
+            scipy.io.savemat(path, {key: matrix})
+    scene = folder / f"{name}.toml"
+    scene.write_text(f"[time]\nend = {end!r}\nstep = {step!r}\n[system]\n"
+                     + "".join(f'{key} = "{name}_{key}{suffix}"\n' for key in "MCK")
+                     + '[[force]]\non = "x1"\ntype = "sine"\namplitude = 10.0\nomega = 5.0\n')
+    return scene
+
+
 def force_block(kind: str, on: str = "m", **fields) -> str:
     """A [[force]] table in TOML text; lists and numbers written as TOML reads them."""
     lines = ["[[force]]", f'on = "{on}"', f'type = "{kind}"']

@@ -12,7 +12,8 @@ from conftest import SCENARIOS, bundled, model_of, one_dof
 ALL = sorted(SCENARIOS.glob("*.toml"))
 BOOK = ["one_dof_nonlinear_stiff", "one_dof_undamped", "one_dof_underdamped", "one_dof_overdamped",
         "one_dof_critical", "one_dof_square_fourier", "one_dof_square_wave", "one_dof_harmonic",
-        "two_dof_forced", "three_dof_forced", "three_dof_free", "three_dof_matrix_forced", "three_dof_matrix_free"]
+        "two_dof_forced", "three_dof_forced", "three_dof_free", "three_dof_matrix_forced", "three_dof_matrix_free",
+        "three_dof_matrix_files"]  # the last: the book's matrices read from Matrix Market files
 STUDIES = ["one_dof_linear_stiff", "two_mass_stiff_chain"]  # stiff scenes for compare-solvers
 SWEEPS = ["one_dof_regimes_sweep", "ic_underdamped", "ic_critical", "ic_overdamped", "frequency_response_zeta",
           "two_dof_frequency_response", "duffing_frequency_response"]  # scenes with a [sweep] table

@@ -128,6 +128,7 @@ def test_every_toml_block_shown_is_read_by_smd(page, tmp_path):
         (tmp_path / "tests").mkdir(exist_ok=True)
         if not (tmp_path / "records").exists():  # a scenario in scenarios/ names the shipped records as ../records
             (tmp_path / "records").symlink_to(ROOT / "records")
+            (path.parent / "matrices").symlink_to(ROOT / "scenarios" / "matrices")  # and its matrix files so
         if not (tmp_path / "tests" / "golden").exists():
             (tmp_path / "tests" / "golden").symlink_to(ROOT / "tests" / "golden")
         code = smd(["simulate", str(path), "-o", str(tmp_path / "out"), "--no-plots", "--quiet"])

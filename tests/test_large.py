@@ -9,9 +9,11 @@ import h5py
 import numpy as np
 import pytest
 from conftest import model_of
+from scipy.sparse import coo_matrix
 
 import smdcli.model.sparse as sparse_module
 from smdcli.errors import ScenarioError
+from smdcli.io.hdf5 import read_matrix
 from smdcli.kernels import banded
 from smdcli.solvers import solve
 from smdcli.solvers.base import Tolerances
@@ -156,11 +158,14 @@ def test_a_chain_above_sparse_dofs_from_the_command_line(cli, tmp_path):
     assert "sparse_newmark" in ran.stdout and "met by the error estimate" in ran.stdout
     with h5py.File(tmp_path / "out" / "long.h5") as f:
         assert f["displacement"].shape == (101, n)
-        K = f["model/K"]
-        assert K.chunks is not None and K.compression == "gzip"
-        corner = K[:3, :3]
-        assert np.array_equal(corner, [[200.0, -100.0, 0.0], [-100.0, 200.0, -100.0], [0.0, -100.0, 200.0]])
+        stored = f["model/K"]  # its nonzero entries only: what scipy's coo_matrix and MATLAB's sparse() read
+        assert stored.attrs["format"] == "coordinate" and list(stored.attrs["shape"]) == [n, n]
+        assert stored["value"].shape == (3 * n - 2,) and stored["value"].attrs["units"] == "N/m"
+        K = coo_matrix((stored["value"][()], (stored["row"][()], stored["column"][()])), shape=(n, n)).toarray()
+        assert np.array_equal(K[:3, :3], [[200.0, -100.0, 0.0], [-100.0, 200.0, -100.0], [0.0, -100.0, 200.0]])
         assert K[n - 1, n - 1] == 100.0 and K[0, n - 1] == 0.0
+        assert np.array_equal(read_matrix(stored).toarray(), K)
+        assert np.array_equal(read_matrix(f["model/M"]).diagonal(), np.ones(n))
         modes = f["model/modes"]
         lowest = modes.attrs["lowest"]
         assert lowest == 20 and modes["shapes"].shape == (n, 20)

@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from conftest import SCENARIOS
+from conftest import SCENARIOS, chain_files
+
+from smdcli.model.sparse import SPARSE_DOFS
 
 RECORD = SCENARIOS.parent / "records" / "synthetic_20s_100hz.csv"
 
@@ -70,8 +72,10 @@ def written(tmp_path_factory):
     from smdcli.cli import run as smd
 
     files = {}
-    for i, (name, args, produced) in enumerate(_runs()):
+    big = chain_files(tmp_path_factory.mktemp("matrices"), SPARSE_DOFS + 10, step=0.1)
+    for i, (name, args, produced) in enumerate(_runs() + [SPARSE_RUN]):
         out = tmp_path_factory.mktemp(f"kind{i}")
+        args = [big if a == SPARSE_CHAIN else a for a in args]
         plots = ["--no-plots"] if args[0] != "phase" else []  # phase writes its portrait always
         assert smd([str(a) for a in args] + ["-o", str(out), "--quiet", *plots]) == 0, name
         files[name] = out / produced
@@ -97,7 +101,10 @@ def _unnamed_axes(path):
     return bare
 
 
-KINDS = [name for name, _, _ in _runs()]
+# a sparse scene from Matrix Market files: its M, C, K written as their nonzero entries
+SPARSE_CHAIN = "<a chain of SPARSE_DOFS + 10 masses, M, C, K in .mtx files>"
+SPARSE_RUN = ("simulate, sparse [system] from files", ["simulate", SPARSE_CHAIN], "chain.h5")
+KINDS = [name for name, _, _ in _runs()] + [SPARSE_RUN[0]]
 
 
 @pytest.mark.parametrize("kind", KINDS)

@@ -39,6 +39,11 @@ def write_header(f, scenario: Scenario, kind: str) -> None:
             ds = group.create_dataset(force.path, data=force.file_text)
             ds.attrs["file"] = force.file
             ds.attrs["sha256"] = hashlib.sha256(force.file_text.encode()).hexdigest()
+    if scenario.system is not None and scenario.system.files:  # the matrices are /model's; where they came from
+        group = f.create_group("provenance/matrix_files")
+        for key, path in scenario.system.files:
+            group.attrs[f"{key}_file"] = path
+            group.attrs[f"{key}_sha256"] = hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def write_provenance(f, kind: str) -> None:
@@ -322,10 +327,10 @@ def write_matrices(group, model_or_family, dof, member=None) -> None:
         if name == "K" and base.nonsmooth:  # the scene at rest, as info and /model/modes take it
             matrix = base.initial_K if member is None else np.stack([initial_stiffness(k, base.nonsmooth)
                                                                      for k in matrix])
-        if isinstance(matrix, np.ndarray):
-            ds = group.create_dataset(name, data=matrix)
-        else:
-            ds = _sparse_dataset(group, name, matrix)
+        if not isinstance(matrix, np.ndarray):
+            stated(_sparse_matrix(group, name, matrix, units, names), accuracy[name])
+            continue
+        ds = group.create_dataset(name, data=matrix)
         ds.attrs["units"] = units
         if name == "K" and base.nonsmooth:
             ds.attrs["description"] = ("at rest: every hysteretic spring at its elastic stiffness k (a bilinear "
@@ -335,24 +340,32 @@ def write_matrices(group, model_or_family, dof, member=None) -> None:
         stated(ds, accuracy[name])
 
 
-SPARSE_CHUNK = 1024  # rows and columns of a chunk of a sparse scene's M, C or K
+def _sparse_matrix(group, name: str, matrix, units: str, names: list[str]):
+    """A sparse scene's matrix as its nonzero entries (coordinate form, rows sorted, 0-based), a group of
+    row, column and value on an `entry` scale with attrs shape and units: what scipy's
+    coo_matrix((value, (row, column)), shape) and MATLAB's sparse(row + 1, column + 1, value, n, n) read, in
+    O(nnz) (a 10,000-mass chain's K: 30,000 entries, not 10^8). read_matrix() gives it back."""
+    coo = matrix.tocoo()
+    order = np.lexsort((coo.col, coo.row))
+    sparse = group.create_group(name)
+    sparse.attrs.update(units=units, shape=np.array(matrix.shape, dtype=np.int64), format="coordinate",
+                        description=f"{name}[row[i], column[i]] = value[i], 0-based, every other entry 0; rows and "
+                                    f"columns in the order of /dof ({names[0]}...)")
+    entry = axis(sparse, "entry", np.arange(coo.nnz, dtype=np.int64))
+    for part, values in (("row", coo.row[order]), ("column", coo.col[order]), ("value", coo.data[order])):
+        with_scales(sparse.create_dataset(part, data=values.astype(np.int64 if part != "value" else float)), entry)
+    sparse["value"].attrs["units"] = units
+    return sparse["value"]
 
 
-def _sparse_dataset(group, name: str, matrix):
-    """A sparse scene's matrix as the same n x n data set, chunked and compressed: written a block of rows at a time
-    over the columns it touches, so chunks of zeros are never stored (a chain's 10,000-square K takes 0.1 MB, not
-    800) and memory stays at one block."""
-    n = matrix.shape[0]
-    ds = group.create_dataset(name, shape=(n, n), dtype=float, chunks=(min(n, SPARSE_CHUNK), min(n, SPARSE_CHUNK)),
-                              compression="gzip", fillvalue=0.0)
-    rows = matrix.tocsr()
-    for start in range(0, n, SPARSE_CHUNK):
-        block = rows[start:start + SPARSE_CHUNK]
-        if block.nnz:
-            first, last = int(block.indices.min()), int(block.indices.max()) + 1
-            ds[start:start + block.shape[0], first:last] = block[:, first:last].toarray()
-    ds.attrs["storage"] = "sparse scene: chunks of zeros are not stored"
-    return ds
+def read_matrix(node):
+    """/model/M, C or K as written: a dense array, or a sparse scene's coordinate group as a scipy CSR matrix."""
+    if not hasattr(node, "keys"):
+        return node[()]
+    from scipy.sparse import coo_matrix
+
+    shape = tuple(int(d) for d in node.attrs["shape"])
+    return coo_matrix((node["value"][()], (node["row"][()], node["column"][()])), shape=shape).tocsr()
 
 
 def _strings(f, name: str, values):

@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from smdcli.model.modes import RIGID_BODY, Modes, modal_eigenvalues, regime, signed
+from smdcli.errors import ScenarioError
 from smdcli.scenario import Scenario
 
 # Above this many masses an element-form scene is assembled sparse (is_sparse_scene) and auto solves it by
@@ -64,15 +65,25 @@ def lowest_modes(model) -> Modes:
 
 
 def is_sparse_scene(scenario: Scenario) -> bool:
-    """Assembled sparse: an element-form scene of more than SPARSE_DOFS masses whose every part the sparse path takes
+    """Assembled sparse: a scene of more than SPARSE_DOFS DOFs, in element form or with [system]'s matrices read
+    from files (M diagonal: the sparse methods invert it row by row), whose every part the sparse path takes
     (linear springs and dampers, up to SPARSE_NONLINEAR cubic springs and quadratic dampers, Rayleigh [damping]; no
     hysteretic spring, contact, stop, modal [damping] or ground motion, which need the modes or the dense
     matrices)."""
+    system = scenario.system
+    if system is not None and not (system.from_files and is_diagonal(system.M)):
+        return False
     nonlinear = sum(e.law in ("cubic", "quadratic") for e in scenario.springs + scenario.dampers)
-    return (scenario.system is None and len(scenario.masses) > SPARSE_DOFS and not scenario.frictions
+    return (len(scenario.dof_names) > SPARSE_DOFS and not scenario.frictions
             and not scenario.stops and all(s.nonsmooth is None for s in scenario.springs)
             and nonlinear <= SPARSE_NONLINEAR and scenario.ground_motion is None
             and (scenario.damping is None or not scenario.damping.modal))
+
+
+def is_diagonal(matrix) -> bool:
+    """A CSR matrix with no entry off its diagonal."""
+    rows = np.repeat(np.arange(matrix.shape[0]), np.diff(matrix.indptr))
+    return bool((matrix.indices == rows).all())
 
 
 def assembled(stamp, n: int, sparse: bool):
@@ -94,3 +105,21 @@ def gershgorin_omega(model) -> float:
     converges slowly where a chain's top modes crowd (7.6 s at 10,000 masses); the bound is tight on a uniform
     chain."""
     return math.sqrt(float((abs(model.K) @ np.ones(model.n) / model.M.diagonal()).max()))
+
+
+DENSE_FILE_BYTES = 1_600_000_000  # the most M, C and K read from files may take when made dense (10,000 DOFs: 2.4 GB)
+
+
+def dense_file_matrices(scenario: Scenario) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """[system]'s file matrices made dense, for a scene the sparse path does not take; refused, naming why, where
+    they would not fit in memory."""
+    system = scenario.system
+    n = len(system.dofs)
+    if 3 * 8 * n * n > DENSE_FILE_BYTES:
+        why = ("M is not diagonal (the sparse methods need a lumped mass matrix)" if not is_diagonal(system.M)
+               else "the scene has parts the sparse methods do not take (stops, friction, hysteretic springs, "
+                    "modal [damping] or ground motion)")
+        raise ScenarioError(scenario.path, "system.M", f"{n} DOFs would be solved with dense matrices "
+                            f"({3 * 8 * n * n / 1e9:.1f} GB) because {why}; the limit is "
+                            f"{DENSE_FILE_BYTES / 1e9:.1f} GB")
+    return system.M.toarray(), system.C.toarray(), system.K.toarray()

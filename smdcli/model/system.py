@@ -27,7 +27,8 @@ from smdcli.model.checks import check_finite, check_forces, check_matrices_finit
 from smdcli.model.mass import mass_solve
 from smdcli.model.modes import RIGID_BODY, Modes, modal_eigenvalues, regime, signed
 from smdcli.model.nonsmooth import NonsmoothElement, check_initial_state, initial_stiffness, nonsmooth_elements
-from smdcli.model.sparse import assembled, cheapest, gershgorin_omega, is_sparse_scene, lowest_modes, rows_times
+from smdcli.model.sparse import (assembled, cheapest, dense_file_matrices, gershgorin_omega, is_sparse_scene,
+                                 lowest_modes, rows_times)
 from smdcli.scenario import Scenario
 
 # A linear model whose decaying eigenvalues spread wider than this is stiff.
@@ -370,7 +371,12 @@ def build(scenario: Scenario) -> Model:
     cubic = quadratic = None
     if scenario.system is not None:
         sys = scenario.system
-        M, C, K = (np.array(a, dtype=float) for a in (sys.M, sys.C, sys.K))
+        if not sys.from_files:
+            M, C, K = (np.array(a, dtype=float) for a in (sys.M, sys.C, sys.K))
+        elif is_sparse_scene(scenario):
+            M, C, K = sys.M, sys.C, sys.K
+        else:
+            M, C, K = dense_file_matrices(scenario)
         x0, v0 = np.array(sys.x0, dtype=float), np.array(sys.v0, dtype=float)
     else:
         masses = np.array([m.m for m in scenario.masses], dtype=float)

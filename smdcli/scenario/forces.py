@@ -42,11 +42,11 @@ def _read_omega(t: _Table, allow_period: bool) -> float:
         raise t.fail(given[1], f"give exactly one of {want}, found {' and '.join(given)}")
     key = given[0]
     value = t.number(key, positive=(key != "omega"), minimum=0.0)
-    if key == "omega":
-        return value
-    if key == "frequency":
-        return 2 * math.pi * value
-    return 2 * math.pi / value
+    omega = value if key == "omega" else 2 * math.pi * value if key == "frequency" else 2 * math.pi / value
+    if not math.isfinite(omega):  # 2 pi f past 1.8e308, or a period below 3.5e-308
+        raise t.fail(key, f"expected an angular frequency below 1.8e308 rad/s, found {key} = {value:g} "
+                          f"({'2 pi f' if key == 'frequency' else '2 pi / period'} overflows)")
+    return omega
 
 
 def _read_force(t: _Table, index: int, dofs: tuple[str, ...]) -> ForceSpec:

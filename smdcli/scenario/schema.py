@@ -23,6 +23,7 @@ BOOLEAN = {"type": "boolean"}
 NUMBERS = {"type": "array", "items": NUMBER}
 STRINGS = {"type": "array", "items": STRING}
 MATRIX = {"type": "array", "items": NUMBERS}
+MATRIX_OR_FILE = {"anyOf": [MATRIX, {**STRING, "description": "a .mtx, .npz or .mat file, relative to the scenario"}]}
 CONNECTS = {"type": "array", "items": STRING, "minItems": 2, "maxItems": 2,
             "description": "two different nodes: mass names or \"ground\""}
 
@@ -32,7 +33,7 @@ SPECIAL = {
     "type": {"enum": list(FORCE_TYPES)}, "expr": STRING, "file": STRING, "t": NUMBERS,
     "values": {"anyOf": [NUMBERS, STRING, {"type": "array", "items": {"anyOf": [NUMBERS, STRING]}}]},
     "interpolation": {"enum": ["linear", "previous"]}, "terms": INTEGER, "points": INTEGER, "mode": INTEGER,
-    "dofs": STRINGS, "M": MATRIX, "C": MATRIX, "K": MATRIX, "method": {"enum": list(METHOD_NAMES)},
+    "dofs": STRINGS, "M": MATRIX_OR_FILE, "C": MATRIX_OR_FILE, "K": MATRIX_OR_FILE, "method": {"enum": list(METHOD_NAMES)},
     "scheme": {"enum": list(NEWMARK_SCHEMES)}, "parameter": {"anyOf": [STRING, STRINGS]}, "labels": STRINGS,
     "ic": STRINGS, "frequency": {"anyOf": [NUMBER, STRING]}, "normalized": BOOLEAN, "input": STRING,
     "direction": {"enum": ["up", "down", "both"]}, "measure": BOOLEAN, "metric": STRING,
@@ -69,7 +70,8 @@ def scenario_schema() -> dict:
         "mass": _array_of(_table(_MASS_KEYS, ["name", "m"])),
         "spring": _array_of(spring), "damper": _array_of(damper),
         "friction": _array_of(contacts["friction"]), "stop": _array_of(contacts["stop"]),
-        "system": _table(_SYSTEM_KEYS, ["dofs", "M", "K"], x0=NUMBERS, v0=NUMBERS),
+        "system": {**_table(_SYSTEM_KEYS, ["M", "K"], x0=NUMBERS, v0=NUMBERS),  # dofs: x1..xn where M is a file
+                   "if": {"properties": {"M": {"type": "array"}}, "required": ["M"]}, "then": {"required": ["dofs"]}},
         "force": _array_of(force),
         "solver": _table(SOLVER_KEYS),
         "sweep": _table(SWEEP_KEYS, quantity={"enum": ["displacement", "velocity", "acceleration", "force"]},

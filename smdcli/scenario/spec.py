@@ -60,14 +60,20 @@ class ElementSpec:
 
 @dataclass(frozen=True)
 class MatrixSystem:
-    """The book's matrix form: M, C, K given whole."""
+    """The book's matrix form: M, C, K given whole, inline (rows of numbers) or as files (CSR matrices)."""
 
     dofs: tuple[str, ...]
-    M: tuple[tuple[float, ...], ...]
-    C: tuple[tuple[float, ...], ...]
-    K: tuple[tuple[float, ...], ...]
+    M: Any  # tuple[tuple[float, ...], ...] inline; a scipy CSR matrix read from a file
+    C: Any
+    K: Any
     x0: tuple[float, ...]
     v0: tuple[float, ...]
+    files: tuple[tuple[str, str], ...] = ()  # (M, C or K, the file's path) for each matrix read from a file
+
+    @property
+    def from_files(self) -> bool:
+        """M, C and K were read from files (CSR), not written inline."""
+        return not isinstance(self.M, tuple)
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,8 @@ from __future__ import annotations
 import difflib
 import math
 
+import numpy as np
+
 from smdcli.errors import ScenarioError
 from smdcli.scenario.reader import _MASS_KEYS, _SYSTEM_KEYS, _TIME_KEYS, _kind, _Table
 from smdcli.scenario.spec import DEFAULT_POINTS, GROUND, DampingSpec, ElementSpec, MassSpec, MatrixSystem, TimeSpec
@@ -178,15 +180,11 @@ def _check_definite(t: _Table, key: str, matrix, strict: bool) -> None:
 
 
 def _read_system(t: _Table) -> MatrixSystem:
+    if any(t.has(key) and isinstance(t.data[key], str) for key in ("M", "C", "K")):
+        return _read_file_system(t)
     if not t.has("dofs"):
         raise t.fail("dofs", 'required field is missing (expected names, e.g. ["x1", "x2"])')
-    dofs = t.raw("dofs")
-    if not isinstance(dofs, list) or not dofs or not all(isinstance(d, str) and d.strip() for d in dofs):
-        raise t.fail("dofs", f"expected a non-empty array of names, found {_kind(dofs)}")
-    if len(set(dofs)) != len(dofs):
-        raise t.fail("dofs", "duplicate DOF names")
-    if GROUND in dofs:
-        raise t.fail("dofs", f"{GROUND!r} is reserved for the fixed wall")
+    dofs = _read_dofs(t)
     n = len(dofs)
     M = _read_matrix(t, "M", n)
     C = _read_matrix(t, "C", n) if t.has("C") else tuple(tuple(0.0 for _ in range(n)) for _ in range(n))
@@ -195,6 +193,50 @@ def _read_system(t: _Table) -> MatrixSystem:
     v0 = t.numbers("v0", (0.0,) * n, length=n)
     t.finish(_SYSTEM_KEYS)
     return MatrixSystem(dofs=tuple(dofs), M=M, C=C, K=K, x0=x0, v0=v0)
+
+
+def _read_dofs(t: _Table) -> tuple[str, ...]:
+    dofs = t.raw("dofs")
+    if not isinstance(dofs, list) or not dofs or not all(isinstance(d, str) and d.strip() for d in dofs):
+        raise t.fail("dofs", f"expected a non-empty array of names, found {_kind(dofs)}")
+    if len(set(dofs)) != len(dofs):
+        raise t.fail("dofs", "duplicate DOF names")
+    if GROUND in dofs:
+        raise t.fail("dofs", f"{GROUND!r} is reserved for the fixed wall")
+    return tuple(dofs)
+
+
+def _read_file_system(t: _Table) -> MatrixSystem:
+    """[system] with M, C or K naming files, kept sparse (a matrix written inline beside them joins them as CSR);
+    dofs default to x1..xn."""
+    from scipy.sparse import csr_matrix
+
+    from smdcli.scenario.matrix_files import check_file_matrix, matrix_file_path, read_matrix_file
+
+    for key in ("M", "K"):
+        if not t.has(key):
+            raise t.fail(key, "required field is missing (expected a .mtx, .npz or .mat file, or a matrix)")
+    dofs = _read_dofs(t) if t.has("dofs") else None
+    n = None if dofs is None else len(dofs)
+    matrices, files = {}, []
+    named = [key for key in ("M", "C", "K") if t.has(key) and isinstance(t.data[key], str)]
+    for key in named:
+        matrices[key] = read_matrix_file(t, key)
+        sized_by = "one row per name in dofs" if dofs is not None else f"as {named[0]} is"
+        check_file_matrix(t, key, matrices[key], n, strict=(key == "M"), sized_by=sized_by)
+        n = matrices[key].shape[0]
+        files.append((key, str(matrix_file_path(t, key))))
+    for key in ("M", "C", "K"):
+        if key not in matrices:
+            # an array, not the tuple of rows: csr_matrix reads a tuple as (data, indices) or a shape
+            matrices[key] = csr_matrix(np.array(_read_matrix(t, key, n)) if t.has(key) else (n, n), dtype=float)
+    if dofs is None:
+        dofs = tuple(f"x{i + 1}" for i in range(n))
+    x0 = t.numbers("x0", (0.0,) * n, length=n)
+    v0 = t.numbers("v0", (0.0,) * n, length=n)
+    t.finish(_SYSTEM_KEYS)
+    return MatrixSystem(dofs=dofs, M=matrices["M"], C=matrices["C"], K=matrices["K"], x0=x0, v0=v0,
+                        files=tuple(files))
 
 
 DAMPING_KEYS = ("alpha", "beta", "zeta", "omega", "modal")

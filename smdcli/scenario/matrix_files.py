@@ -1,0 +1,128 @@
+"""[system]'s M, C and K read from files a finite-element program writes: Matrix Market (.mtx), scipy sparse
+(.npz, from scipy.sparse.save_npz, or numpy.savez of dense arrays) and MATLAB (.mat, v5 to v7.2 as scipy reads
+them). Kept sparse: a 10,000-DOF chain's three matrices are 0.7 MB as CSR, 2.4 GB dense.
+
+Must not import: model, solvers, or any layer above."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from smdcli.scenario.reader import _Table
+
+SUFFIXES = (".mtx", ".npz", ".mat")
+
+
+def matrix_file_path(t: _Table, key: str) -> Path:
+    """The file a [system] field names, relative to the scenario's folder."""
+    path = Path(t.string(key))
+    return path if path.is_absolute() else Path(t.file).parent / path
+
+
+def read_matrix_file(t: _Table, key: str):
+    """A square matrix from the file [system].KEY names, as CSR; one clear line where it cannot be read or is not
+    a real square matrix."""
+    path = matrix_file_path(t, key)
+    suffix = path.suffix.lower()
+    if suffix not in SUFFIXES:
+        raise t.fail(key, f"expected a Matrix Market (.mtx), scipy (.npz) or MATLAB (.mat) file, found {path.name!r}")
+    if not path.is_file():
+        raise t.fail(key, f"{path}: no such file")
+    try:
+        matrix = {".mtx": _read_mtx, ".npz": _read_npz, ".mat": _read_mat}[suffix](path, key)
+    except _Unreadable as exc:
+        raise t.fail(key, f"{path}: {exc}") from None
+    except (OSError, ValueError, TypeError, KeyError, IndexError, NotImplementedError) as exc:
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise t.fail(key, f"{path}: cannot be read as a {suffix} matrix ({reason})") from None
+    from scipy.sparse import csr_matrix, issparse
+
+    if not issparse(matrix):
+        matrix = np.asarray(matrix)
+        if matrix.ndim != 2:
+            raise t.fail(key, f"{path}: expected a matrix, found an array of shape {matrix.shape}")
+    if np.iscomplexobj(matrix.data if issparse(matrix) else matrix):
+        raise t.fail(key, f"{path}: expected a real matrix, found complex entries")
+    matrix = csr_matrix(matrix, dtype=float)
+    if matrix.shape[0] != matrix.shape[1] or matrix.shape[0] == 0:
+        raise t.fail(key, f"{path}: expected a square matrix, found {matrix.shape[0]} x {matrix.shape[1]}")
+    matrix.sum_duplicates()
+    matrix.eliminate_zeros()
+    return matrix
+
+
+class _Unreadable(Exception):
+    """A file that is a matrix file but not one matrix of the kind asked for."""
+
+
+def _read_mtx(path: Path, key: str):
+    from scipy.io import mmread
+
+    return mmread(str(path))
+
+
+def _read_npz(path: Path, key: str):
+    with np.load(path, allow_pickle=False) as data:
+        names = list(data.files)
+        if {"format", "shape", "data"} <= set(names):  # scipy.sparse.save_npz
+            from scipy.sparse import load_npz
+
+            return load_npz(path)
+        return _one_of(names, key, lambda name: data[name])
+
+
+def _read_mat(path: Path, key: str):
+    from scipy.io import loadmat
+
+    try:
+        data = loadmat(str(path))
+    except NotImplementedError:  # v7.3 files are HDF5
+        raise _Unreadable("a MATLAB v7.3 file; save it with save(..., '-v7') for scipy to read") from None
+    names = [name for name in data if not name.startswith("__")]
+    return _one_of(names, key, lambda name: data[name])
+
+
+def _one_of(names: list[str], key: str, get):
+    """The array named as the field (M, C or K) where the file holds several, else its only one."""
+    if key in names:
+        return get(key)
+    if len(names) == 1:
+        return get(names[0])
+    raise _Unreadable(f"holds {', '.join(names) or 'no arrays'}; expected one matrix or one named {key}")
+
+
+def check_file_matrix(t: _Table, key: str, matrix, n: int | None, strict: bool, sized_by: str = "") -> None:
+    """A file's matrix fit to be M (strict: definite) or C, K: of the scene's size, finite, symmetric, and definite
+    (semi-definite for C and K) where it is small enough to factor dense; a large one's diagonal must be positive
+    (non-negative), as a definite matrix's is."""
+    path = matrix_file_path(t, key).name
+    if n is not None and matrix.shape[0] != n:
+        raise t.fail(key, f"{path}: expected a {n} x {n} matrix ({sized_by}), found {matrix.shape[0]} x "
+                          f"{matrix.shape[1]}")
+    if not np.isfinite(matrix.data).all():
+        row = int(np.repeat(np.arange(matrix.shape[0]), np.diff(matrix.indptr))[~np.isfinite(matrix.data)][0])
+        raise t.fail(key, f"{path}: expected finite numbers, found {matrix.data[~np.isfinite(matrix.data)][0]} in row {row}")
+    scale = float(np.abs(matrix.data).max(initial=0.0)) or 1.0
+    asymmetry = abs(matrix - matrix.T)
+    if asymmetry.nnz and asymmetry.max() > 1e-12 * scale:
+        i, j = (int(a[0]) for a in np.nonzero(asymmetry == asymmetry.max()))
+        raise t.fail(key, f"{path}: expected a symmetric matrix, found {key}[{i}][{j}] = {matrix[i, j]:g} but "
+                          f"{key}[{j}][{i}] = {matrix[j, i]:g}")
+    need = "positive definite" if strict else "positive semi-definite"
+    diagonal = matrix.diagonal()
+    bad = np.flatnonzero(diagonal <= 0 if strict else diagonal < 0)
+    if len(bad):
+        raise t.fail(key, f"expected a symmetric {need} matrix; {path} has {key}[{bad[0]}][{bad[0]}] = "
+                          f"{diagonal[bad[0]]:g}")
+    if matrix.shape[0] <= DENSE_CHECK:  # Cholesky, shifted by the rounding a semi-definite matrix's zero may carry
+        tol = 1e-12 * scale * matrix.shape[0]
+        try:
+            np.linalg.cholesky(matrix.toarray() + (0.0 if strict else tol) * np.eye(matrix.shape[0]))
+        except np.linalg.LinAlgError:
+            raise t.fail(key, f"expected a symmetric {need} matrix; {path} is not (its Cholesky factorization "
+                              "fails)") from None
+
+
+DENSE_CHECK = 2000  # up to this many DOFs a file's matrix is proven definite by factoring it (0.1 s at 2,000)
