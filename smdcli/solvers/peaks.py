@@ -93,12 +93,14 @@ def row_peaks(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray,
     # samples, 5 % at omega h = 0.6, beyond which the quintic is not trusted), and the intervals either side of them
     inner = magnitude[:, 1:-1]
     candidate = inner >= ((1 - NEAR) * peaks)[:, None]
-    candidate &= inner >= magnitude[:, :-2]
-    candidate &= inner >= magnitude[:, 2:]
+    candidate &= (inner >= magnitude[:, :-2]) & (inner >= magnitude[:, 2:])
+    # a plateau (a history at rest, all zeros where a wave has not yet arrived) has no peak between its samples:
+    # every one of its samples would be a candidate, 10^7 intervals in a 10,000-DOF run
+    candidate &= (inner > magnitude[:, :-2]) | (inner > magnitude[:, 2:])
     j, at = np.nonzero(candidate)
     at = at + 1
     for end, other in ((0, 1), (N - 1, N - 2)):  # an end sample that is the largest near it
-        edge = np.flatnonzero((magnitude[:, end] >= (1 - NEAR) * peaks) & (magnitude[:, end] >= magnitude[:, other]))
+        edge = np.flatnonzero((magnitude[:, end] >= (1 - NEAR) * peaks) & (magnitude[:, end] > magnitude[:, other]))
         j, at = np.concatenate([j, edge]), np.concatenate([at, np.full(len(edge), end)])
     k = np.concatenate([at - 1, at])
     j = np.concatenate([j, j])
