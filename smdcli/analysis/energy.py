@@ -68,13 +68,18 @@ def dense_output(model: Model, result: Result) -> Callable[[np.ndarray], tuple[n
 def mechanical_energy(model: Model, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Kinetic 1/2 v^T M v and strain energy per row, J: summed over the springs (1/2 k d^2 + k3 d^4 / 4) where
     the scene has elements, since x^T K x of a stiff spring between masses that move together cancels digits."""
-    kinetic = 0.5 * (rows_times(v, cheapest(model.M)) * v).sum(axis=1)
-    if model.element_form:
-        D, k, k3 = _incidence(model, "spring")
-        d = rows_times(x, D.T)
-        strain = (0.5 * k * d**2 + 0.25 * k3 * d**4).sum(axis=1)
-    else:
-        strain = 0.5 * (rows_times(x, model.sparse[1]) * x).sum(axis=1)
+    M = cheapest(model.M)
+    D, k, k3 = _incidence(model, "spring") if model.element_form else (None, None, None)
+    kinetic, strain = np.empty(len(x)), np.empty(len(x))
+    rows = max(1, _CHUNK_VALUES // max(x.shape[-1], 1))  # temporaries of a block of rows, not four of the run's size
+    for lo in range(0, len(x), rows):
+        xs, vs = x[lo:lo + rows], v[lo:lo + rows]
+        kinetic[lo:lo + rows] = 0.5 * (rows_times(vs, M) * vs).sum(axis=1)
+        if D is not None:
+            d = rows_times(xs, D.T)
+            strain[lo:lo + rows] = (0.5 * k * d**2 + 0.25 * k3 * d**4).sum(axis=1)
+        else:
+            strain[lo:lo + rows] = 0.5 * (rows_times(xs, model.sparse[1]) * xs).sum(axis=1)
     return kinetic, strain
 
 

@@ -16,19 +16,33 @@ from smdcli.result import ElementForces
 from smdcli.scenario import GROUND
 
 
-def _stretch(q: np.ndarray, element: Element) -> np.ndarray:
-    """q_b - q_a on the grid, the ground's q being 0."""
-    zero = np.zeros(len(q))
-    return (q[:, element.b] if element.b >= 0 else zero) - (q[:, element.a] if element.a >= 0 else zero)
+ROWS_VALUES = 2_000_000  # states (rows x DOFs) an element table is computed from at once
 
 
-def tension(element: Element, x: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """The element's force, positive in tension, (N,)."""
-    if element.kind == "spring":
-        d = _stretch(x, element)
-        return element.coef * d + (element.k3 * d**3 if element.law == "cubic" else 0.0)
-    dv = _stretch(v, element)
-    return element.coef * (np.abs(dv) * dv if element.law == "quadratic" else dv)
+def _tensions(elements: list[Element], q: np.ndarray, recorded: dict) -> np.ndarray:
+    """(N, elements) tensions of elements of one kind from q (x for springs, v for dampers), a block of rows at a
+    time (a 10,000-element chain's table is 80 MB; its temporaries stay a block's); the recorded ones from the run."""
+    N = len(q)
+    out = np.empty((N, len(elements)))
+    if not elements:
+        return out
+    a, b = (np.array([getattr(e, end) for e in elements]) for end in ("a", "b"))  # -1: the ground, q's last column
+    coef = np.array([e.coef for e in elements])
+    cubic = np.array([e.k3 if e.law == "cubic" else 0.0 for e in elements])
+    quadratic = np.array([e.law == "quadratic" for e in elements])
+    rows = max(1, ROWS_VALUES // (q.shape[1] + 1))
+    for lo in range(0, N, rows):
+        block = q[lo:lo + rows]
+        padded = np.concatenate([block, np.zeros((len(block), 1))], axis=1)
+        d = padded[:, b] - padded[:, a]
+        if elements[0].kind == "spring":
+            out[lo:lo + rows] = coef * d + cubic * d**3
+        else:
+            out[lo:lo + rows] = coef * np.where(quadratic, np.abs(d) * d, d)
+    for j, e in enumerate(elements):
+        if e.name in recorded:
+            out[:, j] = recorded[e.name]
+    return out
 
 
 def element_forces(model, x: np.ndarray, v: np.ndarray, history=None) -> ElementForces:
@@ -40,22 +54,19 @@ def element_forces(model, x: np.ndarray, v: np.ndarray, history=None) -> Element
     N = len(x)
     recorded = {} if history is None else {p: history.tension[:, i] for i, p in enumerate(history.paths)}
 
-    def table(elements):
-        columns = [recorded[e.name] if e.name in recorded else tension(e, x, v) for e in elements]
-        return np.stack(columns, axis=1) if columns else np.zeros((N, 0))
-
-    spring, damper = table(springs), table(dampers)
+    spring, damper = _tensions(springs, x, recorded), _tensions(dampers, v, recorded)
     by_kind = {kind: [e for e in model.nonsmooth if e.kind == kind] for kind in ("friction", "stop")}
     laws = {kind: (np.stack([recorded[e.path] for e in found], axis=1) if found else np.zeros((N, 0)))
             for kind, found in by_kind.items()}
     added = None
     if model.element_form:
         reaction = np.zeros(N)
-        for e, column in zip(springs + dampers, np.concatenate([spring, damper], axis=1).T):
-            if e.b < 0:
-                reaction += column  # the ground pushes a by +T
-            elif e.a < 0:
-                reaction -= column
+        for elements, table in ((springs, spring), (dampers, damper)):
+            for j, e in enumerate(elements):
+                if e.b < 0:
+                    reaction += table[:, j]  # the ground pushes a by +T
+                elif e.a < 0:
+                    reaction -= table[:, j]
         for kind, found in by_kind.items():
             for e, column in zip(found, laws[kind].T):
                 if e.connects[1] == GROUND:
