@@ -35,14 +35,33 @@ def chain(n: int, cubic: bool, damper: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run_once(words: list[str], scene: str | None) -> tuple[float, float]:
-    """(wall seconds, peak resident MB) of one run; exits with the command's code where it fails."""
+def chain_files(n: int, damper: str, folder: str) -> str:
+    """The same chain as [system] with its M, C and K in Matrix Market files beside the scenario (as a finite-element
+    program would write them, docs/scenario.md#matrices-from-files): the scenario's text."""
+    import numpy as np
+    import scipy.io
+    from scipy.sparse import diags
+
+    def links(value, every):
+        weights = np.full(n, value) if every else np.eye(1, n, n - 1).ravel() * value  # link i: mass i-1 to i
+        main = weights + np.append(weights[1:], 0.0)
+        return diags([main, -weights[1:], -weights[1:]], [0, 1, -1]).tocoo()
+    for key, matrix in (("M", diags(np.ones(n)).tocoo()), ("K", links(100.0, True)),
+                        ("C", links(0.5, damper == "every"))):
+        scipy.io.mmwrite(os.path.join(folder, f"chain_{key}.mtx"), matrix, symmetry="symmetric")
+    return ("[time]\nend = 10.0\nstep = 0.01\n[system]\n" + "".join(f'{key} = "chain_{key}.mtx"\n' for key in "MCK")
+            + '[[force]]\non = "x1"\ntype = "sine"\namplitude = 10.0\nomega = 5.0\n')
+
+
+def run_once(words: list[str], scene) -> tuple[float, float]:
+    """(wall seconds, peak resident MB) of one run; exits with the command's code where it fails. scene: the chain's
+    text, or (n, damper) for the chain in matrix files (written untimed)."""
     with tempfile.TemporaryDirectory() as out:
         command = [w.replace("{out}", out) for w in words]
         if scene is not None:
             path = os.path.join(out, "chain.toml")
             with open(path, "w") as f:
-                f.write(scene)
+                f.write(chain_files(*scene, out) if isinstance(scene, tuple) else scene)
             command = [w.replace("{chain}", path) for w in command]
         if command[0] == "smd":
             command = [sys.executable, "-m", "smdcli", *command[1:]]
@@ -62,9 +81,13 @@ def main() -> None:
     parser.add_argument("--chain", type=int, default=0, help="write an n-mass chain for {chain}")
     parser.add_argument("--cubic", action="store_true", help="the chain's first spring cubic")
     parser.add_argument("--damper", choices=["every", "end"], default="every", help="the chain's dampers")
+    parser.add_argument("--files", action="store_true", help="the chain as [system] M, C, K in .mtx files")
     parser.add_argument("command", nargs="+")
     args = parser.parse_args()
-    scene = chain(args.chain, args.cubic, args.damper) if args.chain else None
+    if args.files and args.cubic:
+        sys.exit("--files writes the linear chain's matrices; a cubic spring needs [[spring]] tables")
+    scene = ((args.chain, args.damper) if args.files else chain(args.chain, args.cubic, args.damper)) if args.chain \
+        else None
     if args.repeats > 1:  # a first run untimed: kernels compiled into numba's cache, files in the page cache
         run_once(args.command, scene)
     runs = [run_once(args.command, scene) for _ in range(args.repeats)]

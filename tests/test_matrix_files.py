@@ -220,3 +220,22 @@ def test_a_large_non_diagonal_mass_is_refused_before_it_fills_memory(tmp_path, m
     with pytest.raises(ScenarioError, match=r"system.M: 3 DOFs would be solved with dense matrices \(0.0 GB\) because "
                                             r"M is not diagonal"):
         build(smdcli.load(scene))
+
+
+def test_a_damping_ratio_swept_on_matrices_from_files_is_the_damped_oscillator(tmp_path, cli):
+    """zeta on a 1-DOF [system] from files writes C inline beside the files' M and K: each member's free decay is
+    x0 e^(-zeta w t) (cos wd t + zeta / sqrt(1 - zeta^2) sin wd t)."""
+    for key, value in (("M", 2.0), ("K", 50.0)):
+        scipy.io.mmwrite(tmp_path / f"{key}.mtx", scipy.sparse.coo_matrix([[value]]))
+    scene = tmp_path / "one.toml"
+    scene.write_text('[time]\nend = 5.0\nstep = 0.01\n[system]\nM = "M.mtx"\nK = "K.mtx"\nx0 = [0.1]\n')
+    swept = cli("sweep", scene, "--param", "zeta", "--values", "0.05,0.2", "--keep", "full", "-o", tmp_path / "out",
+                "--no-plots")
+    assert swept.exit_code == 0, swept.output
+    with h5py.File(tmp_path / "out" / "one_sweep.h5") as f:
+        t, x = f["time"][()], f["displacement"][()][:, :, 0]
+    w = 5.0
+    for zeta, member in zip((0.05, 0.2), x):
+        wd = w * math.sqrt(1 - zeta**2)
+        closed = 0.1 * np.exp(-zeta * w * t) * (np.cos(wd * t) + zeta / math.sqrt(1 - zeta**2) * np.sin(wd * t))
+        assert np.abs(member - closed).max() <= 1e-12
