@@ -129,3 +129,31 @@ def test_a_phase_axis_is_labelled_as_far_as_its_lags_reach(tmp_path, monkeypatch
     assert lag > 2 * math.pi and ticks.max() >= lag and ticks.max() - lag < math.pi / 2
     labels = [t.get_text() for t in phase_axis.get_yticklabels()]
     assert labels[-1] == "5π/2" and labels[:5] == ["0", "π/2", "π", "3π/2", "2π"]
+
+
+def test_log_axis_labels_are_plain_text_that_reads_as_the_tick_values():
+    """The energy figure's residual axis is labelled 10⁻¹⁵ and 6×10⁻¹⁶ in plain text (no mathtext to parse), each label
+    the value of its tick."""
+    import math
+    import re
+
+    import smdcli
+    from smdcli.plots.energy import energy_figure
+
+    result = smdcli.simulate(SCENARIOS / "friction_isolated_building.toml")
+    fig = energy_figure(result, "friction")
+    fig.canvas.draw()
+    axis = fig.axes[1].yaxis
+    digits = str.maketrans("⁻⁰¹²³⁴⁵⁶⁷⁸⁹", "-0123456789")
+    read = 0
+    for tick in axis.get_major_ticks() + axis.get_minor_ticks():
+        text = tick.label1.get_text()
+        if not text or not tick.label1.get_visible():
+            continue
+        assert "$" not in text, text
+        parts = re.fullmatch(r"(?:(\d+)×)?10([⁻⁰¹²³⁴⁵⁶⁷⁸⁹]+)", text)
+        assert parts, text
+        value = float(parts.group(1) or 1) * 10.0 ** int(parts.group(2).translate(digits))
+        assert math.isclose(value, tick.get_loc(), rel_tol=1e-9), (text, tick.get_loc())
+        read += 1
+    assert read >= 3
