@@ -4,6 +4,7 @@ wrong refused in one line."""
 
 from __future__ import annotations
 
+import hashlib
 import math
 import re
 
@@ -135,6 +136,7 @@ def test_a_chain_from_files_above_sparse_dofs_is_its_element_form(tmp_path, suff
         assert (read_matrix(K) != chain_matrices(n)[2]).nnz == 0
         origin = f["provenance/matrix_files"].attrs
         assert origin["K_file"].endswith(f"chain_K{suffix}") and len(origin["K_sha256"]) == 64
+        assert origin["K_sha256"] == hashlib.sha256((tmp_path / f"chain_K{suffix}").read_bytes()).hexdigest()
 
 
 def test_a_sweep_of_a_scene_from_files_is_each_member_simulated(tmp_path, cli):

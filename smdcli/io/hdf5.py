@@ -41,9 +41,9 @@ def write_header(f, scenario: Scenario, kind: str) -> None:
             ds.attrs["sha256"] = hashlib.sha256(force.file_text.encode()).hexdigest()
     if scenario.system is not None and scenario.system.files:  # the matrices are /model's; where they came from
         group = f.create_group("provenance/matrix_files")
-        for key, path in scenario.system.files:
+        for key, path, sha256 in scenario.system.files:  # hashed as read: what the run was built from
             group.attrs[f"{key}_file"] = path
-            group.attrs[f"{key}_sha256"] = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+            group.attrs[f"{key}_sha256"] = sha256
 
 
 def write_provenance(f, kind: str) -> None:

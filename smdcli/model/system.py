@@ -371,12 +371,10 @@ def build(scenario: Scenario) -> Model:
     cubic = quadratic = None
     if scenario.system is not None:
         sys = scenario.system
-        if not sys.from_files:
-            M, C, K = (np.array(a, dtype=float) for a in (sys.M, sys.C, sys.K))
-        elif is_sparse_scene(scenario):
+        if is_sparse_scene(scenario):  # matrices from files, kept sparse
             M, C, K = sys.M, sys.C, sys.K
         else:
-            M, C, K = dense_file_matrices(scenario)
+            M, C, K = dense_file_matrices(scenario) if sys.from_files else sys.dense()
         x0, v0 = np.array(sys.x0, dtype=float), np.array(sys.v0, dtype=float)
     else:
         masses = np.array([m.m for m in scenario.masses], dtype=float)

@@ -76,7 +76,7 @@ def layout(sc: Scenario) -> Layout:
                 label += " (quadratic)"
             elements.append(Element(e.kind, a, b, label, e.law != "linear"))
     else:
-        M, C, K = (a.toarray() if sc.system.from_files else np.array(a) for a in (sc.system.M, sc.system.C, sc.system.K))
+        M, C, K = sc.system.dense()
         masses = tuple(np.diag(M))
         for kind, matrix, symbol in (("spring", K, "k"), ("damper", C, "c")):
             for i in range(n):

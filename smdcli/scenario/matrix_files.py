@@ -6,6 +6,8 @@ Must not import: model, solvers, or any layer above."""
 
 from __future__ import annotations
 
+import hashlib
+import io
 from pathlib import Path
 
 import numpy as np
@@ -22,8 +24,8 @@ def matrix_file_path(t: _Table, key: str) -> Path:
 
 
 def read_matrix_file(t: _Table, key: str):
-    """A square matrix from the file [system].KEY names, as CSR; one clear line where it cannot be read or is not
-    a real square matrix."""
+    """(the square matrix the file [system].KEY names, as CSR; the file's sha256): the file read once, for both;
+    one clear line where it cannot be read or is not a real square matrix."""
     path = matrix_file_path(t, key)
     suffix = path.suffix.lower()
     if suffix not in SUFFIXES:
@@ -31,7 +33,8 @@ def read_matrix_file(t: _Table, key: str):
     if not path.is_file():
         raise t.fail(key, f"{path}: no such file")
     try:
-        matrix = {".mtx": _read_mtx, ".npz": _read_npz, ".mat": _read_mat}[suffix](path, key)
+        data = path.read_bytes()
+        matrix = {".mtx": _read_mtx, ".npz": _read_npz, ".mat": _read_mat}[suffix](io.BytesIO(data), key)
     except _Unreadable as exc:
         raise t.fail(key, f"{path}: {exc}") from None
     except (OSError, ValueError, TypeError, KeyError, IndexError, NotImplementedError) as exc:
@@ -50,34 +53,35 @@ def read_matrix_file(t: _Table, key: str):
         raise t.fail(key, f"{path}: expected a square matrix, found {matrix.shape[0]} x {matrix.shape[1]}")
     matrix.sum_duplicates()
     matrix.eliminate_zeros()
-    return matrix
+    return matrix, hashlib.sha256(data).hexdigest()
 
 
 class _Unreadable(Exception):
     """A file that is a matrix file but not one matrix of the kind asked for."""
 
 
-def _read_mtx(path: Path, key: str):
+def _read_mtx(source: io.BytesIO, key: str):
     from scipy.io import mmread
 
-    return mmread(str(path))
+    return mmread(source)
 
 
-def _read_npz(path: Path, key: str):
-    with np.load(path, allow_pickle=False) as data:
+def _read_npz(source: io.BytesIO, key: str):
+    with np.load(source, allow_pickle=False) as data:
         names = list(data.files)
         if {"format", "shape", "data"} <= set(names):  # scipy.sparse.save_npz
             from scipy.sparse import load_npz
 
-            return load_npz(path)
+            source.seek(0)
+            return load_npz(source)
         return _one_of(names, key, lambda name: data[name])
 
 
-def _read_mat(path: Path, key: str):
+def _read_mat(source: io.BytesIO, key: str):
     from scipy.io import loadmat
 
     try:
-        data = loadmat(str(path))
+        data = loadmat(source)
     except NotImplementedError:  # v7.3 files are HDF5
         raise _Unreadable("a MATLAB v7.3 file; save it with save(..., '-v7') for scipy to read") from None
     names = [name for name in data if not name.startswith("__")]

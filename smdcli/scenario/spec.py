@@ -68,12 +68,18 @@ class MatrixSystem:
     K: Any
     x0: tuple[float, ...]
     v0: tuple[float, ...]
-    files: tuple[tuple[str, str], ...] = ()  # (M, C or K, the file's path) for each matrix read from a file
+    files: tuple[tuple[str, str, str], ...] = ()  # (M, C or K, the file's path, its sha256) for each file read
 
     @property
     def from_files(self) -> bool:
         """M, C and K were read from files (CSR), not written inline."""
         return not isinstance(self.M, tuple)
+
+    def dense(self) -> tuple:
+        """M, C and K as dense float arrays, however they were given."""
+        import numpy as np
+
+        return tuple(A.toarray() if self.from_files else np.array(A, dtype=float) for A in (self.M, self.C, self.K))
 
 
 @dataclass(frozen=True)

@@ -220,12 +220,12 @@ def _read_file_system(t: _Table) -> MatrixSystem:
     n = None if dofs is None else len(dofs)
     matrices, files = {}, []
     named = [key for key in ("M", "C", "K") if t.has(key) and isinstance(t.data[key], str)]
+    sized_by = "one row per name in dofs" if dofs is not None else f"as {named[0]} is"
     for key in named:
-        matrices[key] = read_matrix_file(t, key)
-        sized_by = "one row per name in dofs" if dofs is not None else f"as {named[0]} is"
+        matrices[key], sha256 = read_matrix_file(t, key)
         check_file_matrix(t, key, matrices[key], n, strict=(key == "M"), sized_by=sized_by)
         n = matrices[key].shape[0]
-        files.append((key, str(matrix_file_path(t, key))))
+        files.append((key, str(matrix_file_path(t, key)), sha256))
     for key in ("M", "C", "K"):
         if key not in matrices:
             # an array, not the tuple of rows: csr_matrix reads a tuple as (data, indices) or a shape
