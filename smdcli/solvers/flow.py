@@ -33,6 +33,7 @@ class Flow:
         self.cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self._series_powers = None
         self.nodes: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        self.doublings: dict[float, list[np.ndarray]] = {}
         values, vectors = np.linalg.eig(A) if s else (np.zeros(0), np.zeros((0, 0)))
         self.omega = float(np.abs(values).max(initial=0.0))
         # The eigenvectors serve the arbitrary steps of event location (a few microseconds each, not an
@@ -60,6 +61,13 @@ class Flow:
             self.cache[h] = pair
         return pair
 
+    def doubling(self, h: float, count: int) -> list[np.ndarray]:
+        """E(h)^(2^j) for 2^j < count (E(h) a kept step): the step's powers that take a batch of steps by doubling."""
+        powers = self.doublings.setdefault(h, [self.operators(h, keep=True)[0]])
+        while 2 ** len(powers) < count:
+            powers.append(powers[-1] @ powers[-1])
+        return powers
+
     def at(self, z: np.ndarray, b: np.ndarray, h: float, keep: bool = False) -> np.ndarray:
         """z after h."""
         if h == 0:
@@ -79,15 +87,17 @@ class Flow:
             series = self.state_series(Z0[0], b, h)
             if series is not None:
                 return (np.vander(NODES * h, SERIES_TERMS + 1, increasing=True) @ series)[None]
-        E, Phi = self.gauss_operators(h, keep)
-        return np.einsum("gij,mj->mgi", E, Z0) + (Phi @ b)[None]
+        by_state, Phi = self.gauss_operators(h, keep)
+        return (Z0 @ by_state).reshape(len(Z0), GAUSS_POINTS, self.s) + (Phi @ b)[None]
 
     def gauss_operators(self, h: float, keep: bool) -> tuple[np.ndarray, np.ndarray]:
-        """(E, Phi) at the Gauss-Legendre nodes of [0, h], (GAUSS_POINTS, s, s) each."""
+        """The flow's operators at the Gauss-Legendre nodes of [0, h]: E side by side as (s, GAUSS_POINTS s), so
+        that Z0 @ it holds every node's state of every row of Z0 (one product), and Phi (GAUSS_POINTS, s, s)."""
         if keep and h in self.nodes:
             return self.nodes[h]
         pairs = [self.operators(h * c) for c in NODES]
-        found = np.stack([p[0] for p in pairs]), np.stack([p[1] for p in pairs])
+        by_state = np.ascontiguousarray(np.stack([p[0] for p in pairs]).transpose(2, 0, 1).reshape(self.s, -1))
+        found = by_state, np.stack([p[1] for p in pairs])
         if keep:
             self.nodes[h] = found
         return found
@@ -124,14 +134,16 @@ class Flow:
     def guard_polynomial(self, z: np.ndarray, b: np.ndarray, row: np.ndarray, const: float, h: float):
         """row z(tau) + const on [0, h] as a function of tau: the flow's Taylor polynomial (a few microseconds a
         value, where the exponential takes tens), or None where it is no good to rounding there: omega h past
-        SERIES_REACH, or good_to_rounding's tests against the guard's own rounding (64 ulps of row |z| + |const|,
-        modes.at_level)."""
+        SERIES_REACH, or good_to_rounding's tests failing both against the guard's own rounding (64 ulps of
+        row |z| + |const|, modes.at_level) and against the state's (state_series: then the polynomial is what `at`
+        steps to each tau, a ball's height while it flies fast)."""
         series = self._taylor(z, b, h)
         if series is None:
             return None
         coefficients = series @ row
         coefficients[0] += const
-        if not good_to_rounding(np.abs(coefficients), h, float(np.abs(row) @ np.abs(z)) + abs(const)):
+        if not good_to_rounding(np.abs(coefficients), h, float(np.abs(row) @ np.abs(z)) + abs(const)) and \
+                not good_to_rounding(np.abs(series).max(axis=1), h, np.abs(z).max() + np.abs(b).max() * h):
             return None
         highest_first = coefficients[::-1].tolist()
 

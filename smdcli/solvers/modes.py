@@ -62,6 +62,20 @@ class Mode:
     Ct: np.ndarray = None
     g: np.ndarray = None
     hold: tuple = None  # (M^-1 G^T, (G M^-1 G^T)^+, G) of the held rows, or None
+    _guard_table: tuple = None
+
+    @property
+    def guard_table(self) -> tuple:
+        """All guards at once, signed by direction: (rows (2g, s), constants (2g,), |rows| (g, s)), the first g rows
+        the guards' values (rows z + constants), the next g their rates."""
+        if self._guard_table is None:
+            direction = np.array([guard.direction for _, guard, _, _ in self.guards], dtype=float)
+            rows = np.array([row for _, _, row, _ in self.guards]).reshape(len(self.guards), len(self.b))
+            consts = np.array([const for _, _, _, const in self.guards], dtype=float)
+            self._guard_table = (np.vstack([rows, rows @ self.A]) * np.concatenate([direction, direction])[:, None],
+                                 np.concatenate([consts, rows @ self.b]) * np.concatenate([direction, direction]),
+                                 np.abs(rows))
+        return self._guard_table
 
 
 class Scene:

@@ -7,9 +7,7 @@ is where a quantity linear in z crosses a level, found on the exact flow: the fl
 enough to see every crossing (an eighth of the fastest mode's period, the output step at most), a crossing
 bracketed, a touch without a crossing caught where the quantity's slope changes sign, and the time found by
 Brent's method to rounding (crossings.py). The events' decisions (modes.consistent, modes.impact) set the next mode.
-Whole output steps are taken in batches until the first that may hold an event; a step where a guard below its level
-turns back is one only where its top reaches the level (a yield surface's every oscillation peak otherwise ended a
-batch: 450 batches instead of 137 for the 42 events of a 4,001-sample elastoplastic record, twice the time).
+Whole output steps are taken in batches until the first that may hold an event (batches.py).
 
 A rigid stop's impacts that accumulate (a ball coming to rest) are followed one by one while the flights left could
 be seen: once they rise together less than the rounding of the scene's length scale, or take less than the rounding
@@ -33,15 +31,14 @@ import numpy as np
 from smdcli.elements import State
 from smdcli.elements.base import EVENT_KINDS, KINK
 from smdcli.model import Model
+from smdcli.solvers.batches import BATCH_STEPS, BATCH_VALUES, Batches
 from smdcli.solvers.crossings import Crossings
-from smdcli.solvers.flow import Flow
+from smdcli.solvers.flow import GAUSS_POINTS, Flow
 from smdcli.solvers.decisions import accumulation, consistent, impact, project, remaining_flights, touch
-from smdcli.solvers.modes import TOUCH, Mode, Scene, at_level
+from smdcli.solvers.modes import TOUCH, Mode, Scene
 from smdcli.solvers.piecewise_record import Outputs, step_integrals
 
 MAX_EVENTS_AT_ONE_TIME = 200  # a mode that cannot settle at one instant is a scene smd cannot solve
-BATCH = 256  # output steps taken together where no event interrupts them
-CHUNK = 16  # checked for events together
 MAX_SUBSTEPS = 2_000_000  # substeps a run may take (about 100 us each): a mode faster than that is refused
 
 
@@ -49,7 +46,7 @@ class PiecewiseFailed(Exception):
     """A scene the event-driven solver cannot advance (chattering at one instant)."""
 
 
-class PiecewiseRun(Crossings):
+class PiecewiseRun(Crossings, Batches):
     """One exact event-driven run over an output grid."""
 
     def __init__(self, model: Model, grid: np.ndarray):
@@ -67,6 +64,8 @@ class PiecewiseRun(Crossings):
         self.v_scale = float(np.abs(model.v0).max(initial=0.0))  # the run's speeds, as far as seen
         self.x_scale = float(np.abs(model.x0).max(initial=0.0))  # and its positions
         self.damped = bool(np.any(model.C))
+        fewest, most = BATCH_STEPS
+        self.batch_steps = min(most, max(fewest, 2 ** int(math.log2(BATCH_VALUES / (GAUSS_POINTS * self.scene.size)))))
 
     def flow(self, mode: Mode, t: float) -> Flow:
         """The cached flow of a mode's A, entered at t; PiecewiseFailed where A overflows double precision."""
@@ -97,6 +96,7 @@ class PiecewiseRun(Crossings):
         self.break_times = np.array([time_ for time_, _ in breaks], dtype=float)
         self.break_jumps = np.array([jump is not None for _, jump in breaks], dtype=bool)
         b_next = 0
+        self.whole_steps = np.abs(np.diff(grid) - h_out) <= 1e-9 * h_out  # grid steps of h_out, by their ends
         k = 1
         at_same_time, last_event_time = 0, None
         while k < self.N:
@@ -149,78 +149,6 @@ class PiecewiseRun(Crossings):
                 t += step
         self.sort_events()
         return outputs.finish()
-
-    def batch(self, flow: Flow, mode: Mode, states, z: np.ndarray, t: float, k: int, breaks, b_next: int,
-              h_out: float, outputs):
-        """Up to BATCH output steps of h_out from (t, z) in this mode, stopped before the first step where a guard
-        crosses or may touch (the step-by-step path takes that one): (z, t, k) after them, or None for none. The
-        steps are the single path's, E z + Phi b each; only the bookkeeping is done for all at once."""
-        grid = self.grid
-        ahead = grid[k:min(self.N, k + BATCH)]
-        # A force's kink on an output point (a record's sample) is taken in stride; any other break ends the batch.
-        times, jumps = self.break_times, self.break_jumps
-        within = slice(b_next, int(np.searchsorted(times, ahead[-1], side="right")))
-        at = np.searchsorted(ahead, times[within])
-        in_stride = (ahead[np.minimum(at, len(ahead) - 1)] == times[within]) & ~jumps[within]
-        first = int(np.argmin(in_stride)) if not in_stride.all() else len(at)
-        stop = float(times[within][first]) if first < len(at) else math.inf
-        reseed = set(at[:first].tolist())
-        whole = (ahead < stop) & (np.abs(np.diff(ahead, prepend=t) - h_out) <= 1e-9 * h_out)
-        count = int(np.argmin(whole)) if not whole.all() else len(ahead)
-        if count < 1:
-            return None
-        E, Phi = flow.operators(h_out, keep=True)
-        shift = Phi @ mode.b
-        Z = np.empty((count + 1, len(z)))  # each step's start (after a kink's reseeding)
-        Z[0] = z
-        ends = np.empty((count, len(z)))  # each step's end, as the flow left it
-        # the generators restart at each kink (their states read at all at once): the step after it runs on the next
-        # segment
-        seeds = [(lo, hi, signal.exo_states(ahead[:count])) for lo, hi, signal, _ in self.scene.blocks] if reseed \
-            else []
-        clear, done = count, 0  # steps before the first that a guard may end; steps taken
-        jumped_to = set()  # steps whose start a force's jump put past a guard's level (a stuck contact's breakaway)
-        while done < clear:  # in chunks, so that an event near the start wastes little
-            chunk = range(done, min(done + CHUNK, count))
-            for i in chunk:
-                ends[i] = Z[i + 1] = E @ Z[i] + shift
-                if i in reseed:
-                    for lo, hi, states_at in seeds:
-                        Z[i + 1, lo:hi] = states_at[i]
-            starts, stops = Z[chunk.start:chunk.stop], ends[chunk.start:chunk.stop]
-            for _, guard, row, const in mode.guards:
-                rate_row, rate_const = row @ mode.A, float(row @ mode.b)
-                g0, g1 = guard.direction * (starts @ row + const), guard.direction * (stops @ row + const)
-                slope0 = guard.direction * (starts @ rate_row + rate_const)
-                slope1 = guard.direction * (stops @ rate_row + rate_const)
-                level = at_level(np.abs(starts) @ np.abs(row), const)
-                below = g0 <= level  # or at it: it may come back
-                for i in np.flatnonzero(g0 > level):  # a start past its level, reseeded there: a jump passed it
-                    if chunk.start + int(i) - 1 in reseed:
-                        clear = min(clear, chunk.start + int(i))
-                        jumped_to.add(chunk.start + int(i))
-                        break
-                turning = below & (g1 < 0) & (slope0 > 0) & (slope1 < 0)
-                for i in np.flatnonzero(below & ((g1 >= 0) | turning)):  # a turn whose top stays below: no event
-                    if not turning[i] or self.turn_may_hold_event(flow, mode, guard, row, const, starts[i], h_out):
-                        clear = min(clear, chunk.start + int(i))
-                        break
-            done = chunk.stop
-        if clear < 1:
-            return None
-        gained = step_integrals(self, flow, mode, states, Z[:clear], h_out, True)
-        cumulative = {}
-        for term in self.energy_terms:
-            steps = np.cumsum(gained[term]) if term in gained else np.zeros(clear)
-            cumulative[term] = self.cumulative[term] + steps
-            self.cumulative[term] = float(cumulative[term][-1])
-        outputs.store_many(k, Z[1:clear + 1], states, cumulative)
-        z, t = Z[clear].copy(), float(grid[k + clear - 1])
-        if clear in jumped_to:  # the modes after the jump, decided at it (cross_break does so off the batch)
-            states = self.settle(states, z, t)
-            z = self.project(states, z)
-            outputs.store(k + clear - 1, z, states)  # the point at the jump: its right limits, in the new modes
-        return states, z, t, k + clear
 
     def land(self, states, z, t, k, target, break_time, breaks, b_next, outputs):
         """At a target: a break crossed (right limits), an output point stored."""

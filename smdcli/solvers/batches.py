@@ -1,0 +1,129 @@
+"""Whole output steps of the exact event-driven solver taken together (piecewise.py's batches): until the first
+that may hold an event, by doubling (steps d+1 .. 2d are E^d times steps 1 .. d plus the forcing's sum, one product a
+doubling), every guard checked on a doubling's steps at once. A step where a guard below its level turns back is one
+only where its top reaches the level (a yield surface's every oscillation peak otherwise ended a batch: 450 batches
+instead of 137 for the 42 events of a 4,001-sample elastoplastic record, twice the time). A record's kinks, where the
+force generators restart, are stepped one by one (in chunks checked together).
+
+Must not import: sweep, io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from smdcli.solvers.flow import Flow
+from smdcli.solvers.modes import Mode, at_level
+from smdcli.solvers.piecewise_record import step_integrals
+
+BATCH_VALUES = 2 ** 21  # Gauss-node state values (16 MB) of the output steps taken together where no event interrupts
+BATCH_STEPS = (256, 8192)  # the fewest and most steps a batch takes (whole powers of two), whatever the scene's size
+CHUNK = 16  # steps across a kink checked for events together
+
+
+class Batches:
+    """The batches of PiecewiseRun (which holds the grid, the scene, the running energy integrals and batch_steps)."""
+
+    def batch(self, flow: Flow, mode: Mode, states, z: np.ndarray, t: float, k: int, breaks, b_next: int,
+              h_out: float, outputs):
+        """Up to self.batch_steps output steps of h_out from (t, z) in this mode, stopped before the first step where a guard
+        crosses or may touch (the step-by-step path takes that one): (z, t, k) after them, or None for none. Without
+        a kink to reseed the generators at, the steps are taken by doubling (steps d+1 .. 2d are E^d times steps
+        1 .. d plus the forcing's sum: a product for each doubling, not a Python step for each sample), and checked
+        for events a doubling at a time, so that an event near the start wastes no more than the steps to it."""
+        grid = self.grid
+        ahead = grid[k:min(self.N, k + self.batch_steps)]
+        # A force's kink on an output point (a record's sample) is taken in stride; any other break ends the batch.
+        times, jumps = self.break_times, self.break_jumps
+        within = slice(b_next, int(np.searchsorted(times, ahead[-1], side="right")))
+        at = np.searchsorted(ahead, times[within])
+        in_stride = (ahead[np.minimum(at, len(ahead) - 1)] == times[within]) & ~jumps[within]
+        first = int(np.argmin(in_stride)) if not in_stride.all() else len(at)
+        stop = float(times[within][first]) if first < len(at) else math.inf
+        reseed = set(at[:first].tolist())
+        whole = ahead < stop
+        whole[0] &= abs(ahead[0] - t - h_out) <= 1e-9 * h_out  # after an event: a step of its own
+        whole[1:] &= self.whole_steps[k:k + len(ahead) - 1]
+        count = int(np.argmin(whole)) if not whole.all() else len(ahead)
+        if count < 1:
+            return None
+        E, Phi = flow.operators(h_out, keep=True)
+        shift = Phi @ mode.b
+        Z = np.empty((count + 1, len(z)))  # each step's start (after a kink's reseeding)
+        Z[0] = z
+        ends = np.empty((count, len(z)))  # each step's end, as the flow left it
+        # the generators restart at each kink (their states read at all at once): the step after it runs on the next
+        # segment
+        seeds = [(lo, hi, signal.exo_states(ahead[:count])) for lo, hi, signal, _ in self.scene.blocks] if reseed \
+            else []
+        clear, done = count, 0  # steps before the first that a guard may end; steps taken
+        jumped_to = set()  # steps whose start a force's jump put past a guard's level (a stuck contact's breakaway)
+        doubling = None if reseed else flow.doubling(h_out, count)
+        while done < clear:  # in chunks, so that an event near the start wastes little
+            if doubling is None:
+                chunk = range(done, min(done + CHUNK, count))
+                for i in chunk:
+                    ends[i] = Z[i + 1] = E @ Z[i] + shift
+                    if i in reseed:
+                        for lo, hi, states_at in seeds:
+                            Z[i + 1, lo:hi] = states_at[i]
+            elif done == 0:
+                chunk = range(0, 1)
+                ends[0] = Z[1] = E @ z + shift
+                sums = [shift]  # sums[j] = sum of E^i shift, i < 2^j: the forcing's part of 2^j steps
+            else:  # steps done+1 .. 2 done from steps 1 .. done: E^done Z + its forcing, one product for them all
+                level = len(sums) - 1
+                power = doubling[level]
+                chunk = range(done, min(2 * done, count))
+                Z[done + 1:chunk.stop + 1] = Z[1:chunk.stop - done + 1] @ power.T + sums[level]
+                ends[chunk.start:chunk.stop] = Z[chunk.start + 1:chunk.stop + 1]
+                sums.append(power @ sums[level] + sums[level])
+            starts, stops = Z[chunk.start:chunk.stop], ends[chunk.start:chunk.stop]
+            if mode.guards:
+                rows, consts, abs_rows = mode.guard_table
+                # each guard's value and rate (columns, signed) at the steps' starts and ends; by doubling, the ends
+                # are the next starts: one product for both
+                if doubling is None:
+                    at_starts, at_ends = starts @ rows.T + consts, stops @ rows.T + consts
+                else:
+                    values = Z[chunk.start:chunk.stop + 1] @ rows.T + consts
+                    at_starts, at_ends = values[:-1], values[1:]
+                n_guards = len(mode.guards)
+                g0, slope0 = at_starts[:, :n_guards], at_starts[:, n_guards:]
+                g1, slope1 = at_ends[:, :n_guards], at_ends[:, n_guards:]
+                level = at_level(np.abs(starts) @ abs_rows.T, consts[:n_guards])
+                below = g0 <= level  # or at it: it may come back
+                if reseed:  # a start past its level, reseeded there: a jump passed it
+                    for i in np.flatnonzero((g0 > level).any(axis=1)):
+                        if chunk.start + int(i) - 1 in reseed:
+                            clear = min(clear, chunk.start + int(i))
+                            jumped_to.add(chunk.start + int(i))
+                            break
+                turning = below & (g1 < 0) & (slope0 > 0) & (slope1 < 0)
+                may_end = below & ((g1 >= 0) | turning)
+                for i in np.flatnonzero(may_end.any(axis=1)):  # a turn whose top stays below: no event
+                    if chunk.start + int(i) >= clear:
+                        break
+                    if any(not turning[i, j] or self.turn_may_hold_event(flow, mode, mode.guards[j][1],
+                                                                         *mode.guards[j][2:], starts[i], h_out)
+                           for j in np.flatnonzero(may_end[i])):
+                        clear = chunk.start + int(i)
+                        break
+            done = chunk.stop
+        if clear < 1:
+            return None
+        gained = step_integrals(self, flow, mode, states, Z[:clear], h_out, True)
+        cumulative = {}
+        for term in self.energy_terms:
+            steps = np.cumsum(gained[term]) if term in gained else np.zeros(clear)
+            cumulative[term] = self.cumulative[term] + steps
+            self.cumulative[term] = float(cumulative[term][-1])
+        outputs.store_many(k, Z[1:clear + 1], states, cumulative)
+        z, t = Z[clear].copy(), float(grid[k + clear - 1])
+        if clear in jumped_to:  # the modes after the jump, decided at it (cross_break does so off the batch)
+            states = self.settle(states, z, t)
+            z = self.project(states, z)
+            outputs.store(k + clear - 1, z, states)  # the point at the jump: its right limits, in the new modes
+        return states, z, t, k + clear
