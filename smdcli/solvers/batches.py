@@ -26,6 +26,8 @@ CHUNK = 16  # steps across a kink checked for events together
 class Batches:
     """The batches of PiecewiseRun (which holds the grid, the scene, the running energy integrals and batch_steps)."""
 
+    guarded_step = -1  # the output step a batch stopped before, where a guard may end the mode
+
     def batch(self, flow: Flow, mode: Mode, states, z: np.ndarray, t: float, k: int, breaks, b_next: int,
               h_out: float, outputs):
         """Up to self.batch_steps output steps of h_out from (t, z) in this mode, stopped before the first step where a guard
@@ -34,6 +36,8 @@ class Batches:
         1 .. d plus the forcing's sum: a product for each doubling, not a Python step for each sample), and checked
         for events a doubling at a time, so that an event near the start wastes no more than the steps to it."""
         grid = self.grid
+        if abs(grid[k] - t - h_out) > 1e-9 * h_out or k == self.guarded_step:
+            return None  # after an event, a step of its own; or the step a batch just stopped before
         ahead = grid[k:min(self.N, k + self.batch_steps)]
         # A force's kink on an output point (a record's sample) is taken in stride; any other break ends the batch.
         times, jumps = self.break_times, self.break_jumps
@@ -44,7 +48,6 @@ class Batches:
         stop = float(times[within][first]) if first < len(at) else math.inf
         reseed = set(at[:first].tolist())
         whole = ahead < stop
-        whole[0] &= abs(ahead[0] - t - h_out) <= 1e-9 * h_out  # after an event: a step of its own
         whole[1:] &= self.whole_steps[k:k + len(ahead) - 1]
         count = int(np.argmin(whole)) if not whole.all() else len(ahead)
         if count < 1:
@@ -112,6 +115,8 @@ class Batches:
                         clear = chunk.start + int(i)
                         break
             done = chunk.stop
+        if clear < count and clear not in jumped_to:
+            self.guarded_step = k + clear  # the step path takes it: no batch tries it again
         if clear < 1:
             return None
         gained = step_integrals(self, flow, mode, states, Z[:clear], h_out, True)
