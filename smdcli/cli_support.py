@@ -115,3 +115,67 @@ def plain_help() -> None:
     typer.core.TyperOption.display_type_rich = _plain_type
     typer.core.TyperArgument.display_type_rich = _plain_type
     typer.core.TyperArgument._usage_display_name = _usage_name
+
+
+def plain_coercion() -> None:
+    """Coerce smd's plain parameters (str, int, float, bool, Path and lists of them) without pydantic: typer 0.29
+    builds a pydantic TypeAdapter for every parameter it reads, and importing pydantic for that is 0.14 s of every
+    smd call (a fifth of a 1-DOF simulate). Paths still go through typer's own checks (coerce_cli_path); ranged
+    numbers, choices, files and parsers are left to typer, as is everything where this typer lacks the hook."""
+    try:
+        from dataclasses import dataclass
+        from pathlib import Path
+
+        from typer import core
+        from typer._click.exceptions import BadParameter
+        from typer._coercion import RuntimeParam
+        from typer._param_types import coerce_cli_path
+    except ImportError:
+        return
+    parameter = getattr(core, "_TyperParameter", None)
+    typers_own = getattr(parameter, "get_runtime_param", None)
+    if typers_own is None:
+        return
+    kinds = (str, int, float, bool, Path)
+    truth = {"true": True, "1": True, "yes": True, "y": True, "on": True,
+             "false": False, "0": False, "no": False, "n": False, "off": False, "": False}
+
+    def coerce(kind, value, info, param, ctx):
+        if kind is str:
+            return value.decode(errors="replace") if isinstance(value, bytes) else str(value)
+        if kind is bool and isinstance(value, str) and value.strip().lower() in truth:
+            return truth[value.strip().lower()]
+        if kind is bool:
+            if isinstance(value, bool):
+                return value
+            raise BadParameter(f"{value!r} is not a valid boolean.", ctx=ctx, param=param)
+        if kind in (int, float):
+            try:
+                return kind(value)
+            except (TypeError, ValueError):
+                noun = "an integer" if kind is int else "a number"
+                raise BadParameter(f"{value!r} is not {noun}.", ctx=ctx, param=param) from None
+        return coerce_cli_path(value if isinstance(value, Path) else Path(value), info, path_type=Path, param=param,
+                               ctx=ctx)
+
+    @dataclass(frozen=True)
+    class Plain(RuntimeParam):
+        def _coerce_value(self, value, param, ctx):
+            if isinstance(value, (list, tuple)):
+                (item,) = self.annotation.__args__
+                return [coerce(item, v, self.parameter_info, param, ctx) for v in value]
+            return coerce(self.annotation, value, self.parameter_info, param, ctx)
+
+    def plain(descriptor) -> bool:
+        info, annotation = descriptor.parameter_info, descriptor.annotation
+        if getattr(annotation, "__origin__", None) is list and len(annotation.__args__) == 1:
+            annotation = annotation.__args__[0]
+        return (annotation in kinds and info.parser is None and info.min is None and info.max is None
+                and descriptor.file_annotation is None and (annotation is not Path or info.path_type in (None, Path)))
+
+    def get_runtime_param(self):
+        if self._runtime_param is None and plain(self.type_descriptor):
+            self._runtime_param = Plain(self.type_descriptor.parameter_info, self.type_descriptor.annotation)
+        return typers_own(self)
+
+    parameter.get_runtime_param = get_runtime_param

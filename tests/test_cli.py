@@ -1,5 +1,6 @@
 """The commands as a user runs them: outputs, HDF5 layout, exit codes, startup cost."""
 
+import importlib.metadata
 import json
 import subprocess
 import sys
@@ -234,6 +235,26 @@ def test_the_silent_cases_are_loud(cli, tmp_path):
         result = cli(*args)
         assert result.exit_code == 2 and result.stderr.count("\n") == 1, (args, result.stderr)
         assert "╭" not in result.stderr and result.stderr.startswith("smd: ")
+
+
+def test_an_option_that_is_not_a_number_is_one_line_naming_it(cli, tmp_path):
+    """smd coerces its plain options itself (cli_support.plain_coercion, not typer's pydantic adapters): a word
+    for a number, an integer or a flag's value is one line with exit 2 and nothing written; a range typer
+    checks (sweep --workers, at least 1) still is; good values arrive as their types."""
+    out = tmp_path / "out"
+    cases = [(["simulate", SCENARIOS / "one_dof_underdamped.toml", "--rtol", "abc"], "'--rtol': 'abc' is not a number"),
+             (["compare-solvers", SCENARIOS / "one_dof_underdamped.toml", "--repeats", "2.5"],
+              "'--repeats': '2.5' is not an integer"),
+             (["sweep", SCENARIOS / "ic_critical.toml", "--workers", "0"], "--workers")]
+    for args, words in cases:
+        result = cli(*args, "-o", out)
+        assert result.exit_code == 2 and result.stderr.count("\n") == 1 and words in result.stderr, result.stderr
+        assert not out.exists()
+    result = cli("simulate", SCENARIOS / "one_dof_underdamped.toml", "--rtol", "1e-7", "-o", out, "--no-plots",
+                 "--json")
+    assert result.exit_code == 0
+    with h5py.File(out / "one_dof_underdamped.h5") as f:
+        assert f.attrs["scipy_version"] == importlib.metadata.version("scipy")
 
 
 def test_messages_use_the_scenario_words(cli, tmp_path):

@@ -174,11 +174,13 @@ def test_help_and_scenario_loading_import_no_heavy_module():
 
 def test_a_small_linear_scene_without_plots_imports_no_scipy_numba_or_matplotlib(tmp_path):
     """`smd simulate` of a 1-DOF linear scene with --no-plots imports none of scipy (the energy balance's incidence
-    matrix pulled in scipy.sparse, 0.17 s of a 1 s run, and its Van Loan exponential scipy.linalg, 0.22 s), numba or
-    matplotlib: they do no work there."""
+    matrix pulled in scipy.sparse, 0.17 s of a 1 s run, and its Van Loan exponential scipy.linalg, 0.22 s), numba,
+    matplotlib, pydantic (typer's option checks, 0.14 s) or importlib.metadata (scipy's version, 20 ms): they do no
+    work there."""
     probe = ("import sys; from smdcli.cli import run; "
              f"code = run(['simulate', 'scenarios/one_dof_underdamped.toml', '--no-plots', '-q', '-o', {str(tmp_path)!r}]); "
-             "print(code, [m for m in ('scipy', 'numba', 'matplotlib') if m in sys.modules])")
+             "print(code, [m for m in ('scipy', 'numba', 'matplotlib', 'pydantic', 'importlib.metadata') "
+             "if m in sys.modules])")
     result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, cwd=PACKAGE.parent)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip().splitlines()[-1] == "0 []", result.stdout

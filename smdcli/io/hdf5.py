@@ -49,7 +49,6 @@ def write_header(f, scenario: Scenario, kind: str) -> None:
 def write_provenance(f, kind: str) -> None:
     """The root attributes of every smd file, scenario or not: versions, kind, time, command line, machine."""
     import platform
-    from importlib.metadata import version
 
     import h5py
 
@@ -60,7 +59,7 @@ def write_provenance(f, kind: str) -> None:
     f.attrs["command_line"] = provenance.command_line()
     f.attrs["python_version"] = platform.python_version()
     f.attrs["numpy_version"] = np.__version__
-    f.attrs["scipy_version"] = version("scipy")  # without importing scipy for it
+    f.attrs["scipy_version"] = provenance.scipy_version()
     f.attrs["h5py_version"] = h5py.__version__
     f.attrs["machine"] = f"{platform.system()} {platform.machine()}"
 
