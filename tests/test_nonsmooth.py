@@ -637,13 +637,13 @@ def test_integrators_close_the_energy_balance_to_their_tolerance(stem, method, r
 
 
 @pytest.mark.parametrize("stem, method, rtol", [("elastoplastic_record", "BDF", 1e-8), ("coulomb_free_decay", "RK23", 1e-6),
-                                                ("friction_isolated_building", "ode23t", 1e-8)])
+                                                ("friction_isolated_building", "ode23tb", 1e-6)])
 def test_a_run_whose_balance_misses_its_tolerance_is_rerun_tighter_and_says_so(stem, method, rtol):
     sc, model, grid = bundled(stem)
     asked = Tolerances(rtol=rtol, atol=rtol * 1e-3)
     as_it_steps = solve(model, grid, method, dataclasses.replace(asked, balance=False))
     missed = as_it_steps.nonsmooth.balance().max_relative_residual / rtol
-    assert missed > 10  # the method's own error control leaves more (measured 594, 15 and 107)
+    assert missed > 10  # the method's own error control leaves more (measured 594, 15 and 17)
     result = solve(model, grid, method, asked)
     assert result.nonsmooth.balance().max_relative_residual <= 10 * rtol
     note = next(n for n in result.notes if n.startswith("the energy balance"))
