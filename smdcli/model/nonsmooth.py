@@ -55,6 +55,13 @@ def nonsmooth_elements(scenario: Scenario, dofs: tuple[str, ...]) -> tuple[Nonsm
     return tuple(found)
 
 
+def whole_tension(elements: tuple[NonsmoothElement, ...], tension, d) -> np.ndarray:
+    """Each element's whole force from its law's tension and its deformation d (..., E): the law's part plus the
+    linear part kept in K (a hysteretic spring's always-there stiffness), as the outputs store it."""
+    linear = np.array([element.law.linear_stiffness for element in elements], dtype=float)
+    return np.asarray(tension, dtype=float) + linear * np.asarray(d, dtype=float)
+
+
 def initial_stiffness(K: np.ndarray, elements: tuple[NonsmoothElement, ...]) -> np.ndarray:
     """K with every hysteretic spring at its elastic stiffness: the scene at rest, as modes and [damping] see it."""
     extra = [e for e in elements if e.initial_stiffness]

@@ -27,6 +27,7 @@ import numpy as np
 from smdcli.elements.base import KINK
 from smdcli.kernels.arrays import INTERIOR
 from smdcli.model import Model
+from smdcli.model.nonsmooth import whole_tension
 from smdcli.result import NonsmoothHistory, Result, SolverStats
 from smdcli.solvers.base import MAX_STEPS, Tolerances, divergence_bound, diverged, force_function, make_result
 from smdcli.solvers.compiled_events import ACCUMULATED, COMPILED_EVENT_METHODS, CompiledModes
@@ -349,9 +350,9 @@ class _Outputs:
         self.x[k0:k1], self.v[k0:k1], self.a[k0:k1] = x, v, A
         run.v_scale = max(run.v_scale, float(np.abs(v).max(initial=0.0)))
         d = x @ scene.R.T
+        self.tension[k0:k1] = whole_tension(scene.elements, T, d)
         for e, (element, state) in enumerate(zip(scene.elements, scene.live(states, Y))):
             law = element.law
-            self.tension[k0:k1, e] = T[:, e] + law.linear_stiffness * d[:, e]
             for name, value in zip(law.internal_names, law.internal_values(state, d[:, e])):
                 self.internal[f"{element.path}.{name}"][k0:k1] = value
         self.energy["kinetic"][k0:k1], self.energy["strain"][k0:k1], self.energy["contact"][k0:k1] = \

@@ -31,6 +31,7 @@ import numpy as np
 from smdcli.elements import State
 from smdcli.elements.base import EVENT_KINDS, KINK
 from smdcli.model import Model
+from smdcli.model.nonsmooth import whole_tension
 from smdcli.solvers.batches import BATCH_STEPS, BATCH_VALUES, Batches
 from smdcli.solvers.crossings import Crossings
 from smdcli.solvers.flow import GAUSS_POINTS, Flow
@@ -186,9 +187,7 @@ class PiecewiseRun(Crossings, Batches):
         if self.event_points and self.event_points[-1] is None:
             n = self.n
             d, _, tension, _ = self.scene.evaluate(states, z)
-            linear = np.array([element.law.linear_stiffness for element in self.scene.elements], dtype=float)
-            # the whole force, as the outputs store it: a hysteretic spring's linear part with its law's
-            point = (z[:n].copy(), z[n:2 * n].copy(), np.asarray(tension, dtype=float) + linear * np.asarray(d))
+            point = (z[:n].copy(), z[n:2 * n].copy(), whole_tension(self.scene.elements, tension, d))
             for i in range(len(self.event_points) - 1, -1, -1):
                 if self.event_points[i] is not None:
                     break

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from smdcli.model.nonsmooth import whole_tension
 from smdcli.result import NonsmoothHistory
 from smdcli.solvers.flow import WEIGHTS, Flow
 from smdcli.solvers.modes import Mode
@@ -94,10 +95,9 @@ class Outputs:
         run.v_scale = max(run.v_scale, float(np.abs(Z[:, n:2 * n]).max(initial=0.0)))
         self.a[rows] = Z @ mode.acceleration_rows.T + mode.acceleration_const
         d = Z @ mode.d_rows.T
-        tension = Z @ mode.tension_rows.T + mode.tension_const
+        self.tension[rows] = whole_tension(scene.elements, Z @ mode.tension_rows.T + mode.tension_const, d)
         for e, (element, state) in enumerate(zip(scene.elements, states)):
             law = element.law
-            self.tension[rows, e] = tension[:, e] + law.linear_stiffness * d[:, e]
             for name, value in zip(law.internal_names, law.internal_values(state, d[:, e])):
                 self.internal[f"{element.path}.{name}"][rows] = value
         kinetic, strain, contact = stored_energies(run, states, Z)

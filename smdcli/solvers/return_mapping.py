@@ -25,6 +25,7 @@ import numpy as np
 from smdcli.elements.bouc_wen import BoucWen
 from smdcli.elements.elastoplastic import Elastoplastic
 from smdcli.model import Model
+from smdcli.model.nonsmooth import whole_tension
 from smdcli.result import NonsmoothHistory, Result, SolverStats
 from smdcli.solvers.base import MAX_STEPS, Tolerances, cuts, divergence_bound, make_result
 
@@ -154,7 +155,7 @@ def on_grid(grid: np.ndarray, model: Model, R: np.ndarray, t, x, v, a, T, intern
     internal = linear(internal)
     T = linear(T)
     d = xg @ R.T
-    tension = T + d * np.array([el.law.linear_stiffness for el in elements])
+    tension = whole_tension(elements, T, d)
     kinetic = 0.5 * np.einsum("gi,ij,gj->g", vg, model.M, vg)
     work, dissipated, hysteretic, strain = (linear(energies[:, j]) for j in range(4))
     energy = {"kinetic": kinetic, "strain": strain, "contact": np.zeros(len(grid)),
