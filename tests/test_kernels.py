@@ -289,8 +289,13 @@ def test_the_stiffness_watch_reads_the_books_damper_as_not_stiff():
 
 
 def test_kernels_run_as_plain_python_without_the_compiler():
-    """NUMBA_DISABLE_JIT=1: the same kernels interpreted, for coverage and debugging; same answer as scipy's."""
+    """NUMBA_DISABLE_JIT=1: the same kernels interpreted, for coverage and debugging; same answer as scipy's. A test
+    session starts so too: what its start asks of the cache (cached, warm) holds for plain functions, which have
+    no compiled signatures (is_cached read them first, and pytest stopped with an internal error)."""
     code = ("import numpy as np\n"
+            "from smdcli.solvers.compiled import KERNEL_FAMILIES, cached, warm\n"
+            "assert all(cached(family) for family in KERNEL_FAMILIES)\n"
+            "warm('erk')\n"
             "from conftest import bundled as load\n"
             "from smdcli.solvers import solve\n"
             "from smdcli.solvers.base import Tolerances\n"

@@ -80,7 +80,7 @@ no_alloc = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 
 def is_cached(dispatcher) -> bool:
     """True when a kernel has compiled code in memory or an index in numba's cache (so no compile is due)."""
-    if dispatcher.signatures or numba.config.DISABLE_JIT:
+    if numba.config.DISABLE_JIT or dispatcher.signatures:  # plain Python functions have no signatures
         return True
     cache = getattr(dispatcher, "_cache", None)
     locator = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
