@@ -53,6 +53,15 @@ def chain_files(n: int, damper: str, folder: str) -> str:
             + '[[force]]\non = "x1"\ntype = "sine"\namplitude = 10.0\nomega = 5.0\n')
 
 
+def as_user(command: list[str]) -> tuple[list[str], dict[str, str]]:
+    """(command, environment) as a user's machine runs it: `smd` as this Python's smdcli, with Python's bytecode
+    cache (a PYTHONDONTWRITEBYTECODE=1 shell recompiles smd's 70 modules on every start, 0.12 s, where numpy's and
+    h5py's came compiled by pip)."""
+    if command[0] == "smd":
+        command = [sys.executable, "-m", "smdcli", *command[1:]]
+    return command, {key: value for key, value in os.environ.items() if key != "PYTHONDONTWRITEBYTECODE"}
+
+
 def run_once(words: list[str], scene) -> tuple[float, float]:
     """(wall seconds, peak resident MB) of one run; exits with the command's code where it fails. scene: the chain's
     text, or (n, damper) for the chain in matrix files (written untimed)."""
@@ -63,12 +72,8 @@ def run_once(words: list[str], scene) -> tuple[float, float]:
             with open(path, "w") as f:
                 f.write(chain_files(*scene, out) if isinstance(scene, tuple) else scene)
             command = [w.replace("{chain}", path) for w in command]
-        if command[0] == "smd":
-            command = [sys.executable, "-m", "smdcli", *command[1:]]
+        command, env = as_user(command)
         start = time.perf_counter()
-        # as on a user's machine, where Python caches each module's bytecode: a PYTHONDONTWRITEBYTECODE=1 shell
-        # recompiles smd's 70 modules on every start (0.12 s), where numpy's and h5py's came compiled by pip
-        env = {key: value for key, value in os.environ.items() if key != "PYTHONDONTWRITEBYTECODE"}
         child = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
         _, status, usage = os.wait4(child.pid, 0)
         seconds = time.perf_counter() - start

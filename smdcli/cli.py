@@ -326,9 +326,10 @@ def _app_for(args: list[str]) -> typer.Typer:
     """The app that parses ARGS: where they name a command, a group of that command alone (typer builds every
     command's parser and its options' checks before it reads one: 14 commands for one, 15 ms of every call); else
     the whole app, for the listing, a misspelt command, the version."""
+    from typer.main import get_command_name
+
     name = args[0] if args else None
-    chosen = [c for c in app.registered_commands
-              if (c.name or c.callback.__name__.lower().replace("_", "-")) == name]
+    chosen = [c for c in app.registered_commands if (c.name or get_command_name(c.callback.__name__)) == name]
     if len(chosen) != 1:
         return app
     one = _typer()

@@ -143,11 +143,12 @@ def plain_coercion() -> None:
     def coerce(kind, value, info, param, ctx):
         if kind is str:
             return value.decode(errors="replace") if isinstance(value, bytes) else str(value)
-        if kind is bool and isinstance(value, str) and value.strip().lower() in truth:
-            return truth[value.strip().lower()]
         if kind is bool:
             if isinstance(value, bool):
                 return value
+            word = str(value).strip().lower()
+            if word in truth:
+                return truth[word]
             raise BadParameter(f"{value!r} is not a valid boolean.", ctx=ctx, param=param)
         if kind in (int, float):
             try:

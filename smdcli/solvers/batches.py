@@ -11,10 +11,11 @@ Must not import: sweep, io, plots, commands, cli.
 from __future__ import annotations
 
 import math
+from functools import cached_property
 
 import numpy as np
 
-from smdcli.solvers.flow import Flow
+from smdcli.solvers.flow import GAUSS_POINTS, Flow
 from smdcli.solvers.modes import Mode, at_level
 from smdcli.solvers.piecewise_record import step_integrals
 
@@ -24,9 +25,16 @@ CHUNK = 16  # steps across a kink checked for events together
 
 
 class Batches:
-    """The batches of PiecewiseRun (which holds the grid, the scene, the running energy integrals and batch_steps)."""
+    """The batches of PiecewiseRun (which holds the grid, the scene and the running energy integrals)."""
 
     guarded_step = -1  # the output step a batch stopped before, where a guard may end the mode
+
+    @cached_property
+    def batch_steps(self) -> int:
+        """The most output steps a batch takes: BATCH_VALUES Gauss-node values of the scene's state, within
+        BATCH_STEPS."""
+        fewest, most = BATCH_STEPS
+        return min(most, max(fewest, 2 ** int(math.log2(BATCH_VALUES / (GAUSS_POINTS * self.scene.size)))))
 
     def batch(self, flow: Flow, mode: Mode, states, z: np.ndarray, t: float, k: int, breaks, b_next: int,
               h_out: float, outputs):
@@ -56,7 +64,8 @@ class Batches:
         shift = Phi @ mode.b
         Z = np.empty((count + 1, len(z)))  # each step's start (after a kink's reseeding)
         Z[0] = z
-        ends = np.empty((count, len(z)))  # each step's end, as the flow left it
+        # each step's end, as the flow left it: the next step's start but where a kink reseeds the generators
+        ends = np.empty((count, len(z))) if reseed else Z[1:]
         # the generators restart at each kink (their states read at all at once): the step after it runs on the next
         # segment
         seeds = [(lo, hi, signal.exo_states(ahead[:count])) for lo, hi, signal, _ in self.scene.blocks] if reseed \
@@ -65,7 +74,7 @@ class Batches:
         jumped_to = set()  # steps whose start a force's jump put past a guard's level (a stuck contact's breakaway)
         doubling = None if reseed else flow.doubling(h_out, count)
         while done < clear:  # in chunks, so that an event near the start wastes little
-            if doubling is None:
+            if reseed:
                 chunk = range(done, min(done + CHUNK, count))
                 for i in chunk:
                     ends[i] = Z[i + 1] = E @ Z[i] + shift
@@ -74,21 +83,19 @@ class Batches:
                             Z[i + 1, lo:hi] = states_at[i]
             elif done == 0:
                 chunk = range(0, 1)
-                ends[0] = Z[1] = E @ z + shift
+                Z[1] = E @ z + shift
                 sums = [shift]  # sums[j] = sum of E^i shift, i < 2^j: the forcing's part of 2^j steps
             else:  # steps done+1 .. 2 done from steps 1 .. done: E^done Z + its forcing, one product for them all
-                level = len(sums) - 1
-                power = doubling[level]
+                j = len(sums) - 1  # done = 2^j
                 chunk = range(done, min(2 * done, count))
-                Z[done + 1:chunk.stop + 1] = Z[1:chunk.stop - done + 1] @ power.T + sums[level]
-                ends[chunk.start:chunk.stop] = Z[chunk.start + 1:chunk.stop + 1]
-                sums.append(power @ sums[level] + sums[level])
+                Z[done + 1:chunk.stop + 1] = Z[1:chunk.stop - done + 1] @ doubling[j].T + sums[j]
+                sums.append(doubling[j] @ sums[j] + sums[j])
             starts, stops = Z[chunk.start:chunk.stop], ends[chunk.start:chunk.stop]
             if mode.guards:
                 rows, consts, abs_rows = mode.guard_table
                 # each guard's value and rate (columns, signed) at the steps' starts and ends; by doubling, the ends
                 # are the next starts: one product for both
-                if doubling is None:
+                if reseed:
                     at_starts, at_ends = starts @ rows.T + consts, stops @ rows.T + consts
                 else:
                     values = Z[chunk.start:chunk.stop + 1] @ rows.T + consts

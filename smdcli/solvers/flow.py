@@ -126,8 +126,7 @@ class Flow:
         """Coefficients c_k (SERIES_TERMS + 1, s) of z(tau) = sum c_k tau^k on [0, h], or None where they are no good
         to rounding there: omega h past SERIES_REACH, or good_to_rounding's tests against the state's size."""
         series = self._taylor(z, b, h)
-        if series is None or not good_to_rounding(np.abs(series).max(axis=1), h,
-                                                  np.abs(z).max() + np.abs(b).max() * h):
+        if series is None or not _state_good(series, z, b, h):
             return None
         return series
 
@@ -143,7 +142,7 @@ class Flow:
         coefficients = series @ row
         coefficients[0] += const
         if not good_to_rounding(np.abs(coefficients), h, float(np.abs(row) @ np.abs(z)) + abs(const)) and \
-                not good_to_rounding(np.abs(series).max(axis=1), h, np.abs(z).max() + np.abs(b).max() * h):
+                not _state_good(series, z, b, h):
             return None
         highest_first = coefficients[::-1].tolist()
 
@@ -154,6 +153,11 @@ class Flow:
             return total
 
         return value
+
+
+def _state_good(series: np.ndarray, z: np.ndarray, b: np.ndarray, h: float) -> bool:
+    """good_to_rounding of a state's Taylor series against the state's own size on [0, h]."""
+    return good_to_rounding(np.abs(series).max(axis=1), h, np.abs(z).max() + np.abs(b).max() * h)
 
 
 def good_to_rounding(sizes: np.ndarray, h: float, scale: float) -> bool:

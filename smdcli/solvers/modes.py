@@ -72,9 +72,9 @@ class Mode:
             direction = np.array([guard.direction for _, guard, _, _ in self.guards], dtype=float)
             rows = np.array([row for _, _, row, _ in self.guards]).reshape(len(self.guards), len(self.b))
             consts = np.array([const for _, _, _, const in self.guards], dtype=float)
-            self._guard_table = (np.vstack([rows, rows @ self.A]) * np.concatenate([direction, direction])[:, None],
-                                 np.concatenate([consts, rows @ self.b]) * np.concatenate([direction, direction]),
-                                 np.abs(rows))
+            signs = np.concatenate([direction, direction])
+            self._guard_table = (np.vstack([rows, rows @ self.A]) * signs[:, None],
+                                 np.concatenate([consts, rows @ self.b]) * signs, np.abs(rows))
         return self._guard_table
 
 

@@ -32,9 +32,9 @@ from smdcli.elements import State
 from smdcli.elements.base import EVENT_KINDS, KINK
 from smdcli.model import Model
 from smdcli.model.nonsmooth import whole_tension
-from smdcli.solvers.batches import BATCH_STEPS, BATCH_VALUES, Batches
+from smdcli.solvers.batches import Batches
 from smdcli.solvers.crossings import Crossings
-from smdcli.solvers.flow import GAUSS_POINTS, Flow
+from smdcli.solvers.flow import Flow
 from smdcli.solvers.decisions import accumulation, consistent, impact, project, remaining_flights, touch
 from smdcli.solvers.modes import TOUCH, Mode, Scene
 from smdcli.solvers.piecewise_record import Outputs, step_integrals
@@ -65,8 +65,6 @@ class PiecewiseRun(Crossings, Batches):
         self.v_scale = float(np.abs(model.v0).max(initial=0.0))  # the run's speeds, as far as seen
         self.x_scale = float(np.abs(model.x0).max(initial=0.0))  # and its positions
         self.damped = bool(np.any(model.C))
-        fewest, most = BATCH_STEPS
-        self.batch_steps = min(most, max(fewest, 2 ** int(math.log2(BATCH_VALUES / (GAUSS_POINTS * self.scene.size)))))
 
     def flow(self, mode: Mode, t: float) -> Flow:
         """The cached flow of a mode's A, entered at t; PiecewiseFailed where A overflows double precision."""
