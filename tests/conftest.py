@@ -145,7 +145,7 @@ def pytest_sessionstart(session):
 
     if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)
-    from smdcli.solvers.compiled import KERNEL_FAMILIES, warm
+    from smdcli.solvers.compiled import KERNEL_FAMILIES, compile_side_by_side, warm
 
     # SMD_TEST_WARM: the families to warm (comma-separated; empty: erk alone, the rest compiled on first use), for
     # runs that time nothing, such as CI's regression runs under other CPU targets
@@ -155,25 +155,3 @@ def pytest_sessionstart(session):
     warm(*families)
 
 
-# two chains of kernel families that share compiled parts, of about equal compile time (2.5 minutes each on CI's 2
-# cores, 4.3 minutes one after another): each is compiled in a child process of its own
-COMPILE_CHAINS = (("stiff", "modes:stiff", "erk", "rhs", "modes:events", "fixed", "banded"),
-                  ("radau", "modes:radau", "bdf", "modes:bdf", "taylor", "return_mapping"))
-
-
-def compile_side_by_side(families) -> None:
-    """Compile the families that numba's cache lacks in two child processes at once where there are two cores; each
-    child writes numba's cache, from which this process then loads them."""
-    import subprocess
-
-    from smdcli.solvers.compiled import cached
-
-    missing = [family for family in families if not cached(family)]
-    chains = [[family for family in chain if family in missing] for chain in COMPILE_CHAINS]
-    if (os.cpu_count() or 1) < 2 or not all(chains):
-        return
-    print("\nsmd: compiling kernels in two processes (a few minutes, once per install)", file=sys.stderr, flush=True)
-    children = [subprocess.Popen([sys.executable, "-c", f"from smdcli.solvers.compiled import warm; warm(*{chain!r})"],
-                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for chain in chains]
-    for child in children:
-        child.wait()

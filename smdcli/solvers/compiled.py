@@ -136,6 +136,27 @@ def _entry(family: str):
 KERNEL_FAMILIES = ("erk", "fixed", "stiff", "radau", "bdf", "rhs", "modes:events", "modes:radau", "modes:bdf",
                    "modes:stiff", "return_mapping", "banded", "taylor")
 _warmed: set[str] = set()
+# two chains of kernel families that share compiled parts, of about equal compile time (2.5 minutes each on CI's 2
+# cores, 4.3 minutes one after another): each is compiled in a child process of its own
+COMPILE_CHAINS = (("stiff", "modes:stiff", "erk", "rhs", "modes:events", "fixed", "banded"),
+                  ("radau", "modes:radau", "bdf", "modes:bdf", "taylor", "return_mapping"))
+
+
+def compile_side_by_side(families=KERNEL_FAMILIES) -> None:
+    """Compile the families that numba's cache lacks in two child processes at once where there are two cores (a
+    test session's start, CI's first step); each child writes numba's cache, from which warm() then loads them."""
+    import os
+    import subprocess
+
+    missing = [family for family in families if not cached(family)]
+    chains = [[family for family in chain if family in missing] for chain in COMPILE_CHAINS]
+    if (os.cpu_count() or 1) < 2 or not all(chains):
+        return
+    print("\nsmd: compiling kernels in two processes (a few minutes, once per install)", file=sys.stderr, flush=True)
+    children = [subprocess.Popen([sys.executable, "-c", f"from smdcli.solvers.compiled import warm; warm(*{chain!r})"],
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for chain in chains]
+    for child in children:
+        child.wait()
 
 
 def cached(family: str) -> bool:
