@@ -121,6 +121,15 @@ def _dissipation(model: Model, v: np.ndarray, dampers: tuple | None = None) -> n
     return power
 
 
+def _input_power(model: Model, v: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """x'^T B u(t), the applied forces' power, at velocities v (..., n) and their times (flat, as many as v's leading
+    entries): each force's value times the velocity it acts on (v B, not the n-wide force B u of every time)."""
+    if not model.signals:
+        return np.zeros(v.shape[:-1])
+    along = v @ model.B  # (..., forces)
+    return (along * model.forces(times).reshape(along.shape)).sum(axis=-1)
+
+
 def energy_balance(model: Model, result: Result, dense: Callable | None = None) -> Energy:
     """Kinetic, strain, cumulative dissipated and input energy, and the residual of their balance; dense gives the
     run's (x, v) at any sorted times where the method has a dense output."""
@@ -322,8 +331,7 @@ def _dense_gauss(model: Model, result: Result, dense: Callable) -> tuple[np.ndar
     x_all, v_all = np.empty_like(x_sorted), np.empty_like(v_sorted)
     x_all[order], v_all[order] = x_sorted, v_sorted
     v = v_all[1:1 + len(times)].reshape(len(a), GAUSS_POINTS, model.n)
-    force = model.applied_force(times).reshape(v.shape)
-    pieces = np.stack([_dissipation(model, v) @ w, (v * force).sum(axis=2) @ w]) * (b - a)
+    pieces = np.stack([_dissipation(model, v) @ w, _input_power(model, v, times) @ w]) * (b - a)
     step = np.zeros((2, len(grid)))
     np.add.at(step, (slice(None), np.searchsorted(grid, b - 1e-9 * h)), pieces)
     for (k, _, jump), x_after, v_after in zip(jumps, x_all[1 + len(times):], v_all[1 + len(times):]):
@@ -368,9 +376,8 @@ def _hermite_gauss(model: Model, result: Result) -> tuple[np.ndarray, np.ndarray
                          x[k], h[:, 0] * v[k], h[:, 0] ** 2 * a[k]], axis=1)  # (K, 6, n)
         vs = np.einsum("gb,kbn->kgn", slope, ends) / h
         times = t[k - 1][:, None] + (t[k] - t[k - 1])[:, None] * s[None, :]
-        force = model.applied_force(times.ravel()).reshape(len(k), GAUSS_POINTS, n)
         dissipation = _dissipation(model, vs)
-        power = (vs * force).sum(axis=2)
+        power = _input_power(model, vs, times.ravel())
         step[0, k] = (dissipation @ w) * h[:, 0, 0]
         step[1, k] = (power @ w) * h[:, 0, 0]
     events = _events(model, t, (t[-1] - t[0]) / (N - 1))
