@@ -211,3 +211,30 @@ def test_a_spring_yields_through_a_ground_jump_alike_in_every_solver():
     assert errors[0] <= 2e-5 and 3.0 <= errors[0] / errors[1] <= 5.0
     fine = solve(model, grid, "newmark", Tolerances(dt=2.5e-4))
     assert abs(fine.nonsmooth.energy["hysteretic"][-1] - hysteretic[-1]) <= 1e-5 * hysteretic[-1]
+
+
+def test_a_smooth_law_without_a_kernel_code_is_refused_by_the_compiled_methods_and_auto_steps_it_with_scipy(
+        monkeypatch, cli, tmp_path):
+    """A law whose tension is not linear between events and that names no kernel code (Law.kernel_piece's default)
+    would lose its force in a compiled integrator: the compiled methods refuse it in one line naming the element and
+    scipy's counterpart, and auto takes scipy's pair, which agrees with the compiled run of the law as it is."""
+    from smdcli.elements.base import Law
+    from smdcli.elements.bouc_wen import BoucWen
+
+    text = ONE_MASS + ('[[spring]]\nconnects = ["ground", "m"]\nlaw = "bouc_wen"\nk = 100.0\nalpha = 0.1\nbeta = 5.0\n'
+                       'gamma = 5.0\nn = 1.5\nA = 1.0\n[[force]]\non = "m"\ntype = "sine"\namplitude = 20.0\n'
+                       'omega = 9.0\n')
+    _, model, grid = model_of(text)
+    compiled = solve(model, grid, "Radau", Tolerances(rtol=1e-9, atol=1e-12))
+    monkeypatch.setattr(BoucWen, "kernel_piece", Law.kernel_piece)
+    path = tmp_path / "bw.toml"
+    path.write_text(text)
+    refused = cli("simulate", str(path), "--method", "DOP853", "--no-plots", "-o", str(tmp_path / "out"))
+    assert refused.exit_code == 2 and not (tmp_path / "out").exists()
+    assert "spring[1]'s law bouc_wen has no compiled kernel" in refused.stderr, refused.stderr
+    assert "'scipy:DOP853'" in refused.stderr and len(refused.stderr.strip().splitlines()) == 1
+    _, model, grid = model_of(text)
+    auto = solve(model, grid, "auto", Tolerances(rtol=1e-9, atol=1e-12))
+    assert auto.stats.method == "scipy:Radau" and "no compiled kernel" in auto.stats.reason
+    peak = np.abs(compiled.displacement).max()
+    assert np.abs(auto.displacement - compiled.displacement).max() < 1e-6 * peak

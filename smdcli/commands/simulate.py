@@ -73,7 +73,7 @@ def solve_run(sc: Scenario, model: Model, grid: np.ndarray, options: Options = O
 def simulate(path: str | Path, out: str | Path, options: Options = Options()) -> Run:
     """Validate, solve and write one scenario; a solver failure raises SolverFailed and writes nothing."""
     sc, model, grid = prepare(path)
-    out_dir = output_folder(out)
+    out_dir = output_folder(out, make=False)  # made when its files are written
     result = solve_run(sc, model, grid, options)
     if sc.sweep:
         note = ("this file's [sweep] table was not run: simulate solved the scene as written "

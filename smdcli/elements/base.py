@@ -130,6 +130,12 @@ class Law:
         """The mode's smooth tension and dissipated power as compiled kernels take them (none by default)."""
         return KernelPiece()
 
+    @property
+    def compiled(self) -> bool:
+        """Whether compiled kernels can evaluate this law: linear between events, or its smooth tension named by a
+        kernel code (kernel_piece); a law without one is refused by the compiled integrators, never dropped."""
+        return self.piecewise_linear or type(self).kernel_piece is not Law.kernel_piece
+
     def stored(self, state: State, d: float) -> tuple[str, float]:
         """(energy term, energy) this element stores: strain for springs, contact for compliant stops."""
         return "", 0.0

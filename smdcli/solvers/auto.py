@@ -142,6 +142,13 @@ def _nonsmooth_choice(model: Model) -> tuple[Solver, str]:
         return Exact(), (f"piecewise linear ({laws}), {_loads(model) if model.is_forced or model.ground else 'free'}: "
                          "exact between events, each event located on the exact flow to rounding")
     stiff = [e.path for e in model.nonsmooth if e.law.name == "bouc_wen" or getattr(e.law, "regularization", None)]
+    uncompiled = [e.path for e in model.nonsmooth if not e.law.compiled]
+    if uncompiled:  # scipy's pair, stepped from Python: the compiled ones cannot evaluate its tension
+        from smdcli.solvers.ivp import ScipyDOP853, ScipyRadau
+
+        solver = ScipyRadau() if stiff else ScipyDOP853()
+        return solver, (f"nonsmooth ({laws}); {', '.join(uncompiled)} has no compiled kernel: {solver.name}, each "
+                        "event located on its interpolant, restarted there")
     if stiff:
         return Radau(), (f"nonsmooth ({laws}); {', '.join(stiff)} stiff where it saturates or sticks: "
                                      "implicit Radau, each event located on its interpolant, restarted there")

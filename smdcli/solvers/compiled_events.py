@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from smdcli.elements.base import SMOOTH_NONE
 from smdcli.kernels.arrays import (GUARD_D, GUARD_INTERNAL, GUARD_RATE, GUARD_TENSION, LAW_PARAMETERS, ModelArrays,
                                    csr)
 from smdcli.kernels.tableaus import DOP853, RK23, RK45, ROSENBROCK23, TRAPEZOID, TRBDF2
@@ -59,6 +60,8 @@ def mode_arrays(base: ModelArrays, scene, mode, states) -> ModelArrays:
     pd, pc = np.zeros(E), np.zeros(E)
     for e, (element, state, part) in enumerate(zip(scene.elements, states, scene.q_slices)):
         piece, compiled = element.law.piece(state), element.law.kernel_piece(state)
+        if piece.nonlinear is not None and compiled.law == SMOOTH_NONE:  # nonsmooth_refusal's promise, kept here
+            raise AssertionError(f"{element.path}: a smooth tension without a compiled kernel code")
         stiff[e], damp[e], const[e] = piece.stiffness, piece.damping, piece.constant
         law[e] = compiled.law
         par[e, :len(compiled.parameters)] = compiled.parameters

@@ -40,7 +40,15 @@ def nonsmooth_refusal(method: str, model: Model) -> str | None:
     from smdcli.solvers.return_mapping import NEWMARK_FAMILY, refusal as newmark_refusal
 
     if method in ("auto", "exact") or method in EVENT_METHODS:
+        from smdcli.solvers.compiled_events import COMPILED_EVENT_METHODS
         from smdcli.solvers.exact import Exact
+
+        uncompiled = [e for e in model.nonsmooth if not e.law.compiled]
+        if method in COMPILED_EVENT_METHODS and uncompiled:
+            first = uncompiled[0]
+            scipys = next(name for name in (f"scipy:{method}", f"scipy:{EVENT_METHODS[method]}") if name in EVENT_METHODS)
+            return (f"{method!r} is compiled, and {first.path}'s law {first.law.name} has no compiled kernel for its "
+                    f"smooth tension; try {scipys!r} (scipy's, stepped from Python) or 'auto'")
 
         return None if method != "exact" else Exact().refuse(model)
     if method in NEWMARK_FAMILY:
