@@ -6,8 +6,9 @@ Hardening without isotropic hardening.
     law = "elastoplastic"   # k (N/m), fy (N): |T| <= fy, the plastic deformation d_p absorbs the rest
     k = 4000.0
     fy = 150.0
-    # law = "bilinear", hardening = b (0 <= b < 1): an elastic b k in parallel with an elastoplastic (1-b) k
-    #   yielding at (1-b) fy, so the first yield is at fy and the post-yield stiffness b k
+    # law = "bilinear", hardening = b (-1 < b < 1): an elastic b k in parallel with an elastoplastic (1-b) k
+    #   yielding at (1-b) fy, so the first yield is at fy and the post-yield stiffness b k (negative: softening,
+    #   as P-Delta makes a storey's)
 
 Modes: elastic (T = k (d - d_p)), plastic+ (T = fy, d_p = d - fy/k follows d), plastic- (T = -fy). Yield where
 the elastic tension reaches +-fy; unloading where d' turns back (then elastic with d_p frozen). The plastic work
@@ -104,7 +105,8 @@ class Elastoplastic(Law):
         import numpy as np
 
         core = self.core
-        return (np.abs(tension - self.linear_stiffness * d) - core.fy, core.fy,
+        linear = self.linear_stiffness * d  # its rounding is the difference's: a softening spring's runs far
+        return (np.abs(tension - linear) - core.fy, core.fy + float(np.abs(linear).max(initial=0.0)),
                 f"its yield surface (|T - b k d| <= {core.fy:g} N) is never passed")
 
     def dissipation(self, state: State, d: float, rate: float, tension: float) -> tuple[str, float]:
@@ -151,8 +153,8 @@ class Bilinear(Elastoplastic):
     def read(cls, t) -> "Bilinear":
         k, fy = t.number("k", positive=True), t.number("fy", positive=True)
         b = t.number("hardening")
-        if not 0.0 <= b < 1.0:
-            raise t.fail("hardening", f"expected a post-yield stiffness ratio b with 0 <= b < 1, found {b:g}")
+        if not -1.0 < b < 1.0:
+            raise t.fail("hardening", f"expected a post-yield stiffness ratio b with -1 < b < 1, found {b:g}")
         return cls(k=k, fy=fy, hardening=b)
 
     @property
