@@ -34,6 +34,7 @@ import argparse
 import importlib.util
 import math
 import sys
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -214,26 +215,16 @@ def opensees_rows():
     return [(work, smd, f"OpenSees ElasticPP, Newmark dt {0.01 / substeps:g}", (s, np.abs(x - reference).max() / peak))]
 
 
+from chain_vs_opensees import CHAIN_MODEL  # noqa: E402  the chain's OpenSees model, one place
+
 CHAIN_OPENSEES = """
 import json, statistics, sys, time
 import numpy as np
 import openseespy.opensees as ops
-n, k, c, m, dt, steps, repeats = json.loads(sys.stdin.read())
+n, dt, steps, repeats = json.loads(sys.stdin.read())
 def run():
     ops.wipe()
-    ops.model("basic", "-ndm", 1, "-ndf", 1)
-    for i in range(n + 1):
-        ops.node(i, 0.0)
-    ops.fix(0, 1)
-    for i in range(1, n + 1):
-        ops.mass(i, m)
-    ops.uniaxialMaterial("Elastic", 1, k, c)   # spring k and damper c on every link
-    for i in range(1, n + 1):
-        ops.element("zeroLength", i, i - 1, i, "-mat", 1, "-dir", 1)
-    ops.timeSeries("Trig", 1, 0.0, 1e9, 2 * np.pi / 5.0, "-factor", 10.0)
-    ops.pattern("Plain", 1, 1)
-    ops.load(1, 1.0)
-    ops.constraints("Plain"); ops.numberer("RCM"); ops.system("BandGeneral")
+""" + textwrap.indent(CHAIN_MODEL, "    ") + """    ops.constraints("Plain"); ops.numberer("RCM"); ops.system("BandGeneral")
     ops.algorithm("Linear"); ops.integrator("Newmark", 0.5, 0.25); ops.analysis("Transient")
     x = [0.0]
     for _ in range(steps):
@@ -280,7 +271,7 @@ def opensees_chain(n: int, dt: float, steps: int, repeats: int):
     if env is None:
         return None
     done = subprocess.run([sys.executable, "-c", CHAIN_OPENSEES], capture_output=True, text=True, env=env,
-                          input=json.dumps([n, 100.0, 0.5, 1.0, dt, steps, repeats]))
+                          input=json.dumps([n, dt, steps, repeats]))
     if done.returncode != 0:
         return None
     found = json.loads(done.stdout.strip().splitlines()[-1])
