@@ -14,12 +14,10 @@ Needs openseespy (`pip install -e '.[peers]'`).
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -56,20 +54,24 @@ ops.recorder("Node", "-binary", out, "-time", "-node", *range(1, n + 1), "-dof",
 ops.analyze(steps, dt)
 ops.remove("recorders")
 ops.wipe()
-x = np.fromfile(out)[:steps * (n + 1)].reshape(steps, n + 1)  # rows: time, then every mass
+# a record: the time and every mass's displacement as doubles, then a newline byte
+records = np.fromfile(out, dtype=np.uint8).reshape(steps, 8 * (n + 1) + 1)
+x = records[:, :-1].copy().view("<f8")
 np.save(out + ".npy", np.concatenate([[0.0], x[:, 1]]))  # the first mass, from t = 0
 """
 
 
 def timed(command: list[str], env: dict) -> tuple[float, float]:
-    """(wall seconds, peak resident MB) of a whole process; exits where it fails."""
-    start = time.perf_counter()
-    child = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
-    _, status, usage = os.wait4(child.pid, 0)
-    seconds = time.perf_counter() - start
-    if os.waitstatus_to_exitcode(status) != 0:
-        sys.exit(f"{' '.join(command)} failed: {child.stderr.read().decode()[-400:]}")
-    return seconds, usage.ru_maxrss / 1024
+    """(wall seconds, peak resident MB) of a whole process, started by a small process of its own (peers.MEASURER:
+    a child's peak memory counts that of the process it was started from, and this one holds the reference's
+    matrices); exits where it fails."""
+    from peers import MEASURER
+
+    done = subprocess.run([sys.executable, "-c", MEASURER, *command], capture_output=True, text=True, env=env)
+    seconds, megabytes, code = done.stdout.split()
+    if int(code) != 0:
+        sys.exit(f"{' '.join(command)} failed (exit {code})")
+    return float(seconds), float(megabytes)
 
 
 def reference_first_mass(folder: Path) -> np.ndarray:
