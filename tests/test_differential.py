@@ -1,13 +1,12 @@
 """Differential tests that cross the features: random small scenes drawn from every element law (linear, elastoplastic,
-bilinear, Bouc-Wen, cubic springs, quadratic dampers, Coulomb friction with its static force above or at its
-kinetic one, rigid stops), force type (sine, step,
-square, table), damping form (dampers, Rayleigh, modal), support motion (a sine, a record shorter than the run)
-and initial state. For each: `exact` against an implicit and an explicit integrator at tight tolerance, every
-run's own physics (analysis.guards: dissipation never decreasing, friction within its static force, stops never
-passed, yield surfaces never exceeded, the energy balance), the CLI's file against the API, and the export
-against the file, and a sweep of the first spring's k (its law's k where it is hysteretic) against simulate of each
-member. Agreement within the stated accuracies, or a reported failure (a solver that says it failed, a
-run marked suspect): never a silent difference.
+bilinear, Bouc-Wen, cubic springs, quadratic dampers, Coulomb friction with its static force above or at its kinetic
+one, rigid stops), force type (sine, step, square, table, the four shock pulses), damping form (dampers, Rayleigh,
+modal), support motion (a sine, a shock pulse, a record shorter than the run) and initial state. For each: `exact`
+against an implicit and an explicit integrator at tight tolerance, every run's own physics (analysis.guards:
+dissipation never decreasing, friction within its static force, stops never passed, yield surfaces never exceeded,
+the energy balance), the CLI's file against the API, and the export against the file, and a sweep of the first
+spring's k (its law's k where it is hysteretic) against simulate of each member. Agreement within the stated
+accuracies, or a reported failure (a solver that says it failed, a run marked suspect): never a silent difference.
 
 Seeded (derandomized), SMD_DIFFERENTIAL_EXAMPLES scenes (default 60, under a minute); `SMD_DIFFERENTIAL_EXAMPLES=600
 python -m pytest tests/test_differential.py` is the 10x run. Every failure it ever finds becomes a fixed example
@@ -78,7 +77,8 @@ def scenes(draw):
         lines += ["[damping]", f"modal = {draw(st.sampled_from([0.02, 0.05]))!r}"]
     elif damping == "rayleigh":
         lines += ["[damping]", f"alpha = {draw(st.floats(0.0, 0.5))!r}", f"beta = {draw(st.floats(0.0, 0.002))!r}"]
-    force = draw(st.sampled_from(["none", "sine", "step", "square", "table", "ground_sine", "ground_record"]))
+    force = draw(st.sampled_from(["none", "sine", "step", "square", "table", "pulse", "ground_sine", "ground_record",
+                                  "ground_pulse"]))
     on = draw(st.sampled_from(names))
     amplitude = draw(st.floats(0.5, 10.0))
     if force == "sine":
@@ -93,6 +93,13 @@ def scenes(draw):
     elif force == "table":
         lines += ["[[force]]", f'on = "{on}"', 'type = "table"', "t = [0.0, 0.3, 0.61, 1.0]",
                   f"values = [0.0, {amplitude!r}, {-amplitude / 2!r}, 0.0]"]
+    elif force in ("pulse", "ground_pulse"):
+        shape = draw(st.sampled_from(["rectangle", "half_sine", "haversine", "triangle"]))
+        pulse = ['type = "pulse"', f'shape = "{shape}"', f"amplitude = {amplitude!r}",
+                 f"t0 = {draw(st.sampled_from([0.0, 0.1, 0.2345]))!r}",
+                 f"duration = {draw(st.sampled_from([0.011, 0.05, 0.3333]))!r}"]
+        where = ["[[force]]", f'on = "{on}"'] if force == "pulse" else ["[ground_motion]", 'quantity = "acceleration"']
+        lines += where + pulse
     elif force == "ground_sine":
         lines += ["[ground_motion]", 'quantity = "acceleration"', 'type = "sine"', f"amplitude = {amplitude!r}",
                   f"omega = {draw(st.floats(2.0, 30.0))!r}"]

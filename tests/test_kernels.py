@@ -15,7 +15,8 @@ from conftest import model_of
 
 from smdcli.expression import FUNCTIONS, Expression
 from smdcli.kernels.arrays import model_arrays
-from smdcli.kernels.rhs import force_value, jacobian, rhs, work_size
+from smdcli.kernels.forces import force_value
+from smdcli.kernels.rhs import jacobian, rhs, work_size
 from smdcli.solvers import solve
 from smdcli.solvers.base import Tolerances
 
@@ -61,6 +62,27 @@ type = "pulse"
 amplitude = -1.0
 t0 = 1.0
 duration = 0.25
+[[force]]
+on = "a"
+type = "pulse"
+shape = "half_sine"
+amplitude = 2.0
+t0 = 0.3
+duration = 0.4
+[[force]]
+on = "b"
+type = "pulse"
+shape = "haversine"
+amplitude = -1.5
+t0 = 1.7
+duration = 0.6
+[[force]]
+on = "a"
+type = "pulse"
+shape = "triangle"
+amplitude = 1.0
+t0 = 2.2
+duration = 0.5
 [[force]]
 on = "b"
 type = "sine"
@@ -131,7 +153,7 @@ def test_every_force_type_matches_the_numpy_signal_on_both_sides_of_its_edges(fo
 @pytest.mark.parametrize("name", sorted(FUNCTIONS))
 def test_every_expression_function_runs_compiled_as_numpy_evaluates_it(name):
     """The compiled interpreter reads smdcli.expression's opcodes: each function, and every operator around it."""
-    from smdcli.kernels.rhs import _expression
+    from smdcli.kernels.forces import _expression
 
     text = f"-{name}(0.3 * t + 0.1) ** 2 / (1.5 + t) - 2 * t + 0.25"
     expression = Expression(text)

@@ -15,6 +15,7 @@ LAYERS = [
               "smdcli.progress", "smdcli.provenance", "smdcli.resources", "smdcli.strict_json", "smdcli.text",
               "smdcli.solvers.catalog"]),
     ("elements", ["smdcli.elements"]),  # the laws: read by the scenario, used by everything that solves
+    ("shapes", ["smdcli.shapes"]),  # the force shapes: likewise
     ("scenario", ["smdcli.scenario"]),
     ("model", ["smdcli.model"]),
     ("kernels", ["smdcli.kernels"]),

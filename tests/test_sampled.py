@@ -9,7 +9,7 @@ from conftest import SCENARIOS, model_of
 
 from smdcli import scenario
 from smdcli.model import build, time_grid
-from smdcli.model.forcing import Table
+from smdcli.shapes.table import Table
 from smdcli.solvers import ground, sampled, solve
 from smdcli.solvers.base import Tolerances
 

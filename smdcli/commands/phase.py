@@ -46,10 +46,13 @@ class PhaseRun:
 
 
 def forcing_period(sc: Scenario) -> float:
-    """The period of the scene's first periodic force (sine, cosine, square, Fourier square)."""
+    """The period of the scene's first periodic force (a sine, a square wave, a Fourier series)."""
+    from smdcli.shapes import build_signal
+
     for force in sc.forces:
-        if force.omega and force.type in ("sine", "cosine", "square", "fourier_square"):
-            return 2 * math.pi / force.omega
+        period = build_signal(force).period
+        if period is not None:
+            return period
     raise UsageError(f"{sc.path}: --poincare samples once per forcing period, and this scene has no periodic force")
 
 

@@ -16,14 +16,9 @@ from typing import NamedTuple
 import numpy as np
 
 from smdcli.model import Model
-from smdcli.model.forcing import (Chirp, Constant, ExpressionSignal, FourierSquare, Harmonic, Pulse, Signal, Square,
-                                  Step, Table)
 
 # Element laws: the row kinds of the nonlinear element table.
 CUBIC_SPRING, QUADRATIC_DAMPER = 0, 1
-# Force kinds: the row kinds of the force table.
-(CONSTANT, STEP, PULSE, SINE, COSINE, SQUARE, FOURIER_SQUARE, CHIRP, TABLE_LINEAR, TABLE_PREVIOUS,
- EXPRESSION) = range(11)
 FORCE_PARAMETERS = 4
 LAW_PARAMETERS = 6
 GUARD_D, GUARD_RATE, GUARD_TENSION, GUARD_INTERNAL = range(4)
@@ -45,7 +40,7 @@ class ModelArrays(NamedTuple):
     el_a: np.ndarray  # (E,) int: first node, -1 for ground (the element pulls it with -g)
     el_b: np.ndarray  # (E,) int: second node, -1 for ground
     el_coef: np.ndarray  # (E,) k3 or the quadratic damping coefficient
-    f_kind: np.ndarray  # (F,) int force kind
+    f_kind: np.ndarray  # (F,) int force row kind (each shape's, smdcli.shapes)
     f_dof: np.ndarray  # (F,) int DOF the force acts on; -1: the ground's acceleration, -a_g on every DOF's acceleration
     f_par: np.ndarray  # (F, FORCE_PARAMETERS) float parameters, by kind
     f_ptr: np.ndarray  # (F + 1,) int: each force's slice of f_data
@@ -105,31 +100,6 @@ def _elements(model: Model) -> tuple[np.ndarray, ...]:
     return ints(laws), ints(first), ints(second), np.array(coefs, dtype=float)
 
 
-def _force_row(signal: Signal) -> tuple[int, list[float], list[float], list[int]]:
-    """(kind, parameters, packed data, expression opcodes) of one force signal."""
-    if isinstance(signal, Step):
-        return STEP, [signal.amplitude, signal.t0], [], []
-    if isinstance(signal, Pulse):
-        return PULSE, [signal.amplitude, signal.t0, signal.t_end], [], []
-    if isinstance(signal, Constant):
-        return CONSTANT, [signal.amplitude], [], []
-    if isinstance(signal, Harmonic):
-        return (COSINE if signal.cosine else SINE), [signal.amplitude, signal.omega, signal.phase], [], []
-    if isinstance(signal, Square):
-        return SQUARE, [signal.amplitude, signal.period, signal.duty, signal.t0], [], []
-    if isinstance(signal, FourierSquare):
-        return FOURIER_SQUARE, [signal.omega, signal.t0, signal.phase], [*signal.harmonics, *signal.coefs], []
-    if isinstance(signal, Chirp):
-        return CHIRP, [signal.amplitude, signal.f0, signal.rate, signal.phase], [], []
-    if isinstance(signal, Table):
-        times, values = signal.kernel_knots()
-        return (TABLE_PREVIOUS if signal.previous else TABLE_LINEAR), [], [*times, *values], []
-    if isinstance(signal, ExpressionSignal):
-        codes, constants, depth = signal.expression.program()
-        return EXPRESSION, [float(depth)], constants, codes
-    raise AssertionError(f"no compiled form for {type(signal).__name__}")
-
-
 _BUILT: dict[int, tuple[weakref.ref, ModelArrays]] = {}
 
 
@@ -150,7 +120,7 @@ def _build(model: Model) -> ModelArrays:
     n = model.n
     a_ptr, a_idx, a_val = csr(model.state_matrix[n:])
     mi_ptr, mi_idx, mi_val = csr(model.Minv)
-    rows = [_force_row(s) for s in model.signals]
+    rows = [s.kernel_row() for s in model.signals]
     par = np.zeros((len(rows), FORCE_PARAMETERS))
     for j, (_, values, _, _) in enumerate(rows):
         par[j, :len(values)] = values

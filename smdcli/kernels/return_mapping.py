@@ -24,7 +24,8 @@ import numpy as np
 from smdcli.kernels.arrays import CUBIC_SPRING
 from smdcli.kernels.compiler import kernel, no_alloc
 from smdcli.kernels.linalg import lu_factor, lu_solve
-from smdcli.kernels.rhs import bouc_wen_rate, element_force, force_value
+from smdcli.kernels.forces import force_value
+from smdcli.kernels.rhs import bouc_wen_rate, element_force
 
 ELASTOPLASTIC, BOUC_WEN = 0, 1  # spring laws: parameters (k, fy) of the elastic-plastic core, or ((1-alpha) k, A,
 #                                 beta, gamma, n)

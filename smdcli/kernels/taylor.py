@@ -20,12 +20,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from smdcli.kernels.arrays import COSINE, CUBIC_SPRING, FOURIER_SQUARE, SINE, TABLE_LINEAR
+from smdcli.kernels.arrays import CUBIC_SPRING
 from smdcli.kernels.compiler import inlined, kernel, no_alloc
 from smdcli.kernels.diagonals import banded_rows, diagonals, tridiagonal_rows
 from smdcli.kernels.erk import (ACCEPTED, NFEV, NOT_FINITE, OK, STEP_BUDGET, STIFF, T_REACHED, TOO_SMALL_STEP,
                                 WATCH_WINDOW, held_by_stability, linear_norms, relative, rows_through, state_status)
-from smdcli.kernels.rhs import force_value
+from smdcli.kernels.forces import force_series
 from smdcli.kernels.series_rows import OUTPUT_SHARE, ROWS, acceleration_series, emit, order_sizes, summed, widen
 from smdcli.kernels.taylor_spans import active_dofs, coupling_orders, loaded_dofs, terms_span
 
@@ -34,41 +34,6 @@ EXTREMES = 5  # floats[5:9], after erk's: the least and largest x the rows hold,
 FLOATS = EXTREMES + 4
 NEGLIGIBLE = 1e-6  # of the step's tolerance: a DOF whose x and v stay under it has not been reached yet
 SAMPLES = 4  # points of each step where a damper's velocity polynomial is checked for a reversal
-
-
-@no_alloc
-def _harmonic(amplitude, omega, phase, cosine, p, column, series):
-    """Taylor coefficients of amplitude sin(phase + omega tau) (cos if cosine) about tau = 0 into series[:, column]."""
-    s, c = math.sin(phase), math.cos(phase)
-    cycle = (c, -s, -c, s) if cosine else (s, c, -s, -c)
-    scale = amplitude
-    for k in range(p + 1):
-        series[k, column] += scale * cycle[k % 4]
-        scale *= omega / (k + 1)
-
-
-@no_alloc
-def force_series(m, t, ta, mid, p, series, stack):
-    """Each force's Taylor coefficients about t (in a stretch [ta, tb) between discontinuities, mid its middle);
-    stack is force_value's scratch."""
-    series[:, :] = 0.0
-    for j in range(len(m.f_kind)):
-        kind = m.f_kind[j]
-        q = m.f_par[j]
-        if kind == SINE or kind == COSINE:
-            _harmonic(q[0], q[1], q[1] * t + q[2], kind == COSINE, p, j, series)
-        elif kind == FOURIER_SQUARE:
-            data = m.f_data[m.f_ptr[j]:m.f_ptr[j + 1]]
-            terms = len(data) // 2
-            for i in range(terms):
-                omega = data[i] * q[0]
-                _harmonic(data[terms + i], omega, omega * (t - q[1]) + q[2], False, p, j, series)
-        elif kind == TABLE_LINEAR:  # a line between knots (they are discontinuities of its slope)
-            series[0, j] = force_value(m, j, t, t >= mid, stack)
-            if p >= 1 and mid > ta:
-                series[1, j] = (force_value(m, j, mid, False, stack) - force_value(m, j, ta, False, stack)) / (mid - ta)
-        else:  # constant on the stretch, its value in the middle (chirps and expressions: Taylor.refuse)
-            series[0, j] = force_value(m, j, mid, False, stack)
 
 
 @no_alloc

@@ -27,8 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from smdcli.errors import ScenarioError
-from smdcli.model.forcing import (Chirp, Constant, ExpressionSignal, FourierSquare, Harmonic, Pulse, Signal, Square,
-                                  Step, Table, build_signal)
+from smdcli.shapes import Signal, build_signal
 from smdcli.model.mass import mass_solve
 from smdcli.scenario import GroundMotionSpec
 
@@ -82,14 +81,10 @@ class TooManyJumps(ValueError):
 
 def _ground_motion(spec: GroundMotionSpec, start: float, end: float) -> GroundMotion:
     given = build_signal(spec.shape)
-    if isinstance(given, Chirp):  # differentiated as the expression it is
-        text = (f"{given.amplitude!r} * sin(2 * pi * ({given.f0!r} * t + 0.5 * {given.rate!r} * t ** 2) + "
-                f"{given.phase!r})")
-        given = ExpressionSignal(text)
     jumps: dict[float, list[float]] = {}
     if spec.quantity == "acceleration":
-        if isinstance(given, Table) and not spec.hold:  # a record is over at its last sample
-            given = Table(given.t, given.v, "previous" if given.previous else "linear", ended=True)
+        if not spec.hold:  # a record is over at its last sample
+            given = given.as_record()
         velocity, acceleration, u0, v0 = None, given, 0.0, 0.0
     elif spec.quantity == "velocity":
         velocity = given
@@ -120,26 +115,7 @@ def derivative(signal: Signal, start: float, end: float) -> tuple[Signal | None,
     edges = signal.breakpoints(start, end)
     jumps = [(float(t), float(signal.value(t) - signal.value_left(t))) for t in edges]
     jumps = [(t, size) for t, size in jumps if size != 0.0]
-    if isinstance(signal, (Constant, Step, Pulse, Square)):
-        return None, jumps
-    if isinstance(signal, Harmonic):
-        return Harmonic(signal.amplitude * signal.omega, signal.omega, signal.phase + math.pi / 2,
-                        signal.cosine), jumps
-    if isinstance(signal, FourierSquare):
-        return signal.derivative(), jumps
-    if isinstance(signal, Table):
-        if signal.previous or len(signal.t) < 2:
-            return None, jumps
-        # The slope between knots, zero before the first and after the last (the ends are held).
-        before = min(start, float(signal.t[0])) - 1.0
-        times = np.concatenate([[before], signal.t])
-        values = np.concatenate([[0.0], signal.slopes, [0.0]])
-        return Table(times, values, "previous"), jumps
-    if isinstance(signal, ExpressionSignal):
-        derived = ExpressionSignal.__new__(ExpressionSignal)
-        derived.expression = signal.expression.derivative()
-        return derived, jumps
-    raise AssertionError(f"no derivative for {type(signal).__name__}")
+    return signal.derivative(start), jumps
 
 
 def state_jumps(ground: GroundMotion, M: np.ndarray, C: np.ndarray) -> tuple[tuple[float, np.ndarray, np.ndarray], ...]:

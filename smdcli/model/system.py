@@ -21,7 +21,7 @@ import numpy as np
 from smdcli.errors import ScenarioError
 from smdcli.model.damping import added_damping, check_damping
 from smdcli.model.elements import GROUND, Element, Incidence, elements_of, incidence, incidence_row
-from smdcli.model.forcing import Signal, build_signal
+from smdcli.shapes import Signal, build_signal
 from smdcli.model.ground import MAX_JUMPS, GroundMotion, ground_motion, state_jumps
 from smdcli.model.checks import check_finite, check_forces, check_matrices_finite
 from smdcli.model.mass import mass_solve
@@ -54,7 +54,7 @@ class Model:
     signals: tuple[Signal, ...] = ()
     force_dofs: tuple[int, ...] = ()  # DOF index each signal acts on
     force_paths: tuple[str, ...] = ()
-    force_types: tuple[str, ...] = ()  # each force's `type` as the scenario names it (sine, fourier_square, ...)
+    force_types: tuple[str, ...] = ()  # each force's `type` as the scenario names it (sine, table, ...)
     cubic: Incidence | None = None  # force k3 d^3
     quadratic: Incidence | None = None  # force c |d'| d'
     source: str = "<model>"

@@ -1,4 +1,5 @@
-"""[[force]] tables: every force type's fields, table forces read from files.
+"""[[force]] tables and [ground_motion]: a shape's fields read by its class (smdcli.shapes), table forces read
+from files.
 
 Must not import: model, solvers, or any layer above."""
 
@@ -16,37 +17,9 @@ from smdcli.scenario.reader import _Table
 from smdcli.scenario.records import (BASELINES, ColumnsError, band_passed, baseline_corrected, check_scaled, read_text,
                                      slope_problem, two_columns)
 from smdcli.scenario.spec import FORCE_TYPES, GROUND, GROUND_QUANTITIES, GROUND_UNITS, ForceSpec, GroundMotionSpec
+from smdcli.shapes.registry import SHAPES
 
-_FORCE_FIELDS = {
-    "constant": ("amplitude",),
-    "step": ("amplitude", "t0"),
-    "sine": ("amplitude", "omega", "frequency", "phase"),
-    "cosine": ("amplitude", "omega", "frequency", "phase"),
-    "square": ("amplitude", "omega", "frequency", "period", "duty", "t0"),
-    "fourier_square": ("amplitude", "omega", "frequency", "period", "terms", "t0"),
-    "pulse": ("amplitude", "t0", "duration"),
-    "chirp": ("amplitude", "f0", "f1", "t1", "phase"),
-    "table": ("t", "values", "file", "interpolation"),
-    "expression": ("expr",),
-}
-_ANY_FORCE_KEYS = ("on", "type") + tuple(dict.fromkeys(k for keys in _FORCE_FIELDS.values() for k in keys))
-
-
-def _read_omega(t: _Table, allow_period: bool) -> float:
-    keys = ("omega", "frequency") + (("period",) if allow_period else ())
-    given = [k for k in keys if t.has(k)]
-    if len(given) != 1:
-        want = " or ".join(keys)
-        if not given:
-            raise t.fail(keys[0], f"required field is missing (expected exactly one of {want})")
-        raise t.fail(given[1], f"give exactly one of {want}, found {' and '.join(given)}")
-    key = given[0]
-    value = t.number(key, positive=(key != "omega"), minimum=0.0)
-    omega = value if key == "omega" else 2 * math.pi * value if key == "frequency" else 2 * math.pi / value
-    if not math.isfinite(omega):  # 2 pi f past 1.8e308, or a period below 3.5e-308
-        raise t.fail(key, f"expected an angular frequency below 1.8e308 rad/s, found {key} = {value:g} "
-                          f"({'2 pi f' if key == 'frequency' else '2 pi / period'} overflows)")
-    return omega
+_ANY_FORCE_KEYS = ("on", "type") + tuple(dict.fromkeys(k for shape in SHAPES.values() for k in shape.fields))
 
 
 def _read_force(t: _Table, index: int, dofs: tuple[str, ...]) -> ForceSpec:
@@ -59,49 +32,17 @@ def _read_force(t: _Table, index: int, dofs: tuple[str, ...]) -> ForceSpec:
 
 
 def _read_shape(t: _Table, index: int, on: str, others: tuple[str, ...]) -> ForceSpec:
-    """A force shape: `type` and the keys it takes; `others` are the table's keys read elsewhere."""
+    """A force shape: `type` and the keys its shape reads; `others` are the table's keys read elsewhere."""
     kind = t.string("type", choices=FORCE_TYPES)
+    shape = SHAPES[kind]
     spec: dict[str, Any] = {"index": index, "on": on, "type": kind}
-    if kind in ("constant", "step", "sine", "cosine", "square", "fourier_square", "pulse", "chirp"):
-        spec["amplitude"] = t.number("amplitude")
-    if kind in ("step", "square", "fourier_square", "pulse"):
-        spec["t0"] = t.number("t0", 0.0)
-    if kind in ("sine", "cosine"):
-        spec["omega"] = _read_omega(t, allow_period=False)
-        spec["phase"] = t.number("phase", 0.0)
-    elif kind == "square":
-        spec["omega"] = _read_omega(t, allow_period=True)
-        duty = t.number("duty", 0.5)
-        if not 0.0 < duty < 1.0:
-            raise t.fail("duty", f"expected a fraction between 0 and 1 (exclusive), found {duty:g}")
-        spec["duty"] = duty
-    elif kind == "fourier_square":
-        spec["omega"] = _read_omega(t, allow_period=True)
-        spec["terms"] = t.integer("terms", minimum=1)
-        if spec["terms"] > 10_000:
-            raise t.fail("terms", f"expected at most 10000 harmonics, found {spec['terms']}")
-    elif kind == "pulse":
-        spec["duration"] = t.number("duration", positive=True)
-        if spec["t0"] + spec["duration"] == spec["t0"]:
-            raise t.fail("duration", f"expected a duration that moves the time t0 = {spec['t0']:g} s, found "
-                                     f"{spec['duration']:g} s, below its rounding ({math.ulp(spec['t0']):.3g} s)")
-    elif kind == "chirp":
-        spec["f0"] = t.number("f0", minimum=0.0)
-        spec["f1"] = t.number("f1", minimum=0.0)
-        spec["t1"] = t.number("t1", positive=True)
-        spec["phase"] = t.number("phase", 0.0)
-    elif kind == "table":
-        spec.update(_read_table_force(t))
-    elif kind == "expression":
-        from smdcli.expression import Expression, ExpressionError
-
-        text = t.string("expr")
-        try:
-            Expression(text)
-        except ExpressionError as exc:
-            raise t.fail("expr", str(exc)) from None
-        spec["expr"] = text
-    t.finish(others + ("type",) + _FORCE_FIELDS[kind])
+    spec.update(_read_table_force(t) if kind == "table" else shape.read(t))  # a table's file is the scenario's
+    allowed = others + ("type",) + shape.fields
+    for key in t.data:
+        owners = [f'"{name}"' for name, other in SHAPES.items() if key in other.fields]
+        if key not in allowed and owners:
+            raise t.fail(key, f'type = "{kind}" takes no {key} (a field of type = {" or ".join(owners)})')
+    t.finish(allowed)
     return ForceSpec(**spec)
 
 

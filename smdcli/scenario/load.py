@@ -14,7 +14,8 @@ from smdcli.scenario.forces import _ANY_FORCE_KEYS, GROUND_KEYS, _read_force, _r
 from smdcli.scenario.options import EXPECT_KEYS, SOLVER_KEYS, SWEEP_KEYS, _read_expect, _read_solver, _read_sweep
 from smdcli.scenario.reader import (_SYSTEM_KEYS, _TIME_KEYS, _TOP_KEYS, MAX_SCENARIO_BYTES, _NotRegular, _Table,
                                     read_regular_file)
-from smdcli.scenario.spec import MAX_SAMPLES, ForceSpec, Scenario, SolverSpec, TimeSpec
+from smdcli.scenario.spec import MAX_SAMPLES, Scenario, SolverSpec, TimeSpec
+from smdcli.shapes.registry import SHAPES
 from smdcli.scenario.structure import (DAMPING_KEYS, _read_damping, _read_elements, _read_masses, _read_system,
                                       _read_time, read_law_elements)
 
@@ -119,9 +120,11 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
             f"output grid of {n_points:.3g} points x {len(dofs)} DOF is too large "
             f"(limit {MAX_SAMPLES:.0e} samples); use a larger step or fewer points",
         )
+    step = (time.end - time.start) / max(n_points - 1, 1)
     for force in forces + ((ground_motion.shape,) if ground_motion else ()):
-        if force.type == "chirp":
-            _check_chirp_resolved(file, force, time, n_points)
+        problem = SHAPES[force.type].resolution_problem(force, time.start, time.end, step)
+        if problem is not None:
+            raise ScenarioError(file, f"{force.path}.{problem[0]}", problem[1])
     return Scenario(
         path=file, text=text, time=time, masses=masses, springs=springs, dampers=dampers,
         system=system, forces=forces, solver=solver, title=title, description=description,
@@ -141,22 +144,6 @@ def _check_size(file: str, n: int, matrix_form: bool) -> None:
         raise ScenarioError(file, "system.dofs" if matrix_form else "mass",
                             f"{n} DOFs need about {needed / 2**30:.3g} GB for their dense matrices, more than half of "
                             f"this machine's {physical_memory() / 2**30:.3g} GB; model fewer masses")
-
-
-def _check_chirp_resolved(file: str, force: ForceSpec, time: TimeSpec, n_points: float) -> None:
-    """A chirp whose frequency passes the output grid's Nyquist frequency cannot be seen or held: refuse it."""
-    rate = (force.f1 - force.f0) / force.t1
-    if not math.isfinite(rate):
-        raise ScenarioError(file, f"{force.path}.t1", f"the chirp's sweep rate (f1 - f0) / t1 overflows (t1 = "
-                                                      f"{force.t1:g} s); the force cannot be resolved")
-    top = max(abs(force.f0 + rate * time.start), abs(force.f0 + rate * time.end))  # Hz; it sweeps on past t1
-    step = (time.end - time.start) / max(n_points - 1, 1)
-    if not top * step <= 0.5:
-        need = 0.5 / top if top > 0 else math.inf
-        raise ScenarioError(file, f"{force.path}.f1",
-                            f"the chirp reaches {top:.4g} Hz by t = {time.end:g} s, above the output grid's Nyquist "
-                            f"frequency {0.5 / step:.4g} Hz (step {step:.3g} s); the force cannot be resolved: use a "
-                            f"[time] step of at most {need:.3g} s, or lower f1 or t1")
 
 
 def _refuse_control_characters(file: str, node, path: str) -> None:

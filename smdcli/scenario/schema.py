@@ -14,6 +14,7 @@ from smdcli.scenario.options import EXPECT_KEYS, SOLVER_KEYS, SWEEP_KEYS
 from smdcli.scenario.reader import _MASS_KEYS, _SYSTEM_KEYS, _TIME_KEYS, _TOP_KEYS
 from smdcli.scenario.spec import EXPECT_QUANTITIES, FORCE_TYPES, GROUND_QUANTITIES, GROUND_UNITS
 from smdcli.scenario.structure import DAMPING_KEYS
+from smdcli.shapes.registry import SHAPES
 from smdcli.solvers.catalog import METHOD_NAMES, NEWMARK_SCHEMES
 
 NUMBER = {"type": "number"}
@@ -41,7 +42,7 @@ SPECIAL = {
     "units": {"enum": sorted({u for units in GROUND_UNITS.values() for u in units} | {"g"})},
     "dof": STRING, "baseline": {"enum": ["none", "linear", "quadratic"]}, "filter": {**NUMBERS, "minItems": 2, "maxItems": 2},
     "filter_order": INTEGER, "hold": BOOLEAN,
-}
+} | {key: schema for shape in SHAPES.values() for key, schema in shape.schema.items()}
 
 
 def _table(keys, required=(), **overrides) -> dict:

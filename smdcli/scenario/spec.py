@@ -1,6 +1,6 @@
 """What a scenario is: frozen dataclasses and the limits they are read under.
 
-Must not import: anything of smd but errors (the bottom of the scenario layer)."""
+Must not import: anything of smd but errors and the force shapes' names (the bottom of the scenario layer)."""
 
 from __future__ import annotations
 
@@ -8,11 +8,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from smdcli.shapes.registry import FORCE_TYPES
+
 GROUND = "ground"
-FORCE_TYPES = (
-    "constant", "step", "sine", "cosine", "square", "fourier_square",
-    "pulse", "chirp", "table", "expression",
-)
 # Output samples (time points x DOFs) one run may hold; beyond this the grid
 # is refused before anything is allocated.
 MAX_SAMPLES = 20_000_000
@@ -94,6 +92,7 @@ class ForceSpec:
     phase: float = 0.0
     t0: float = 0.0
     duration: float | None = None
+    shape: str = "rectangle"  # a pulse's
     duty: float = 0.5
     terms: int | None = None
     f0: float | None = None

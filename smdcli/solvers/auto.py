@@ -37,7 +37,7 @@ def _loads(model: Model) -> str:
 
 
 def _unheld(model: Model) -> str:
-    """The forces without an exact integral, by path and type: 'force[0] (chirp)'."""
+    """The forces without an exact integral, by path and type: 'force[0] (expression)'."""
     held = [f"{path} ({kind})" for path, kind, s in zip(model.force_paths, model.force_types, model.signals)
             if s.exo() is None]
     return ", ".join(held)

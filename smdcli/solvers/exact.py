@@ -1,7 +1,7 @@
 """Exact solution of linear time-invariant scenes by the matrix exponential.
 
-Chirp and expression forces have no exact form: they are replaced by their
-first-order hold on the output grid (a piecewise-linear table), which is then
+Forces whose shape has no exact form (smdcli.shapes: Signal.exact) are replaced by
+their first-order hold on the output grid (a piecewise-linear table), which is then
 integrated exactly; the error is that of the hold, O(step^2), and `auto` does
 not choose this path (it integrates such forces to the scenario's tolerance).
 
@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from smdcli.model import Model
-from smdcli.model.forcing import Table
+from smdcli.shapes.table import Table
 from smdcli.result import Result, SolverStats
 from smdcli.solvers.accurate_expm import propagator
 from smdcli.solvers.base import Solver, Tolerances, make_result, segments, stated_rounding
@@ -83,7 +83,7 @@ def _stacked_powers(size: int, N: int) -> int:
 
 
 def first_order_hold(model: Model, grid: np.ndarray) -> tuple[Model, tuple[str, ...]]:
-    """Replace forces without an exact form (chirp, expression) by their piecewise-linear interpolant on the grid."""
+    """Replace forces without an exact form (Signal.exact false) by their piecewise-linear interpolant on the grid."""
     held = tuple(path for path, s in zip(model.force_paths, model.signals) if s.exo() is None)
     if not held:
         return model, held

@@ -15,8 +15,8 @@ from smdcli.model import Model
 from smdcli.result import GroundHistory, Result
 from smdcli.solvers.base import Tolerances, make_result
 
-# The ground's integrated displacement and velocity, where its acceleration has no exact generator (a chirp, an
-# expression): compiled DOP853 at this relative tolerance.
+# The ground's integrated displacement and velocity, where its acceleration has no exact generator (a sweep,
+# an expression): compiled DOP853 at this relative tolerance.
 GROUND_RTOL = 1e-12
 
 
@@ -104,11 +104,13 @@ def ground_history(model: Model, grid: np.ndarray, solve: Callable[..., Result])
 def drift_note(model: Model, history: GroundHistory) -> str | None:
     """A warning where a ground acceleration's integrated velocity or displacement ends far from rest: a record's
     baseline left uncorrected, or a shape given as an acceleration whose mean from rest is not zero (a sine from
-    rest has mean velocity a / omega: the ground walks away)."""
+    rest has mean velocity a / omega: the ground walks away). None for a shock pulse, whose velocity change (the
+    shock test's delta-v) is the test."""
     from smdcli.scenario.records import velocity_drift
+    from smdcli.shapes import SHAPES
 
-    if model.ground is None or model.ground.quantity != "acceleration":
-        return None
+    if model.ground is None or model.ground.quantity != "acceleration" or SHAPES[model.ground.kind].shock:
+        return None  # a shock pulse's velocity change is what it means
     line = velocity_drift("ground_motion", history.velocity, history.displacement)
     if line is None or model.ground.record:
         return line

@@ -20,23 +20,11 @@ import math
 import numpy as np
 
 from smdcli.model import Model
-from smdcli.model.forcing import FourierSquare, Harmonic
 
 SPLIT_STATES = 64  # generator states of harmonic forces from which they are superposed instead of augmented
 MAX_CONDITION = 1e10  # of Z(w): beyond, a harmonic is too near an undamped resonance to be solved for alone
 BLOCK_VALUES = 2**22  # output times x harmonics evaluated at once (64 MB of complex exponentials)
 EPS = float(np.finfo(float).eps)
-
-
-def _terms(signal) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """(w, c, p) with the signal = sum c sin(w t + p), or None for a signal that is not a sum of harmonics."""
-    if isinstance(signal, FourierSquare):
-        w = signal.harmonics * signal.omega
-        return w, np.asarray(signal.coefs, dtype=float), signal.phase - w * signal.t0
-    if isinstance(signal, Harmonic):
-        shift = math.pi / 2 if signal.cosine else 0.0
-        return np.array([signal.omega]), np.array([signal.amplitude]), np.array([signal.phase + shift])
-    return None
 
 
 class Particular:
@@ -70,7 +58,7 @@ def split(model: Model) -> tuple[Model, Particular] | None:
     augmented exponential; None where it is not, or a harmonic is on an undamped resonance."""
     chosen, rows = [], []
     for j, signal in enumerate(model.signals):
-        terms = _terms(signal)
+        terms = signal.harmonic_terms()
         if terms is not None:
             chosen.append(j)
             rows.append(terms)

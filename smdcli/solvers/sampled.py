@@ -20,7 +20,7 @@ from typing import NamedTuple
 import numpy as np
 
 from smdcli.model import Model
-from smdcli.model.forcing import Table
+from smdcli.shapes.table import Table
 from smdcli.solvers.accurate_expm import propagator
 from smdcli.solvers.base import stated_rounding
 from smdcli.text import plural

@@ -49,7 +49,7 @@ class Taylor(Solver):
     name = "taylor"
     family = "compiled Taylor series"
     description = ("Taylor series of order 8-30 (by the tolerance), coefficients by recurrence, compiled; for smooth "
-                   "scenes with cubic springs, quadratic dampers and forces other than chirps and expressions")
+                   "scenes with cubic springs, quadratic dampers and forces of every shape but a frequency sweep and an expression")
     compiled = True
     order = None
     watch: Watch | None = None
@@ -59,14 +59,12 @@ class Taylor(Solver):
 
     @staticmethod
     def unsupported(model: Model) -> str | None:
-        """What in the scene has no series here (nonsmooth elements, a chirp or expression force), or None."""
-        from smdcli.model.forcing import Chirp, ExpressionSignal
-
+        """What in the scene has no series here (nonsmooth elements, a force shape without one), or None."""
         if model.nonsmooth:
             return "nonsmooth elements"
-        for signal in model.signals:
-            if isinstance(signal, (Chirp, ExpressionSignal)):
-                return f"a {'chirp' if isinstance(signal, Chirp) else 'expression'} force"
+        for kind, signal in zip(model.force_types, model.signals):
+            if not signal.series:
+                return f"a {kind} force"
         return None
 
     def refuse(self, model: Model) -> str | None:

@@ -86,7 +86,7 @@ def _measure_direction(args: tuple[Scenario, np.ndarray, int]) -> tuple[np.ndarr
     At each frequency the steady state is found (see _steady_state); amplitude is (max - min) / 2
     of x over that whole period per unit force amplitude, and the phase lag is the fundamental's.
     """
-    from smdcli.model.forcing import build_signal
+    from smdcli.shapes import build_signal
 
     sc, omega, force_index = args
     base = build(sc).dense()
