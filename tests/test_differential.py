@@ -1,8 +1,8 @@
 """Differential tests that cross the features: random small scenes drawn from every element law (linear, elastoplastic,
-bilinear, Bouc-Wen, cubic springs, quadratic dampers, Coulomb friction with its static force above or at its kinetic
-one, rigid stops), force type (sine, step, square, table, the four shock pulses), damping form (dampers, Rayleigh,
-modal), support motion (a sine, a shock pulse, a record shorter than the run) and initial state. For each: `exact`
-against an implicit and an explicit integrator at tight tolerance, every run's own physics (analysis.guards:
+bilinear, Iwan, Bouc-Wen, cubic springs, quadratic dampers, Coulomb friction with its static force above or at its
+kinetic one, rigid stops), force type (sine, step, square, table, the four shock pulses), damping form (dampers,
+Rayleigh, modal), support motion (a sine, a shock pulse, a record shorter than the run) and initial state. For each:
+`exact` against an implicit and an explicit integrator at tight tolerance, every run's own physics (analysis.guards:
 dissipation never decreasing, friction within its static force, stops never passed, yield surfaces never exceeded,
 the energy balance), the CLI's file against the API, and the export against the file, and a sweep of the first
 spring's k (its law's k where it is hysteretic) against simulate of each member. Agreement within the stated
@@ -42,7 +42,7 @@ def scenes(draw):
                   f"v0 = {draw(st.sampled_from([0.0, 0.0, 0.1, -0.2]))!r}"]
     nodes = ["ground"] + names
     law_used = draw(st.sampled_from(["linear", "elastoplastic", "bilinear", "friction", "stop", "friction+stop",
-                                     "bouc_wen", "cubic", "quadratic"]))
+                                     "bouc_wen", "cubic", "quadratic", "iwan"]))
     for i in range(n):
         pair = f'connects = ["{nodes[i]}", "{nodes[i + 1]}"]'
         k = draw(st.floats(50.0, 400.0))
@@ -50,6 +50,10 @@ def scenes(draw):
             lines += ["[[spring]]", pair, f'law = "{law_used}"', f"k = {k!r}", f"fy = {draw(st.floats(0.5, 3.0))!r}"]
             if law_used == "bilinear":
                 lines.append(f"hardening = {draw(st.sampled_from([0.05, 0.2]))!r}")
+        elif i == 0 and law_used == "iwan":
+            fy = draw(st.floats(0.5, 3.0))
+            lines += ["[[spring]]", pair, 'law = "iwan"', f"k = {[k / 2, k / 3, k / 6]!r}",
+                      f"fy = {[fy / 2, fy, 2 * fy]!r}"]
         elif i == 0 and law_used == "bouc_wen":
             lines += ["[[spring]]", pair, 'law = "bouc_wen"', f"k = {k!r}", "alpha = 0.1",
                       f"beta = {draw(st.sampled_from([20.0, 60.0]))!r}", "gamma = 20.0", "n = 1.0"]
@@ -154,7 +158,8 @@ def check_scene(text: str, tmp_path) -> None:
 
 
 def check_sweep(text: str, tmp_path) -> None:
-    """A sweep of the first spring's k (whatever its law) against simulate of each member's own scene."""
+    """A sweep of the first spring's k (whatever its law; an Iwan spring's first element's) against simulate of each
+    member's own scene."""
     import tomllib
 
     import tomli_w
@@ -164,12 +169,14 @@ def check_sweep(text: str, tmp_path) -> None:
     from smdcli.sweep import build_family, read_spec, set_parameter, solve_family
 
     sc = scenario.parse(text, str(tmp_path / "scene.toml"))
-    k = float(tomllib.loads(text)["spring"][0]["k"])
-    family = build_family(sc, read_spec(sc, {"parameter": ("spring[0].k",), "values": (f"{0.7 * k!r}, {1.4 * k!r}",)}))
+    k = tomllib.loads(text)["spring"][0]["k"]
+    path = "spring[0].k" if not isinstance(k, list) else "spring[0].k[0]"  # an Iwan spring: its first element's
+    k = float(k if not isinstance(k, list) else k[0])
+    family = build_family(sc, read_spec(sc, {"parameter": (path,), "values": (f"{0.7 * k!r}, {1.4 * k!r}",)}))
     result = solve_family(family)
     for s in range(len(family)):
         doc = tomllib.loads(text)
-        set_parameter(doc, "spring[0].k", float(family.values[s][0]))
+        set_parameter(doc, path, float(family.values[s][0]))
         member = tmp_path / f"member{s}.toml"
         member.write_text(tomli_w.dumps(doc))
         try:

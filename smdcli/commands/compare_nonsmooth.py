@@ -14,6 +14,7 @@ import numpy as np
 
 from smdcli.model import Model
 from smdcli.result import Result
+from smdcli.solvers.return_mapping import NEWMARK_FAMILY
 
 
 NONSMOOTH_METHODS = ("ode45", "ode23", "ode15s", "ode23s", "ode23t", "ode23tb", "DOP853", "Radau", "LSODA",
@@ -33,13 +34,6 @@ def nonsmooth_defaults(model: Model) -> tuple[str, ...]:
         if wanted:
             methods += [f"{m}/{variant}" for m in ("ode45", "DOP853", "Radau")]
     return tuple(methods)
-
-
-def _restitution_damping(e: float) -> float:
-    """The damping ratio of a linear contact that rebounds at restitution e: e = exp(-zeta pi / sqrt(1 - zeta^2))."""
-    if e <= 0.0:
-        return 1.0
-    return -math.log(e) / math.hypot(math.pi, math.log(e))
 
 
 def refusals(model: Model, candidates, methods) -> dict[str, str]:
@@ -79,7 +73,10 @@ def verdict(result: Result, error: float, energy: float, growth: float, referenc
         return f"wrong law: the {variant} law is off the exact solution by {error:.2g} of the peak"
     if math.isfinite(energy) and energy > FAILED_ENERGY:
         return f"energy created or lost: the balance is off by {energy:.2g} of the largest energy"
-    if variant is None and reference.nonsmooth is not None and result.nonsmooth is not None and error > allowed:
+    # the Newmark family return-maps its springs step by step, locating no event by design: its error is its answer
+    locates = result.stats.method not in NEWMARK_FAMILY
+    if variant is None and locates and reference.nonsmooth is not None and result.nonsmooth is not None \
+            and error > allowed:
         mine, theirs = _counts(result.nonsmooth.events), _counts(reference.nonsmooth.events)
         fewer = {k: theirs[k] - mine.get(k, 0) for k in theirs if mine.get(k, 0) < theirs[k]}
         more = {k: mine[k] - theirs.get(k, 0) for k in mine if mine[k] > theirs.get(k, 0)}
@@ -117,7 +114,7 @@ def split_variant(method: str) -> tuple[str | None, str]:
 def smoothed(model: Model, variant: str, reference: Result) -> Model:
     """The scene with its friction made a tanh law (its speed scale a thousandth of the reference's peak relative
     speed) or its rigid stops made penalty springs (stiff enough to touch for a thousandth of the run, damped to
-    the stop's restitution): the usual way around events, with the chattering and stiffness it brings."""
+    the stop's rebound, Stop.penalty): the usual way around events, with the chattering and stiffness it brings."""
     from smdcli.elements.friction import Friction
     from smdcli.elements.stop import Stop
     from smdcli.model.nonsmooth import NonsmoothElement
@@ -133,7 +130,7 @@ def smoothed(model: Model, variant: str, reference: Result) -> Model:
                            belt_velocity=law.belt_velocity)
         elif variant == "penalty" and isinstance(law, Stop) and law.rigid:
             k = mass * (2 * math.pi / (1e-3 * span)) ** 2
-            law = Stop(law.min, law.max, k=k, c=2 * _restitution_damping(law.restitution) * math.sqrt(k * mass))
+            law = law.penalty(k, mass)
         changed.append(NonsmoothElement(element.path, element.kind, law, element.connects, element.row,
                                         element.belt))
     return dataclasses.replace(model, nonsmooth=tuple(changed))

@@ -134,8 +134,10 @@ def portraits(paths: list[Path], out: Path, dofs: str | None = None, ics: tuple[
             raise UsageError("--hysteresis draws springs, not DOFs: leave out --poincare and --dof")
         for sc in scenarios:
             if not hysteretic_springs(sc):
-                raise UsageError(f"--hysteresis: {sc.path} has no hysteretic spring (law = \"elastoplastic\", "
-                                 "\"bilinear\" or \"bouc_wen\")")
+                from smdcli.elements import SPRING_LAWS
+
+                laws = ", ".join(f'"{name}"' for name in SPRING_LAWS)
+                raise UsageError(f"--hysteresis: {sc.path} has no hysteretic spring (law = {laws})")
     runs = [(label if len(scenarios) == 1 else f"{sc.stem}: {label}", member, sc)
             for sc in scenarios for label, member in _runs(sc, ics)]
     if periods is not None and periods < 1 or skip_periods < 0:

@@ -23,11 +23,16 @@ import numpy as np
 
 # Guard quantities: the deformation, its rate, a held element's tension, or an internal variable ("internal:z").
 D, RATE, TENSION = "d", "rate", "tension"
+ON_SURFACE = 1e-12  # relative slack with which a point on a yield surface counts as on it (the solvers' TOUCH)
 KINK = "kink"  # not an event: where a smooth law's right-hand side has a kink, an integrator restarts
 # Event kinds, as /events/kind names them.
 EVENT_KINDS = ("yield", "unload", "stick", "slip", "contact", "impact", "separation", "rest")
-# The smooth tensions compiled kernels evaluate (smdcli.kernels.rhs): a law's kernel_piece names one of them.
-SMOOTH_NONE, SMOOTH_BOUC_WEN, SMOOTH_STRIBECK, SMOOTH_TANH = range(4)
+# No smooth tension: a mode linear in d and d'. A law with a smooth tension numbers its own code (its module's SMOOTH_*,
+# evaluated in smdcli.kernels.rhs) and names it in its kernel_piece.
+SMOOTH_NONE = 0
+# The Newmark family's spring rows (smdcli.kernels.return_mapping): an elastic-perfectly-plastic core (k, fy),
+# or a smooth hysteretic variable stepped by the trapezoidal rule (Bouc-Wen's z); a law gives its rows (newmark_rows).
+NEWMARK_CORE, NEWMARK_SMOOTH_Z = range(2)
 
 
 @dataclass(frozen=True)
@@ -81,13 +86,26 @@ class Law:
     piecewise_linear: ClassVar[bool] = True  # linear between events: solvable exactly
     ode_states: ClassVar[tuple[str, ...]] = ()  # internal variables with a differential equation (Bouc-Wen's z)
     internal_names: ClassVar[tuple[str, ...]] = ()  # what /elements writes per step (plastic_deformation, z)
+    stiff: ClassVar[bool] = False  # its smooth tension can make a scene stiff: auto steps it implicitly
+    units: ClassVar[dict[str, str]] = {}  # its keys' units, for sweeps' axes
     holds_impulse: ClassVar[bool] = True  # held, it carries an impact's impulse (a bounded force cannot: friction)
     capacity: ClassVar[float | None] = None  # the most force it holds (a stuck contact's breakaway); None: unbounded
+
+    arrays: ClassVar[tuple[str, ...]] = ()  # its keys given as arrays (one value per part)
+
+    @property
+    def elastic_stiffness(self) -> float:
+        """The stiffness it has at rest, elastic: what modes, [damping] and the accuracy estimates see."""
+        return float(getattr(self, "k", None) or 0.0)
 
     @property
     def linear_stiffness(self) -> float:
         """The part of the stiffness that is always there (a bilinear spring's b k): stamped into K."""
         return 0.0
+
+    def unit_of(self, key: str) -> str:
+        """The units of one of its keys (a sweep's axis)."""
+        return self.units.get(key, "")
 
     def start(self, d: float, rate: float) -> State:
         """The mode at the start, from rest deformation and rate (internal variables at their initial values)."""
@@ -100,6 +118,18 @@ class Law:
     def event(self, state: State, kind: str, d: float, rate: float, tension: float) -> State:
         """The state after an event of this element (kind from one of its guards)."""
         raise NotImplementedError
+
+    def settle(self, state: State, d: float, rate: float, moving) -> tuple[State, str] | None:
+        """The mode a spring takes at this instant, and the event kind, where it changes: on its yield surface and
+        loading outward it yields, yielding and no longer loading it unloads; moving(sign) says whether d moves
+        the sign's way now (by its rate, or from rest by its acceleration). None where nothing changes (and for
+        contacts, whose stick and slip the solver decides together)."""
+        return None
+
+    def newmark_rows(self, d: float) -> list[tuple[int, tuple[float, ...], float]] | None:
+        """The Newmark family's rows of this spring starting at deformation d: (NEWMARK_* code, parameters, the
+        committed state), one row per part; None where the family cannot step it (contacts: their events)."""
+        return None
 
     def tension(self, state: State, d: float, rate: float) -> float:
         """The tension in a mode that is not held, at d and d'."""

@@ -24,7 +24,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-from smdcli.elements.base import KINK, RATE, SMOOTH_BOUC_WEN, Guard, KernelPiece, Law, Piece, State
+from smdcli.elements.base import KINK, NEWMARK_SMOOTH_Z, RATE, Guard, KernelPiece, Law, Piece, State
+
+SMOOTH_BOUC_WEN = 1  # its smooth tension's kernel code (smdcli.kernels.rhs)
 
 SMOOTH = "smooth"
 
@@ -45,6 +47,8 @@ class BoucWen(Law):
     name: ClassVar[str] = "bouc_wen"
     keys: ClassVar[tuple[str, ...]] = ("k", "alpha", "A", "beta", "gamma", "n", "z0")
     piecewise_linear: ClassVar[bool] = False
+    stiff: ClassVar[bool] = True  # pinned at its saturation, z is stiff
+    units: ClassVar[dict[str, str]] = {"k": "N/m", "alpha": "1", "A": "1", "n": "1", "z0": "m"}  # beta, gamma: unit_of
     ode_states: ClassVar[tuple[str, ...]] = ("z",)
     internal_names: ClassVar[tuple[str, ...]] = ("z",)
 
@@ -71,6 +75,9 @@ class BoucWen(Law):
         (beta + gamma sign(d' z)): never negative only where beta >= |gamma|. Elsewhere (the Noel-Schoukens benchmark:
         beta = 800, gamma = -1100) the law itself gives some back on loading; the balance still closes."""
         return self.beta >= abs(self.gamma)
+
+    def unit_of(self, key: str) -> str:
+        return f"1/m^{self.n:g}" if key in ("beta", "gamma") else self.units.get(key, "")
 
     def warning(self) -> str | None:
         """With beta + gamma <= 0 (the Noel-Schoukens benchmark's identified law, for one) z is not bounded: loading
@@ -121,6 +128,10 @@ class BoucWen(Law):
     def kernel_piece(self, state: State) -> KernelPiece:
         return KernelPiece(SMOOTH_BOUC_WEN, ((1 - self.alpha) * self.k, self.A, self.beta, self.gamma, self.n),
                            "hysteretic")
+
+    def newmark_rows(self, d: float) -> list[tuple[int, tuple[float, ...], float]]:
+        """Its z, stepped by the trapezoidal rule from z0."""
+        return [(NEWMARK_SMOOTH_Z, ((1 - self.alpha) * self.k, self.A, self.beta, self.gamma, self.n), self.z0)]
 
     def stored(self, state: State, d: float) -> tuple[str, float]:
         z = state.internal["z"]

@@ -25,7 +25,7 @@ import math
 from dataclasses import dataclass
 from typing import ClassVar
 
-from smdcli.elements.base import D, RATE, Guard, KernelPiece, Law, Piece, State
+from smdcli.elements.base import D, NEWMARK_CORE, ON_SURFACE, RATE, Guard, KernelPiece, Law, Piece, State
 
 ELASTIC, PLUS, MINUS = "elastic", "plastic+", "plastic-"
 
@@ -41,6 +41,7 @@ class Elastoplastic(Law):
     name: ClassVar[str] = "elastoplastic"
     keys: ClassVar[tuple[str, ...]] = ("k", "fy")
     internal_names: ClassVar[tuple[str, ...]] = ("plastic_deformation",)
+    units: ClassVar[dict[str, str]] = {"k": "N/m", "fy": "N", "hardening": "1"}
 
     @classmethod
     def read(cls, t) -> "Elastoplastic":
@@ -89,6 +90,22 @@ class Elastoplastic(Law):
         # unload: elastic again, the plastic deformation where yielding left it
         sign = 1.0 if state.mode == PLUS else -1.0
         return State(ELASTIC, {**state.internal, "dp": d - sign * core.fy / core.k})
+
+    def settle(self, state: State, d: float, rate: float, moving) -> tuple[State, str] | None:
+        core = self.core
+        if state.mode == ELASTIC:
+            trial = core.k * (d - state.internal["dp"])
+            if abs(trial) < core.fy * (1 - ON_SURFACE):
+                return None
+            side = 1 if trial > 0 else -1
+            return (self.event(state, "yield", d, rate, 0.0), "yield") if moving(side) else None
+        sign = 1.0 if state.mode == PLUS else -1.0
+        return None if moving(sign) else (self.event(state, "unload", d, rate, 0.0), "unload")
+
+    def newmark_rows(self, d: float) -> list[tuple[int, tuple[float, ...], float]]:
+        """Its elastic-perfectly-plastic core, from the plastic deformation it starts with (on its surface where d
+        is past yield)."""
+        return [(NEWMARK_CORE, (self.core.k, self.core.fy), self.start(d, 0.0).internal["dp"])]
 
     def plastic_deformation(self, state: State, d: float) -> float:
         """d_p at deformation d: frozen while elastic, following d while yielding."""

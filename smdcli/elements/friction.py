@@ -25,10 +25,10 @@ import math
 from dataclasses import dataclass
 from typing import ClassVar
 
-from smdcli.elements.base import (RATE, SMOOTH_STRIBECK, SMOOTH_TANH, TENSION, Guard, KernelPiece, Law, Piece,
-                                  State)
+from smdcli.elements.base import RATE, TENSION, Guard, KernelPiece, Law, Piece, State
 
 STICK, PLUS, MINUS, SMOOTH = "stick", "slip+", "slip-", "smooth"
+SMOOTH_STRIBECK, SMOOTH_TANH = 2, 3  # its smooth tensions' kernel codes (smdcli.kernels.rhs)
 
 
 @dataclass(frozen=True)
@@ -48,6 +48,13 @@ class Friction(Law):
     holds_impulse: ClassVar[bool] = False  # its force is bounded: no impulse through it, stuck or not
     keys: ClassVar[tuple[str, ...]] = ("force", "static", "stribeck_velocity", "viscous", "regularization",
                                        "belt_velocity")
+    units: ClassVar[dict[str, str]] = {"force": "N", "static": "N", "stribeck_velocity": "m/s", "viscous": "N s/m",
+                                       "regularization": "m/s", "belt_velocity": "m/s"}
+
+    @property
+    def stiff(self) -> bool:
+        """A regularized (tanh) law is stiff near zero speed."""
+        return self.regularization is not None
 
     @classmethod
     def read(cls, t) -> "Friction":

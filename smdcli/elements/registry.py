@@ -9,10 +9,11 @@ from smdcli.elements.base import Law
 from smdcli.elements.bouc_wen import BoucWen
 from smdcli.elements.elastoplastic import Bilinear, Elastoplastic
 from smdcli.elements.friction import Friction
+from smdcli.elements.iwan import Iwan
 from smdcli.elements.stop import Stop
 
 # [[spring]] laws beyond linear and cubic, by name.
-SPRING_LAWS: dict[str, type[Law]] = {cls.name: cls for cls in (Elastoplastic, Bilinear, BoucWen)}
+SPRING_LAWS: dict[str, type[Law]] = {cls.name: cls for cls in (Elastoplastic, Bilinear, BoucWen, Iwan)}
 # Tables whose every entry is one law.
 TABLES: dict[str, type[Law]] = {"friction": Friction, "stop": Stop}
 

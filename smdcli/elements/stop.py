@@ -19,6 +19,7 @@ Must not import: scenario, model, solvers, sweep, io, plots, commands, cli.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -40,6 +41,24 @@ class Stop(Law):
     table: ClassVar[str] = "stop"
     name: ClassVar[str] = "stop"
     keys: ClassVar[tuple[str, ...]] = ("min", "max", "restitution", "k", "c")
+    units: ClassVar[dict[str, str]] = {"min": "m", "max": "m", "restitution": "1", "k": "N/m", "c": "N s/m"}
+
+    @property
+    def rebound(self) -> float:
+        """The ratio of the rebound's speed to the approach's at a rigid impact (its coefficient e)."""
+        return self.restitution
+
+    @property
+    def contact(self) -> str:
+        """What its contact is, in a few characters: 'e = 0.8' or 'k = 1e+06 N/m'."""
+        return f"e = {self.restitution:g}" if self.k is None else f"k = {self.k:g} N/m"
+
+    def penalty(self, k: float, mass: float) -> "Stop":
+        """The compliant contact that stands in for this rigid one: a spring k, damped so that a mass bouncing on it
+        rebounds at this stop's e (e = exp(-zeta pi / sqrt(1 - zeta^2)))."""
+        e = self.restitution
+        zeta = 1.0 if e <= 0 else -math.log(e) / math.sqrt(math.pi**2 + math.log(e) ** 2)
+        return Stop(self.min, self.max, k=k, c=2 * zeta * math.sqrt(k * mass))
 
     @classmethod
     def read(cls, t) -> "Stop":

@@ -62,7 +62,7 @@ class ModelArrays(NamedTuple):
     ns_stiff: np.ndarray  # (E,) the mode's piece: tension = stiff d + damp d' + const (+ the smooth law)
     ns_damp: np.ndarray
     ns_const: np.ndarray
-    ns_law: np.ndarray  # (E,) int: smdcli.elements.base's SMOOTH_LAWS code of the smooth part, 0 if none
+    ns_law: np.ndarray  # (E,) int: the smooth part's kernel code (its law's SMOOTH_*), 0 (SMOOTH_NONE) if none
     ns_par: np.ndarray  # (E, LAW_PARAMETERS) its parameters
     ns_term: np.ndarray  # (E,) int: the energy term it dissipates into (ACCUMULATED index), -1 if none
     ns_pd: np.ndarray  # (E,) dissipated power = pd d'^2 + pc d' (+ the smooth law's)

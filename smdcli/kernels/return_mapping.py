@@ -24,11 +24,12 @@ import numpy as np
 from smdcli.kernels.arrays import CUBIC_SPRING
 from smdcli.kernels.compiler import kernel, no_alloc
 from smdcli.kernels.linalg import lu_factor, lu_solve
+from smdcli.elements.base import NEWMARK_CORE, NEWMARK_SMOOTH_Z
 from smdcli.kernels.forces import force_value
-from smdcli.kernels.rhs import bouc_wen_rate, element_force
+from smdcli.kernels.rhs import element_force, z_step
 
-ELASTOPLASTIC, BOUC_WEN = 0, 1  # spring laws: parameters (k, fy) of the elastic-plastic core, or ((1-alpha) k, A,
-#                                 beta, gamma, n)
+# Spring rows (elements.base's NEWMARK_*): parameters (k, fy) of an elastic-plastic core, or ((1-alpha) k, A, beta,
+# gamma, n) of a smooth hysteretic variable z
 NEWTON_ITERATIONS = 50
 NEWTON_TOLERANCE = 1e-12  # of the residual, relative to the forces' scale
 OK, NEWTON_FAILED, STEP_BUDGET, DIVERGED = range(4)
@@ -39,42 +40,10 @@ WORK, DISSIPATED, HYSTERETIC, STRAIN = range(4)
 
 
 @no_alloc
-def _partials(p, z, rate):
-    """(d z_rate / d z, d z_rate / d d')."""
-    size = abs(z)
-    sign_z = 1.0 if z >= 0 else -1.0
-    sign_rate = 1.0 if rate >= 0 else -1.0
-    power = size ** (p[4] - 1)
-    by_z = -p[2] * abs(rate) * p[4] * power - p[3] * rate * p[4] * power * sign_z
-    by_rate = p[1] - p[2] * sign_rate * power * z - p[3] * size ** p[4]
-    return by_z, by_rate
-
-
-@no_alloc
-def z_step(p, z_old, d_old, d_new, h):
-    """(z, dz/dd_new) after a step from d_old to d_new over h: the trapezoidal rule at the step's mean rate."""
-    if h <= 0:
-        return z_old, 0.0
-    rate = (d_new - d_old) / h
-    start = bouc_wen_rate(p, z_old, rate)
-    z = z_old + h * start
-    for _ in range(50):
-        by_z, _ = _partials(p, z, rate)
-        f = z - z_old - 0.5 * h * (start + bouc_wen_rate(p, z, rate))
-        step = f / (1.0 - 0.5 * h * by_z)
-        z -= step
-        if abs(step) <= 1e-15 * max(abs(z), abs(z_old), 1e-300):
-            break
-    by_z, by_rate = _partials(p, z, rate)
-    _, by_rate_old = _partials(p, z_old, rate)
-    return z, 0.5 * (by_rate_old + by_rate) / (1.0 - 0.5 * h * by_z)
-
-
-@no_alloc
 def spring(law, p, committed, d0, d1, h):
     """(tension, tangent, trial state) of a hysteretic spring stepped from d0 to d1 over h from its committed state
     (the plastic deformation, or Bouc-Wen's z)."""
-    if law == BOUC_WEN:
+    if law == NEWMARK_SMOOTH_Z:
         z, dz = z_step(p, committed, d0, d1, h)
         return p[0] * z, p[0] * dz, z
     trial = p[0] * (d1 - committed)
@@ -87,7 +56,7 @@ def spring(law, p, committed, d0, d1, h):
 @no_alloc
 def _stored(law, p, state, d):
     """What a spring stores at d in its committed state: the elastic part's strain energy."""
-    if law == BOUC_WEN:
+    if law == NEWMARK_SMOOTH_Z:
         return 0.5 * p[0] * state * state
     elastic = min(abs(d - state), p[1] / p[0])
     return 0.5 * p[0] * elastic * elastic
@@ -216,7 +185,7 @@ def march(m, M, C, K, R, laws, par, coefficients, x, v, committed, edges, jump_d
             _internal(m, K, R, laws, par, committed, trial, x, v, x, 0.0, y, f_prev, Kt, Ct, T, Tk)
             lost = 0.0  # a spring yielding through the jump dissipates fy |change of d_p|
             for e in range(E):
-                if laws[e] == ELASTOPLASTIC:
+                if laws[e] == NEWMARK_CORE:
                     lost += par[e, 1] * abs(trial[e] - committed[e])
                 committed[e] = trial[e]
             _applied(m, M, ta, mid, F_end, stack)

@@ -11,7 +11,9 @@ import math
 
 import numpy as np
 
-from smdcli.elements.base import SMOOTH_BOUC_WEN, SMOOTH_NONE, SMOOTH_STRIBECK, SMOOTH_TANH
+from smdcli.elements.base import SMOOTH_NONE
+from smdcli.elements.bouc_wen import SMOOTH_BOUC_WEN
+from smdcli.elements.friction import SMOOTH_STRIBECK, SMOOTH_TANH
 from smdcli.kernels.arrays import CUBIC_SPRING
 from smdcli.kernels.compiler import inlined, kernel, no_alloc
 from smdcli.kernels.forces import force_value
@@ -88,6 +90,38 @@ def bouc_wen_rate(p, z, rate):
     """Bouc-Wen's dz/dt at z and d' for parameters p = ((1 - alpha) k, A, beta, gamma, n, ...)."""
     size = abs(z)
     return p[1] * rate - p[2] * abs(rate) * size ** (p[4] - 1) * z - p[3] * rate * size ** p[4]
+
+
+@no_alloc
+def _partials(p, z, rate):
+    """(d z_rate / d z, d z_rate / d d')."""
+    size = abs(z)
+    sign_z = 1.0 if z >= 0 else -1.0
+    sign_rate = 1.0 if rate >= 0 else -1.0
+    power = size ** (p[4] - 1)
+    by_z = -p[2] * abs(rate) * p[4] * power - p[3] * rate * p[4] * power * sign_z
+    by_rate = p[1] - p[2] * sign_rate * power * z - p[3] * size ** p[4]
+    return by_z, by_rate
+
+
+@no_alloc
+def z_step(p, z_old, d_old, d_new, h):
+    """(z, dz/dd_new) after a step from d_old to d_new over h: the trapezoidal rule at the step's mean rate."""
+    if h <= 0:
+        return z_old, 0.0
+    rate = (d_new - d_old) / h
+    start = bouc_wen_rate(p, z_old, rate)
+    z = z_old + h * start
+    for _ in range(50):
+        by_z, _ = _partials(p, z, rate)
+        f = z - z_old - 0.5 * h * (start + bouc_wen_rate(p, z, rate))
+        step = f / (1.0 - 0.5 * h * by_z)
+        z -= step
+        if abs(step) <= 1e-15 * max(abs(z), abs(z_old), 1e-300):
+            break
+    by_z, by_rate = _partials(p, z, rate)
+    _, by_rate_old = _partials(p, z_old, rate)
+    return z, 0.5 * (by_rate_old + by_rate) / (1.0 - 0.5 * h * by_z)
 
 
 @inlined

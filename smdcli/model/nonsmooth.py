@@ -31,7 +31,7 @@ class NonsmoothElement:
         law = self.law
         if self.kind != "spring":
             return 0.0
-        return float(getattr(law, "k", 0.0)) - law.linear_stiffness
+        return law.elastic_stiffness - law.linear_stiffness
 
 
 def nonsmooth_elements(scenario: Scenario, dofs: tuple[str, ...]) -> tuple[NonsmoothElement, ...]:

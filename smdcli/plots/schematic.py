@@ -111,8 +111,7 @@ def _contact_label(e) -> str:
         return "\n".join(lines)
     limits = ", ".join(f"{side} {value:g} m" for side, value in (("min", law.min), ("max", law.max))
                        if value is not None)
-    contact = f"e = {law.restitution:g}" if law.k is None else f"k = {law.k:g} N/m"
-    return f"stop{e.index + 1}, {contact}\n{limits}"
+    return f"stop{e.index + 1}, {law.contact}\n{limits}"
 
 
 def _friction_pad(ax, x0: float, x1: float, y: float, color) -> None:

@@ -59,7 +59,8 @@ def scenario_schema() -> dict:
     """The JSON Schema of a scenario TOML document (as JSON: TOML's tables are objects, its arrays arrays)."""
     spring_keys = ("connects", "k", "law", "k3") + tuple(
         dict.fromkeys(k for law in SPRING_LAWS.values() for k in law.keys if k != "k"))
-    spring = _table(spring_keys, ["connects"], law={"enum": ["linear", "cubic", *SPRING_LAWS]})
+    arrays = {key: {"anyOf": [NUMBER, NUMBERS]} for law in SPRING_LAWS.values() for key in law.arrays}
+    spring = _table(spring_keys, ["connects"], law={"enum": ["linear", "cubic", *SPRING_LAWS]}, **arrays)
     damper = _table(("connects", "c", "law"), ["connects", "c"], law={"enum": ["linear", "quadratic"]})
     contacts = {name: _table(("connects",) + law.keys, ["connects"]) for name, law in TABLES.items()}
     a_force = {"frequency": NUMBER, "omega": NUMBER, "values": NUMBERS}  # as a force has them (a sweep differs)

@@ -46,7 +46,7 @@ class ElementSpec:
     index: int
     connects: tuple[str, str]
     coef: float
-    law: str = "linear"  # spring: linear | cubic | elastoplastic | bilinear | bouc_wen; damper: linear | quadratic
+    law: str = "linear"  # spring: linear | cubic | a hysteretic law (smdcli.elements); damper: linear | quadratic
     k3: float = 0.0  # cubic spring coefficient [N/m^3]
     nonsmooth: Any = None  # the law (smdcli.elements) of a hysteretic spring, a [[friction]] or a [[stop]]
 

@@ -73,7 +73,7 @@ def _read_elements(top: _Table, file: str, kind: str, dofs: tuple[str, ...]) -> 
             _refuse_other_keys(t, law, ("connects", "law") + cls.keys)
             model = cls.read(t)
             t.finish(("connects", "law") + cls.keys)
-            elements.append(ElementSpec(kind=kind, index=i, connects=connects, coef=model.k, law=law,
+            elements.append(ElementSpec(kind=kind, index=i, connects=connects, coef=model.elastic_stiffness, law=law,
                                         nonsmooth=model))
             continue
         coef = t.number(coef_key, minimum=0.0)

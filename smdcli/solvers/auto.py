@@ -136,12 +136,13 @@ class Auto(Solver):
 
 def _nonsmooth_choice(model: Model) -> tuple[Solver, str]:
     """Exact event to event for a piecewise-linear scene; else the ODE family, event to event: Radau where a law is
-    stiff (Bouc-Wen pinned at its saturation, a regularized friction near zero speed), DOP853 otherwise."""
+    stiff (Law.stiff: a hysteretic variable pinned at its saturation, a regularized friction near zero speed), DOP853
+    otherwise."""
     laws = ", ".join(f"{e.path} {getattr(e.law, 'law_name', e.law.name)}" for e in model.nonsmooth)
     if model.is_piecewise_linear and all(s.exo() is not None for s in model.signals):
         return Exact(), (f"piecewise linear ({laws}), {_loads(model) if model.is_forced or model.ground else 'free'}: "
                          "exact between events, each event located on the exact flow to rounding")
-    stiff = [e.path for e in model.nonsmooth if e.law.name == "bouc_wen" or getattr(e.law, "regularization", None)]
+    stiff = [e.path for e in model.nonsmooth if e.law.stiff]
     uncompiled = [e.path for e in model.nonsmooth if not e.law.compiled]
     if uncompiled:  # scipy's pair, stepped from Python: the compiled ones cannot evaluate its tension
         from smdcli.solvers.ivp import ScipyDOP853, ScipyRadau

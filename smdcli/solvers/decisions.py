@@ -33,7 +33,6 @@ def consistent(scene: Scene, states: list[State], z: np.ndarray, t: float, on_ev
     which way it moves, or where that is zero to rounding too, its jerk (Motion); a stuck contact on its breakaway
     slips if its force is still growing. `breaking` are contacts an event just let slip, their force at the
     breakaway: they are not stuck again at that instant. on_event(element, kind) records what changed."""
-    from smdcli.elements.elastoplastic import ELASTIC
     from smdcli.elements.friction import MINUS as SLIP_MINUS
     from smdcli.elements.friction import PLUS as SLIP_PLUS
     from smdcli.elements.friction import STICK
@@ -80,19 +79,12 @@ def consistent(scene: Scene, states: list[State], z: np.ndarray, t: float, on_ev
                     states[e] = law.event(state, "separation", d[e], rate[e], tension[e])
                     on_event(e, "separation")
                     changed = True
-            elif table == "spring" and hasattr(law, "core"):
-                if state.mode == ELASTIC:
-                    side = _at_surface(law, state, d[e])
-                    if side and moving(e, side):
-                        states[e] = law.event(state, "yield", d[e], rate[e], tension[e])
-                        on_event(e, "yield")
-                        changed = True
-                else:
-                    sign = 1.0 if state.mode.endswith("+") else -1.0
-                    if not moving(e, sign):
-                        states[e] = law.event(state, "unload", d[e], rate[e], tension[e])
-                        on_event(e, "unload")
-                        changed = True
+            elif table == "spring":
+                settled = law.settle(state, d[e], rate[e], lambda sign, e=e: moving(e, sign))
+                if settled is not None:
+                    states[e] = settled[0]
+                    on_event(e, settled[1])
+                    changed = True
         if candidates:
             changed |= _stick_or_slip(scene, states, z, candidates, on_event)
             stopping = ()
@@ -138,15 +130,6 @@ def breaks_away(law, tension: float, rate) -> bool:
     return abs(tension) >= law.static * (1 - TOUCH) and tension * rate() > 0
 
 
-def _at_surface(law, state: State, d: float) -> int:
-    """+1 or -1 where an elastic spring's tension is on its yield surface (to rounding), else 0."""
-    core = law.core
-    trial = core.k * (d - state.internal["dp"])
-    if abs(trial) < core.fy * (1 - TOUCH):
-        return 0
-    return 1 if trial > 0 else -1
-
-
 def _stick_or_slip(scene: Scene, states: list[State], z: np.ndarray, candidates: list[int], on_event) -> bool:
     """Slipping contacts at zero relative speed, decided together: the largest subset that can stick (each held
     contact's force within its breakaway) with the others slipping each in a direction its own acceleration then
@@ -179,20 +162,20 @@ def _stick_or_slip(scene: Scene, states: list[State], z: np.ndarray, candidates:
     return False
 
 
-def impact(scene: Scene, states: list[State], z: np.ndarray, element: int, restitution: float) -> np.ndarray:
+def impact(scene: Scene, states: list[State], z: np.ndarray, element: int, e: float) -> np.ndarray:
     """Velocities after a rigid impact at element: d' -> -e d' by an impulse along its row, the held constraints
     kept (their impulses solved with it); the masses' momentum is conserved where the row is internal. A stuck
     friction contact holds nothing through an impact: its force is bounded, so its impulse is zero (it slips
     after, if the impact set it moving)."""
     n = scene.n
-    held = [e for e, (el, s) in enumerate(zip(scene.elements, states))
-            if el.law.piece(s).held and e != element and el.law.holds_impulse]
+    held = [i for i, (el, s) in enumerate(zip(scene.elements, states))
+            if el.law.piece(s).held and i != element and el.law.holds_impulse]
     rows = [element] + held
     G = scene.R[rows]
     v = z[n:2 * n]
     MG = scene.Minv @ G.T
     target = np.zeros(len(rows))
-    target[0] = -restitution * (scene.R[element] @ v + scene.belts[element]) - scene.belts[element]
+    target[0] = -e * (scene.R[element] @ v + scene.belts[element]) - scene.belts[element]
     target[1:] = -scene.belts[held] if held else target[1:]
     impulse = np.linalg.lstsq(G @ MG, target - G @ v, rcond=None)[0]
     out = z.copy()

@@ -1,7 +1,7 @@
 """Integrators on scenes with nonsmooth elements: each mode integrated as the smooth system it is, every event
 located on the method's own interpolant and the method restarted there.
 
-A scene that is not linear between events (Bouc-Wen springs, Stribeck or regularized friction, stops and
+A scene that is not linear between events (Bouc-Wen springs, velocity-weakening or regularized friction, stops and
 friction beside cubic springs or quadratic dampers) is integrated mode by mode, with the same modes, guards and
 decisions as the exact event-driven solver (modes.py, decisions.py): its state y = [x, v, q] (smooth_scene.py)
 carries the laws' internal variables q (Bouc-Wen's z) with their differential equations. After every accepted

@@ -245,15 +245,15 @@ class PiecewiseRun(Crossings, Batches):
         rest_at, resting = None, True  # met at rest, pressed on: persistent contact, no impact
         if met == "impact":
             v_before = z[n:2 * n].copy()
-            z = impact(scene, states, z, element, law.restitution)
+            z = impact(scene, states, z, element, law.rebound)
             self.record(t, element, "impact")
             self.velocity_before[len(self.events) - 1] = v_before  # the jump, for what draws the state
             history.append((t, speed))
-            remaining = remaining_flights(scene, states, z, element, law.restitution)
+            remaining = remaining_flights(scene, states, z, element, law.rebound)
             # the scene's length: its positions so far, and the rise of the sequence's first flight
             length = self.x_scale if remaining is None else max(self.x_scale, history[0][1] ** 2 / (2 * remaining[2]))
             rest_at = accumulation(remaining, length, t, float(self.grid[-1] - self.grid[0]), len(history))
-            resting = law.restitution == 0 or rest_at is not None or speed <= 1e-14 * max(history[0][1], 1e-300)
+            resting = law.rebound == 0 or rest_at is not None or speed <= 1e-14 * max(history[0][1], 1e-300)
         states = list(states)
         if resting:
             states[element] = law.event(states[element], "rest", float(scene.R[element] @ z[:n]), 0.0, 0.0)

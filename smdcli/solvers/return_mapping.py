@@ -22,8 +22,6 @@ import time
 
 import numpy as np
 
-from smdcli.elements.bouc_wen import BoucWen
-from smdcli.elements.elastoplastic import Elastoplastic
 from smdcli.model import Model
 from smdcli.model.nonsmooth import whole_tension
 from smdcli.result import NonsmoothHistory, Result, SolverStats
@@ -35,7 +33,7 @@ NEWMARK_FAMILY = ("newmark", "hht", "generalized_alpha", "central_difference")
 def refusal(method: str, model: Model) -> str | None:
     """Why the Newmark family cannot take the scene (a friction contact or a stop), or None."""
     for element in model.nonsmooth:
-        if not isinstance(element.law, (Elastoplastic, BoucWen)):
+        if element.law.newmark_rows(0.0) is None:
             what = f"a {element.law.law_name} friction contact" if element.kind == "friction" else "a stop"
             return (f"{method!r} steps hysteretic springs by their return mapping, but {element.path} is {what}, "
                     "whose stick, slip, contact and impact are events to locate: use 'exact' (piecewise-linear "
@@ -43,26 +41,19 @@ def refusal(method: str, model: Model) -> str | None:
     return None
 
 
-def spring_table(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The hysteretic springs as the compiled kernel takes them: rows R (d = R x), law codes, parameters and the
-    initial committed states (plastic deformation as the law starts it, Bouc-Wen's z0)."""
-    from smdcli.kernels import return_mapping as kernel
-
-    elements = model.nonsmooth
-    R = np.array([e.row for e in elements], dtype=float).reshape(len(elements), model.n)
-    laws = np.array([kernel.BOUC_WEN if isinstance(e.law, BoucWen) else kernel.ELASTOPLASTIC for e in elements],
-                    dtype=np.int64)
-    par = np.zeros((len(elements), 5))
-    committed = np.zeros(len(elements))
-    for i, e in enumerate(elements):
-        law = e.law
-        if isinstance(law, BoucWen):
-            par[i] = ((1 - law.alpha) * law.k, law.A, law.beta, law.gamma, law.n)
-            committed[i] = law.z0
-        else:
-            par[i, :2] = (law.core.k, law.core.fy)
-            committed[i] = law.start(float(e.row @ model.x0), 0.0).internal["dp"]  # past yield at the start: on it
-    return R, laws, par, committed
+def spring_table(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The hysteretic springs as the compiled kernel takes them, one row per part of a law (Law.newmark_rows): rows
+    R (d = R x), law codes, parameters, the initial committed states, and each row's element."""
+    rows = [(e, row) for e, element in enumerate(model.nonsmooth)
+            for row in element.law.newmark_rows(float(element.row @ model.x0))]
+    R = np.array([model.nonsmooth[e].row for e, _ in rows], dtype=float).reshape(len(rows), model.n)
+    laws = np.array([code for _, (code, _, _) in rows], dtype=np.int64)
+    par = np.zeros((len(rows), 5))
+    for i, (_, (_, parameters, _)) in enumerate(rows):
+        par[i, :len(parameters)] = parameters
+    committed = np.array([state for _, (_, _, state) in rows], dtype=float)
+    owner = np.array([e for e, _ in rows], dtype=np.int64)
+    return R, laws, par, committed, owner
 
 
 def solve_return_mapping(model: Model, grid: np.ndarray, tol: Tolerances, solver) -> Result:
@@ -78,7 +69,7 @@ def solve_return_mapping(model: Model, grid: np.ndarray, tol: Tolerances, solver
     solver.params = dict(tol.options)
     dt = solver.step_size(grid, tol)
     n = model.n
-    R, laws, par, committed = spring_table(model)
+    R, laws, par, committed, owner = spring_table(model)
     bound = divergence_bound(model, grid)
     max_steps = tol.max_steps or MAX_STEPS
     jumps = {float(t): (dx, dv) for t, dx, dv in model.jumps}
@@ -113,8 +104,9 @@ def solve_return_mapping(model: Model, grid: np.ndarray, tol: Tolerances, solver
                         steps_accepted=int(counts[kernel.STEPS]), nlu=int(counts[kernel.FACTORIZATIONS]),
                         nfev=int(counts[kernel.STEPS]))
     w = slice(0, written)
-    x_g, v_g, a_g, history = on_grid(grid, model, R, t_out[w], x_out[w], v_out[w], a_out[w], T_out[w], q_out[w],
-                                     e_out[w])
+    tensions = np.zeros((written, len(model.nonsmooth)))
+    np.add.at(tensions, (slice(None), owner), T_out[w])  # a law of several parts pulls with their sum
+    x_g, v_g, a_g, history = on_grid(grid, model, tensions, t_out[w], x_out[w], v_out[w], a_out[w], q_out[w], e_out[w])
     if failure:
         for q in (x_g, v_g, a_g):
             q[grid > t] = np.nan
@@ -122,7 +114,7 @@ def solve_return_mapping(model: Model, grid: np.ndarray, tol: Tolerances, solver
                        nonsmooth=history)
 
 
-def on_grid(grid: np.ndarray, model: Model, R: np.ndarray, t, x, v, a, T, internal, energies):
+def on_grid(grid: np.ndarray, model: Model, T, t, x, v, a, internal, energies):
     """x, v, a on the grid (cubic Hermite between steps) and the history (linear between steps) from the steps'
     times, states, springs' tensions and internal variables, and energy terms (work, dissipated, hysteretic,
     strain)."""
@@ -154,7 +146,7 @@ def on_grid(grid: np.ndarray, model: Model, R: np.ndarray, t, x, v, a, T, intern
     names = [f"{el.path}.{name}" for el in elements for name in el.law.internal_names]
     internal = linear(internal)
     T = linear(T)
-    d = xg @ R.T
+    d = xg @ np.array([e.row for e in elements], dtype=float).reshape(len(elements), model.n).T
     tension = whole_tension(elements, T, d)
     kinetic = 0.5 * np.einsum("gi,ij,gj->g", vg, model.M, vg)
     work, dissipated, hysteretic, strain = (linear(energies[:, j]) for j in range(4))

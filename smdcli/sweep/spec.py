@@ -23,25 +23,30 @@ METRICS = ("peak_displacement", "rms_displacement", "settling_time", "peak_groun
 _FIELD_UNITS = {"k": "N/m", "k3": "N/m^3", "c": "N s/m", "m": "kg", "x0": "m", "v0": "m/s", "omega": "rad/s",
                 "frequency": "Hz", "amplitude": "N", "t0": "s", "duration": "s", "period": "s", "t1": "s", "f0": "Hz",
                 "f1": "Hz", "phase": "rad", "duty": "1", "end": "s", "start": "s", "step": "s", "zeta": "1",
-                "M": "kg", "C": "N s/m", "K": "N/m", "fy": "N", "hardening": "1", "alpha": "1", "A": "1", "n": "1",
-                "z0": "m", "force": "N", "static": "N", "stribeck_velocity": "m/s", "viscous": "N s/m",
-                "regularization": "m/s", "belt_velocity": "m/s", "min": "m", "max": "m", "restitution": "1"}
+                "M": "kg", "C": "N s/m", "K": "N/m"}
 
 
 def parameter_units(path: str, scenario: Scenario | None = None) -> str:
     """The units of a swept field by its path: 'spring[0].k' -> 'N/m', 'system.K[0][1]' -> 'N/m', 'zeta' -> '1';
-    with the scenario, those that follow an element's law: a quadratic damper's c is in N s^2/m^2, a Bouc-Wen
-    spring's beta and gamma in 1/m^n."""
+    an element law's keys as the law gives them (with the scenario, the element's own law: a quadratic damper's c
+    is in N s^2/m^2, a Bouc-Wen spring's beta and gamma in 1/m^n)."""
+    from smdcli.elements import SPRING_LAWS, TABLES
+
     field = re.split(r"[.\[]", path.split(".")[-1])[0] if "." in path else path
-    element = re.fullmatch(r"(damper|spring)\[(\d+)\]\.(\w+)", path)
-    if scenario is not None and element:
+    element = re.fullmatch(r"(damper|spring|friction|stop)\[(\d+)\]\.(\w+)(\[\d+\])?", path)
+    if element:
         kind, index, key = element.group(1), int(element.group(2)), element.group(3)
-        table = scenario.dampers if kind == "damper" else scenario.springs
-        law = table[index].law if index < len(table) else ""
-        if law == "quadratic" and key == "c":
+        tables = {"damper": "dampers", "spring": "springs", "friction": "frictions", "stop": "stops"}
+        table = getattr(scenario, tables[kind]) if scenario is not None else ()
+        spec = table[index] if index < len(table) else None
+        if spec is not None and spec.law == "quadratic" and key == "c":
             return "N s^2/m^2"
-        if law == "bouc_wen" and key in ("beta", "gamma"):
-            return f"1/m^{table[index].nonsmooth.n:g}"
+        if spec is not None and spec.nonsmooth is not None:
+            return spec.nonsmooth.unit_of(key)
+        laws = SPRING_LAWS.values() if kind == "spring" else [TABLES[kind]] if kind in TABLES else []
+        units = {k: unit for law in laws for k, unit in law.units.items()}
+        if key in units and key not in _FIELD_UNITS:
+            return units[key]
     return _FIELD_UNITS.get(field, "")
 
 
