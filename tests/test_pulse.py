@@ -198,3 +198,44 @@ def test_a_field_of_another_shape_is_named_as_such(tmp_path, cli):
     ran = cli("simulate", path, "--no-plots", "-o", tmp_path / "out")
     assert ran.exit_code == 2
     assert 'force[0].shape: type = "sine" takes no shape (a field of type = "pulse")' in ran.stderr
+
+
+@pytest.mark.parametrize("quantity", ["displacement", "velocity"])
+@pytest.mark.parametrize("shape", SHAPES)
+def test_a_ground_displacement_or_velocity_pulse_moves_the_mass_as_the_absolute_equation_says(shape, quantity):
+    """Absolute motion x = y + u under the support's pulse: m x'' + c (x' - u') + k (x - u) = 0, integrated by
+    DOP853 (rtol 1e-13) piece by piece between the pulse's edges, u from its velocity where that is what is given,
+    a jump of u passing the damper's impulse c du to the mass. smd: the relative motion, its derived ground
+    accelerations and state jumps, plus the ground's own motion."""
+    from scipy.integrate import solve_ivp
+
+    c, U = 4.0, 0.01
+    text = one_dof(c, k=K, m=M, x0=0.0, end=0.6, step=0.001) + (
+        f'[ground_motion]\nquantity = "{quantity}"\ntype = "pulse"\nshape = "{shape}"\namplitude = {U!r}\n'
+        f"t0 = {T0!r}\nduration = {DURATION!r}\n")
+    _, model, grid = model_of(text)
+    run = solve(model, grid, "exact", Tolerances())
+    given = model.ground.given
+    edges = [0.0, T0, T0 + DURATION / 2, T0 + DURATION, 0.6]
+    y, pieces = np.zeros(3), []  # x, x', u
+    for a, b in zip(edges[:-1], edges[1:]):
+        inside = lambda t, a=a, b=b: min(max(t, a), np.nextafter(b, a))  # noqa: E731  (the piece's own side)
+        if quantity == "displacement":  # u itself, and its jump at a: the damper's impulse
+            jump = float(given.value(a) - given.value_left(a)) if a > 0 else 0.0
+            y = y + [0.0, c * jump / M, 0.0]
+            u = lambda t, y, inside=inside: float(given.value(inside(t)))  # noqa: E731
+            rate = lambda t, inside=inside: float(model.ground.velocity.value(inside(t))) \
+                if model.ground.velocity is not None else 0.0  # noqa: E731
+        else:
+            u = lambda t, y: y[2]  # noqa: E731
+            rate = lambda t, inside=inside: float(given.value(inside(t)))  # noqa: E731
+
+        def flow(t, y, u=u, rate=rate):
+            return [y[1], (c * (rate(t) - y[1]) + K * (u(t, y) - y[0])) / M, rate(t)]
+
+        solution = solve_ivp(flow, (a, b), y, method="DOP853", rtol=1e-13, atol=1e-18, dense_output=True)
+        pieces.append(solution.sol(grid[(grid >= a) & (grid < b)])[0])
+        y = solution.sol(b)
+    reference = np.concatenate(pieces)
+    absolute = run.displacement[:len(reference), 0] + run.ground.displacement[:len(reference)]
+    assert np.abs(absolute - reference).max() <= 1e-10 * np.abs(reference).max()

@@ -26,7 +26,7 @@ D, RATE, TENSION = "d", "rate", "tension"
 ON_SURFACE = 1e-12  # relative slack with which a point on a yield surface counts as on it (the solvers' TOUCH)
 KINK = "kink"  # not an event: where a smooth law's right-hand side has a kink, an integrator restarts
 # Event kinds, as /events/kind names them.
-EVENT_KINDS = ("yield", "unload", "stick", "slip", "contact", "impact", "separation", "rest")
+EVENT_KINDS = ("yield", "unload", "reload", "stick", "slip", "contact", "impact", "separation", "rest")
 # No smooth tension: a mode linear in d and d'. A law with a smooth tension numbers its own code (its module's SMOOTH_*,
 # evaluated in smdcli.kernels.rhs) and names it in its kernel_piece.
 SMOOTH_NONE = 0
@@ -60,13 +60,15 @@ class Piece:
 @dataclass(frozen=True)
 class KernelPiece:
     """What a compiled kernel evaluates of a mode beyond its Piece: the smooth tension's code (SMOOTH_*) and
-    parameters, and the power dissipated into energy `term`: pd d'^2 + pc d' (+ the smooth tension's share)."""
+    parameters, and the power dissipated into energy `term`: pd d'^2 + pc d' + px d d' (+ the smooth tension's
+    share)."""
 
     law: int = SMOOTH_NONE
     parameters: tuple[float, ...] = ()
     term: str = ""
     pd: float = 0.0
     pc: float = 0.0
+    px: float = 0.0
 
 
 @dataclass

@@ -65,8 +65,9 @@ class ModelArrays(NamedTuple):
     ns_law: np.ndarray  # (E,) int: the smooth part's kernel code (its law's SMOOTH_*), 0 (SMOOTH_NONE) if none
     ns_par: np.ndarray  # (E, LAW_PARAMETERS) its parameters
     ns_term: np.ndarray  # (E,) int: the energy term it dissipates into (ACCUMULATED index), -1 if none
-    ns_pd: np.ndarray  # (E,) dissipated power = pd d'^2 + pc d' (+ the smooth law's)
+    ns_pd: np.ndarray  # (E,) dissipated power = pd d'^2 + pc d' + px d d' (+ the smooth law's)
     ns_pc: np.ndarray
+    ns_px: np.ndarray
     h_lin: np.ndarray  # (E, 2n) held tensions = h_lin [x, v] + h_f F - h_g a_g
     h_f: np.ndarray  # (E, n)
     h_g: np.ndarray  # (E,)
@@ -145,6 +146,6 @@ def _smooth_scene(n: int) -> dict:
     none, ints = np.zeros(0), np.zeros(0, dtype=np.int64)
     return dict(ns_q=0, ns_acc=0, f_const=none, ground_row=none, mass_row=none, c_dense=np.zeros((0, 0)),
                 ns_R=np.zeros((0, n)), ns_belt=none, ns_held=ints, ns_stiff=none, ns_damp=none, ns_const=none,
-                ns_law=ints, ns_par=np.zeros((0, LAW_PARAMETERS)), ns_term=ints, ns_pd=none, ns_pc=none,
+                ns_law=ints, ns_par=np.zeros((0, LAW_PARAMETERS)), ns_term=ints, ns_pd=none, ns_pc=none, ns_px=none,
                 h_lin=np.zeros((0, 2 * n)), h_f=np.zeros((0, n)), h_g=none, gd_el=ints, gd_qty=ints, gd_level=none,
                 gd_dir=ints)

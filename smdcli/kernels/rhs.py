@@ -191,7 +191,7 @@ def _mode_rates(m, y, ground, power, dy, work):
         if term < 0:
             continue
         p = m.ns_par[e]
-        loss = (m.ns_pd[e] * rate + m.ns_pc[e]) * rate
+        loss = (m.ns_pd[e] * rate + m.ns_pc[e] + m.ns_px[e] * d) * rate
         law = m.ns_law[e]
         if law == SMOOTH_BOUC_WEN:
             z = y[2 * n + int(p[5])]

@@ -57,7 +57,7 @@ def mode_arrays(base: ModelArrays, scene, mode, states) -> ModelArrays:
     mi_ptr, mi_idx, mi_val = csr(PM)
     stiff, damp, const = np.zeros(E), np.zeros(E), np.zeros(E)
     law, par, term = np.zeros(E, dtype=np.int64), np.zeros((E, LAW_PARAMETERS)), np.full(E, -1, dtype=np.int64)
-    pd, pc = np.zeros(E), np.zeros(E)
+    pd, pc, px = np.zeros(E), np.zeros(E), np.zeros(E)
     for e, (element, state, part) in enumerate(zip(scene.elements, states, scene.q_slices)):
         piece, compiled = element.law.piece(state), element.law.kernel_piece(state)
         if piece.nonlinear is not None and compiled.law == SMOOTH_NONE:  # nonsmooth_refusal's promise, kept here
@@ -67,7 +67,7 @@ def mode_arrays(base: ModelArrays, scene, mode, states) -> ModelArrays:
         par[e, :len(compiled.parameters)] = compiled.parameters
         par[e, LAW_PARAMETERS - 1] = part.start - 2 * n  # the first internal variable's place in q
         term[e] = ACCUMULATED.index(compiled.term) if compiled.term else -1
-        pd[e], pc[e] = compiled.pd, compiled.pc
+        pd[e], pc[e], px[e] = compiled.pd, compiled.pc, compiled.px
     el, qty, level, direction = [], [], [], []
     for e, guard, _, _ in mode.guards:
         el.append(e)
@@ -85,7 +85,7 @@ def mode_arrays(base: ModelArrays, scene, mode, states) -> ModelArrays:
         a_ptr=a_ptr, a_idx=a_idx, a_val=a_val, mi_ptr=mi_ptr, mi_idx=mi_idx, mi_val=mi_val,
         f_const=np.ascontiguousarray(mode.g, dtype=float), ground_row=P @ np.ones(n), ns_held=held, ns_stiff=stiff,
         ns_damp=damp,
-        ns_const=const, ns_law=law, ns_par=par, ns_term=term, ns_pd=pd, ns_pc=pc, h_lin=h_lin, h_f=h_f, h_g=h_g,
+        ns_const=const, ns_law=law, ns_par=par, ns_term=term, ns_pd=pd, ns_pc=pc, ns_px=px, h_lin=h_lin, h_f=h_f, h_g=h_g,
         gd_el=ints(el), gd_qty=ints(qty), gd_level=np.array(level, dtype=float), gd_dir=ints(direction))
 
 

@@ -34,10 +34,14 @@ def refusal(method: str, model: Model) -> str | None:
     """Why the Newmark family cannot take the scene (a friction contact or a stop), or None."""
     for element in model.nonsmooth:
         if element.law.newmark_rows(0.0) is None:
-            what = f"a {element.law.law_name} friction contact" if element.kind == "friction" else "a stop"
-            return (f"{method!r} steps hysteretic springs by their return mapping, but {element.path} is {what}, "
-                    "whose stick, slip, contact and impact are events to locate: use 'exact' (piecewise-linear "
-                    "scenes), 'auto', or an ODE method ('DOP853', 'Radau', 'ode45', ...)")
+            if element.kind == "spring":
+                what = f"a {element.law.name} spring, which it has no return mapping for"
+            else:
+                what = (f"a {element.law.law_name} friction contact" if element.kind == "friction" else "a stop") + \
+                    ", whose stick, slip, contact and impact are events to locate"
+            return (f"{method!r} steps hysteretic springs by their return mapping, but {element.path} is {what}: "
+                    "use 'exact' (piecewise-linear scenes), 'auto', or an ODE method ('DOP853', 'Radau', 'ode45', "
+                    "...)")
     return None
 
 
