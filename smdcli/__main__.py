@@ -8,7 +8,14 @@ Ctrl-C or SIGTERM that lands while the command line is being imported ends the r
 import signal
 import sys
 
-from smdcli import interrupts
+try:
+    from smdcli import interrupts
+except KeyboardInterrupt:  # a Ctrl-C in the instant before there is a handler to take it: still one line
+    import os
+
+    print("smd: interrupted while starting; nothing was written", file=sys.stderr)
+    sys.stderr.flush()
+    os._exit(130)
 
 
 def main() -> None:
