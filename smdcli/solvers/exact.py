@@ -178,7 +178,11 @@ class Exact(Solver):
 
 def _solve_linear(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:
     """x, v, stated accuracy and a description, by the cheapest exact path: modal, the sparse action, blocks of
-    steps between a table's samples (sampled.py) or dense."""
+    steps between a table's samples (sampled.py) or dense. Each path steps a uniform grid; a grid of other steps
+    (an internal caller's) is taken as its uniform runs one after the other."""
+    runs = _uniform_runs(grid)
+    if len(runs) > 1:
+        return _solve_runs(model, grid, runs)
     if modal_applies(model):
         return solve_modal(model, grid)
     action = sparse_action(model, grid)
@@ -186,6 +190,29 @@ def _solve_linear(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarra
         return solve_action(model, grid, action)
     knots = sampled.uniform_knots(model, grid)
     return sampled.solve_sampled(model, knots, *augmented(model)) if knots is not None else solve_dense(model, grid)
+
+
+def _uniform_runs(grid: np.ndarray) -> list[tuple[int, int]]:
+    """The grid's maximal runs of equal steps (to 1e-9 of the step), as (first, last) indices sharing their ends."""
+    steps = np.diff(grid)
+    if len(steps) < 2:
+        return [(0, len(grid) - 1)]
+    breaks = np.flatnonzero(np.abs(np.diff(steps)) > 1e-9 * np.maximum(steps[1:], steps[:-1])) + 1
+    ends = [0, *breaks.tolist(), len(steps)]
+    return [(lo, hi) for lo, hi in zip(ends[:-1], ends[1:])]
+
+
+def _solve_runs(model: Model, grid: np.ndarray, runs) -> tuple[np.ndarray, np.ndarray, float, str]:
+    """The linear scene on each uniform run in turn, each from the state the last one ended in."""
+    x, v = np.empty((len(grid), model.n)), np.empty((len(grid), model.n))
+    stated, message, start = 0.0, "", model
+    for lo, hi in runs:
+        xs, vs, accuracy, described = _solve_linear(start, grid[lo:hi + 1])
+        message = message or described
+        x[lo:hi + 1], v[lo:hi + 1] = xs, vs
+        stated = max(stated, accuracy)
+        start = dataclasses.replace(model, x0=xs[-1].copy(), v0=vs[-1].copy())
+    return x, v, stated, f"{message}; a grid of unequal steps, as {len(runs)} uniform runs"
 
 
 def solve_dense(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:
