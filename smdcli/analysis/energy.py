@@ -236,10 +236,12 @@ def _closed_form(model: Model, result: Result) -> tuple[np.ndarray, np.ndarray]:
     # after the edge, so the generator's state there is read just after it (a pulse's end 0.0503 + 0.0917 lands
     # a rounding past the point 142 * 0.001, and read at the point the pulse was still on for the next step).
     after = grid.copy()
-    for t in model.breakpoints(float(grid[0]), float(grid[-1])):
-        k = int(np.argmin(np.abs(grid - t)))
-        if abs(grid[k] - t) <= 1e-9 * h:
-            after[k] = max(after[k], t)
+    edges = model.breakpoints(float(grid[0]), float(grid[-1]))
+    if len(edges):
+        k = np.clip(np.searchsorted(grid, edges), 1, len(grid) - 1)
+        k = np.where(np.abs(grid[k - 1] - edges) < np.abs(grid[k] - edges), k - 1, k)  # the nearest point
+        on = np.abs(grid[k] - edges) <= 1e-9 * h
+        np.maximum.at(after, k[on], edges[on])
     for lo, hi, signal in blocks:
         z[:, lo:hi] = [signal.exo_state(t) for t in after]
     z = z @ Tinv.T

@@ -147,7 +147,7 @@ class Clough(Law):
     def event(self, state: State, kind: str, d: float, rate: float, tension: float) -> State:
         i = state.internal
         side = i["side"]
-        T = self._line(state)[0] * d + self._line(state)[1]
+        T = self.tension(state, d, rate)
         if state.mode == ELASTIC:  # onto the backbone, the side it yields on
             return State(BACKBONE, {**i, "side": 1.0 if d > 0 else -1.0})
         if state.mode == BACKBONE:
@@ -186,11 +186,6 @@ class Clough(Law):
             return self.event(state, "reload", d, -side, 0.0), "reload"  # past zero force already: reloading
         return None
 
-    def tension_at(self, state: State, d: float) -> float:
-        """Its force at d in the state's branch."""
-        s, c = self._line(state)
-        return s * d + c
-
     def internal_values(self, state: State, d) -> tuple:
         return state.internal["dmax"] + 0.0 * d, state.internal["dmin"] + 0.0 * d
 
@@ -208,7 +203,7 @@ class Clough(Law):
         return KernelPiece(term="hysteretic", pc=share * c, px=share * s) if share else KernelPiece()
 
     def stored(self, state: State, d: float) -> tuple[str, float]:
-        T = self.tension_at(state, d)
+        T = self.tension(state, d, 0.0)
         return "strain", T * T / (2 * self.k)
 
     def jump(self, state: State, d_old: float, d_new: float) -> tuple[State, float]:

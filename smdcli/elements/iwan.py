@@ -20,11 +20,11 @@ Must not import: scenario, model, solvers, sweep, io, plots, commands, cli.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import ClassVar
 
 from smdcli.elements.base import D, NEWMARK_CORE, ON_SURFACE, RATE, Guard, KernelPiece, Law, Piece, State
+from smdcli.elements.elastoplastic import Elastoplastic
 
 ELASTIC, PLUS, MINUS = "e", "+", "-"  # each element's mode, one character each in State.mode
 MAX_ELEMENTS = 100
@@ -59,6 +59,11 @@ class Iwan(Law):
         return cls(k=tuple(k), fy=tuple(fy))
 
     @property
+    def parts(self) -> tuple[Elastoplastic, ...]:
+        """Its elements, each an elastoplastic spring (their start and return mapping are theirs)."""
+        return tuple(Elastoplastic(k, fy) for k, fy in zip(self.k, self.fy))
+
+    @property
     def elastic_stiffness(self) -> float:
         return float(sum(self.k))
 
@@ -76,8 +81,8 @@ class Iwan(Law):
     def start(self, d: float, rate: float) -> State:
         """Each element deformed past its yield at the start yielded on the way there: it starts on its surface."""
         internal = {"work": 0.0}
-        for i, (k, fy) in enumerate(zip(self.k, self.fy)):
-            internal[f"dp{i}"] = d - math.copysign(fy / k, d) if abs(k * d) > fy else 0.0
+        for i, part in enumerate(self.parts):
+            internal[f"dp{i}"] = part.start(d, 0.0).internal["dp"]
         state = State(ELASTIC * len(self.k), internal)
         settled = self.settle(state, d, rate, lambda sign: sign * rate > 0)
         return settled[0] if settled else state
@@ -156,12 +161,10 @@ class Iwan(Law):
     def jump(self, state: State, d_old: float, d_new: float) -> tuple[State, float]:
         # each element's straight path return-mapped, as an elastoplastic spring's
         internal, work = dict(state.internal), 0.0
-        for i, (k, fy) in enumerate(zip(self.k, self.fy)):
+        for i, part in enumerate(self.parts):
             dp = self._dp(state, i, d_old)
-            trial = k * (d_new - dp)
-            new = dp if abs(trial) <= fy else d_new - math.copysign(fy / k, trial)
-            internal[f"dp{i}"] = new
-            work += fy * abs(new - dp)
+            _, _, internal[f"dp{i}"] = part.return_map(d_new, dp)
+            work += part.fy * abs(internal[f"dp{i}"] - dp)
         return State(ELASTIC * len(self.k), internal), work
 
     def newmark_rows(self, d: float) -> list[tuple[int, tuple[float, ...], float]]:
