@@ -18,7 +18,7 @@ from smdcli import scenario
 from smdcli.model import build, time_grid
 from smdcli.solvers import solve
 from smdcli.solvers.base import Tolerances
-from smdcli.solvers.checked import solve_scenario
+from smdcli.solvers.run import solve_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 

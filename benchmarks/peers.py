@@ -417,7 +417,7 @@ def nonlinear_rows(repeats):
 
     from smdcli import scenario
     from smdcli.model import build, time_grid
-    from smdcli.solvers.checked import solve_scenario
+    from smdcli.solvers.run import solve_scenario
 
     scenes = [("book's stiff damper c|v|v, 1 DOF", "stiff", 1,
                scenario.load(ROOT / "scenarios" / "one_dof_nonlinear_stiff.toml"))]
@@ -462,7 +462,7 @@ def main() -> None:
     parts = {"spectrum": lambda: spectrum_rows(args.repeats), "linear": lambda: linear_rows(args.repeats),
              "chain": lambda: chain_rows(args.repeats), "elastoplastic": opensees_rows,
              "nonlinear": lambda: nonlinear_rows(args.repeats)}
-    from smdcli.solvers.compiled import KERNEL_FAMILIES, warm
+    from smdcli.solvers.integrators.compiled import KERNEL_FAMILIES, warm
 
     warm(*KERNEL_FAMILIES)  # compiled (or loaded) before any clock starts: an edit to a kernel clears the cache
     rows = [row for part, rows_of in parts.items() if args.only in (None, part) for row in rows_of()]

@@ -33,9 +33,9 @@ from smdcli.scenario import Scenario
 
 def load(path: str | Path) -> Scenario:
     """Read and validate a scenario file; raises ScenarioError with the file, field and problem."""
-    from smdcli import scenario
+    from smdcli.solvers.run import load as load_checked
 
-    return scenario.load(path)
+    return load_checked(path)
 
 
 def simulate(scenario: Scenario | str | Path, method: str | None = None, rtol: float | None = None,
@@ -43,7 +43,7 @@ def simulate(scenario: Scenario | str | Path, method: str | None = None, rtol: f
     """Solve a scenario (a Scenario or a path) as `smd simulate` does, writing nothing; SolverFailed on failure."""
     from smdcli.commands.simulate import Options, solve_run
     from smdcli.model import build, time_grid
-    from smdcli.solvers.checked import check_overrides, failure_message
+    from smdcli.solvers.run import check_overrides, failure_message
 
     check_overrides(method, rtol, atol)
     sc = scenario if isinstance(scenario, Scenario) else load(scenario)

@@ -17,6 +17,7 @@ from smdcli.cli_analyses import psd, record, rsa, spectrum
 from smdcli.cli_files import diff_files, export
 from smdcli.cli_support import _carried_out, _fail, _interrupted, _message, _print_json, _report, plain_coercion, plain_help
 from smdcli.progress import wanted as progress_wanted
+from smdcli.solvers.registry import NAMES as METHOD_NAMES, names as method_names
 from smdcli.text import plural
 
 plain_help()
@@ -49,7 +50,7 @@ def _root(version: bool = typer.Option(False, "--version", callback=_version, is
 def simulate(
     scenarios: List[Path] = typer.Argument(..., help="Scenario TOML files."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
-    method: Optional[str] = typer.Option(None, "--method", help="Solver, overriding the scenario's solver.method."),
+    method: Optional[str] = typer.Option(None, "--method", help=f"Solver, overriding the scenario's solver.method: {', '.join(METHOD_NAMES)}."),
     rtol: Optional[float] = typer.Option(None, "--rtol", help="Relative tolerance override (> 0)."),
     atol: Optional[float] = typer.Option(None, "--atol", help="Absolute tolerance override (> 0)."),
     no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
@@ -71,7 +72,7 @@ def simulate(
     from smdcli.errors import SmdError
     from smdcli.progress import bar
 
-    from smdcli.solvers.checked import check_overrides
+    from smdcli.solvers.run import check_overrides
 
     try:  # once, before any scenario: the same check as smdcli.simulate()'s
         check_overrides(method, rtol, atol)
@@ -139,7 +140,8 @@ def info(
 @app.command("compare-solvers")
 def compare_solvers(
     scenario: Path = typer.Argument(..., help="Scenario TOML file."),
-    methods: Optional[str] = typer.Option(None, "--methods", help="Comma list; default: every adaptive and fixed-step method."),
+    methods: Optional[str] = typer.Option(None, "--methods", help="Comma list; default: "
+                                         f"{', '.join(method_names(compare='adaptive') + method_names(compare='fixed'))}."),
     tolerances: Optional[str] = typer.Option(None, "--tolerances",
                                              help="Comma list of rtol or rtol/atol; default 1e-3..1e-10, atol = rtol/1000."),
     steps: Optional[str] = typer.Option(None, "--steps", help="Comma list of fixed steps in s; default h*omega_max 3..0.02."),
@@ -180,7 +182,8 @@ def sweep(
                                            "acceleration or force."),
     metric: Optional[str] = typer.Option(None, "--metric", help="peak_displacement, rms_displacement, settling_time "
                                          "or peak_ground_force."),
-    method: Optional[str] = typer.Option(None, "--method", help="Solver for every member (default: the scenario's)."),
+    method: Optional[str] = typer.Option(None, "--method", help="Solver for every member (default: the scenario's): "
+                                          f"{', '.join(METHOD_NAMES)}."),
     keep: Optional[str] = typer.Option(None, "--keep", help="What the file stores per member: full (time histories "
                                        "and metrics, the default) or metrics."),
     resume: bool = typer.Option(False, "--resume", help="Finish the sweep an interrupted run left in "
@@ -200,9 +203,9 @@ def sweep(
     from smdcli.sweep.stream import KEEPS
 
     if method is not None:
-        from smdcli.solvers.catalog import check_method_name
+        from smdcli.solvers.registry import method_problem
 
-        problem = check_method_name(method)
+        problem = method_problem(method)
         if problem:
             raise typer.BadParameter(problem, param_hint="--method")
     options = {"parameter": tuple(param or ()), "values": tuple(values or ()),
@@ -236,7 +239,7 @@ def phase(
     skip_periods: int = typer.Option(0, "--skip-periods", help="Poincare: leave out the first periods (transient)."),
     hysteresis: bool = typer.Option(False, "--hysteresis", help="Plot force against deformation of every "
                                     "hysteretic spring instead (OUT/NAME_hysteresis.png and .h5)."),
-    method: Optional[str] = typer.Option(None, "--method", help="Solver, overriding the scenario's solver.method."),
+    method: Optional[str] = typer.Option(None, "--method", help=f"Solver, overriding the scenario's solver.method: {', '.join(METHOD_NAMES)}."),
     name: Optional[str] = typer.Option(None, "--name", help="Output name: OUT/NAME_portrait.png and .h5 (default: "
                                        "the scenario's stem, or FIRST_and_K_more for several)."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
@@ -276,9 +279,9 @@ def schema():
     """Print a JSON Schema of the scenario format, for an editor's TOML extension (completion and checking)."""
     import json
 
-    from smdcli.scenario.schema import scenario_schema
+    from smdcli.commands.schema import full_schema
 
-    typer.echo(json.dumps(scenario_schema(), indent=2))
+    typer.echo(json.dumps(full_schema(), indent=2))
 
 
 @app.command()
@@ -290,7 +293,7 @@ def animate(
                                           "motion drawn as 0.3 of the mass spacing)."),
     start: Optional[float] = typer.Option(None, "--start", help="First simulated time shown."),
     end: Optional[float] = typer.Option(None, "--end", help="Last simulated time shown."),
-    method: Optional[str] = typer.Option(None, "--method", help="Solver, overriding the scenario's solver.method."),
+    method: Optional[str] = typer.Option(None, "--method", help=f"Solver, overriding the scenario's solver.method: {', '.join(METHOD_NAMES)}."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
 ):

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields, replace
+from typing import Any
 
 import numpy as np
 
@@ -227,6 +228,8 @@ class Result:
     energy: Energy | None = None
     nonsmooth: NonsmoothHistory | None = None  # a scene with hysteretic springs, friction or stops: their history
     origin: tuple | None = field(default=None, repr=False, compare=False)  # (Scenario, Model) it was solved from
+    # times -> (x, v) from the run's own method (an adaptive one's interpolant), for quadratures between outputs
+    interpolant: Any = field(default=None, repr=False, compare=False)
     # ((array, (min, max)), ...): extremes a solver found as it wrote the arrays (extremes_of), so that the checks
     # after a run need not pass over them again
     found_extremes: tuple = field(default=(), repr=False, compare=False)

@@ -145,7 +145,7 @@ def pytest_sessionstart(session):
 
     if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)
-    from smdcli.solvers.compiled import KERNEL_FAMILIES, compile_side_by_side, warm
+    from smdcli.solvers.integrators.compiled import KERNEL_FAMILIES, compile_side_by_side, warm
 
     # SMD_TEST_WARM: the families to warm (comma-separated; empty: erk alone, the rest compiled on first use), for
     # runs that time nothing, such as CI's regression runs under other CPU targets

@@ -12,9 +12,9 @@ from scipy.linalg import expm
 from smdcli.errors import ScenarioError
 from smdcli.solvers import solve
 from smdcli.solvers.base import Tolerances
-from smdcli.solvers.compiled import CompiledRK, CompiledStiff, run_kernel
-from smdcli.solvers.ivp import ScipyMethod
-from smdcli.solvers.registry import _solvers
+from smdcli.solvers.integrators.compiled import CompiledRK, CompiledStiff, run_kernel
+from smdcli.solvers.integrators.scipy_driven import ScipyMethod
+from smdcli.solvers.registry import NAMES, solver_class
 
 # Two masses, damped, a harmonic force on one: smooth, two modes (1.1 and 3.4 rad/s), 6 s.
 SCENE = """
@@ -48,7 +48,7 @@ amplitude = 1.5
 omega = 2.0
 """
 
-ALL = sorted(name for name in _solvers() if name != "auto")
+ALL = sorted(name for name in NAMES if name != "auto")
 FIXED_STEP = ["newmark", "hht", "generalized_alpha", "central_difference", "euler", "rk4"]
 ADAPTIVE_FIXED_ORDER = {"RK45": 5, "RK23": 3, "DOP853": 8, "Radau": 5, "ode45": 5, "ode23": 3,
                         "ode23s": 2, "ode23t": 2, "ode23tb": 2, "scipy:RK45": 5, "scipy:RK23": 3, "scipy:DOP853": 8,
@@ -77,7 +77,7 @@ def test_every_method_is_covered_by_the_suite():
 @pytest.mark.parametrize("method", [m for m in ALL if m != "closed_form"])
 def test_agrees_with_the_exact_solution(scene, method):
     model, grid, exact = scene
-    solver = _solvers()[method]
+    solver = solver_class(method)
     # Each method at a setting its order makes affordable; the bound is what that order delivers here.
     if method == "euler":  # first order: about 6 h here
         tol, bound = Tolerances(dt=1e-4), 1e-3
@@ -128,7 +128,7 @@ def compiled_fixed_step_error(solver, model, h, t_end):
 @pytest.mark.parametrize("method", sorted(ADAPTIVE_FIXED_ORDER))
 def test_adaptive_formulas_converge_at_their_declared_order(scene, method):
     model = scene[0]
-    solver = _solvers()[method]()
+    solver = solver_class(method)()
     assert solver.order == ADAPTIVE_FIXED_ORDER[method]
     # Steps where the error is far above rounding and in the asymptotic range (h * omega_max 0.17 to 0.04).
     steps = [0.05, 0.025, 0.0125] if solver.order < 8 else [0.2, 0.1]
@@ -144,7 +144,7 @@ def test_adaptive_formulas_converge_at_their_declared_order(scene, method):
 @pytest.mark.parametrize("method", FIXED_STEP)
 def test_fixed_step_methods_converge_at_their_declared_order(scene, method):
     model, grid, exact = scene
-    solver = _solvers()[method]()
+    solver = solver_class(method)()
     steps = [4e-3, 2e-3, 1e-3] if method != "rk4" else [4e-2, 2e-2, 1e-2]
     errors = [relative_error(solve(model, grid, method, Tolerances(dt=h)), exact) for h in steps]
     orders = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
@@ -156,7 +156,7 @@ def test_extrapolated_methods_converge_at_their_declared_order(scene, method):
     """Coarsest steps of 0.05, 0.025 and 0.0125 s, tolerances too loose to refine them: errors 9e-8, 1.5e-9 and
     2.3e-11 of the peak (measured), far above the 1e-12 its rounding leaves."""
     model, grid, exact = scene
-    solver = _solvers()[method]()
+    solver = solver_class(method)()
     errors = [relative_error(solve(model, grid, method, Tolerances(rtol=1e3, atol=1e3, dt=h)), exact)
               for h in (0.05, 0.025, 0.0125)]
     orders = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
@@ -205,8 +205,7 @@ def test_linear_only_methods_refuse_a_nonlinear_model(method):
 
 
 def test_declared_stability_limits():
-    solvers = _solvers()
-    assert solvers["central_difference"]().omega_limit() == 2.0
-    assert solvers["rk4"]().omega_limit() == pytest.approx(2 * math.sqrt(2))
-    assert solvers["euler"]().omega_limit() == 0.0
-    assert solvers["newmark"]().omega_limit() == math.inf
+    assert solver_class("central_difference")().omega_limit() == 2.0
+    assert solver_class("rk4")().omega_limit() == pytest.approx(2 * math.sqrt(2))
+    assert solver_class("euler")().omega_limit() == 0.0
+    assert solver_class("newmark")().omega_limit() == math.inf

@@ -163,3 +163,21 @@ def test_the_performance_page_is_measured():
     commands = [m["command"] for m in MEASURED.finditer(text)]
     assert any("exact_vs_rk45" in c for c in commands) and any("compiled_vs_solve_ivp" in c for c in commands)
     assert any("sweep_vs_rk45" in c for c in commands)
+
+
+def test_the_solvers_table_lists_exactly_the_registered_methods():
+    """docs/solvers.md's table of methods names every method of the registry, and no other."""
+    from smdcli.solvers.registry import NAMES
+
+    rows = [line for line in (ROOT / "docs" / "solvers.md").read_text().splitlines() if line.startswith("| `")]
+    listed = [name for row in rows for name in re.findall(r"`([^`]+)`", row.split("|")[1])]
+    assert sorted(listed) == sorted(NAMES)
+
+
+def test_compare_solvers_defaults_are_the_registrys_and_the_docs_say_so():
+    """docs/compare-solvers.md lists compare-solvers' default methods as the registry's compare groups, in order."""
+    from smdcli.solvers.registry import names
+
+    text = (ROOT / "docs" / "compare-solvers.md").read_text()
+    for group in ("adaptive", "fixed"):
+        assert f"`{','.join(names(compare=group))}`" in text, group

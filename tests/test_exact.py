@@ -183,7 +183,7 @@ def test_accurate_exponential_is_correctly_rounded_on_random_matrices():
     """expm in double-double against mpmath's at 40 digits: within one rounding of the true entries."""
     import mpmath as mp
 
-    from smdcli.solvers.accurate_expm import expm_times
+    from smdcli.solvers.exact.accurate_expm import expm_times
 
     rng = np.random.default_rng(7)
     for size, scale in ((3, 0.5), (6, 40.0), (10, 3000.0)):
@@ -240,7 +240,7 @@ def _chain(n: int, ground_damper: float, chain_damper: float, force: str) -> str
 def test_modal_path_matches_the_dense_exponential_on_a_100_mass_chain(monkeypatch):
     """Classically damped (C = 0.002 K), a sine and a square force: modal coordinates against the dense 200-state
     exponential, to 1e-10 of the peak; a chain damped at one end only is not classical and stays dense."""
-    import smdcli.solvers.modal as modal
+    import smdcli.solvers.exact.modal as modal
 
     forces = force_block("sine", on="m0", amplitude=10.0, omega=5.0) + \
         force_block("square", on="m50", amplitude=3.0, period=0.37, t0=0.05)
@@ -264,7 +264,7 @@ def test_action_path_matches_the_dense_exponential_on_non_classical_chains(monke
     """Damped at one end only (not classical): the exponential's sparse action against the dense 200-state
     exponential, to 1e-10 of the peak, with a sine, a square wave (force segments that fall between output
     points), a delayed step, a table and initial displacements; its stated accuracy covers the difference."""
-    import smdcli.solvers.exact as exact
+    import smdcli.solvers.exact.linear as exact
 
     forces = force_block("sine", on="m0", amplitude=10.0, omega=5.0) + \
         force_block("square", on="m50", amplitude=3.0, period=0.37, t0=0.05) + \
@@ -322,7 +322,7 @@ def test_stacked_exponential_is_within_a_few_roundings_of_mpmaths():
     the sizes and norms the modal path feeds it (a damped mode beside a force generator, ||A h||_1 up to 16)."""
     import mpmath as mp
 
-    from smdcli.solvers.accurate_expm import expm_stack
+    from smdcli.solvers.exact.accurate_expm import expm_stack
 
     rng = np.random.default_rng(11)
     stack = np.stack([rng.standard_normal((4, 4)) * scale for scale in (1e-3, 0.1, 1.0, 2.0, 4.0)])

@@ -356,7 +356,7 @@ def test_thread_pools_end_or_raise_whenever_an_interrupt_lands(pool):
             "alongside": "alongside_ready(1)"}
     code = ("import random, signal\n"
             "from smdcli import interrupts\n"
-            "from smdcli.solvers.compiled import warm\n"
+            "from smdcli.solvers.integrators.compiled import warm\n"
             "from smdcli.sweep.pool import run_threads\n"
             "warm()\n"  # kernels loaded before the first run, which would otherwise always be interrupted
             "interrupts.install()\n"

@@ -9,9 +9,9 @@ from scipy.linalg import expm
 
 from smdcli import scenario
 from smdcli.model import build, time_grid
-from smdcli.solvers import piecewise
-from smdcli.solvers.crossings import Crossings
-from smdcli.solvers.flow import NODES, SERIES_REACH, Flow
+from smdcli.solvers.events import piecewise
+from smdcli.solvers.events.crossings import Crossings
+from smdcli.solvers.exact.flow import NODES, SERIES_REACH, Flow
 
 
 def random_mode(rng, n: int, exo: int):

@@ -142,7 +142,7 @@ def test_any_number_at_the_edge_of_double_in_any_field_is_solved_or_refused_in_o
     # the exact solver's budget of substeps cut 100-fold: a damper of 2e9 N s/m on friction_isolated_building took 50 s
     # to solve (its fastest mode sets the substep), and a larger one minutes of CI; over the budget it stops as it
     # would at its own limit, in one line, which is what this test checks
-    with mock.patch("smdcli.solvers.piecewise.MAX_SUBSTEPS", 20_000):
+    with mock.patch("smdcli.solvers.events.piecewise.MAX_SUBSTEPS", 20_000):
         result = cli("simulate", scene, "-o", out, "--no-plots", "--quiet")
     took = time.monotonic() - start
     assert result.exit_code in (0, 1, 2), result.output

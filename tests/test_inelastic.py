@@ -34,7 +34,7 @@ def record(samples: int = SHORT):
 
 def exact_run(period: float, zeta: float, fy: float, hardening: float, end: float = 12.0):
     """(peak |u|, final plastic deformation, events) of the 1-DOF under the record by smd's `exact` solver (the
-    event-driven numpy solver of smdcli.solvers.piecewise), its output grid holding every event time so that the
+    event-driven numpy solver of smdcli.solvers.events.piecewise), its output grid holding every event time so that the
     peaks reached at unloading are exact."""
     period, zeta, fy, hardening = float(period), float(zeta), float(fy), float(hardening)
     w = 2 * math.pi / period

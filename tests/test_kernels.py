@@ -240,7 +240,7 @@ def test_compiled_pairs_take_scipys_steps_on_every_force_type(forced, pair):
 @pytest.mark.parametrize("method", ["ode23s", "ode23t", "ode23tb", "Radau", "BDF"])
 @pytest.mark.parametrize("scene", ["forced", "one_dof_nonlinear_stiff"])
 def test_compiled_stiff_methods_take_the_python_formulas_steps(forced, scene, method):
-    """The compiled Radau, BDF and ode23s/t/tb against scipy's Radau and BDF and smdcli.solvers.stiff23's classes
+    """The compiled Radau, BDF and ode23s/t/tb against scipy's Radau and BDF and smdcli.solvers.integrators.stiff23's classes
     on scipy's OdeSolver: same formulas and step control, so the same steps (within a few %: a step accepted at an
     error norm of 0.999 by one LU's rounding may be rejected by the other's) and agreement far inside the
     tolerance."""
@@ -286,7 +286,7 @@ def test_compiled_pairs_match_scipy_on_the_bundled_nonlinear_scenes(name, pair):
 
 def test_default_settings_of_the_books_stiff_case_are_within_1e_8_of_a_tight_reference():
     sc, model, grid = load("one_dof_nonlinear_stiff")
-    from smdcli.solvers.checked import solve_scenario
+    from smdcli.solvers.run import solve_scenario
 
     ours = solve_scenario(sc, model, grid)
     reference = solve(model, grid, "Radau", Tolerances(rtol=1e-12, atol=1e-16))
@@ -298,8 +298,9 @@ def test_default_settings_of_the_books_stiff_case_are_within_1e_8_of_a_tight_ref
 def test_the_stiffness_watch_reads_the_books_damper_as_not_stiff():
     """h |lambda| from the O(n) bound stays under half the boundaries of DOP853 and of auto's Taylor series along
     the run (exact eigenvalues: 1.2), but for one of DOP853's 846 steps at rtol 1e-6 (3.1 against 3.0)."""
-    from smdcli.solvers.compiled import DOP853
+    from smdcli.solvers.registry import solver_class
 
+    DOP853 = solver_class("DOP853")
     sc, model, grid = load("one_dof_nonlinear_stiff")
     tol = Tolerances(rtol=1e-6, atol=1e-12)
     r = solve(model, grid, "auto", tol)
@@ -315,7 +316,7 @@ def test_kernels_run_as_plain_python_without_the_compiler():
     session starts so too: what its start asks of the cache (cached, warm) holds for plain functions, which have
     no compiled signatures (is_cached read them first, and pytest stopped with an internal error)."""
     code = ("import numpy as np\n"
-            "from smdcli.solvers.compiled import KERNEL_FAMILIES, cached, warm\n"
+            "from smdcli.solvers.integrators.compiled import KERNEL_FAMILIES, cached, warm\n"
             "assert all(cached(family) for family in KERNEL_FAMILIES)\n"
             "warm('erk')\n"
             "from conftest import bundled as load\n"
@@ -376,8 +377,9 @@ def test_a_changed_kernel_source_clears_the_cached_kernels(tmp_path, monkeypatch
 def test_steps_landed_on_a_quadratic_dampers_reversals_cost_fewer_tries_at_no_loss_of_accuracy():
     """The book's c |v| v damper reverses 200 times in 20 s; a step that ends at each reversal (where c |v| v has no
     second derivative) replaces the rejected tries of a step across it, and is as accurate against a tight Radau."""
-    from smdcli.solvers.compiled import DOP853
+    from smdcli.solvers.registry import solver_class
 
+    DOP853 = solver_class("DOP853")
     _, model, grid = load("one_dof_nonlinear_stiff")
     tol = Tolerances(rtol=1e-8, atol=1e-13)
     across, landed = DOP853().solve(model, grid, tol), DOP853(land=True).solve(model, grid, tol)

@@ -17,7 +17,8 @@ from smdcli.io.hdf5 import read_matrix
 from smdcli.kernels import banded
 from smdcli.solvers import solve
 from smdcli.solvers.base import Tolerances
-from smdcli.solvers.sparse_newmark import SparseNewmark, _March
+from smdcli.solvers.integrators.sparse_newmark import _March
+from smdcli.solvers.registry import solver_class
 
 SPARSE_DOFS = sparse_module.SPARSE_DOFS
 
@@ -143,7 +144,7 @@ def test_sparse_newmark_refuses_what_it_cannot_take():
     _, model, grid = model_of(shaken)
     with pytest.raises(ScenarioError, match="'sparse_newmark' does not take a ground motion; try 'auto'"):
         solve(model, grid, "sparse_newmark", Tolerances())
-    assert SparseNewmark().refuse(model_of(chain(2))[1]) is None
+    assert solver_class("sparse_newmark")().refuse(model_of(chain(2))[1]) is None
 
 
 def test_a_chain_above_sparse_dofs_from_the_command_line(cli, tmp_path):

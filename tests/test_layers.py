@@ -12,8 +12,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "smdcli"
 # Lowest first. A module may import its own layer and the layers below it, never one above.
 LAYERS = [
     ("base", ["smdcli", "smdcli.errors", "smdcli.expression", "smdcli.result", "smdcli.interrupts",
-              "smdcli.progress", "smdcli.provenance", "smdcli.resources", "smdcli.strict_json", "smdcli.text",
-              "smdcli.solvers.catalog"]),
+              "smdcli.progress", "smdcli.provenance", "smdcli.resources", "smdcli.strict_json", "smdcli.text"]),
     ("elements", ["smdcli.elements"]),  # the laws: read by the scenario, used by everything that solves
     ("shapes", ["smdcli.shapes"]),  # the force shapes: likewise
     ("scenario", ["smdcli.scenario"]),
@@ -41,7 +40,7 @@ MODULES = {module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
 
 
 def layer_of(module: str) -> int:
-    """The layer of a module: the most specific prefix listed (smdcli.solvers.catalog before smdcli.solvers)."""
+    """The layer of a module: the most specific prefix listed (smdcli.cli_support before smdcli)."""
     best, best_len = None, -1
     for index, (_, prefixes) in enumerate(LAYERS):
         for prefix in prefixes:
@@ -76,8 +75,9 @@ def test_a_module_in_no_layer_is_named():
 
     with pytest.raises(AssertionError, match="smdcli.newcomer is in no layer"):
         layer_of("smdcli.newcomer")
-    assert LAYERS[layer_of("smdcli.solvers.catalog")][0] == "base"
-    assert LAYERS[layer_of("smdcli.solvers.exact")][0] == "solvers"
+    assert LAYERS[layer_of("smdcli.solvers.registry")][0] == "solvers"
+    assert LAYERS[layer_of("smdcli.solvers.exact.linear")][0] == "solvers"
+    assert LAYERS[layer_of("smdcli.solvers.exact.linear")][0] == "solvers"
 
 
 def test_every_module_has_a_layer_and_a_docstring_saying_what_it_must_not_import():
@@ -140,7 +140,7 @@ def test_no_import_circle():
 def test_the_checks_catch_a_back_edge_and_a_circle():
     """The two checks above on made-up graphs: they are not vacuous."""
     assert back_edges({"smdcli.scenario.load": {"smdcli.solvers.registry"}})
-    assert not back_edges({"smdcli.scenario.load": {"smdcli.solvers.catalog", "smdcli.errors"}})
+    assert not back_edges({"smdcli.scenario.load": {"smdcli.elements.registry", "smdcli.errors"}})
     assert find_circle({"smdcli.sweep.a": {"smdcli.sweep.b"}, "smdcli.sweep.b": {"smdcli.sweep.c"},
                         "smdcli.sweep.c": {"smdcli.sweep.a"}}) == ["smdcli.sweep.a", "smdcli.sweep.b",
                                                                    "smdcli.sweep.c", "smdcli.sweep.a"]
@@ -152,21 +152,34 @@ def test_no_module_is_over_450_lines():
     assert all(n <= MAX_LINES for n in long.values()), {k: v for k, v in long.items() if v > MAX_LINES}
 
 
-def test_the_catalog_names_exactly_the_registered_solvers():
-    from smdcli.solvers.catalog import METHOD_NAMES, NEWMARK_SCHEMES
-    from smdcli.solvers.fixed_step import Newmark
-    from smdcli.solvers.registry import _solvers
+def test_every_registered_method_loads_as_a_solver_of_its_name():
+    """The registry is the one table of names: each entry's class imports, and the solver carries the entry's name."""
+    from smdcli.solvers.base import Solver
+    from smdcli.solvers.registry import METHODS, get_solver
 
-    assert tuple(_solvers()) == METHOD_NAMES
-    assert Newmark.SCHEMES == NEWMARK_SCHEMES
+    assert len({m.name for m in METHODS}) == len(METHODS)
+    for method in METHODS:
+        solver = get_solver(method.name)
+        assert isinstance(solver, Solver) and solver.name == method.name and solver.description
+
+
+def test_the_scenario_and_the_step_by_step_methods_are_kept_apart():
+    """No arrow from scenario/ into solvers/, none from analysis/ into the step-by-step methods (issue 54)."""
+    for name, targets in GRAPH.items():
+        if name.startswith("smdcli.scenario"):
+            assert not {t for t in targets if t.startswith("smdcli.solvers")}, name
+        if name.startswith("smdcli.analysis"):
+            assert not {t for t in targets if t.startswith("smdcli.solvers.integrators")}, name
 
 
 def test_help_and_scenario_loading_import_no_heavy_module():
-    """`smd --help` imports none of scipy, matplotlib, h5py, numba; reading a scenario imports no solver."""
+    """`smd --help` imports none of scipy, matplotlib, h5py, numba; reading a scenario imports no solver (the help
+    reads the registry's names, plain data)."""
     probe = ("import sys; from smdcli.cli import run; run(['--help']); "
              "heavy = [m for m in ('scipy', 'matplotlib', 'h5py', 'numba') if m in sys.modules]; "
              "from smdcli import scenario; scenario.load('scenarios/three_dof_forced.toml'); "
-             "solvers = sorted(m for m in sys.modules if m.startswith('smdcli.solvers.') and m != 'smdcli.solvers.catalog'); "
+             "solvers = sorted(m for m in sys.modules if m.startswith('smdcli.solvers') "
+             "and m not in ('smdcli.solvers', 'smdcli.solvers.registry')); "
              "print(heavy, solvers)")
     result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, cwd=PACKAGE.parent)
     assert result.returncode == 0, result.stderr

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from conftest import ROOT, SCENARIOS, bundled, model_of, one_dof
-from smdcli.solvers.checked import solve_scenario
+from smdcli.solvers.run import solve_scenario
 from smdcli.analysis.energy import with_physics
 
 LINEAR = sorted(p.stem for p in SCENARIOS.glob("*.toml") if bundled(p.stem)[1].is_linear)

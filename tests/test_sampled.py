@@ -1,4 +1,4 @@
-"""Linear scenes driven by tables on one uniform grid of knots (smdcli.solvers.sampled): the record's double
+"""Linear scenes driven by tables on one uniform grid of knots (smdcli.solvers.exact.sampled): the record's double
 integral against exact rational arithmetic, and every case against the dense path's per-breakpoint steps."""
 
 from fractions import Fraction
@@ -10,7 +10,8 @@ from conftest import SCENARIOS, model_of
 from smdcli import scenario
 from smdcli.model import build, time_grid
 from smdcli.shapes.table import Table
-from smdcli.solvers import ground, sampled, solve
+from smdcli.solvers import ground, solve
+from smdcli.solvers.exact import sampled
 from smdcli.solvers.base import Tolerances
 
 SAMPLED = "steps between the tables' samples"
@@ -140,7 +141,7 @@ def test_a_large_classically_damped_chain_under_a_record_steps_its_modes_in_bloc
     """100 masses, damping proportional to stiffness, a ground acceleration record sampled twice as finely as the
     output: every mode's steps in blocks against the modal path's step-by-step walk, within their stated accuracies,
     in chunks of a few steps as in one (a chunk's end state carried to the next)."""
-    from smdcli.solvers import modal
+    from smdcli.solvers.exact import modal
 
     rng = np.random.default_rng(3)
     record = tmp_path / "record.csv"
@@ -171,7 +172,7 @@ def test_units_are_not_stiffness_a_balanced_exponential_matches_40_digits(tmp_pa
     (4.1e-15 measured; over 10 s, 8.4e-15 where double-double left 2.1e-15) and within the stated accuracy (5.0e-13)."""
     import mpmath as mp
 
-    from smdcli.solvers.exact import augmented
+    from smdcli.solvers.exact.linear import augmented
 
     rng = np.random.default_rng(11)
     record = tmp_path / "record.csv"

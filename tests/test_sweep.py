@@ -11,10 +11,9 @@ from conftest import SCENARIOS, force_block, model_of, one_dof
 from smdcli import scenario
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import time_grid
-from smdcli.solvers.accurate_expm import expm_stack
+from smdcli.solvers.exact.accurate_expm import expm_stack
 from smdcli.solvers.base import Tolerances
-from smdcli.solvers.closed_form import ClosedForm
-from smdcli.solvers.exact import Exact
+from smdcli.solvers.registry import solver_class
 from smdcli.sweep import (build_family, frequency_response, metrics, parse_frequency, parse_ic,
                           parse_values, read_spec, set_parameter, solve_family)
 
@@ -108,7 +107,7 @@ def test_four_regimes_match_the_closed_form():
     assert result.how.startswith("one batched exact recurrence")
     grid = time_grid(sc.time)
     for s in range(len(family)):
-        reference = ClosedForm().solve(family.model(s), grid, Tolerances())
+        reference = solver_class("closed_form")().solve(family.model(s), grid, Tolerances())
         assert np.abs(result.displacement[s] - reference.displacement).max() < 1e-13
         assert np.abs(result.velocity[s] - reference.velocity).max() < 1e-12
         assert np.abs(result.acceleration[s] - reference.acceleration).max() < 1e-10
@@ -160,7 +159,7 @@ def test_two_parameter_grid_matches_member_by_member_exact_solves():
         _, model, _ = model_of(one_dof(1.0, k=k, m=m, end=8.0, step=0.01,
                                        extra=force_block("sine", amplitude=2.0, omega=3.0)
                                        + force_block("step", amplitude=1.0, t0=2.004)))
-        reference = Exact().solve(model, grid, Tolerances())
+        reference = solver_class("exact")().solve(model, grid, Tolerances())
         assert np.abs(result.displacement[s] - reference.displacement).max() < 1e-12
         assert np.abs(result.acceleration[s] - reference.acceleration).max() < 1e-10
 
@@ -173,13 +172,13 @@ def test_force_parameter_family_is_batched_with_its_own_forces():
     assert "its own forces" in result.how
     for s, w in enumerate((1, 4, 5, 7)):
         _, model, grid = model_of(one_dof(0.5, end=10.0, step=0.01, extra=force_block("sine", amplitude=1.0, omega=w)))
-        reference = Exact().solve(model, grid, Tolerances())
+        reference = solver_class("exact")().solve(model, grid, Tolerances())
         assert np.abs(result.displacement[s] - reference.displacement).max() < 1e-12
 
 
 def test_nonlinear_coefficient_family_runs_on_threads_and_matches_single_runs():
     """A swept quadratic damping is one model with interpolated coefficients, solved in-process by the kernels."""
-    from smdcli.solvers.registry import solve
+    from smdcli.solvers.dispatch import solve
 
     text = one_dof(0.5, law="quadratic", end=3.0, step=0.01)
     family = family_of(text, parameter=("damper[0].c",), values=("0.5, 5, 50",))
@@ -198,7 +197,7 @@ def test_nonlinear_coefficient_family_runs_on_threads_and_matches_single_runs():
 
 
 def test_nonlinear_family_of_force_shapes_runs_in_a_process_pool_and_matches_single_runs():
-    from smdcli.solvers.registry import solve
+    from smdcli.solvers.dispatch import solve
 
     text = one_dof(0.5, law="quadratic", end=3.0, step=0.01, extra=force_block("sine", amplitude=1.0, omega=2.0))
     family = family_of(text, parameter=("force[0].omega",), values=("1, 3",))
@@ -291,7 +290,7 @@ def test_two_dof_receptance_matches_a_long_exact_simulation():
         text = sc.text.replace("omega = 10.0", f"omega = {w!r}").replace("amplitude = 3.3", "amplitude = 1.0")
         text = text.replace("end = 5.0\nstep = 0.005", f"end = {400 * period!r}\npoints = 40001")
         _, model, grid = model_of(text)
-        run = Exact().solve(model, grid, Tolerances())
+        run = solver_class("exact")().solve(model, grid, Tolerances())
         last = grid >= grid[-1] - period
         basis = np.stack([np.cos(w * grid[last]), np.sin(w * grid[last])], axis=1)
         for j in range(2):

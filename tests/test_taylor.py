@@ -14,7 +14,10 @@ from test_kernels import FORCES
 
 from smdcli.solvers import solve
 from smdcli.solvers.base import Tolerances
-from smdcli.solvers.taylor_series import Taylor, taylor_boundary, taylor_order
+from smdcli.solvers.integrators.taylor_series import taylor_boundary, taylor_order
+from smdcli.solvers.registry import solver_class
+
+Taylor = solver_class("taylor")
 
 TIGHT = Tolerances(rtol=1e-13, atol=1e-16)
 
@@ -48,7 +51,7 @@ def test_the_books_stiff_damper_at_its_settings_is_within_1e_9_of_a_tight_radau_
     """The book's c |v| v scene reverses 200 times: each reversal is a root of the velocity's series, where a step
     ends, so the series never spans the kink; its default run is 20x inside rtol, at a third of DOP853's work."""
     sc, model, grid = load("one_dof_nonlinear_stiff")
-    from smdcli.solvers.checked import solve_scenario
+    from smdcli.solvers.run import solve_scenario
 
     ours = solve_scenario(sc, model, grid)
     reference = solve(model, grid, "Radau", Tolerances(rtol=1e-12, atol=1e-16))
@@ -312,7 +315,7 @@ def whole_and_chunked(model, grid, tol, monkeypatch, cores):
     """A Taylor run written whole (its rows zeroed by the kernel), and one zeroed ahead a chunk at a time
     (taylor_series.zeroed_ahead, as for an output larger than the caches) with this many cores."""
     from smdcli import interrupts
-    from smdcli.solvers import taylor_series
+    from smdcli.solvers.integrators import taylor_series
 
     whole = Taylor().solve(model, grid, tol)
     monkeypatch.setattr(taylor_series, "ZEROED_IN_ONE_PASS", 0)

@@ -32,7 +32,6 @@ from smdcli.model import Model
 from smdcli.analysis.forces import element_forces
 from smdcli.model.sparse import cheapest, rows_times
 from smdcli.result import Energy, Result, largest_energy
-from smdcli.solvers.base import Tolerances
 
 VAN_LOAN_SIZE = 400  # largest augmented state taken in closed form: two exponentials of twice this size
 GAUSS_POINTS = 8
@@ -46,23 +45,7 @@ def with_physics(model: Model, result: Result) -> Result:
         elements = element_forces(model, result.displacement, result.velocity, result.nonsmooth)
     if result.nonsmooth is not None:  # the solver integrated the balance on its own pieces, modes known
         return result.changed(elements=elements, energy=result.nonsmooth.balance())
-    return result.changed(elements=elements, energy=energy_balance(model, result, dense_output(model, result)))
-
-
-def dense_output(model: Model, result: Result) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None:
-    """x(t), v(t) at any times from the same adaptive method and tolerances (its steps do not depend on where output is
-    asked for, so this is the run's own interpolant); None for methods without one."""
-    from smdcli.solvers.registry import get_solver, solve
-
-    s = result.stats
-    if not get_solver(s.method).adaptive or s.rtol is None:
-        return None
-
-    def states(times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        run = solve(model, times, s.method, Tolerances(rtol=s.rtol, atol=s.atol))
-        return run.displacement, run.velocity
-
-    return states
+    return result.changed(elements=elements, energy=energy_balance(model, result, result.interpolant))
 
 
 def mechanical_energy(model: Model, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -197,7 +180,7 @@ class _StepIntegrals:
         return self.cache[dt]
 
     def _compute(self, dt: float):
-        from smdcli.solvers.accurate_expm import expm_stack  # numpy only: scipy.linalg is 0.2 s of a start-up
+        from smdcli.solvers.exact.accurate_expm import expm_stack  # numpy only: scipy.linalg is 0.2 s of a start-up
 
         # Van Loan's block exponential on dt / 2^s with |A| dt / 2^s <= 1/2 (no growth of e^{-A^T t} to lose
         # digits in), then doubling: W(2t) = W(t) + Phi(t)^T W(t) Phi(t), Phi(2t) = Phi(t)^2.
@@ -218,7 +201,7 @@ class _StepIntegrals:
 
 def _closed_form(model: Model, result: Result) -> tuple[np.ndarray, np.ndarray]:
     """Cumulative dissipated and input energy by the closed-form integrals of every output step."""
-    from smdcli.solvers.exact import augmented
+    from smdcli.solvers.exact.linear import augmented
 
     A, blocks = augmented(model)
     size, n, grid = len(A), model.n, result.time

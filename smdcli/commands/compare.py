@@ -25,11 +25,11 @@ from smdcli.progress import bar, silent
 from smdcli.result import Result
 from smdcli.scenario import Scenario
 from smdcli.solvers.base import Tolerances, stated_tolerance
+from smdcli.solvers.registry import BY_NAME, method_problem, names
 from smdcli.commands.compare_nonsmooth import (NONSMOOTH_RTOLS, VARIANTS, cannot_represent, nonsmooth_defaults,
                                                refusals, run_energy, smoothed, split_variant, verdict)
 
-DEFAULT_ADAPTIVE = ("ode45", "ode23", "ode113", "ode15s", "ode23s", "ode23t", "ode23tb", "DOP853", "Radau", "LSODA")
-DEFAULT_FIXED = ("newmark", "hht", "generalized_alpha", "central_difference", "euler", "rk4")
+DEFAULTS = names(compare="adaptive") + names(compare="fixed")  # the registry's compare-solvers groups
 DEFAULT_RTOLS = tuple(10.0 ** -k for k in range(3, 11))
 # Steps as h * omega_max: either side of RK4's limit (2.83) and central difference's (2), then finer.
 DEFAULT_H_OMEGA = (3.0, 2.6, 2.1, 1.9, 1.0, 0.5, 0.2, 0.1, 0.05, 0.02)
@@ -91,21 +91,19 @@ def parse_methods(text: str | None, model: Model | None = None) -> list[str]:
     """A comma list of method names (a nonsmooth scene's may end /tanh or /penalty: run on its friction or stops
     smoothed), checked against the registry; by default every method, or for a nonsmooth scene the ODE family and
     three of them on its smoothed laws."""
-    from smdcli.solvers.catalog import check_method_name
-
     if not text:
         if model is not None and model.nonsmooth:
             return list(nonsmooth_defaults(model))
-        return list(DEFAULT_ADAPTIVE + DEFAULT_FIXED)
+        return list(DEFAULTS)
     methods = [m.strip() for m in text.split(",") if m.strip()]
     for m in methods:
         variant, base = split_variant(m)
         if variant is not None and variant not in VARIANTS:
             raise UsageError(f"--methods: {m!r}: expected /tanh or /penalty after a method, found /{variant}")
-        problem = check_method_name(base)
+        problem = method_problem(base)
         if problem:
             raise UsageError(f"--methods: {problem}")
-        if m in ("auto", "exact", "closed_form"):
+        if BY_NAME[base].family in ("choice", "exact"):
             raise UsageError(f"--methods: {m!r} is not compared: the reference is the exact solution or a tight run")
     if not methods:
         raise UsageError("--methods: expected a comma-separated list of methods, found nothing")
@@ -150,7 +148,7 @@ def parse_steps(text: str | None, omega_max: float, span: float) -> list[float]:
 
 def reference_solution(model: Model, grid: np.ndarray) -> tuple[Result, str, float]:
     """(reference, its name, its estimated error relative to its peak)."""
-    from smdcli.solvers.registry import solve
+    from smdcli.solvers.dispatch import solve
 
     if model.is_linear:
         exact = solve(model, grid, "exact", Tolerances())
@@ -188,7 +186,8 @@ def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], to
     """Run the plan; failures are recorded, never raised. A method that ran out of budget skips its tighter rungs.
     The step budget is STEP_BUDGET for Python-driven methods and COMPILED_STEP_BUDGET for compiled ones, unless
     `budget` says otherwise."""
-    from smdcli.solvers.registry import get_solver, solve
+    from smdcli.solvers.dispatch import solve
+    from smdcli.solvers.registry import get_solver
 
     reference, ref_name, ref_error = reference_solution(model, grid)
     if reference.stats.method == "exact":  # a point on the chart too: timed as the runs are, median of repeats
@@ -198,7 +197,7 @@ def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], to
             reference.stats, wall_time_s=statistics.median(times[1:])))
     omega_max = model.omega_max
     out = Comparison(sc, model, grid, reference, ref_name, ref_error, omega_max, breakpoints,
-                     refused=refusals(model, DEFAULT_ADAPTIVE + DEFAULT_FIXED, methods))
+                     refused=refusals(model, DEFAULTS, methods))
     peak = float(np.abs(reference.displacement).max()) or 1.0
     exhausted: set[str] = set()
     span = float(grid[-1] - grid[0])

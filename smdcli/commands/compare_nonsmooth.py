@@ -14,20 +14,18 @@ import numpy as np
 
 from smdcli.model import Model
 from smdcli.result import Result
-from smdcli.solvers.return_mapping import NEWMARK_FAMILY
+from smdcli.solvers.registry import BY_NAME, names
 
-
-NONSMOOTH_METHODS = ("ode45", "ode23", "ode15s", "ode23s", "ode23t", "ode23tb", "DOP853", "Radau", "LSODA",
-                     "newmark", "hht", "generalized_alpha", "central_difference")
 NONSMOOTH_RTOLS = (1e-3, 1e-5, 1e-7, 1e-9)  # a shorter ladder, as charted in the docs (LSODA steps from Python)
 
 
 def nonsmooth_defaults(model: Model) -> tuple[str, ...]:
     """The methods compared on a nonsmooth scene: those that take it (the Newmark family only with hysteretic
     springs alone), and DOP853, Radau and ode45 on its smoothed friction (/tanh) and stops (/penalty)."""
-    from smdcli.solvers.nonsmooth import nonsmooth_refusal
+    from smdcli.solvers.events.drivers import nonsmooth_refusal
 
-    methods = [m for m in NONSMOOTH_METHODS if nonsmooth_refusal(m, model) is None]
+    defaults = [m for group in ("adaptive", "fixed") for m in names(compare=group, nonsmooth=True)]
+    methods = [m for m in defaults if nonsmooth_refusal(m, model) is None]
     kinds = {e.kind for e in model.nonsmooth}
     rigid = any(e.kind == "stop" and e.law.rigid for e in model.nonsmooth)
     for variant, wanted in (("tanh", "friction" in kinds), ("penalty", rigid)):
@@ -38,7 +36,7 @@ def nonsmooth_defaults(model: Model) -> tuple[str, ...]:
 
 def refusals(model: Model, candidates, methods) -> dict[str, str]:
     """Why each candidate left out of `methods` cannot take the scene (the failure map's footnote)."""
-    from smdcli.solvers.nonsmooth import nonsmooth_refusal
+    from smdcli.solvers.events.drivers import nonsmooth_refusal
 
     if not model.nonsmooth:
         return {}
@@ -74,7 +72,7 @@ def verdict(result: Result, error: float, energy: float, growth: float, referenc
     if math.isfinite(energy) and energy > FAILED_ENERGY:
         return f"energy created or lost: the balance is off by {energy:.2g} of the largest energy"
     # the Newmark family return-maps its springs step by step, locating no event by design: its error is its answer
-    locates = result.stats.method not in NEWMARK_FAMILY
+    locates = not BY_NAME[result.stats.method].return_mapping
     if variant is None and locates and reference.nonsmooth is not None and result.nonsmooth is not None \
             and error > allowed:
         mine, theirs = _counts(result.nonsmooth.events), _counts(reference.nonsmooth.events)

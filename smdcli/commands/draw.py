@@ -9,7 +9,6 @@ from pathlib import Path
 
 import numpy as np
 
-from smdcli import scenario as scenario_mod
 from smdcli.errors import UsageError
 from smdcli.io.atomic import atomic_path
 from smdcli.io.folders import output_folder
@@ -18,12 +17,12 @@ from smdcli.plots.common import _figure, save_figure
 from smdcli.plots.schematic import SPACING, draw, layout, schematic_figure
 from smdcli.progress import bar
 from smdcli.scenario import TimeSpec
-from smdcli.solvers.checked import solve_checked
+from smdcli.solvers.run import load as load_checked, solve_checked
 
 
 def write_schematic(path: str | Path, out: str | Path) -> Path:
     """`smd draw`: OUT/<stem>_schematic.png."""
-    sc = scenario_mod.load(path)
+    sc = load_checked(path)
     build(sc)
     out_dir = output_folder(out)
     png = out_dir / f"{sc.stem}_schematic.png"
@@ -37,7 +36,7 @@ def animate(path: str | Path, out: str | Path, fps: int = 20, seconds: float | N
     """`smd animate`: OUT/<stem>.gif of the masses moving, displacements scaled to be seen, time stamped."""
     if not 1 <= fps <= 50:
         raise UsageError(f"--fps: expected 1 to 50 frames per second, found {fps}")
-    sc = scenario_mod.load(path)
+    sc = load_checked(path)
     t0 = sc.time.start if start is None else start
     t1 = sc.time.end if end is None else end
     if not sc.time.start <= t0 < t1 <= sc.time.end:

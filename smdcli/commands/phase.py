@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from smdcli import scenario as scenario_mod
+from smdcli.solvers.run import load as load_checked
 from smdcli.errors import UsageError
 from smdcli.model import time_grid
 from smdcli.progress import bar
@@ -71,7 +71,7 @@ def _runs(sc: Scenario, ics: tuple[str, ...]) -> list[tuple[str, Scenario]]:
 def _solve(sc: Scenario, method: str | None, events: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(t, x, v) of a run; with `events`, each located event's state merged in time order (a stop's contact point,
     a stick's corner: the samples alone cut them)."""
-    from smdcli.solvers.checked import solve_checked
+    from smdcli.solvers.run import solve_checked
 
     result = solve_checked(sc, method)
     return result.with_events() if events else (result.time, result.displacement, result.velocity)
@@ -85,7 +85,7 @@ def hysteretic_springs(sc: Scenario) -> list:
 def _loops(sc: Scenario, method: str | None, label: str | None) -> list[Curve]:
     """Force against deformation d = x_b - x_a of every hysteretic spring (Curve.x = d, Curve.v = tension)."""
     from smdcli.model import build
-    from smdcli.solvers.checked import solve_checked
+    from smdcli.solvers.run import solve_checked
     from smdcli.analysis.energy import with_physics
     from smdcli.result import merged
 
@@ -119,7 +119,7 @@ def portraits(paths: list[Path], out: Path, dofs: str | None = None, ics: tuple[
     The name is the scenario's stem, `<first>_and_<k>_more` for several scenarios, or `name`."""
     from smdcli.io.folders import output_folder
 
-    scenarios = [scenario_mod.load(p) for p in paths]
+    scenarios = [load_checked(p) for p in paths]
     if ics and len(scenarios) > 1:
         raise UsageError("--ic: give one scenario with an initial-condition family")
     if name is not None and not _NAME.fullmatch(name):

@@ -80,7 +80,7 @@ def psd(path: str | Path, spec: str, out: str | Path, on: str | None = None, uni
         plots: bool = True) -> PsdRun:
     """Read the scene and the input PSD, compute the response PSDs and RMS values, write OUT/<stem>_psd.*."""
     from smdcli.model import build
-    from smdcli.scenario import load
+    from smdcli.solvers.run import load
 
     path = Path(path)
     support = on is None

@@ -86,7 +86,7 @@ def rsa(path: str | Path, spectrum: str | Path, out: str | Path, combination: st
         plots: bool = True) -> RsaRun:
     """Read the scene and the spectrum, combine the modal peaks, write OUT/<stem>_rsa.h5 and .png."""
     from smdcli.model import build
-    from smdcli.scenario import load
+    from smdcli.solvers.run import load
 
     path = Path(path)
     if combination not in COMBINATIONS:

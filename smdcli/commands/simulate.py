@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 
-from smdcli import scenario as scenario_mod
 from smdcli.errors import SolverFailed, UsageError
 from smdcli.io.folders import output_folder
 from smdcli.model import GROUND_DOF, Model, build, time_grid
@@ -19,7 +18,7 @@ from smdcli.model.sparse import SPARSE_DOFS
 from smdcli.solvers.peaks import result_peaks
 from smdcli.result import Result
 from smdcli.scenario import Scenario
-from smdcli.solvers.checked import failure_message, solve_scenario
+from smdcli.solvers.run import load as load_checked, failure_message, solve_scenario
 from smdcli.strict_json import status
 
 
@@ -49,7 +48,7 @@ class Run:
 
 def prepare(path: str | Path) -> tuple[Scenario, Model, np.ndarray]:
     """Load, validate and assemble: every input error surfaces here, before any work."""
-    sc = scenario_mod.load(path)
+    sc = load_checked(path)
     return sc, build(sc), time_grid(sc.time)
 
 
@@ -265,7 +264,7 @@ def info(path: str | Path, state_space: Path | None = None) -> dict:
         ratio0 = float(re.max() / re.min()) if len(re) else 1.0
         data["linearized_at_start"] = {"eigenvalues": [[float(e.real), float(e.imag)] for e in lam],
                                        "stiffness_ratio": ratio0}
-        from smdcli.solvers.taylor_series import Taylor
+        from smdcli.solvers.integrators.taylor_series import Taylor
 
         unsupported = Taylor.unsupported(model)
         explicit = "DOP853" if unsupported else "taylor"

@@ -249,7 +249,7 @@ def _check_cost(record: Record, periods: np.ndarray, dampings: int) -> None:
 
 def scenario_record(path: Path) -> Record:
     """The ground acceleration record of a scenario's [ground_motion] (a table of acceleration), in m/s^2."""
-    from smdcli.scenario import load
+    from smdcli.solvers.run import load
     from smdcli.scenario.records import sampled_record
 
     sc = load(path)

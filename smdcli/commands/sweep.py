@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from smdcli import interrupts
-from smdcli import scenario as scenario_mod
+from smdcli.solvers.run import load as load_checked
 from smdcli.errors import UsageError
 from smdcli.progress import bar
 from smdcli.sweep.family import Family, build_family
@@ -56,7 +56,7 @@ def run_and_write(path, out, cli: dict[str, Any], workers: int | None = None, pl
     from smdcli.io.atomic import together
     from smdcli.io.folders import output_folder
 
-    sc = scenario_mod.load(path)
+    sc = load_checked(path)
     spec = read_spec(sc, cli)
     family = build_family(sc, spec)
     if spec.frequency is not None:

@@ -9,7 +9,7 @@ and in a mode its tension is a Piece: a stiffness and a damping added along d, a
 holds d (or d') where it is, the tension then being whatever keeps it there. A mode ends where a Guard's quantity
 (d, d', or a held element's tension) crosses its level in its direction: the event. For a piecewise-linear law
 every quantity is linear in the state, so a scene of such elements is linear between events and solved exactly
-(smdcli.solvers.piecewise); a smooth law adds a nonlinear tension (and internal states) that integrators take.
+(smdcli.solvers.events.piecewise); a smooth law adds a nonlinear tension (and internal states) that integrators take.
 
 Imports nothing of smd but errors (the bottom layer): the scenario reader, the model and the solvers consult it.
 """

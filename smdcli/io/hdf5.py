@@ -13,11 +13,11 @@ import numpy as np
 from smdcli import __version__, provenance
 from smdcli.io.atomic import atomic_path
 from smdcli.model import Model
-from smdcli.model.accuracy import derived_accuracy, evaluation_accuracy, matrix_accuracy, modes_accuracy
+from smdcli.model.accuracy import (acceleration_accuracy, derived_accuracy, evaluation_accuracy, matrix_accuracy,
+                                   modes_accuracy)
 from smdcli.model.nonsmooth import initial_stiffness
 from smdcli.result import Result
 from smdcli.scenario import Scenario
-from smdcli.solvers.base import acceleration_accuracy
 
 SCHEMA_VERSION = 1
 TIME_ACCURACY = float(np.finfo(float).eps)  # each output time is a decimal start + k*step rounded once

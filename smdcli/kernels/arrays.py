@@ -47,7 +47,7 @@ class ModelArrays(NamedTuple):
     f_data: np.ndarray  # tables (times then values), Fourier terms (harmonics then coefficients), constants
     f_cptr: np.ndarray  # (F + 1,) int: each expression's slice of f_code
     f_code: np.ndarray  # postfix opcodes of expression forces
-    # A nonsmooth scene in one mode (smdcli.solvers.modes): empty for smooth models. The state is then
+    # A nonsmooth scene in one mode (smdcli.solvers.events.scene): empty for smooth models. The state is then
     # [x, v, q, energy]: q the laws' internal variables, energy the ACCUMULATED powers' integrals; a_* and mi_*
     # hold the mode's P M^-1 [-Kt, -Ct] and P M^-1 (P projects out the held rows' accelerations).
     ns_q: int  # internal variables (0 for smooth models)

@@ -4,7 +4,7 @@ Cholesky, every step then O(n w) for a band of half-width w (a chain's is 1).
 
 A band is held in LAPACK's lower form: band[d, j] = A[j + d, j], d = 0..w. Cubic springs and quadratic dampers
 (few, two-terminal) enter each step by modified Newton on the linear factor, refactored at the tangent where it
-contracts slowly, as smdcli.solvers.sparse_newmark does in Python.
+contracts slowly, as smdcli.solvers.integrators.sparse_newmark does in Python.
 
 Must not import: solvers, sweep, io, plots, commands, cli.
 """

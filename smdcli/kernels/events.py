@@ -5,7 +5,7 @@ carries the laws' internal variables and the energy terms' powers with the motio
 error control holds them. After every accepted step each guard is looked at on the step's dense output (its
 ends and INTERIOR points between, so that a touch within a step is seen), the first crossing located on that
 interpolant by Brent's method to rounding, and the run stops there; the decisions at the event (stick or slip,
-impact, yield ...) are taken by the caller (smdcli.solvers.nonsmooth_ivp), which starts the next mode. No
+impact, yield ...) are taken by the caller (smdcli.solvers.events.integrated), which starts the next mode. No
 Python runs between two events.
 
 Must not import: solvers, sweep, io, plots, commands, cli.

@@ -1,4 +1,4 @@
-"""Compiled fixed-step methods: the generalized-alpha family (Newmark, HHT, central difference are cases
+"""Compiled fixed-step methods: the generalized-alpha family (Newmark, Hilber-alpha, central difference are cases
 of it) on M a + C v + K x + f_nl(x, v) = F(t), and classic Euler and RK4 on the state equation.
 
 Each stretch between cuts (force discontinuities) is cut into equal steps no longer than dt, so a step

@@ -8,7 +8,7 @@ over as the same arguments (method, t_old, h, y_old, y_new, K, F, Q), the interp
 - RADAU: the collocation polynomial y_old + Q [x, x^2, x^3], x = (t - t_old) / h;
 - BDF: the difference polynomial of the difference array K, about F[0] = (t, h, order) (scipy's BdfDenseOutput);
 - ROSENBROCK: ode23s's free interpolant y_old + h (a(x) K[0] + b(x) K[1]) from its stages k1, k2;
-- HERMITE: the cubic Hermite polynomial through (y_old, K[0] = f) and (y_new, K[1] = f_new) (ode23t, ode23tb).
+- HERMITE: the cubic Hermite polynomial through (y_old, K[0] = f) and (y_new, K[1] = f_new) (the trapezoidal rule and TR-BDF2).
 
 Must not import: solvers, sweep, io, plots, commands, cli.
 """
@@ -94,7 +94,7 @@ def guard_value(m, g, y, work):
 @no_alloc
 def _rounding(value, level):
     """How far from its level a guard's value (quantity less level) is rounding of it: 64 ulps of what it sums,
-    as smdcli.solvers.modes.at_level."""
+    as smdcli.solvers.events.scene.at_level."""
     return 64 * EPS * (abs(value + level) + abs(level))
 
 
@@ -178,7 +178,7 @@ def _at(m, method, t_old, h, y_old, y_new, K, F, Q, s, mid, work, jwork, arg, wh
 @no_alloc
 def _root(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, when, row, dy, g, a, b, fa, fb):
     """Brent's method (scipy's brentq) for guard g's crossing in [a, b] on the interpolant, to rounding: xtol
-    2 eps (b - a), rtol 4 eps, as smdcli.solvers.modes.event_root."""
+    2 eps (b - a), rtol 4 eps, as smdcli.solvers.events.scene.event_root."""
     xtol = 2 * EPS * (b - a)
     rtol = 4 * EPS
     pre, cur = a, b

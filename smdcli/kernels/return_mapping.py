@@ -1,4 +1,4 @@
-"""The Newmark family (generalized-alpha: Newmark, HHT, central difference are cases of it) on scenes with
+"""The Newmark family (generalized-alpha: Newmark, Hilber-alpha, central difference are cases of it) on scenes with
 hysteretic springs, compiled: each step's Newton iteration on the new acceleration evaluates every spring by its
 return mapping from the last committed state (elastoplastic and bilinear: the trial force projected back onto the
 yield surface; Bouc-Wen: z by the trapezoidal rule, solved by Newton), with its consistent tangent in the
@@ -8,7 +8,7 @@ iteration matrix, and commits the state only when the step has converged, as str
     x1 = x0 + h v0 + h^2 ((1/2 - beta) a0 + beta a1),   v1 = v0 + h ((1 - gamma) a0 + gamma a1).
 
 Every step's state, the springs' tensions and internal variables and the energy terms (trapezoid rule a step,
-the method's order) are written out; smdcli.solvers.return_mapping puts them on the output grid. The elastic-
+the method's order) are written out; smdcli.solvers.events.return_mapping puts them on the output grid. The elastic-
 plastic return map is smdcli.elements.elastoplastic.return_map's, Bouc-Wen's step the trapezoidal rule on its
 z' (tests hold them equal).
 

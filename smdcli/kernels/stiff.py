@@ -1,6 +1,6 @@
 """MATLAB's low-order stiff solvers compiled: ode23s, ode23t and ode23tb, with the model's analytic Jacobian.
 
-The formulas, error estimates, simplified Newton iteration and step control are smdcli.solvers.stiff23's
+The formulas, error estimates, simplified Newton iteration and step control are smdcli.solvers.integrators.stiff23's
 (whose scipy-driven classes stay as the reference these kernels are tested against):
 
 - ode23s: the Rosenbrock 2(3) pair of Shampine and Reichelt with its free second-order interpolant;

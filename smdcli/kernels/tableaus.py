@@ -10,7 +10,7 @@ import numpy as np
 
 # The pairs, as the compiled kernel's method argument.
 RK23, RK45, DOP853 = 0, 1, 2
-# ode23s, ode23t, ode23tb, as smdcli.kernels.stiff's method argument; d = 1 / (2 + sqrt 2) of the Rosenbrock pair.
+# Rosenbrock 2(3), the trapezoidal rule and TR-BDF2, as smdcli.kernels.stiff's method argument; d = 1 / (2 + sqrt 2) of the Rosenbrock pair.
 ROSENBROCK23, TRAPEZOID, TRBDF2 = 0, 1, 2
 ROS_D = 1 / (2 + 2 ** 0.5)
 

@@ -4,8 +4,8 @@ Every error names the file and the field path (``spring[2].k``); TOML syntax err
 Unknown keys are errors, named before anything they leave missing, with the key they most likely mean.
 
 Modules: spec (the dataclasses), reader (one table's typed fields), load (file or text -> Scenario),
-structure, forces, options (the tables). Must not import: model, solvers (but solvers.catalog, plain
-data), sweep, io, plots, commands, cli.
+structure, forces, options (the tables). Must not import: model, solvers (a
+method's name and options are checked by smdcli.solvers.run), sweep, io, plots, commands, cli.
 """
 
 from smdcli.scenario.load import load, parse, parse_document

@@ -1,6 +1,6 @@
 """TOML file or text -> validated Scenario: load, parse, parse_document, and the checks across tables.
 
-Must not import: model, solvers (but the catalog's data), or any layer above."""
+Must not import: model, solvers, or any layer above."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from pathlib import Path
 
 from smdcli.errors import ScenarioError
 from smdcli.scenario.forces import _ANY_FORCE_KEYS, GROUND_KEYS, _read_force, _read_ground_motion
-from smdcli.scenario.options import EXPECT_KEYS, SOLVER_KEYS, SWEEP_KEYS, _read_expect, _read_solver, _read_sweep
+from smdcli.scenario.options import EXPECT_KEYS, SWEEP_KEYS, _read_expect, _read_solver, _read_sweep
 from smdcli.scenario.reader import (_SYSTEM_KEYS, _TIME_KEYS, _TOP_KEYS, MAX_SCENARIO_BYTES, _NotRegular, _Table,
                                     read_regular_file)
 from smdcli.scenario.spec import MAX_SAMPLES, Scenario, SolverSpec, TimeSpec
@@ -98,7 +98,7 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
     forces = tuple(
         _read_force(_Table(file, f"force[{i}]", raw, _ANY_FORCE_KEYS), i, dofs) for i, raw in enumerate(top.tables("force"))
     )
-    solver = _read_solver(_Table(file, "solver", top.raw("solver"), SOLVER_KEYS)) if top.has("solver") else SolverSpec()
+    solver = _read_solver(_Table(file, "solver", top.raw("solver"))) if top.has("solver") else SolverSpec()
     sweep = _read_sweep(_Table(file, "sweep", top.raw("sweep"), SWEEP_KEYS)) if top.has("sweep") else ()
     damping = _read_damping(_Table(file, "damping", top.raw("damping"), DAMPING_KEYS), len(dofs)) \
         if top.has("damping") else None

@@ -1,7 +1,7 @@
 """Reading one TOML table: typed fields, unknown keys named with the key they most likely mean, files read
 without blocking.
 
-Must not import: model, solvers (but the catalog's data), or any layer above."""
+Must not import: model, solvers, or any layer above."""
 
 from __future__ import annotations
 

@@ -4,7 +4,9 @@ types, methods and choices that the reader validates with, so that a key the rea
 What the schema checks is the structure: the tables, their keys (no other), each value's type, the choices. What
 it cannot say (a spring between two masses that exist, end after start, a positive-definite M) only smd checks.
 
-Must not import: model, solvers (but their catalog), or any layer above."""
+The [solver] table's methods and options are the solvers' registry's: smdcli.commands.schema puts them in.
+
+Must not import: model, solvers, or any layer above."""
 
 from __future__ import annotations
 
@@ -15,7 +17,6 @@ from smdcli.scenario.reader import _MASS_KEYS, _SYSTEM_KEYS, _TIME_KEYS, _TOP_KE
 from smdcli.scenario.spec import EXPECT_QUANTITIES, FORCE_TYPES, GROUND_QUANTITIES, GROUND_UNITS
 from smdcli.scenario.structure import DAMPING_KEYS
 from smdcli.shapes.registry import SHAPES
-from smdcli.solvers.catalog import METHOD_NAMES, NEWMARK_SCHEMES
 
 NUMBER = {"type": "number"}
 INTEGER = {"type": "integer"}
@@ -34,8 +35,8 @@ SPECIAL = {
     "type": {"enum": list(FORCE_TYPES)}, "expr": STRING, "file": STRING, "t": NUMBERS,
     "values": {"anyOf": [NUMBERS, STRING, {"type": "array", "items": {"anyOf": [NUMBERS, STRING]}}]},
     "interpolation": {"enum": ["linear", "previous"]}, "terms": INTEGER, "points": INTEGER, "mode": INTEGER,
-    "dofs": STRINGS, "M": MATRIX_OR_FILE, "C": MATRIX_OR_FILE, "K": MATRIX_OR_FILE, "method": {"enum": list(METHOD_NAMES)},
-    "scheme": {"enum": list(NEWMARK_SCHEMES)}, "parameter": {"anyOf": [STRING, STRINGS]}, "labels": STRINGS,
+    "dofs": STRINGS, "M": MATRIX_OR_FILE, "C": MATRIX_OR_FILE, "K": MATRIX_OR_FILE, "method": STRING,
+    "parameter": {"anyOf": [STRING, STRINGS]}, "labels": STRINGS,
     "ic": STRINGS, "frequency": {"anyOf": [NUMBER, STRING]}, "normalized": BOOLEAN, "input": STRING,
     "direction": {"enum": ["up", "down", "both"]}, "measure": BOOLEAN, "metric": STRING,
     "omega": {"anyOf": [NUMBER, NUMBERS]}, "modal": {"anyOf": [NUMBER, NUMBERS]},
@@ -56,7 +57,8 @@ def _array_of(table: dict) -> dict:
 
 
 def scenario_schema() -> dict:
-    """The JSON Schema of a scenario TOML document (as JSON: TOML's tables are objects, its arrays arrays)."""
+    """The JSON Schema of a scenario TOML document (as JSON: TOML's tables are objects, its arrays arrays), with the
+    [solver] table's own keys only and any method name (the registry's are added above)."""
     spring_keys = ("connects", "k", "law", "k3") + tuple(
         dict.fromkeys(k for law in SPRING_LAWS.values() for k in law.keys if k != "k"))
     arrays = {key: {"anyOf": [NUMBER, NUMBERS]} for law in SPRING_LAWS.values() for key in law.arrays}
@@ -76,8 +78,7 @@ def scenario_schema() -> dict:
                    "if": {"properties": {"M": {"type": "array"}}, "required": ["M"]}, "then": {"required": ["dofs"]}},
         "force": _array_of(force),
         "solver": _table(SOLVER_KEYS),
-        "sweep": _table(SWEEP_KEYS, quantity={"enum": ["displacement", "velocity", "acceleration", "force"]},
-                        method={"enum": list(METHOD_NAMES)}),
+        "sweep": _table(SWEEP_KEYS, quantity={"enum": ["displacement", "velocity", "acceleration", "force"]}),
         "damping": _table(DAMPING_KEYS, omega={**NUMBERS, "minItems": 2, "maxItems": 2}),
         "ground_motion": ground,
         "expect": _array_of(_table(EXPECT_KEYS, ["quantity"], quantity={"enum": list(EXPECT_QUANTITIES)})),

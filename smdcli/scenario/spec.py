@@ -154,7 +154,7 @@ class SolverSpec:
     rtol: float = 1e-6
     atol: float = 1e-9
     dt: float | None = None
-    options: tuple[tuple[str, float | str], ...] = ()  # beta, gamma, scheme (newmark), alpha (hht), rho_inf
+    options: tuple[tuple[str, float | str], ...] = ()  # a method's own [solver] options (the registry's)
 
 
 EXPECT_QUANTITIES = ("peak_displacement", "rms_displacement", "settling_time", "natural_frequency",

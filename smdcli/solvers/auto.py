@@ -12,11 +12,11 @@ import numpy as np
 from smdcli.model import GROUND_DOF, Model
 from smdcli.result import Result
 from smdcli.solvers.base import Solver, Tolerances
-from smdcli.solvers.closed_form import ClosedForm
-from smdcli.solvers.exact import Exact, sparse_action
-from smdcli.solvers.modal import modal_applies
-from smdcli.solvers.compiled import DOP853, Radau, StiffnessDetected
-from smdcli.solvers.taylor_series import Taylor, taylor_boundary, taylor_order
+from smdcli.solvers.exact.linear import sparse_action
+from smdcli.solvers.exact.modal import modal_applies
+from smdcli.solvers.integrators.compiled import StiffnessDetected
+from smdcli.solvers.integrators.taylor_series import Taylor, taylor_boundary, taylor_order
+from smdcli.solvers.registry import get_solver, solver_class
 
 
 def _force_kinds(model: Model, exact: bool | None = None) -> str:
@@ -49,24 +49,20 @@ STIFFNESS_NOTE_DOFS = 200  # beyond, the reason names stiffness only where the s
 class Auto(Solver):
     """Closed form or exact for linear scenes; for the rest, explicit unless the trajectory proves stiff."""
 
-    name = "auto"
-    family = "choice"
-    description = "picks the cheapest method that is exact or accurate enough, and says why"
-
     def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
         solver, reason = self.choose(model, grid)
         abandoned_s = 0.0  # an explicit attempt given up as stiff still cost its time
         if solver is None:  # nonlinear: try explicit with a stiffness watch
             nonlinear = f"nonlinear ({', '.join(model.nonlinear_paths)})"
             why_not = Taylor.unsupported(model)
-            explicit = DOP853(watch=True, land=True) if why_not else Taylor(watch=True)
+            explicit = get_solver("DOP853", watch=True, land=True) if why_not else get_solver("taylor", watch=True)
             try:
                 result = explicit.solve(model, grid, tol)
                 watch = explicit.watch
                 if why_not:
                     how = (f"compiled DOP853 (no Taylor series for {why_not}), its steps ending at quadratic dampers' "
                            "velocity reversals")
-                    limit = DOP853.stability_boundary
+                    limit = solver_class("DOP853").stability_boundary
                 else:
                     order = taylor_order(tol.rtol)
                     how = (f"compiled Taylor series of order {order} (smooth, polynomial elements: its terms by "
@@ -76,13 +72,13 @@ class Auto(Solver):
                           f"(max h*|lambda| = {watch.max_rho:.2f}, limit {limit}): not stiff along this trajectory")
             except StiffnessDetected as stiff:
                 abandoned_s = stiff.elapsed_s
-                result = Radau().solve(model, grid, tol)
+                result = get_solver("Radau").solve(model, grid, tol)
                 name = "DOP853" if why_not else "Taylor series"
                 reason = (f"{nonlinear} and stiff: the explicit {name} was "
                           f"stability-limited on {stiff.fraction:.0%} of its steps by t = {stiff.t:.3g} s "
                           f"(h*|lambda| = {stiff.rho:.2f}); implicit Radau with the analytic Jacobian")
         elif model.nonsmooth:
-            from smdcli.solvers.nonsmooth import solve_nonsmooth
+            from smdcli.solvers.events.drivers import solve_nonsmooth
 
             result = solve_nonsmooth(solver, model, grid, tol)
         else:
@@ -98,10 +94,8 @@ class Auto(Solver):
         if model.nonsmooth:
             return _nonsmooth_choice(model)
         if model.is_sparse:
-            from smdcli.solvers.sparse_newmark import SparseNewmark
-
             kind = "linear" if model.is_linear else f"nonlinear ({', '.join(model.nonlinear_paths)})"
-            return SparseNewmark(), (
+            return get_solver("sparse_newmark"), (
                 f"{kind}, {model.n} DOFs, sparse: an exact modal solution would hold {model.n}^2 mode-shape entries "
                 f"({8 * model.n ** 2 / 2**30:.2g} GiB) and take longer (n^2 per output point); Newmark average "
                 "acceleration on the sparse matrices instead, one factorization reused across steps, extrapolated "
@@ -114,22 +108,22 @@ class Auto(Solver):
                      if told and model.is_stiff else "")
             if model.n == 1 and not model.is_forced and model.ground is None:
                 regime = model.modes.regimes[0]
-                return ClosedForm(), f"linear 1-DOF free response ({regime}): closed form, exact to rounding{stiff}"
+                return get_solver("closed_form"), f"linear 1-DOF free response ({regime}): closed form, exact to rounding{stiff}"
             if all(s.exo() is not None for s in model.signals):
                 forced = f"{_loads(model)} integrated exactly between discontinuities" \
                     if model.is_forced or model.ground is not None else "free response"
                 if modal_applies(model):
-                    return Exact(), (f"linear time-invariant, classically damped, {forced}: in modal coordinates "
+                    return get_solver("exact"), (f"linear time-invariant, classically damped, {forced}: in modal coordinates "
                                      f"({model.n} exact 1-DOF recurrences), exact to rounding{stiff}")
                 if sparse_action(model, grid) is not None:
-                    return Exact(), (f"linear time-invariant, damping not proportional, {forced}: the exponential's "
+                    return get_solver("exact"), (f"linear time-invariant, damping not proportional, {forced}: the exponential's "
                                      f"action on the sparse state matrix (cheaper than the dense {2 * model.n}-square "
                                      f"exponential), exact to rounding{stiff}")
-                return Exact(), f"linear time-invariant, {forced}: matrix exponential, exact to rounding{stiff}"
+                return get_solver("exact"), f"linear time-invariant, {forced}: matrix exponential, exact to rounding{stiff}"
             if model.is_stiff:
-                return Radau(), (f"linear, but {_unheld(model)} has no exact integral, and stiff "
+                return get_solver("Radau"), (f"linear, but {_unheld(model)} has no exact integral, and stiff "
                                  f"(stiffness ratio {model.stiffness_ratio:.3g}): implicit Radau at the scenario's tolerances")
-            return DOP853(), (f"linear, but {_unheld(model)} has no exact integral; not stiff "
+            return get_solver("DOP853"), (f"linear, but {_unheld(model)} has no exact integral; not stiff "
                               f"(stiffness ratio {model.stiffness_ratio:.3g}): DOP853 at the scenario's tolerances")
         return None, ""
 
@@ -140,18 +134,16 @@ def _nonsmooth_choice(model: Model) -> tuple[Solver, str]:
     otherwise."""
     laws = ", ".join(f"{e.path} {getattr(e.law, 'law_name', e.law.name)}" for e in model.nonsmooth)
     if model.is_piecewise_linear and all(s.exo() is not None for s in model.signals):
-        return Exact(), (f"piecewise linear ({laws}), {_loads(model) if model.is_forced or model.ground else 'free'}: "
+        return get_solver("exact"), (f"piecewise linear ({laws}), {_loads(model) if model.is_forced or model.ground else 'free'}: "
                          "exact between events, each event located on the exact flow to rounding")
     stiff = [e.path for e in model.nonsmooth if e.law.stiff]
     uncompiled = [e.path for e in model.nonsmooth if not e.law.compiled]
     if uncompiled:  # scipy's pair, stepped from Python: the compiled ones cannot evaluate its tension
-        from smdcli.solvers.ivp import ScipyDOP853, ScipyRadau
-
-        solver = ScipyRadau() if stiff else ScipyDOP853()
+        solver = get_solver("scipy:Radau" if stiff else "scipy:DOP853")
         return solver, (f"nonsmooth ({laws}); {', '.join(uncompiled)} has no compiled kernel: {solver.name}, each "
                         "event located on its interpolant, restarted there")
     if stiff:
-        return Radau(), (f"nonsmooth ({laws}); {', '.join(stiff)} stiff where it saturates or sticks: "
+        return get_solver("Radau"), (f"nonsmooth ({laws}); {', '.join(stiff)} stiff where it saturates or sticks: "
                                      "implicit Radau, each event located on its interpolant, restarted there")
-    return DOP853(), (f"nonsmooth ({laws}), not linear between events: DOP853 at the scenario's "
+    return get_solver("DOP853"), (f"nonsmooth ({laws}), not linear between events: DOP853 at the scenario's "
                                   "tolerances, each event located on its interpolant, restarted there")

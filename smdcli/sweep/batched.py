@@ -10,7 +10,7 @@ from typing import Callable
 import numpy as np
 
 from smdcli.model import Model
-from smdcli.solvers.accurate_expm import expm_stack
+from smdcli.solvers.exact.accurate_expm import expm_stack
 from smdcli.sweep.family import Family
 
 # ------------------------------------------------------ batched linear runs
@@ -31,7 +31,7 @@ def shared_signal_recurrence(family: Family, grid: np.ndarray) -> tuple[np.ndarr
     function that derives the acceleration when it is wanted (it costs as much as the recurrence).
     """
     from smdcli.solvers.base import segments
-    from smdcli.solvers.exact import augmented
+    from smdcli.solvers.exact.linear import augmented
 
     base = family.base
     n, N, S = base.n, len(grid), len(family)
@@ -136,7 +136,7 @@ def batched_exact(models: list[Model], grid: np.ndarray) -> tuple[np.ndarray, np
     frequency, say) but the same breakpoints: each member's augmented system, one recurrence for all.
     None when the members' force structures or breakpoints differ."""
     from smdcli.solvers.base import segments
-    from smdcli.solvers.exact import augmented
+    from smdcli.solvers.exact.linear import augmented
 
     if not all(m.is_linear and all(s.exo() is not None for s in m.signals) for m in models):
         return None

@@ -63,7 +63,7 @@ def _status(result) -> tuple:
 
 def _solve_member(args: tuple[Scenario, str | None]) -> tuple:
     """Worker: solve one member with its own solver settings (or the override): (histories, status)."""
-    from smdcli.solvers.checked import solve_scenario
+    from smdcli.solvers.run import solve_scenario
 
     sc, method = args
     result = solve_scenario(sc, build(sc), time_grid(sc.time), method)
@@ -73,7 +73,7 @@ def _solve_member(args: tuple[Scenario, str | None]) -> tuple:
 def _solve_model(args: tuple[Family, int, np.ndarray, str | None, dict[str, np.ndarray]]) -> tuple:
     """Thread task: solve member s of a family that holds matrices and coefficients, not scenarios, writing its
     histories straight into row s of the family's stacks; returns its status."""
-    from smdcli.solvers.checked import solve_scenario
+    from smdcli.solvers.run import solve_scenario
 
     family, s, grid, method, stacks = args
     result = solve_scenario(family.scenario, family.model(s), grid, method)

@@ -54,7 +54,7 @@ def run_threads(function: Callable, tasks: list, workers: int, progress: Callabl
     global _TICKS
     from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
-    from smdcli.solvers.compiled import warm
+    from smdcli.solvers.integrators.compiled import warm
 
     warm()  # once, here: threads must not race to compile
     results: list = [None] * len(tasks)

@@ -26,7 +26,7 @@ def _one_period(model: Model, y: np.ndarray, period: float, variational: bool):
     """Integrate one forcing period from state y at t = 0 (compiled DOP853, rtol 1e-10), with the monodromy
     matrix if asked: (final state, monodromy or None, the state at PERIOD_SAMPLES even times over the period)."""
     from smdcli.kernels.tableaus import DOP853
-    from smdcli.solvers.compiled import run_kernel, warm
+    from smdcli.solvers.integrators.compiled import run_kernel, warm
 
     warm()
     m = len(y)

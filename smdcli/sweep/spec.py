@@ -14,6 +14,7 @@ import numpy as np
 
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.scenario import Scenario
+from smdcli.solvers.registry import METHODS, method_problem
 
 MAX_MEMBERS = 100_000  # values of one parameter
 MAX_GRID_MEMBERS = 10_000_000  # members of a two-parameter grid (memory is checked too: see family.py)
@@ -61,7 +62,7 @@ METRIC_UNITS = {"peak_displacement": "m", "rms_displacement": "m", "settling_tim
 QUANTITIES = ("displacement", "velocity", "acceleration", "force")
 DIRECTIONS = ("up", "down", "both")
 SETTLING_BAND = 0.02  # settling time: the last time the response leaves 2 % of its largest excursion
-EXACT_METHODS = ("auto", "exact", "closed_form")
+EXACT_METHODS = tuple(m.name for m in METHODS if m.family in ("choice", "exact"))  # the batched recurrence's
 
 
 # ------------------------------------------------------------------ specs
@@ -245,6 +246,8 @@ def read_spec(sc: Scenario, cli: dict[str, Any]) -> SweepSpec:
             raise fail("labels", f"expected {count} labels (one per member), found {len(labels)}")
     if normalized and frequency is None:
         raise fail("normalized", "applies to a frequency response (--frequency) only")
+    if pick("method") is not None and method_problem(pick("method")):
+        raise fail("method", method_problem(pick("method")))
     if frequency is not None and pick("method") is not None:
         raise fail("method", "does not apply to a frequency response: it is exact for a linear scene, "
                    "and measured with DOP853 at rtol 1e-10 otherwise")

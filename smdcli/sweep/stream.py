@@ -84,7 +84,7 @@ def measure_chunk(family: Family, members: range, result: FamilyResult, keep: st
                   length: int, quantity: str) -> Chunk:
     """A solved chunk's metrics and status; its histories kept (keep="full") or dropped, apart from the members
     an overlay plot draws."""
-    from smdcli.solvers.base import acceleration_accuracy
+    from smdcli.model.accuracy import acceleration_accuracy
 
     part = family.take(members)
     errors: dict[str, np.ndarray] = {}

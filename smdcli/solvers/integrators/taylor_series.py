@@ -17,7 +17,7 @@ import numpy as np
 from smdcli.model import Model
 from smdcli.result import Result
 from smdcli.solvers.base import MAX_STEPS, Solver, Tolerances, cuts, divergence_bound, make_result
-from smdcli.solvers.compiled import Watch, explicit_outcome, warm
+from smdcli.solvers.integrators.compiled import Watch, explicit_outcome, warm
 
 
 # A Taylor step's tolerance: this share of rtol and atol. The steps' errors add up over a run (the global error is
@@ -46,10 +46,6 @@ def taylor_boundary(order: int) -> float:
 class Taylor(Solver):
     """Taylor series of the motion, its coefficients by recurrence, summed compiled (smdcli.kernels.taylor)."""
 
-    name = "taylor"
-    family = "compiled Taylor series"
-    description = ("Taylor series of order 8-30 (by the tolerance), coefficients by recurrence, compiled; for smooth "
-                   "scenes with cubic springs, quadratic dampers and forces of every shape but a frequency sweep and an expression")
     compiled = True
     order = None
     watch: Watch | None = None

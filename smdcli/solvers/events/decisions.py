@@ -12,7 +12,7 @@ import itertools
 import numpy as np
 
 from smdcli.elements import State
-from smdcli.solvers.modes import TOUCH, Scene, at_level
+from smdcli.solvers.events.scene import TOUCH, Scene, at_level
 
 MAX_IMPACTS_IN_A_SEQUENCE = 10_000
 

@@ -32,12 +32,15 @@ from smdcli.elements import State
 from smdcli.elements.base import EVENT_KINDS, KINK
 from smdcli.model import Model
 from smdcli.model.nonsmooth import whole_tension
-from smdcli.solvers.batches import Batches
-from smdcli.solvers.crossings import Crossings
-from smdcli.solvers.flow import Flow
-from smdcli.solvers.decisions import accumulation, consistent, impact, project, remaining_flights, touch
-from smdcli.solvers.modes import TOUCH, Mode, Scene
-from smdcli.solvers.piecewise_record import Outputs, step_integrals
+from smdcli.result import Result, SolverStats
+from smdcli.solvers.base import make_result
+from smdcli.solvers.events.batches import Batches
+from smdcli.solvers.events.crossings import Crossings
+from smdcli.solvers.exact.flow import Flow
+from smdcli.solvers.exact.linear import first_order_hold, hold_error
+from smdcli.solvers.events.decisions import accumulation, consistent, impact, project, remaining_flights, touch
+from smdcli.solvers.events.scene import TOUCH, Mode, Scene
+from smdcli.solvers.events.record import Outputs, step_integrals
 
 MAX_EVENTS_AT_ONE_TIME = 200  # a mode that cannot settle at one instant is a scene smd cannot solve
 MAX_SUBSTEPS = 2_000_000  # substeps a run may take (about 100 us each): a mode faster than that is refused
@@ -370,3 +373,24 @@ def solve_piecewise(model: Model, grid: np.ndarray):
     message = (f"ok: event to event, {len(history.events)} events ({told}), {len(run.flows)} modes, "
                f"{time.perf_counter() - start:.3g} s")
     return x, v, a, history, message, stated
+
+
+def solve_exactly(name: str, model: Model, grid: np.ndarray) -> Result:
+    """A piecewise-linear scene solved by the exact method `name`, event to event; a scene it cannot advance is a
+    failed run."""
+    start = time.perf_counter()
+    held_model, held = first_order_hold(model, grid)
+    try:
+        x, v, a, history, message, stated = solve_piecewise(held_model, grid)
+    except PiecewiseFailed as exc:
+        stats = SolverStats(method=name, requested_method=name, reason="", success=False,
+                            message=f"failed: {exc}", wall_time_s=time.perf_counter() - start)
+        nan = np.full((len(grid), model.n), np.nan)
+        return make_result(held_model, grid, nan, nan, stats, t_failed=float(grid[0]))
+    if held:
+        stated = max(stated, hold_error(model, grid, held))
+        message += f"; first-order hold on the output grid for {', '.join(held)} (error O(step^2))"
+    stats = SolverStats(method=name, requested_method=name, reason="", nlu=0,
+                        steps_accepted=max(len(grid) - 1, 0), wall_time_s=time.perf_counter() - start,
+                        message=message, stated_accuracy=stated)
+    return make_result(held_model, grid, x, v, stats, acceleration=a, nonsmooth=history)

@@ -21,7 +21,7 @@ import numpy as np
 
 from smdcli.model import Model
 from smdcli.shapes.table import Table
-from smdcli.solvers.accurate_expm import propagator
+from smdcli.solvers.exact.accurate_expm import propagator
 from smdcli.solvers.base import stated_rounding
 from smdcli.text import plural
 

@@ -14,8 +14,8 @@ import numpy as np
 
 from smdcli.model.nonsmooth import whole_tension
 from smdcli.result import NonsmoothHistory
-from smdcli.solvers.flow import WEIGHTS, Flow
-from smdcli.solvers.modes import Mode
+from smdcli.solvers.exact.flow import WEIGHTS, Flow
+from smdcli.solvers.events.scene import Mode
 
 
 def step_integrals(run, flow: Flow, mode: Mode, states, Z0: np.ndarray, h: float,

@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from smdcli.model import Model
-from smdcli.solvers import sampled
-from smdcli.solvers.accurate_expm import NEEDED_NORM, expm_stack, expm_times
+from smdcli.solvers.exact import sampled
+from smdcli.solvers.exact.accurate_expm import NEEDED_NORM, expm_stack, expm_times
 from smdcli.solvers.base import segments, stated_rounding, walk
 from smdcli.text import plural
 

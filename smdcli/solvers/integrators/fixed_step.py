@@ -1,5 +1,5 @@
-"""Fixed-step methods: the structural family (Newmark, HHT-alpha, generalized-alpha, central
-difference) on M a + C v + K x + f_nl(x, v) = F(t), and classic Euler and RK4 on the state
+"""Fixed-step methods: the structural family (Newmark, Hilber's alpha, generalized-alpha,
+central difference) on M a + C v + K x + f_nl(x, v) = F(t), and classic Euler and RK4 on the state
 equation, for stability studies; all stepped by the compiled kernel smdcli.kernels.fixed.
 
 The step is tol.dt (the scenario's solver.dt), or the output step when none is given. Each
@@ -22,14 +22,13 @@ import numpy as np
 from smdcli.model import Model
 from smdcli.result import Result, SolverStats
 from smdcli.solvers.base import MAX_STEPS, Solver, Tolerances, cuts, divergence_bound, make_result
-from smdcli.solvers.catalog import NEWMARK_SCHEMES
-from smdcli.solvers.compiled import failure_text, warm
+from smdcli.solvers.registry import NEWMARK_SCHEMES
+from smdcli.solvers.integrators.compiled import failure_text, warm
 
 
 class FixedStep(Solver):
     """Shared driver: the compiled march, its statistics and failure messages."""
 
-    family = "fixed step"
     compiled = True
     adaptive = False
     kernel_method: ClassVar[str] = "GENERALIZED_ALPHA"  # the name of a method id in smdcli.kernels.fixed
@@ -90,10 +89,9 @@ class FixedStep(Solver):
 
 
 class GeneralizedAlpha(FixedStep):
-    """Chung-Hulbert generalized-alpha: M a(n+1-am) + f_int(n+1-af) = F(t(n+1-af)); Newmark and HHT are cases of it."""
+    """Chung-Hulbert generalized-alpha: M a(n+1-am) + f_int(n+1-af) = F(t(n+1-af)); Newmark and Hilber's alpha are
+    cases of it."""
 
-    name = "generalized_alpha"
-    description = "Chung-Hulbert generalized-alpha, implicit, second order"
     implicit = True
     order = 2
     DEFAULT_RHO_INF = 0.8
@@ -108,8 +106,6 @@ class GeneralizedAlpha(FixedStep):
 class Newmark(GeneralizedAlpha):
     """Newmark-beta: average acceleration (beta 1/4, gamma 1/2) by default, or linear acceleration (1/6, 1/2)."""
 
-    name = "newmark"
-    description = "Newmark-beta, average acceleration unless beta/gamma or scheme say otherwise"
     SCHEMES: ClassVar[dict[str, tuple[float, float]]] = NEWMARK_SCHEMES
 
     def coefficients(self):
@@ -123,11 +119,10 @@ class Newmark(GeneralizedAlpha):
         return 1 / math.sqrt(gamma / 2 - beta) if gamma / 2 > beta else 0.0
 
 
-class HHT(GeneralizedAlpha):
-    """Hilber-Hughes-Taylor alpha in Hilber's convention, alpha in [-1/3, 0]; alpha = 0 is average acceleration."""
+class HilberAlpha(GeneralizedAlpha):
+    """Hilber, Hughes and Taylor's alpha in Hilber's convention, alpha in [-1/3, 0]; alpha = 0 is average
+    acceleration."""
 
-    name = "hht"
-    description = "HHT-alpha (Hilber, Hughes, Taylor 1977), implicit, second order, damps high modes"
     DEFAULT_ALPHA = -0.1
 
     def coefficients(self):
@@ -139,8 +134,6 @@ class CentralDifference(GeneralizedAlpha):
     """Central difference as Newmark beta = 0, gamma = 1/2: stiffness never enters the step's matrix, only
     M + h/2 C (diagonal, hence explicit, for lumped masses and dampers to ground)."""
 
-    name = "central_difference"
-    description = "explicit central difference (Newmark beta 0, gamma 1/2), second order, stable for h * omega_max <= 2"
     implicit = False
 
     def coefficients(self):
@@ -153,8 +146,6 @@ class CentralDifference(GeneralizedAlpha):
 class Euler(FixedStep):
     """Explicit (forward) Euler: first order; on an undamped scene its energy grows at every step size."""
 
-    name = "euler"
-    description = "explicit Euler, first order, for stability studies"
     order = 1
     kernel_method = "EULER"
 
@@ -165,8 +156,6 @@ class Euler(FixedStep):
 class RK4(FixedStep):
     """The classic fourth-order Runge-Kutta method; stable on the imaginary axis for h * omega <= 2 sqrt(2)."""
 
-    name = "rk4"
-    description = "classic Runge-Kutta, fourth order, fixed step, for stability studies"
     order = 4
     kernel_method = "RK4"
 

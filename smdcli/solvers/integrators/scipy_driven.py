@@ -3,7 +3,7 @@
 Driving scipy's OdeSolver classes directly (rather than through solve_ivp)
 lets smd restart at every force breakpoint, count accepted and rejected
 steps and stop at divergence with the time reached. The explicit pairs run
-compiled (smdcli.solvers.compiled); scipy's stay here as `scipy:RK45`,
+compiled (smdcli.solvers.integrators.compiled); scipy's stay here as `scipy:RK45`,
 `scipy:RK23` and `scipy:DOP853`, an independent cross-check.
 
 Must not import: sweep, io, plots, commands, cli.
@@ -21,11 +21,8 @@ from smdcli.model import Model
 from smdcli.result import Result, SolverStats
 from smdcli.solvers.base import (MAX_STEPS, Solver, Tolerances, divergence_bound, diverged, force_function,
                                  make_result, segments)
-from smdcli.solvers.compiled import warm
-
-
-# OdeSolver subclasses that smd writes itself (smdcli.solvers.stiff23), for MATLAB's ode23s/t/tb.
-OWN_SOLVERS = ("Rosenbrock23", "Trapezoid", "TRBDF2")
+from smdcli.solvers.integrators.compiled import warm
+from smdcli.solvers.registry import OWN_SOLVERS
 
 
 @contextlib.contextmanager
@@ -106,7 +103,7 @@ class ScipyMethod(Solver):
 
     def _solver_class(self):
         if self.scipy_name in OWN_SOLVERS:
-            from smdcli.solvers import stiff23
+            from smdcli.solvers.integrators import stiff23
 
             return getattr(stiff23, self.scipy_name)
         import scipy.integrate as si
@@ -189,34 +186,9 @@ class ScipyMethod(Solver):
         return _finish(self, model, grid, out, tol, start, counts, failure, t_reached)
 
 
-def _scipy(name: str, scipy_name: str, implicit: bool, order: int, boundary: float, text: str):
-    return type(name, (ScipyMethod,), {
-        "name": name, "scipy_name": scipy_name, "family": "scipy.integrate.solve_ivp",
-        "implicit": implicit, "order": order, "stability_boundary": boundary, "description": text,
-    })
-
-
-ScipyRK45 = _scipy("scipy:RK45", "RK45", False, 5, 3.3, "scipy's RK45, Dormand-Prince 5(4), driven from Python")
-ScipyRK23 = _scipy("scipy:RK23", "RK23", False, 3, 2.5, "scipy's RK23, Bogacki-Shampine 3(2), driven from Python")
-ScipyDOP853 = _scipy("scipy:DOP853", "DOP853", False, 8, 6.0, "scipy's DOP853, Dormand-Prince 8(5,3), driven from Python")
-ScipyRadau = _scipy("scipy:Radau", "Radau", True, 5, 0.0, "scipy's Radau IIA, order 5, driven from Python")
-ScipyBDF = _scipy("scipy:BDF", "BDF", True, 5, 0.0, "scipy's variable-order BDF/NDF, orders 1-5, driven from Python")
-LSODA = _scipy("LSODA", "LSODA", True, 12, 0.0, "ODEPACK LSODA: Adams, switching to BDF when stiff")
-LSODA.compiled_rhs = True
-ScipyOde23s = _scipy("scipy:ode23s", "Rosenbrock23", True, 2, 0.0,
-                     "ode23s's formula in Python on scipy's OdeSolver (smdcli.solvers.stiff23), driven from Python")
-ScipyOde23t = _scipy("scipy:ode23t", "Trapezoid", True, 2, 0.0,
-                     "ode23t's formula in Python on scipy's OdeSolver (smdcli.solvers.stiff23), driven from Python")
-ScipyOde23tb = _scipy("scipy:ode23tb", "TRBDF2", True, 2, 0.0,
-                      "ode23tb's formula in Python on scipy's OdeSolver (smdcli.solvers.stiff23), driven from Python")
-
-
 class Ode113(Solver):
     """MATLAB ode113's family: variable-order Adams-Bashforth-Moulton (VODE, method='adams', never switches to BDF)."""
 
-    name = "ode113"
-    family = "MATLAB name"
-    description = "variable-order Adams-Bashforth-Moulton PECE, orders 1-12 (VODE adams)"
     order = 12
 
     def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:

@@ -153,7 +153,7 @@ def compile_side_by_side(families=KERNEL_FAMILIES) -> None:
     if (os.cpu_count() or 1) < 2 or not all(chains):
         return
     print("\nsmd: compiling kernels in two processes (a few minutes, once per install)", file=sys.stderr, flush=True)
-    children = [subprocess.Popen([sys.executable, "-c", f"from smdcli.solvers.compiled import warm; warm(*{chain!r})"],
+    children = [subprocess.Popen([sys.executable, "-c", f"from smdcli.solvers.integrators.compiled import warm; warm(*{chain!r})"],
                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for chain in chains]
     for child in children:
         child.wait()
@@ -244,14 +244,18 @@ def explicit_outcome(solver, status: int, counts: np.ndarray, floats: np.ndarray
 class CompiledRK(Solver):
     """An explicit Runge-Kutta pair run by the compiled kernel, restarted at every force discontinuity."""
 
-    family = "compiled explicit Runge-Kutta"
     compiled = True
-    kernel_method: ClassVar[int]
+    tableau: ClassVar[str]  # the name of a method id in smdcli.kernels.tableaus (the registry's setting)
     stability_boundary: ClassVar[float]
     watch: Watch | None = None
 
     def __init__(self, watch: bool = False, land: bool = False):
         self.watching, self.landing = watch, land
+
+    @property
+    def kernel_method(self) -> int:
+        """The kernel's id of this pair (smdcli.kernels.tableaus)."""
+        return getattr(tableaus, self.tableau)
 
     def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
         warm()
@@ -269,24 +273,10 @@ class CompiledRK(Solver):
         return make_result(model, grid, out[:, :n], out[:, n:], stats, t_failed=t_failed)
 
 
-def _compiled(name: str, method: int, order: int, boundary: float, text: str):
-    return type(name, (CompiledRK,), {
-        "name": name, "kernel_method": method, "order": order, "stability_boundary": boundary, "description": text,
-    })
-
-
-RK45 = _compiled("RK45", tableaus.RK45, 5, 3.3, "explicit Dormand-Prince 5(4), compiled")
-RK23 = _compiled("RK23", tableaus.RK23, 3, 2.5, "explicit Bogacki-Shampine 3(2), compiled")
-DOP853 = _compiled("DOP853", tableaus.DOP853, 8, 6.0, "explicit Dormand-Prince 8(5,3), compiled")
-ode45 = _compiled("ode45", tableaus.RK45, 5, 3.3, "MATLAB ode45's formula: Dormand-Prince 5(4), compiled")
-ode23 = _compiled("ode23", tableaus.RK23, 3, 2.5, "MATLAB ode23's formula: Bogacki-Shampine 3(2), compiled")
-
-
 class CompiledStiff(Solver):
-    """Radau IIA 5 (smdcli.kernels.radau), ode23s, ode23t or ode23tb (smdcli.kernels.stiff) run compiled with the
-    analytic Jacobian, restarted at every force discontinuity."""
+    """Radau IIA 5 (smdcli.kernels.radau), NDF (smdcli.kernels.bdf) or a low-order formula of smdcli.kernels.stiff
+    run compiled with the analytic Jacobian, restarted at every force discontinuity."""
 
-    family = "compiled stiff"
     compiled = True
     implicit = True
     order = 2
@@ -335,17 +325,3 @@ class CompiledStiff(Solver):
         )
         n = model.n
         return make_result(model, grid, out[:, :n], out[:, n:], stats, t_failed=None if failure is None else t_reached)
-
-
-def _stiff(name: str, method: str, text: str, order: int = 2):
-    return type(name, (CompiledStiff,), {"name": name, "kernel_method": method, "description": text, "order": order})
-
-
-Radau = _stiff("Radau", "RADAU5", "implicit Radau IIA, order 5, compiled (scipy's steps)", order=5)
-BDF = _stiff("BDF", "NDF", "implicit variable-order BDF/NDF, orders 1-5, compiled (scipy's steps)", order=5)
-ode15s = _stiff("ode15s", "NDF", "MATLAB ode15s's family: variable-order NDF, orders 1-5, compiled (scipy BDF's steps)",
-                order=5)
-
-ode23s = _stiff("ode23s", "ROSENBROCK23", "MATLAB ode23s's formula: Rosenbrock 2(3) of Shampine and Reichelt, compiled")
-ode23t = _stiff("ode23t", "TRAPEZOID", "MATLAB ode23t's formula: trapezoidal rule, no numerical damping, compiled")
-ode23tb = _stiff("ode23tb", "TRBDF2", "MATLAB ode23tb's formula: TR-BDF2 of Hosea and Shampine, compiled")

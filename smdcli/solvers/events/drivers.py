@@ -6,8 +6,8 @@ event to event (nonsmooth_ivp.py); the Newmark family steps hysteretic springs b
 
 An integrator's run vouches for its energy balance to BALANCE_RTOLS times its rtol of the largest energy, and for a
 trajectory error it measures (estimate_error). Local
-error control does not bound the global error: the methods without local extrapolation (BDF, ode23s, ode23t,
-ode23tb) leave one that grows as rtol^(2/3), measured at 70 to 600 rtol on the bundled scenes at rtol 1e-8, and
+error control does not bound the global error: the methods without local extrapolation (BDF and the low-order
+stiff formulas) leave one that grows as rtol^(2/3), measured at 70 to 600 rtol on the bundled scenes at rtol 1e-8, and
 RK23 leaves 15 to 20 rtol. The balance is the run's own a-posteriori measure of that error, so a run that misses
 it is rerun at a tighter tolerance chosen from the error's observed growth with the tolerance (assumed 2/3 until
 two runs measure it), and says so in a note.
@@ -26,6 +26,7 @@ import numpy as np
 from smdcli.model import Model
 from smdcli.result import Result
 from smdcli.solvers.base import Solver, Tolerances
+from smdcli.solvers.registry import BY_NAME, METHODS, get_solver
 
 BALANCE_RTOLS = 10.0  # the energy balance a run vouches for, in rtols of the largest energy
 BALANCE_AIM = 3.0  # what a rerun aims at: a margin for the error's scatter about its power law
@@ -36,47 +37,47 @@ SLOWEST_GROWTH = 0.3  # the error taken to fall at least as rtol^0.3 (the reruns
 
 def nonsmooth_refusal(method: str, model: Model) -> str | None:
     """Why a method cannot take a scene with nonsmooth elements, naming the element and the methods that can."""
-    from smdcli.solvers.nonsmooth_ivp import EVENT_METHODS
-    from smdcli.solvers.return_mapping import NEWMARK_FAMILY, refusal as newmark_refusal
+    from smdcli.solvers.events.return_mapping import refusal as newmark_refusal
 
-    if method in ("auto", "exact") or method in EVENT_METHODS:
-        from smdcli.solvers.compiled_events import COMPILED_EVENT_METHODS
-        from smdcli.solvers.exact import Exact
-
+    entry = BY_NAME[method]
+    if entry.exact_events:
+        return get_solver(method).refuse(model)
+    if entry.events:
         uncompiled = [e for e in model.nonsmooth if not e.law.compiled]
-        if method in COMPILED_EVENT_METHODS and uncompiled:
+        if entry.compiled_modes and uncompiled:
             first = uncompiled[0]
-            scipys = next(name for name in (f"scipy:{method}", f"scipy:{EVENT_METHODS[method]}") if name in EVENT_METHODS)
+            python = next(m.name for m in METHODS if m.events == entry.events and not m.compiled_modes)
             return (f"{method!r} is compiled, and {first.path}'s law {first.law.name} has no compiled kernel for its "
-                    f"smooth tension; try {scipys!r} (scipy's, stepped from Python) or 'auto'")
-
-        return None if method != "exact" else Exact().refuse(model)
-    if method in NEWMARK_FAMILY:
+                    f"smooth tension; try {python!r} (scipy's, stepped from Python) or 'auto'")
+        return None
+    if entry.return_mapping:
         return newmark_refusal(method, model)
     first = model.nonsmooth[0]
     can = "'exact' (piecewise-linear scenes), 'auto', the ODE family ('DOP853', 'Radau', 'ode45', ...)"
-    why = {"closed_form": "solves a linear 1-DOF free response only",
-           "ode113": "is VODE's Adams method, which cannot be cut back to an event and restarted from Python",
-           "euler": "has no interpolant to locate an event on", "rk4": "has no interpolant to locate an event on"}
-    return (f"{method!r} {why.get(method, 'cannot take nonsmooth elements')}; {first.path} is {first.law.name} "
-            f"({first.kind}); methods that can: {can}")
+    return (f"{method!r} {entry.refuses_nonsmooth}; {first.path} is {first.law.name} ({first.kind}); "
+            f"methods that can: {can}")
 
 
 def solve_nonsmooth(solver: Solver, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
     """A scene with nonsmooth elements: exact event to event, an ODE method event to event, or the Newmark
     family's return mapping."""
-    from smdcli.solvers.nonsmooth_ivp import EVENT_METHODS, solve_events
-    from smdcli.solvers.return_mapping import NEWMARK_FAMILY, solve_return_mapping
+    from smdcli.solvers.events.integrated import solve_events
+    from smdcli.solvers.events.return_mapping import solve_return_mapping
 
-    if solver.name in EVENT_METHODS:
+    entry = BY_NAME[solver.name]
+    if entry.events:
         run = lambda tol: solve_events(model, grid, tol, solver.name)  # noqa: E731
         if not tol.balance:
             return run(tol)
         result, used, looser = meet_balance(run, tol)
         return estimate_error(run, result, used, looser)
-    if solver.name in NEWMARK_FAMILY:
+    if entry.return_mapping:
         return solve_return_mapping(model, grid, tol, solver)
-    return solver.solve(model, grid, tol)  # exact, auto
+    if entry.family == "exact":
+        from smdcli.solvers.events.piecewise import solve_exactly
+
+        return solve_exactly(solver.name, model, grid)
+    return solver.solve(model, grid, tol)  # auto: it chooses, and comes back here
 
 
 def meet_balance(run: Callable[[Tolerances], Result], tol: Tolerances) -> tuple[Result, Tolerances, Result | None]:

@@ -10,8 +10,8 @@ within a step is seen), a crossing located by Brent's method on that interpolant
 event decided, and the method started afresh from the event. The energy terms' powers are integrated with the motion, under the
 method's own error control.
 
-Every method of the ODE family takes part. smd's compiled ones (RK23, RK45, DOP853, Radau, BDF, ode15s, ode23s,
-ode23t, ode23tb) run each mode in a compiled kernel (compiled_events.py), guards watched and events located there,
+Every method of the ODE family takes part (those with the registry's `events`). smd's compiled ones (with its
+`compiled_modes`) run each mode in a compiled kernel (compiled_modes.py), guards watched and events located there,
 Python back only at an event; scipy's OdeSolvers (scipy:RK45 ..., LSODA) are stepped from Python, a step at a
 time, with the same modes and decisions: the compiled kernels' cross-check.
 
@@ -30,31 +30,26 @@ from smdcli.model import Model
 from smdcli.model.nonsmooth import whole_tension
 from smdcli.result import NonsmoothHistory, Result, SolverStats
 from smdcli.solvers.base import MAX_STEPS, Tolerances, divergence_bound, diverged, force_function, make_result
-from smdcli.solvers.compiled_events import ACCUMULATED, COMPILED_EVENT_METHODS, CompiledModes
-from smdcli.solvers.modes import at_level, event_root
-from smdcli.solvers.piecewise import MAX_EVENTS_AT_ONE_TIME, PiecewiseRun
-from smdcli.solvers.piecewise_record import stored_energies
-from smdcli.solvers.smooth_scene import SmoothScene
+from smdcli.solvers.events.compiled_modes import ACCUMULATED, CompiledModes, compiled_modes
+from smdcli.solvers.events.scene import at_level, event_root
+from smdcli.solvers.events.piecewise import MAX_EVENTS_AT_ONE_TIME, PiecewiseRun
+from smdcli.solvers.events.record import stored_energies
+from smdcli.solvers.events.smooth_scene import SmoothScene
+from smdcli.solvers.registry import BY_NAME, OWN_SOLVERS
 
-# The OdeSolver class each method name integrates nonsmooth scenes with.
-EVENT_METHODS = {"RK45": "RK45", "ode45": "RK45", "scipy:RK45": "RK45", "RK23": "RK23", "ode23": "RK23",
-                 "scipy:RK23": "RK23", "DOP853": "DOP853", "scipy:DOP853": "DOP853", "Radau": "Radau",
-                 "scipy:Radau": "Radau", "BDF": "BDF", "ode15s": "BDF", "scipy:BDF": "BDF", "LSODA": "LSODA",
-                 "ode23s": "Rosenbrock23", "scipy:ode23s": "Rosenbrock23", "ode23t": "Trapezoid",
-                 "scipy:ode23t": "Trapezoid", "ode23tb": "TRBDF2", "scipy:ode23tb": "TRBDF2"}
 PYTHON_STEPS = 200_000  # steps a run may take, driven from Python (about 300 us each)
 
 
-def solver_class(name: str):
-    """The OdeSolver class of a method name (scipy's, or smd's own stiff ones)."""
-    scipy_name = EVENT_METHODS[name]
-    if scipy_name in ("Rosenbrock23", "Trapezoid", "TRBDF2"):
-        from smdcli.solvers import stiff23
+def ode_solver_class(name: str):
+    """The OdeSolver class that integrates a method's modes (the registry's events: scipy's, or smd's own)."""
+    formula = BY_NAME[name].events
+    if formula in OWN_SOLVERS:
+        from smdcli.solvers.integrators import stiff23
 
-        return getattr(stiff23, scipy_name)
+        return getattr(stiff23, formula)
     import scipy.integrate as si
 
-    return getattr(si, scipy_name)
+    return getattr(si, formula)
 
 
 class EventDriver(PiecewiseRun):
@@ -64,9 +59,9 @@ class EventDriver(PiecewiseRun):
         super().__init__(model, grid)
         self.scene = SmoothScene(model)
         self.tol, self.name = tol, name
-        self.kernel_method = COMPILED_EVENT_METHODS.get(name)  # None: an OdeSolver stepped from Python
-        self.cls = solver_class(name) if self.kernel_method is None else None
-        self.own = EVENT_METHODS[name] in ("Rosenbrock23", "Trapezoid", "TRBDF2")  # smd's: they take a Jacobian
+        self.kernel_method = compiled_modes(name)  # None: an OdeSolver stepped from Python
+        self.cls = ode_solver_class(name) if self.kernel_method is None else None
+        self.own = BY_NAME[name].events in OWN_SOLVERS  # smd's: they take a Jacobian
         self.counts = {"nfev": 0, "njev": 0, "nlu": 0, "steps_accepted": 0, "steps_rejected": -1}
         self.max_steps = tol.max_steps or (PYTHON_STEPS if self.kernel_method is None else MAX_STEPS)
         self.fired = None  # (time, element, guard) of the last event
@@ -372,13 +367,14 @@ class _Outputs:
 
 
 def solve_events(model: Model, grid: np.ndarray, tol: Tolerances, name: str) -> Result:
-    """A nonsmooth scene integrated by method `name` (an EVENT_METHODS key), event to event."""
-    if name in COMPILED_EVENT_METHODS:  # the compiled kernel loaded, or the OdeSolver imported, before the clock
-        from smdcli.solvers.compiled import warm
+    """A nonsmooth scene integrated by method `name` (one with the registry's events), event to event."""
+    kernel = compiled_modes(name)
+    if kernel is not None:  # the compiled kernel loaded, or the OdeSolver imported, before the clock
+        from smdcli.solvers.integrators.compiled import warm
 
-        warm(f"modes:{COMPILED_EVENT_METHODS[name][0]}")
+        warm(f"modes:{kernel[0]}")
     else:
-        solver_class(name)
+        ode_solver_class(name)
     start = time.perf_counter()
     driver = EventDriver(model, grid, tol, name)
     (x, v, a, history), failure, t_reached = driver.run()
@@ -386,7 +382,7 @@ def solve_events(model: Model, grid: np.ndarray, tol: Tolerances, name: str) -> 
     stats = SolverStats(method=name, requested_method=name, reason="", rtol=tol.rtol, atol=tol.atol,
                         wall_time_s=time.perf_counter() - start, success=failure is None,
                         message=(f"ok: {events} events located on the method's interpolant, a restart at each"
-                                 + (" (compiled)" if name in COMPILED_EVENT_METHODS else "")
+                                 + (" (compiled)" if kernel is not None else "")
                                  if failure is None else f"failed at t = {t_reached:.6g} s: {failure}"),
                         **driver.counts)
     return make_result(model, grid, x, v, stats, t_failed=None if failure is None else t_reached, acceleration=a,

@@ -1,4 +1,4 @@
-"""The Newmark family (Newmark, HHT-alpha, generalized-alpha, central difference) on scenes with hysteretic
+"""The Newmark family (Newmark, Hilber-alpha, generalized-alpha, central difference) on scenes with hysteretic
 springs, as structural codes step them: each step's Newton iteration on the new acceleration evaluates every
 hysteretic spring by its return mapping from the last committed state (elastoplastic and bilinear: the trial
 force projected back onto the yield surface; Bouc-Wen: z by the trapezoidal rule), with its consistent tangent in the
@@ -7,7 +7,7 @@ iteration matrix, and commits the state only when the step has converged.
     (1 - am) M a1 + am M a0 + C v_af + f_int(x_af) = F(t_af),   f_int(x_af) = (1 - af) f(x1) + af f(x0),
     x1 = x0 + h v0 + h^2 ((1/2 - beta) a0 + beta a1),   v1 = v0 + h ((1 - gamma) a0 + gamma a1)
 
-(force averaging of the path-dependent forces, as OpenSees' HHT). The steps run in the compiled kernel
+(force averaging of the path-dependent forces, as OpenSees does for Hilber-alpha). The steps run in the compiled kernel
 smdcli.kernels.return_mapping; this module hands the springs over and puts the steps on the output grid. At a
 ground jump the method restarts from equilibrium, each spring return-mapped through the jump. Friction and stops
 need events the family cannot locate: those scenes are refused, naming the element and the methods that can.
@@ -27,7 +27,6 @@ from smdcli.model.nonsmooth import whole_tension
 from smdcli.result import NonsmoothHistory, Result, SolverStats
 from smdcli.solvers.base import MAX_STEPS, Tolerances, cuts, divergence_bound, make_result
 
-NEWMARK_FAMILY = ("newmark", "hht", "generalized_alpha", "central_difference")
 
 
 def refusal(method: str, model: Model) -> str | None:
@@ -66,7 +65,7 @@ def solve_return_mapping(model: Model, grid: np.ndarray, tol: Tolerances, solver
     from smdcli.kernels import return_mapping as kernel
     from smdcli.kernels.arrays import model_arrays
     from smdcli.kernels.rhs import work_size
-    from smdcli.solvers.compiled import warm
+    from smdcli.solvers.integrators.compiled import warm
 
     warm("return_mapping")
     start = time.perf_counter()

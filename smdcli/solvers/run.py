@@ -1,4 +1,5 @@
-"""A scenario solved with its own [solver] settings (or overrides), and what to say when a solver fails.
+"""A run set up and solved: a scenario read with its [solver] table checked against the registry, solved with those
+settings (or overrides), and what to say when a solver fails.
 
 Must not import: sweep, io, plots, commands, cli.
 """
@@ -6,24 +7,40 @@ Must not import: sweep, io, plots, commands, cli.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 
-from smdcli.errors import SolverFailed, UsageError
+from smdcli import scenario as scenario_mod
+from smdcli.errors import ScenarioError, SolverFailed, UsageError
 from smdcli.model import Model, build, time_grid
 from smdcli.result import Result
 from smdcli.scenario import Scenario
 from smdcli.solvers.base import Tolerances
+from smdcli.solvers.registry import method_problem, options_problem
+
+
+def check_solver(sc: Scenario) -> Scenario:
+    """The scenario, its [solver] method and options checked against the registry (ScenarioError at the field)."""
+    problem = method_problem(sc.solver.method)
+    if problem:
+        raise ScenarioError(sc.path, "solver.method", problem)
+    bad = options_problem(sc.solver.method, sc.solver.options)
+    if bad:
+        raise ScenarioError(sc.path, f"solver.{bad[0]}", bad[1])
+    return sc
+
+
+def load(path: str | Path) -> Scenario:
+    """A scenario file read and checked whole, its [solver] table against the registry: every run's way in."""
+    return check_solver(scenario_mod.load(path))
 
 
 def check_overrides(method: str | None = None, rtol: float | None = None, atol: float | None = None) -> None:
     """The overrides of a scenario's [solver] (--method, --rtol, --atol, or simulate()'s arguments), checked the
     same way for the command line and the Python API: UsageError naming the option."""
-    from smdcli.solvers.catalog import check_method_name
-
     if method is not None:
-        problem = check_method_name(method) if isinstance(method, str) else \
-            f"expected a method name, found {type(method).__name__} {method!r}"
+        problem = method_problem(method)
         if problem:
             raise UsageError(f"--method: {problem}")
     for option, value in (("--rtol", rtol), ("--atol", atol)):
@@ -38,7 +55,8 @@ def check_overrides(method: str | None = None, rtol: float | None = None, atol: 
 def solve_scenario(sc: Scenario, model: Model, grid: np.ndarray, method: str | None = None,
                    rtol: float | None = None, atol: float | None = None) -> Result:
     """Solve with the scenario's [solver] settings, overridden by those given (the command line's)."""
-    from smdcli.solvers.registry import solve
+    check_solver(sc)
+    from smdcli.solvers.dispatch import solve
 
     check_overrides(method, rtol, atol)
 
@@ -65,7 +83,7 @@ def failure_message(sc: Scenario, model: Model, result: Result) -> str:
 
 def failure_hint(model: Model, result: Result) -> str:
     """What to try after a failed run."""
-    from smdcli.solvers.fixed_step import FixedStep
+    from smdcli.solvers.integrators.fixed_step import FixedStep
     from smdcli.solvers.registry import get_solver
 
     solver = get_solver(result.stats.method)

@@ -27,12 +27,12 @@ import numpy as np
 from smdcli.model import Model
 from smdcli.shapes.table import Table
 from smdcli.result import Result, SolverStats
-from smdcli.solvers.accurate_expm import propagator
+from smdcli.solvers.exact.accurate_expm import propagator
 from smdcli.solvers.base import Solver, Tolerances, make_result, segments, stated_rounding
-from smdcli.solvers import sampled
-from smdcli.solvers.harmonic import from_rest_less, split
-from smdcli.solvers.action import ACTION_DOFS, Action, action_cost, solve_action
-from smdcli.solvers.modal import modal_applies, solve_modal
+from smdcli.solvers.exact import sampled
+from smdcli.solvers.exact.harmonic import from_rest_less, split
+from smdcli.solvers.exact.action import ACTION_DOFS, Action, action_cost, solve_action
+from smdcli.solvers.exact.modal import modal_applies, solve_modal
 from smdcli.text import plural
 
 BLOCK = 64  # output steps per stacked propagation
@@ -106,14 +106,12 @@ def hold_error(model: Model, grid: np.ndarray, held: tuple[str, ...]) -> float:
 class Exact(Solver):
     """State transition by matrix exponential; forces integrated exactly between their breakpoints."""
 
-    name = "exact"
-    family = "linear time-invariant"
-    description = "matrix exponential of the system augmented with its force generators"
     linear_only = True
     adaptive = False
 
     def refuse(self, model: Model) -> str | None:
-        """A linear scene, or a piecewise-linear one (elastoplastic, bilinear, Coulomb friction, stops)."""
+        """A linear scene, or a piecewise-linear one (elastoplastic, bilinear, Coulomb friction, stops: solved event to
+        event by smdcli.solvers.events.piecewise)."""
         if model.is_linear or model.is_piecewise_linear:
             return None
         smooth = [p for p in model.nonlinear_paths if p not in {e.path for e in model.nonsmooth}]
@@ -133,8 +131,6 @@ class Exact(Solver):
         start = time.perf_counter()
         original = model
         model, held = first_order_hold(model, grid)
-        if model.nonsmooth:
-            return self._events(model, original, grid, held, start)
         harmonics = split(model)
         if harmonics is not None:  # thousands of Fourier terms: superposed in closed form, not augmented
             reduced, particular = harmonics
@@ -154,26 +150,6 @@ class Exact(Solver):
             message=message, stated_accuracy=stated,
         )
         return make_result(model, grid, x, v, stats)
-
-
-    def _events(self, model: Model, original: Model, grid: np.ndarray, held: tuple[str, ...], start: float) -> Result:
-        """A piecewise-linear scene, event to event (piecewise.py); a scene it cannot advance is a failed run."""
-        from smdcli.solvers.piecewise import PiecewiseFailed, solve_piecewise
-
-        try:
-            x, v, a, history, message, stated = solve_piecewise(model, grid)
-        except PiecewiseFailed as exc:
-            stats = SolverStats(method=self.name, requested_method=self.name, reason="", success=False,
-                                message=f"failed: {exc}", wall_time_s=time.perf_counter() - start)
-            nan = np.full((len(grid), model.n), np.nan)
-            return make_result(model, grid, nan, nan, stats, t_failed=float(grid[0]))
-        if held:
-            stated = max(stated, hold_error(original, grid, held))
-            message += f"; first-order hold on the output grid for {', '.join(held)} (error O(step^2))"
-        stats = SolverStats(method=self.name, requested_method=self.name, reason="", nlu=0,
-                            steps_accepted=max(len(grid) - 1, 0), wall_time_s=time.perf_counter() - start,
-                            message=message, stated_accuracy=stated)
-        return make_result(model, grid, x, v, stats, acceleration=a, nonsmooth=history)
 
 
 def _solve_linear(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:

@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from smdcli.elements.base import D, RATE
-from smdcli.solvers.flow import Flow
-from smdcli.solvers.modes import TOUCH, Mode, at_level, event_root
+from smdcli.solvers.exact.flow import Flow
+from smdcli.solvers.events.scene import TOUCH, Mode, at_level, event_root
 
 RETURN_SAMPLES = 32  # samples of a substep in which a guard left at its level may have come back and gone again
 

@@ -15,9 +15,9 @@ from functools import cached_property
 
 import numpy as np
 
-from smdcli.solvers.flow import GAUSS_POINTS, Flow
-from smdcli.solvers.modes import Mode, at_level
-from smdcli.solvers.piecewise_record import step_integrals
+from smdcli.solvers.exact.flow import GAUSS_POINTS, Flow
+from smdcli.solvers.events.scene import Mode, at_level
+from smdcli.solvers.events.record import step_integrals
 
 BATCH_VALUES = 2 ** 21  # Gauss-node state values (16 MB) of the output steps taken together where no event interrupts
 BATCH_STEPS = (256, 8192)  # the fewest and most steps a batch takes (whole powers of two), whatever the scene's size

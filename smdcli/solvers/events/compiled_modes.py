@@ -1,6 +1,6 @@
 """smd's compiled ODE methods on nonsmooth scenes: each mode handed to a compiled kernel (smdcli.kernels.events for
 the explicit pairs; radau, bdf, stiff) as arrays, integrated there step by step with its guards watched on the
-method's interpolant, and back in Python only at an event, where the decisions of smdcli.solvers.decisions are taken.
+method's interpolant, and back in Python only at an event, where the decisions of smdcli.solvers.events.decisions are taken.
 
 Must not import: sweep, io, plots, commands, cli.
 """
@@ -12,20 +12,22 @@ import numpy as np
 from smdcli.elements.base import SMOOTH_NONE
 from smdcli.kernels.arrays import (GUARD_D, GUARD_INTERNAL, GUARD_RATE, GUARD_TENSION, LAW_PARAMETERS, ModelArrays,
                                    csr)
-from smdcli.kernels.tableaus import DOP853, RK23, RK45, ROSENBROCK23, TRAPEZOID, TRBDF2
+from smdcli.kernels import tableaus
+from smdcli.solvers.registry import BY_NAME
 
-# The method names whose modes a compiled kernel runs, as (kernel module, method id); scipy's classes (scipy:*) and
-# LSODA are stepped from Python by smdcli.solvers.nonsmooth_ivp.
-COMPILED_EVENT_METHODS = {"RK45": ("events", RK45), "ode45": ("events", RK45), "RK23": ("events", RK23),
-                          "ode23": ("events", RK23), "DOP853": ("events", DOP853), "Radau": ("radau", 0),
-                          "BDF": ("bdf", 0), "ode15s": ("bdf", 0), "ode23s": ("stiff", ROSENBROCK23),
-                          "ode23t": ("stiff", TRAPEZOID), "ode23tb": ("stiff", TRBDF2)}
 ACCUMULATED = ("dissipated", "input", "hysteretic", "friction", "impact")  # energy terms integrated with the motion
 QUANTITIES = {"d": GUARD_D, "rate": GUARD_RATE, "tension": GUARD_TENSION}
 
 
+def compiled_modes(name: str) -> tuple[str, int] | None:
+    """(kernel module, method id) of the compiled kernel that runs a method's modes (the registry's compiled_modes);
+    None where an OdeSolver class steps them from Python (smdcli.solvers.events.integrated)."""
+    modes = BY_NAME[name].compiled_modes
+    return None if modes is None else (modes[0], getattr(tableaus, modes[1]) if modes[1] else 0)
+
+
 def scene_arrays(scene) -> ModelArrays:
-    """The kernels' arrays of a SmoothScene (smdcli.solvers.smooth_scene) with what every mode shares: the state's
+    """The kernels' arrays of a SmoothScene (smdcli.solvers.events.smooth_scene) with what every mode shares: the state's
     internal variables and energy terms, the elements' rows and belts, M 1 and the dampers' C."""
     from smdcli.kernels.arrays import model_arrays
 
@@ -90,7 +92,7 @@ def mode_arrays(base: ModelArrays, scene, mode, states) -> ModelArrays:
 
 
 class CompiledModes:
-    """An event-driven run's compiled half (for smdcli.solvers.nonsmooth_ivp.EventDriver): each mode's arrays
+    """An event-driven run's compiled half (for smdcli.solvers.events.integrated.EventDriver): each mode's arrays
     (built once, cached by the mode), the rows the kernel writes, its counters and scratch."""
 
     def __init__(self, driver, size: int):
@@ -113,7 +115,7 @@ class CompiledModes:
 
         from smdcli.kernels import erk, radau
         from smdcli.kernels.guards import EVENT
-        from smdcli.solvers.compiled import failure_text
+        from smdcli.solvers.integrators.compiled import failure_text
 
         driver = self.driver
         scene = driver.scene

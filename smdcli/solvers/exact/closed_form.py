@@ -66,9 +66,6 @@ def free_response(m: float, c: float, k: float, x0: float, v0: float, t: np.ndar
 class ClosedForm(Solver):
     """Analytic free response of a 1-DOF linear oscillator."""
 
-    name = "closed_form"
-    family = "analytic"
-    description = "1-DOF linear free response, all four regimes, continuous across zeta = 1"
     linear_only = True
     adaptive = False
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from smdcli.elements import State
 from smdcli.model import Model
-from smdcli.solvers.modes import Scene
+from smdcli.solvers.events.scene import Scene
 
 
 class SmoothScene(Scene):

@@ -44,10 +44,6 @@ class SparseNewmark(Solver):
     """Newmark average acceleration on sparse matrices, Richardson-extrapolated over h, h/2, h/4 (Romberg), its
     step made finer until the extrapolation's error estimate meets rtol."""
 
-    name = "sparse_newmark"
-    family = "fixed step"
-    description = ("Newmark average acceleration on the sparse matrices, one LU reused across steps, extrapolated "
-                   "over steps h, h/2, h/4 to sixth order; the step made finer until its error estimate meets rtol")
     implicit = True
     order = 6
 
@@ -205,7 +201,7 @@ class _March:
 
     def _run_banded(self, divisions: int) -> tuple[np.ndarray, np.ndarray] | None:
         from smdcli.kernels import banded
-        from smdcli.solvers.compiled import warm
+        from smdcli.solvers.integrators.compiled import warm
 
         warm("banded")
         model, band, nodes = self.model, self.band, self.nodes
