@@ -141,6 +141,13 @@ class Law:
             value += piece.nonlinear(d, rate, state.internal)
         return value
 
+    def force_derivatives(self, state: State, d: float, rate: float) -> dict[str, float] | None:
+        """d/dp of its whole force (linear_stiffness d + tension) for each of its parameters p (an array key's parts as
+        key[i]; keys left unset omitted), at d and d' with the mode and internal variables held (their own
+        derivatives are the state's). d' is the element's own rate, a belt's speed in it. None in a held mode
+        (stuck, in rigid contact): its force is then the reaction the scene needs, not its own."""
+        raise NotImplementedError
+
     def internal_values(self, state: State, d: float) -> tuple[float, ...]:
         """The internal variables /elements records, at deformation d in this state."""
         return ()

@@ -107,6 +107,11 @@ class BoucWen(Law):
                  Guard("internal:z", 0.0, +1, KINK), Guard("internal:z", 0.0, -1, KINK))
         return Piece(nonlinear=lambda d, rate, internal: (1 - self.alpha) * self.k * internal["z"], guards=kinks)
 
+    def force_derivatives(self, state: State, d: float, rate: float) -> dict[str, float]:
+        z = state.internal["z"]  # alpha k d + (1 - alpha) k z; the shape (A, beta, gamma, n) and z0 act through z
+        return {"k": self.alpha * d + (1 - self.alpha) * z, "alpha": self.k * (d - z), "A": 0.0, "beta": 0.0,
+                "gamma": 0.0, "n": 0.0, "z0": 0.0}
+
     def event(self, state: State, kind: str, d: float, rate: float, tension: float) -> State:
         return state  # a kink: nothing changes but the integrator's start
 

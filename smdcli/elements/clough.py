@@ -144,6 +144,16 @@ class Clough(Law):
             guards = (Guard(D, i["td"], int(side), reached), Guard(RATE, 0.0, -int(side), "unload"))
         return Piece(stiffness=s, constant=c, guards=guards)
 
+    def force_derivatives(self, state: State, d: float, rate: float) -> dict[str, float]:
+        # elastic k d; the backbone b k d + side fy (1 - b); unloading and reloading lines are the state's (their
+        # anchors, targets and slopes are internal variables, held)
+        if state.mode == ELASTIC:
+            return {"k": d, "fy": 0.0, "hardening": 0.0}
+        if state.mode == BACKBONE:
+            b, side = self.hardening, state.internal["side"]
+            return {"k": b * d, "fy": side * (1 - b), "hardening": self.k * d - side * self.fy}
+        return {"k": 0.0, "fy": 0.0, "hardening": 0.0}
+
     def event(self, state: State, kind: str, d: float, rate: float, tension: float) -> State:
         i = state.internal
         side = i["side"]

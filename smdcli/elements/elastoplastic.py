@@ -82,6 +82,14 @@ class Elastoplastic(Law):
         sign = 1.0 if state.mode == PLUS else -1.0
         return Piece(constant=sign * core.fy, guards=(Guard(RATE, 0.0, -int(sign), "unload"),))
 
+    def force_derivatives(self, state: State, d: float, rate: float) -> dict[str, float]:
+        elastic = d - state.internal["dp"] if state.mode == ELASTIC else 0.0  # the core's force: k elastic + fy sign
+        return self._chained(elastic, {PLUS: 1.0, MINUS: -1.0}.get(state.mode, 0.0), d)
+
+    def _chained(self, by_k: float, by_fy: float, d: float) -> dict[str, float]:
+        """The parameters' derivatives from the core's force's: by its stiffness and by its yield force."""
+        return {"k": by_k, "fy": by_fy}
+
     def event(self, state: State, kind: str, d: float, rate: float, tension: float) -> State:
         core = self.core
         if kind == "yield":
@@ -182,3 +190,9 @@ class Bilinear(Elastoplastic):
     @property
     def linear_stiffness(self) -> float:
         return self.hardening * self.k
+
+    def _chained(self, by_k: float, by_fy: float, d: float) -> dict[str, float]:
+        # b k d + (1 - b) k by_k + (1 - b) fy by_fy
+        b = self.hardening
+        return {"k": b * d + (1 - b) * by_k, "fy": (1 - b) * by_fy,
+                "hardening": self.k * d - self.k * by_k - self.fy * by_fy}

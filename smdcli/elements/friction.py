@@ -118,6 +118,29 @@ class Friction(Law):
         return Piece(damping=self.viscous, guards=guard,
                      nonlinear=lambda d, rate, internal: sign * self.slip_force(abs(rate)))
 
+    def force_derivatives(self, state: State, d: float, rate: float) -> dict[str, float] | None:
+        if state.mode == STICK:
+            return None
+        # the viscous part c d', then the law's: force tanh(d'/r), sign F, or sign (F + (Fs - F) e) with e the Stribeck
+        # factor; d' = (the masses' rate) + belt speed, so d/d(belt) is d/d(d')
+        out = {"force": 0.0, "static": 0.0, "viscous": rate, "belt_velocity": self.viscous}
+        if state.mode == SMOOTH:
+            x = rate / self.regularization
+            sech2 = 1.0 / math.cosh(x) ** 2 if abs(x) < 350 else 0.0
+            out.update(force=math.tanh(x), regularization=-self.force * sech2 * x / self.regularization)
+            out["belt_velocity"] += self.force * sech2 / self.regularization
+            return out
+        sign = 1.0 if state.mode == PLUS else -1.0
+        if self.stribeck_velocity is None:
+            out["force"] = sign
+            return out
+        vs, ratio = self.stribeck_velocity, rate / self.stribeck_velocity
+        e = math.exp(-ratio**2)
+        out.update(force=sign * (1 - e), static=sign * e,
+                   stribeck_velocity=sign * (self.static - self.force) * e * 2 * ratio**2 / vs)
+        out["belt_velocity"] += sign * (self.static - self.force) * e * (-2 * ratio / vs)
+        return out
+
     def event(self, state: State, kind: str, d: float, rate: float, tension: float) -> State:
         if kind == "slip":
             return State(PLUS if tension > 0 else MINUS)

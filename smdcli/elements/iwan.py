@@ -120,6 +120,13 @@ class Iwan(Law):
                 guards.append(Guard(RATE, 0.0, direction, "unload"))
         return Piece(stiffness=stiffness, constant=constant, guards=tuple(guards))
 
+    def force_derivatives(self, state: State, d: float, rate: float) -> dict[str, float]:
+        out = {}
+        for i, mode in enumerate(state.mode):  # each part: k_i (d - dp_i) elastic, +-fy_i plastic
+            out[f"k[{i}]"] = d - state.internal[f"dp{i}"] if mode == ELASTIC else 0.0
+            out[f"fy[{i}]"] = 0.0 if mode == ELASTIC else (1.0 if mode == PLUS else -1.0)
+        return out
+
     def event(self, state: State, kind: str, d: float, rate: float, tension: float) -> State:
         modes, internal = list(state.mode), dict(state.internal)
         if kind == "yield":  # the elastic elements whose surface d has reached (the nearest, and any within rounding)

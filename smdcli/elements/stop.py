@@ -114,6 +114,15 @@ class Stop(Law):
         return Piece(stiffness=self.k, damping=self.c, constant=-self.k * limit,
                      guards=(Guard(D, limit, +1 if at_min else -1, "separation"),))
 
+    def force_derivatives(self, state: State, d: float, rate: float) -> dict[str, float] | None:
+        given = {key: 0.0 for key in self.keys if getattr(self, key) is not None}
+        if state.mode == FREE:
+            return given
+        if self.rigid:
+            return None
+        limit = "min" if state.mode == AT_MIN else "max"  # k (d - limit) + c d'
+        return {**given, "k": d - getattr(self, limit), "c": rate, limit: -self.k}
+
     def event(self, state: State, kind: str, d: float, rate: float, tension: float) -> State:
         if kind == "separation":
             return State(FREE)
