@@ -274,10 +274,12 @@ def test_an_elastoplastic_and_a_bilinear_oscillator_under_a_record_match_an_inde
     reference, dp_end = reference[:, 0], dp_end[0]
     x = result.displacement[:, 0]
     peak = np.abs(reference).max()
-    assert np.abs(x - reference).max() <= 1e-6 * peak  # the whole history
-    assert abs(np.abs(x).max() - peak) <= 1e-6 * peak
+    # both are exact event to event up to DOP853's rtol 1e-13 and the events' location (1e-13 of the peak measured,
+    # softening and collapse included): 1e-8, the bar of issue 54
+    assert np.abs(x - reference).max() <= 1e-8 * peak  # the whole history
+    assert abs(np.abs(x).max() - peak) <= 1e-8 * peak
     dp = result.elements.internal["spring[0].plastic_deformation"]
-    assert abs(dp[-1] - dp_end) <= 1e-6 * peak  # the residual deformation
+    assert abs(dp[-1] - dp_end) <= 1e-8 * peak  # the residual deformation
     assert sum(kind == "yield" for _, _, kind in result.nonsmooth.events) >= 5
     assert abs(dp[-1]) > 0.1 * peak or b < 0  # it did yield, and for good (a softening spring ends near upright)
     # the hysteretic energy is the plastic work: the core's yield force times the plastic deformation travelled
