@@ -18,6 +18,8 @@ from smdcli.cli_files import diff_files, export
 from smdcli.cli_support import _carried_out, _fail, _interrupted, _message, _print_json, _report, plain_coercion, plain_help
 from smdcli.progress import wanted as progress_wanted
 from smdcli.solvers.registry import NAMES as METHOD_NAMES, names as method_names
+
+OVERRIDE_HELP = f"Solver, overriding the scenario's solver.method: {', '.join(METHOD_NAMES)}."
 from smdcli.text import plural
 
 plain_help()
@@ -50,7 +52,7 @@ def _root(version: bool = typer.Option(False, "--version", callback=_version, is
 def simulate(
     scenarios: List[Path] = typer.Argument(..., help="Scenario TOML files."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
-    method: Optional[str] = typer.Option(None, "--method", help=f"Solver, overriding the scenario's solver.method: {', '.join(METHOD_NAMES)}."),
+    method: Optional[str] = typer.Option(None, "--method", help=OVERRIDE_HELP),
     rtol: Optional[float] = typer.Option(None, "--rtol", help="Relative tolerance override (> 0)."),
     atol: Optional[float] = typer.Option(None, "--atol", help="Absolute tolerance override (> 0)."),
     no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
@@ -239,7 +241,7 @@ def phase(
     skip_periods: int = typer.Option(0, "--skip-periods", help="Poincare: leave out the first periods (transient)."),
     hysteresis: bool = typer.Option(False, "--hysteresis", help="Plot force against deformation of every "
                                     "hysteretic spring instead (OUT/NAME_hysteresis.png and .h5)."),
-    method: Optional[str] = typer.Option(None, "--method", help=f"Solver, overriding the scenario's solver.method: {', '.join(METHOD_NAMES)}."),
+    method: Optional[str] = typer.Option(None, "--method", help=OVERRIDE_HELP),
     name: Optional[str] = typer.Option(None, "--name", help="Output name: OUT/NAME_portrait.png and .h5 (default: "
                                        "the scenario's stem, or FIRST_and_K_more for several)."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
@@ -293,7 +295,7 @@ def animate(
                                           "motion drawn as 0.3 of the mass spacing)."),
     start: Optional[float] = typer.Option(None, "--start", help="First simulated time shown."),
     end: Optional[float] = typer.Option(None, "--end", help="Last simulated time shown."),
-    method: Optional[str] = typer.Option(None, "--method", help=f"Solver, overriding the scenario's solver.method: {', '.join(METHOD_NAMES)}."),
+    method: Optional[str] = typer.Option(None, "--method", help=OVERRIDE_HELP),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
 ):

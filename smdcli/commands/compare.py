@@ -25,7 +25,7 @@ from smdcli.progress import bar, silent
 from smdcli.result import Result
 from smdcli.scenario import Scenario
 from smdcli.solvers.base import Tolerances, stated_tolerance
-from smdcli.solvers.registry import BY_NAME, method_problem, names
+from smdcli.solvers.registry import EXACT_NAMES, method_problem, names
 from smdcli.commands.compare_nonsmooth import (NONSMOOTH_RTOLS, VARIANTS, cannot_represent, nonsmooth_defaults,
                                                refusals, run_energy, smoothed, split_variant, verdict)
 
@@ -103,7 +103,7 @@ def parse_methods(text: str | None, model: Model | None = None) -> list[str]:
         problem = method_problem(base)
         if problem:
             raise UsageError(f"--methods: {problem}")
-        if BY_NAME[base].family in ("choice", "exact"):
+        if base in EXACT_NAMES:
             raise UsageError(f"--methods: {m!r} is not compared: the reference is the exact solution or a tight run")
     if not methods:
         raise UsageError("--methods: expected a comma-separated list of methods, found nothing")

@@ -5,13 +5,19 @@ Must not import: solvers, model, or any layer above."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
+from smdcli.errors import ScenarioError
 from smdcli.scenario.reader import _kind, _Table
-from pathlib import Path
 
 from smdcli.scenario.spec import EXPECT_QUANTITIES, ExpectSpec, SolverSpec
 SOLVER_KEYS = ("method", "rtol", "atol", "dt")  # and a method's own options, which the registry knows
+
+
+def unknown_solver_key(file: str, key: str, known: tuple[str, ...]) -> ScenarioError:
+    """A [solver] key that neither the table nor any method reads, with the key it most likely means."""
+    return _Table(file, "solver", {key: None}).unknown(key, known)
 
 
 def _read_solver(t: _Table) -> SolverSpec:

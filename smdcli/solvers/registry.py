@@ -1,7 +1,7 @@
 """The methods, registered once: each name with its family, its solver class, what it can take and its options.
 
 `auto`, `compare-solvers`, the nonsmooth drivers, the JSON Schema, the command line's help and docs/solvers.md read
-this table; a method's name appears nowhere else but in the module of its class where that class is its alone.
+this table; the classes do not state their names (the registry subclasses each with its entry's name and settings).
 Plain data at import (the classes are imported on first use), so the command line reads it without a solver.
 
 Must not import (at import time): any solver module; nor sweep, io, plots, commands, cli.
@@ -137,9 +137,10 @@ METHODS = (
 )
 BY_NAME = {m.name: m for m in METHODS}
 NAMES = tuple(BY_NAME)
-# The [solver] keys every method reads; each method's own options follow from METHODS.
-COMMON_KEYS = ("method", "rtol", "atol", "dt")
-OPTION_KEYS = tuple(dict.fromkeys(o.key for m in METHODS for o in m.options))
+OPTION_KEYS = tuple(dict.fromkeys(o.key for m in METHODS for o in m.options))  # the methods' own [solver] keys
+# exact, or auto, which is exact wherever it can be: what a linear sweep's batched recurrence stands in for, and what
+# compare-solvers measures the others against rather than charts
+EXACT_NAMES = tuple(m.name for m in METHODS if m.family in ("choice", "exact"))
 
 
 def names(*, compare: str | None = None, nonsmooth: bool | None = None) -> tuple[str, ...]:
@@ -160,15 +161,12 @@ def method_problem(name: Any) -> str | None:
 
 
 def options_problem(method: str, options: tuple[tuple[str, Any], ...]) -> tuple[str, str] | None:
-    """(key, why) for the first [solver] option that the method does not take or that is out of its range."""
+    """(key, why) for the first [solver] option (one of OPTION_KEYS) that the method does not take or that is out of
+    its range."""
     own = {o.key: o for o in BY_NAME[method].options}
     for key, value in options:
         if key not in own:
-            owner = next((m.name for m in METHODS if any(o.key == key for o in m.options)), None)
-            if owner is None:
-                hint = difflib.get_close_matches(key, COMMON_KEYS + OPTION_KEYS, n=1, cutoff=0.6)
-                return key, f"unknown key (did you mean {hint[0]!r}?)" if hint else \
-                    "unknown key; known keys: " + ", ".join(COMMON_KEYS + OPTION_KEYS)
+            owner = next(m.name for m in METHODS if any(o.key == key for o in m.options))
             return key, f"applies to method {owner!r} only, found method {method!r}"
         option = own[key]
         if option.choices:

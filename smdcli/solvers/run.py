@@ -17,11 +17,15 @@ from smdcli.model import Model, build, time_grid
 from smdcli.result import Result
 from smdcli.scenario import Scenario
 from smdcli.solvers.base import Tolerances
-from smdcli.solvers.registry import method_problem, options_problem
+from smdcli.scenario.options import SOLVER_KEYS, unknown_solver_key
+from smdcli.solvers.registry import OPTION_KEYS, method_problem, options_problem
 
 
 def check_solver(sc: Scenario) -> Scenario:
     """The scenario, its [solver] method and options checked against the registry (ScenarioError at the field)."""
+    for key, _ in sc.solver.options:
+        if key not in OPTION_KEYS:
+            raise unknown_solver_key(sc.path, key, SOLVER_KEYS + OPTION_KEYS)
     problem = method_problem(sc.solver.method)
     if problem:
         raise ScenarioError(sc.path, "solver.method", problem)

@@ -15,10 +15,11 @@ from smdcli.errors import UsageError
 from smdcli.model import build, mass_solve, time_grid
 from smdcli.scenario import Scenario
 from smdcli.solvers.peaks import jump_times, result_peaks, row_peaks
+from smdcli.solvers.registry import EXACT_NAMES
 from smdcli.sweep.batched import batched_exact, shared_signal_recurrence
 from smdcli.sweep.family import Family
 from smdcli.sweep.pool import default_workers, run_pool, run_threads
-from smdcli.sweep.spec import EXACT_METHODS, MAX_STACKED, METRICS, QUANTITIES, SETTLING_BAND
+from smdcli.sweep.spec import MAX_STACKED, METRICS, QUANTITIES, SETTLING_BAND
 
 # --------------------------------------------------------------- families
 
@@ -99,7 +100,7 @@ def solve_family(family: Family, method: str | None = None, workers: int | None 
     requested = {method} if method else {sc.solver.method for sc in (scenarios or [family.scenario])}
     # Ground jumps restart each member's run (solved one by one); the ground's effective force -M 1 a_g is shared
     # only by members of one mass matrix.
-    exact_ok = requested <= set(EXACT_METHODS) and family.base.is_linear and same_grid and not family.base.jumps
+    exact_ok = requested <= set(EXACT_NAMES) and family.base.is_linear and same_grid and not family.base.jumps
     shared_force = family.base.ground is None or bool(np.all(family.M == family.M[:1]))
     batched = None
     if exact_ok and scenarios is None and shared_force and all(s.exo() is not None for s in family.base.signals):

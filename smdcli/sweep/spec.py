@@ -14,7 +14,7 @@ import numpy as np
 
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.scenario import Scenario
-from smdcli.solvers.registry import METHODS, method_problem
+from smdcli.solvers.registry import method_problem
 
 MAX_MEMBERS = 100_000  # values of one parameter
 MAX_GRID_MEMBERS = 10_000_000  # members of a two-parameter grid (memory is checked too: see family.py)
@@ -62,7 +62,6 @@ METRIC_UNITS = {"peak_displacement": "m", "rms_displacement": "m", "settling_tim
 QUANTITIES = ("displacement", "velocity", "acceleration", "force")
 DIRECTIONS = ("up", "down", "both")
 SETTLING_BAND = 0.02  # settling time: the last time the response leaves 2 % of its largest excursion
-EXACT_METHODS = tuple(m.name for m in METHODS if m.family in ("choice", "exact"))  # the batched recurrence's
 
 
 # ------------------------------------------------------------------ specs

@@ -1,4 +1,4 @@
-"""The decisions taken at an event of a nonsmooth scene (modes.py): which mode each element takes (stick or slip,
+"""The decisions taken at an event of a nonsmooth scene (scene.py): which mode each element takes (stick or slip,
 yield or unload, contact or separation), decided together where elements share a pair of masses; the velocity
 jump of an impact; the state put exactly on the held constraints.
 

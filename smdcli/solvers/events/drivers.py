@@ -1,7 +1,7 @@
 """Scenes with nonsmooth elements: which method takes them, and how.
 
 `exact` solves piecewise-linear scenes event to event (piecewise.py); the ODE family integrates any of them
-event to event (nonsmooth_ivp.py); the Newmark family steps hysteretic springs by return mapping
+event to event (integrated.py); the Newmark family steps hysteretic springs by return mapping
 (return_mapping.py); every other method refuses, naming the element and the methods that can.
 
 An integrator's run vouches for its energy balance to BALANCE_RTOLS times its rtol of the largest energy, and for a

@@ -3,7 +3,7 @@ located on the method's own interpolant and the method restarted there.
 
 A scene that is not linear between events (Bouc-Wen springs, velocity-weakening or regularized friction, stops and
 friction beside cubic springs or quadratic dampers) is integrated mode by mode, with the same modes, guards and
-decisions as the exact event-driven solver (modes.py, decisions.py): its state y = [x, v, q] (smooth_scene.py)
+decisions as the exact event-driven solver (scene.py, decisions.py): its state y = [x, v, q] (smooth_scene.py)
 carries the laws' internal variables q (Bouc-Wen's z) with their differential equations. After every accepted
 step each guard is looked at on the step's dense output (its ends and four interior points, so that a touch
 within a step is seen), a crossing located by Brent's method on that interpolant, the step cut back there, the
@@ -66,7 +66,7 @@ class EventDriver(PiecewiseRun):
         self.max_steps = tol.max_steps or (PYTHON_STEPS if self.kernel_method is None else MAX_STEPS)
         self.fired = None  # (time, element, guard) of the last event
         # the time at which kinks of smooth laws fired one after another (a Bouc-Wen spring at rest: d' and z both 0,
-        # each kink left at once): every guard crossing there is one left, not an event (compiled_events.advance)
+        # each kink left at once): every guard crossing there is one left, not an event (compiled_modes.advance)
         self.kinks_left = None
         self.fastest_force = None  # rad/s, once asked (held_spacing)
 

@@ -1,7 +1,7 @@
 """Piecewise-linear scenes solved exactly, event to event.
 
 Between two events (a yield, an unloading, a stick or slip, a contact, an impact, a separation) a scene of
-elastoplastic and bilinear springs, Coulomb friction and stops is linear with constant forcing terms (modes.py):
+elastoplastic and bilinear springs, Coulomb friction and stops is linear with constant forcing terms (scene.py):
 z' = A z + b, whose flow z(t) = E(t) z0 + Phi(t) b is one matrix exponential ([[A, I], [0, 0]] t). Each event
 is where a quantity linear in z crosses a level, found on the exact flow: the flow is sampled at substeps short
 enough to see every crossing (an eighth of the fastest mode's period, the output step at most), a crossing

@@ -9,7 +9,7 @@ rows G (d' = 0) are kept by the forces G^T mu with mu = -(G M^-1 G^T)^-1 G M^-1 
 
 linear in z = [x, v, w] (w the force generators' state): z' = A z + b, b constant. Every quantity an event
 watches (d, d', a held element's tension) is a row times z plus a constant. Shared by the exact event-driven
-solver (piecewise.py) and the integrators' event-driven driver (nonsmooth_ivp.py); the decisions at an event
+solver (piecewise.py) and the integrators' event-driven driver (integrated.py); the decisions at an event
 are decisions.py's.
 
 Must not import: sweep, io, plots, commands, cli.
@@ -58,7 +58,7 @@ class Mode:
     acceleration_const: np.ndarray
     held: tuple[int, ...]
     guards: list = None  # (element, Guard, row, constant): the guard's quantity less its level = row z + constant
-    Kt: np.ndarray = None  # the mode's stiffness, damping and constant force, for integrators (nonsmooth_ivp.py)
+    Kt: np.ndarray = None  # the mode's stiffness, damping and constant force, for integrators (integrated.py)
     Ct: np.ndarray = None
     g: np.ndarray = None
     hold: tuple = None  # (M^-1 G^T, (G M^-1 G^T)^+, G) of the held rows, or None

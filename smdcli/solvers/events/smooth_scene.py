@@ -1,6 +1,6 @@
 """A nonsmooth scene whose modes may carry smooth nonlinear forces (Bouc-Wen, velocity-weakening and regularized friction,
 cubic springs, quadratic dampers) and internal differential equations, evaluated at a state y = [x, v, q] for the
-integrators (nonsmooth_ivp.py): the same modes, guards and decisions as the exact solver's Scene (modes.py).
+integrators (integrated.py): the same modes, guards and decisions as the exact solver's Scene (scene.py).
 
 Must not import: sweep, io, plots, commands, cli.
 """

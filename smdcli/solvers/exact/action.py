@@ -2,7 +2,7 @@
 
 Where damping is not proportional (a damper at one end of a chain, dampers on some springs only) the undamped
 modes do not decouple the scene, but its state matrix stays sparse: an element model has a few entries per row.
-Its exponential is dense, though: for a 1,000-mass chain the dense path (exact.py) spends 1.4 s on expm of size
+Its exponential is dense, though: for a 1,000-mass chain the dense path (linear.py) spends 1.4 s on expm of size
 2,002 and then moves a 32 MB propagator through memory at every output step. Here exp(A dt) z is applied to the
 state alone by the truncated Taylor series of Al-Mohy and Higham ("Computing the action of the matrix
 exponential", SIAM J. Sci. Comput. 33, 2011): s sub-steps of at most m terms, (m, s) chosen so that the

@@ -5,7 +5,7 @@ A force c sin(w t + p) on a linear scene has the periodic response x_p = c Im(X 
 Z(w) X = b, Z(w) = K - w^2 M + i w C (b the force's column of B). The whole response is x_p plus the solution of
 the scene without that force from the initial state less x_p(t0): linear superposition, exact. A Fourier series
 of thousands of terms (the book's periodic pulse, a square ground motion) costs a complex solve per term and a
-product per output point, where augmenting the state with every harmonic (exact.py) would exponentiate a matrix
+product per output point, where augmenting the state with every harmonic (linear.py) would exponentiate a matrix
 of twice as many rows as terms. Used where the harmonics' generators would pass SPLIT_STATES states, and only
 where no harmonic sits on an undamped resonance (Z singular): there the augmented exponential stays exact.
 

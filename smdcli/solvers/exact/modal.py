@@ -3,7 +3,7 @@
 Where C M^-1 K = K M^-1 C (proportional damping, Caughey's condition) and every undamped mode has a positive
 frequency, the undamped mode shapes Phi (K Phi = M Phi Omega^2, Phi^T M Phi = I, from a symmetric solver)
 decouple the scene into n 1-DOF oscillators q_i'' + c_i q_i' + w_i^2 q_i = (Phi^T B u(t))_i. Each is advanced
-exactly like the dense path (exact.py) advances the whole scene: its state augmented with the force generators'
+exactly like the dense path (linear.py) advances the whole scene: its state augmented with the force generators'
 state w, propagated by expm of a (2 + m)-square matrix, w reseeded from its closed form at every output point
 and split at force discontinuities. Cost O(n) per output step and O(n^3) once (the eigenvectors; O(n^2) for a
 chain, whose M^-1/2 K M^-1/2 is tridiagonal), against O(n^2) per step and a dense 2n-square exponential; the n

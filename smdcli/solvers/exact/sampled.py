@@ -2,7 +2,7 @@
 one uniform grid of knots: the exact recurrence from knot to knot, taken in blocks.
 
 Between two knots every force is linear in time (a table's first-order hold) or constant (its previous-value hold),
-so one step is exact: y_(k+1) = E y_k + G w_k, with E and G from one exponential of the augmented system (exact.py;
+so one step is exact: y_(k+1) = E y_k + G w_k, with E and G from one exponential of the augmented system (linear.py;
 for modal.py each mode's own) and w_k = (value, slope) each table's right limit at knot k. The dense and modal paths
 reseed w at every breakpoint, one Python step per sample (15 ms for 2,001 samples of a 3-DOF frame, 78 ms to
 integrate a 4,001-sample record to the ground's displacement); here the steps run J at a time across all blocks at
