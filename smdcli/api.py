@@ -4,6 +4,8 @@
     result = smdcli.simulate("scenarios/two_dof_forced.toml")      # or a Scenario from smdcli.load(...)
     result.displacement, result.energy.max_relative_residual, result.elements.spring
     smdcli.write(result, "out/two_dof.h5")                          # the file `smd simulate` writes
+    s = smdcli.sensitivity("scenarios/two_dof_forced.toml", ["spring[0].k", "mass.m1.m"])
+    s.d_displacement                                                # (P, N, n): dx/dp per unit of each parameter
 
 The analyses (smdcli.analysis) take a record, a Model or a Result and return arrays; these are the ones the
 commands run, exposed here by name:
@@ -64,6 +66,15 @@ def write(result: Result, path: str | Path) -> Path:
     scenario, model = result.origin
     write_simulation(path, scenario, model, result)
     return path
+
+
+def sensitivity(scenario: Scenario | str | Path, params: list[str]):
+    """Exact sensitivities of a linear scene (a Scenario or a path) to parameter paths, as `smd sensitivity` takes
+    them, writing nothing: .parameter, .time, .displacement, .d_displacement (P, N, n) and the file's other arrays."""
+    from smdcli.analysis.sensitivity import sensitivity as sensitivities
+
+    sc = scenario if isinstance(scenario, Scenario) else load(scenario)
+    return sensitivities(sc, [params] if isinstance(params, str) else list(params))
 
 
 # name -> (module, attribute): the analyses and the pieces they take, imported on first use

@@ -7,7 +7,7 @@ Must not import: scipy, matplotlib, h5py at module level (the commands import wh
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
+from typing import List, Optional
 
 import typer
 
@@ -130,3 +130,25 @@ def rsa(
 
     _carried_out(lambda: run_rsa(scenario, spectrum_file, out, combination, modes, plots=not no_plots),
                  {"scenario": str(scenario)}, as_json, quiet, rsa_summary, lambda _, data: format_rsa(data))
+
+
+def sensitivity(
+    scenario: Path = typer.Argument(..., help="Scenario TOML file of a linear scene."),
+    param: List[str] = typer.Option(..., "--param", help="A parameter path, as a sweep takes it (repeat): "
+                                    "spring[0].k, damper[1].c, mass.m1.m, mass.m1.x0, force[0].amplitude, "
+                                    "force[0].omega, ground_motion.scale, damping.modal, system.K[0][0] ..."),
+    out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
+    no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
+    as_json: bool = typer.Option(False, "--json", help="Print the peaks' derivatives as JSON."),
+):
+    """Exact sensitivities dx/dp of a linear scene's response to its parameters, and of each DOF's peak.
+
+    The scene and its sensitivity equations are solved together by the matrix exponential; writes
+    OUT/<stem>_sensitivity.h5 (d_displacement, d_velocity, d_acceleration per unit of each parameter) and
+    OUT/<stem>_sensitivity.png (p dx/dp of each DOF)."""
+    from smdcli.commands.sensitivity import format_sensitivity, sensitivity_command, sensitivity_summary
+
+    _carried_out(lambda: sensitivity_command(scenario, list(param), out, plots=not no_plots),
+                 {"scenario": str(scenario)}, as_json, quiet, sensitivity_summary,
+                 lambda _, data: format_sensitivity(data))

@@ -48,43 +48,49 @@ def quintic_at(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray, at
     return _value(c, np.clip((at - time[k]) / h, 0.0, 1.0))
 
 
-def _interval_peaks(x0, v0, a0, x1, v1, a1, h) -> np.ndarray:
+def _interval_peaks(x0, v0, a0, x1, v1, a1, h) -> tuple[np.ndarray, np.ndarray]:
     """The largest |x| on each interval of the quintic Hermite interpolant, nan where the quintic and the cubic (x, v
-    only) disagree by more than what locating the peak could gain (the interpolant not good there)."""
+    only) disagree by more than what locating the peak could gain (the interpolant not good there), and where in
+    the interval it is (0 to 1)."""
     c = _quintics(x0, v0, a0, x1, v1, a1, h)
     grid = np.linspace(0.0, 1.0, SEEDS)
     values = c @ (grid[:, None] ** np.arange(6)).T  # (intervals, SEEDS)
-    s = grid[np.argmax(np.abs(values), axis=1)]
+    seed = grid[np.argmax(np.abs(values), axis=1)]
+    s = seed
     for _ in range(4):  # Newton on the slope, from the best seed; an end stays an end
         slope, curvature = _value(c, s, 1), _value(c, s, 2)
         step = np.where(curvature != 0, slope / np.where(curvature != 0, curvature, 1.0), 0.0)
         s = np.clip(s - step, 0.0, 1.0)
     best = np.maximum(np.abs(_value(c, s)), np.abs(values).max(axis=1))
+    at = np.where(np.abs(_value(c, s)) >= best, s, seed)
     # the cubic Hermite on x and v alone: how far the interpolant is from settled at the peak found
     d0, d1 = v0 * h, v1 * h
     cubic = (x0 * (2 * s ** 3 - 3 * s ** 2 + 1) + d0 * (s ** 3 - 2 * s ** 2 + s) + x1 * (-2 * s ** 3 + 3 * s ** 2)
              + d1 * (s ** 3 - s ** 2))
     gain = best - np.maximum(np.abs(x0), np.abs(x1))
-    return np.where(np.abs(np.abs(_value(c, s)) - np.abs(cubic)) > np.maximum(gain, 0.0), np.nan, best)
+    return np.where(np.abs(np.abs(_value(c, s)) - np.abs(cubic)) > np.maximum(gain, 0.0), np.nan, best), at
 
 
 def located_peaks(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray,
-                  events: np.ndarray = np.empty(0)) -> np.ndarray:
+                  events: np.ndarray = np.empty(0), with_times: bool = False):
     """The largest |x| of each DOF (columns of x, v, a (N, n)) over the run, located between samples; intervals
-    holding an event (`events`, the times where the acceleration or the state jumps) keep their samples."""
-    return row_peaks(time, x.T, v.T, a.T, events)
+    holding an event (`events`, the times where the acceleration or the state jumps) keep their samples. With
+    `with_times`, (peaks, the times they are at)."""
+    return row_peaks(time, x.T, v.T, a.T, events, with_times)
 
 
 def row_peaks(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray,
-              events: np.ndarray = np.empty(0)) -> np.ndarray:
+              events: np.ndarray = np.empty(0), with_times: bool = False):
     """located_peaks of histories laid out as rows (histories, N): a sweep's members and DOFs, contiguous in time."""
     x, v, a = (np.asarray(q, dtype=float) for q in (x, v, a))  # a transposed view stays one: no copy of a big run
     rows, N = x.shape
     magnitude = np.abs(x)
     magnitude[~np.isfinite(magnitude)] = 0.0
     peaks = magnitude.max(axis=1) if N else np.zeros(rows)
+    when = time[magnitude.argmax(axis=1)] if N else np.zeros(rows)
+    done = (lambda: (peaks, when)) if with_times else (lambda: peaks)
     if N < 3:
-        return peaks
+        return done()
     usable = np.ones(N - 1, dtype=bool)
     if len(events):
         usable[np.clip(np.searchsorted(time, events, side="right") - 1, 0, N - 2)] = False
@@ -110,12 +116,18 @@ def row_peaks(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray,
     ends = (x[j, k], v[j, k], a[j, k], x[j, k + 1], v[j, k + 1], a[j, k + 1])
     finite = np.logical_and.reduce([np.isfinite(q) for q in ends]) if len(k) else np.zeros(0, dtype=bool)
     if not finite.any():
-        return peaks
+        return done()
     k, j = k[finite], j[finite]
-    found = _interval_peaks(*(q[finite] for q in ends), time[k + 1] - time[k])
+    found, at = _interval_peaks(*(q[finite] for q in ends), time[k + 1] - time[k])
     found = np.where(np.isnan(found), 0.0, found)
+    if with_times:  # each history's best interval, where it beats the samples
+        order = np.lexsort((found, j))
+        last = order[np.r_[j[order][1:] != j[order][:-1], True]]
+        better = found[last] > peaks[j[last]]
+        chosen = last[better]
+        when[j[chosen]] = time[k[chosen]] + at[chosen] * (time[k[chosen] + 1] - time[k[chosen]])
     np.maximum.at(peaks, j, found)
-    return peaks
+    return done()
 
 
 def jump_times(model, grid: np.ndarray) -> np.ndarray:

@@ -42,6 +42,35 @@ def _path_steps(path: str) -> list[str | int]:
 
 def set_parameter(doc: dict, path: str, value: float) -> None:
     """Write one number into a decoded scenario document at a path like damper[0].c or mass.m1.m."""
+    node, last, _ = _located(doc, path)
+    steps = _path_steps(path)
+    if isinstance(last, str) and last in _OMEGA_KEYS:
+        for other in _OMEGA_KEYS:
+            node.pop(other, None)
+    node[last] = float(value)
+    if len(steps) == 4 and steps[0] == "system" and isinstance(steps[2], int) and steps[2] != steps[3]:
+        doc["system"][steps[1]][steps[3]][steps[2]] = float(value)  # keep M, C, K symmetric
+
+
+def parameter_value(doc: dict, path: str) -> float:
+    """The number a decoded scenario document holds at a parameter path (an absent optional field's default: 1 for a
+    scale, else 0; a force's omega, frequency or period from whichever of the three it gives)."""
+    node, last, current = _located(doc, path)
+    if last == "scale" and last not in node:
+        return 1.0
+    if isinstance(last, str) and last in _OMEGA_KEYS and last not in node:
+        for given in _OMEGA_KEYS:
+            value = node.get(given)
+            if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0:
+                omega = value if given == "omega" else 2 * math.pi * value if given == "frequency" else \
+                    2 * math.pi / value
+                return {"omega": omega, "frequency": omega / (2 * math.pi)}.get(last, 2 * math.pi / omega)
+    return float(current)
+
+
+def _located(doc: dict, path: str) -> tuple[Any, str | int, float]:
+    """(the table or list holding the path's last step, that step, the number there): a UsageError naming the
+    path where it leads nowhere or to something that is not a number."""
     named = re.fullmatch(r"mass\.(.+)\.(\w+)", path)
     if named and not _STEP.fullmatch(named.group(1)):  # a name a path cannot hold: 'Floor 1', '2'
         names = [t.get("name") for t in doc.get("mass", []) if isinstance(t, dict)]
@@ -62,14 +91,9 @@ def set_parameter(doc: dict, path: str, value: float) -> None:
         if not isinstance(node, dict):
             raise UsageError(f"--param {path}: {walked or 'the file'} is not a table")
         current = node.get(last, 0.0)  # an absent optional field (x0, t0, ...); validation refuses unknown ones
-        if last in _OMEGA_KEYS:
-            for other in _OMEGA_KEYS:
-                node.pop(other, None)
     if isinstance(current, bool) or not isinstance(current, (int, float)):
         raise UsageError(f"--param {path}: is not a number in the scenario (found {type(current).__name__})")
-    node[last] = float(value)
-    if len(steps) == 4 and steps[0] == "system" and isinstance(steps[2], int) and steps[2] != steps[3]:
-        doc["system"][steps[1]][steps[3]][steps[2]] = float(value)  # keep M, C, K symmetric
+    return node, last, current
 
 
 def _descend(node: Any, step: str | int, path: str, walked: str) -> tuple[Any, str]:

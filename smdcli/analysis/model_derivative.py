@@ -1,0 +1,294 @@
+"""A linear model's derivative with respect to scenario parameters, and the augmented model whose exact solution
+carries the response's sensitivities beside the response.
+
+Differentiating M x'' + C x' + K x = B u(t) with respect to a parameter p gives the same structure driven by a
+pseudo-load: M s'' + C s' + K s = B du/dp - dM/dp x'' - dC/dp x' - dK/dp x, s = dx/dp, s(0) = dx0/dp. Stacked
+with the scene, [x; s_1; ...; s_P] is one linear system with block lower-triangular M, C and K (the scene on
+the diagonal, the parameters' derivatives below it) and the scene's own signals with their derivatives as
+forces, so the exact solver (the matrix exponential, Van Loan's block form of the sensitivities) solves both.
+
+The model's derivatives (of M, C, K, x0, v0, the ground's jumps and every force's generator) are taken on the
+assembled model, never on a solution: the scenario is built at p + o delta for a stencil of offsets o and the
+weights that are exact for polynomials of degree 4 combine them. M, C, K, the initial state and a generator's
+matrices are polynomials of low degree in every parameter a scenario holds (a stiffness, a mass, a Rayleigh
+coefficient, an amplitude, a frequency), so their derivatives are exact to rounding; the rest (modal damping, a
+generator's state at a late time) carries the stencil's error, which the same stencil at twice the offsets
+estimates and the result states.
+
+Must not import: io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass
+
+import numpy as np
+
+from smdcli import scenario as scenario_mod
+from smdcli.errors import ScenarioError, UsageError
+from smdcli.model import Model, build
+from smdcli.model.system import GROUND_DOF
+from smdcli.scenario import Scenario
+from smdcli.shapes.base import Exo, Signal
+from smdcli.shapes.table import Table
+from smdcli.sweep.family import parameter_value, set_parameter
+
+CENTRAL = (-2.0, -1.0, 1.0, 2.0)  # offsets in units of delta: exact for polynomials of degree 4 (its symmetry)
+FORWARD = (0.0, 1.0, 2.0, 3.0, 4.0)  # where p - delta is not a valid scene (a damper at c = 0): degree 4 too
+STEPS = (1e-3, 1e-4, 2e-5)  # relative deltas tried, largest first, until the stencil's error is rounding's
+EPS = np.finfo(float).eps
+ROUNDING = 16  # units of rounding in a model's number (a generator's state at a late time: sin(w t) of a large w t)
+_REFUSED = ("time.", "solver.", "sweep.", "output.", "plot")  # the run's span and settings: not the scene's
+
+
+def stencil_weights(offsets: tuple[float, ...]) -> np.ndarray:
+    """Weights w with sum w_k f(o_k) = f'(0) exactly for polynomials of degree len(offsets) - 1 (delta = 1)."""
+    o = np.asarray(offsets, dtype=float)
+    powers = o[None, :] ** np.arange(len(o))[:, None]
+    target = np.zeros(len(o))
+    target[1] = 1.0
+    return np.linalg.solve(powers, target)
+
+
+@dataclass
+class Derivative:
+    """One parameter's derivative of the assembled model: its models at the stencil's points and the weights
+    (already divided by delta) that combine them, and the stencil's estimated relative error."""
+
+    path: str
+    value: float
+    delta: float
+    models: list[Model]
+    weights: np.ndarray
+    error: float
+
+    def of(self, read) -> np.ndarray:
+        """d/dp of a model's array read(model), combined over the stencil."""
+        return sum(w * np.asarray(read(m), dtype=float) for w, m in zip(self.weights, self.models))
+
+
+def _scene_at(sc: Scenario, doc: dict, path: str, value: float) -> Model:
+    member = copy.deepcopy(doc)
+    set_parameter(member, path, value)
+    return build(scenario_mod.parse_document(member, sc.text, sc.path))  # the text only names the scenario's source
+
+
+def _model_arrays(model: Model, t_end: float) -> list[np.ndarray]:
+    """Every array of a model a derivative is taken of: matrices, initial state, jumps, generators (with their
+    state at the run's end, where a frequency's stencil is least accurate)."""
+    arrays = [_dense(model.M), _dense(model.C), _dense(model.K), model.x0, model.v0]
+    arrays += [np.concatenate([dx, dv]) for _, dx, dv in model.jumps]
+    for signal in model.signals:
+        exo = signal.exo()
+        if isinstance(signal, Table):
+            arrays.append(signal.v)
+        elif exo is not None:
+            arrays += [exo.S, exo.g, signal.exo_state(t_end)]
+        else:
+            arrays.append(np.atleast_1d(signal.value(np.array([t_end]))))
+    return [np.asarray(a, dtype=float) for a in arrays]
+
+
+def _structure(model: Model, grid: np.ndarray) -> tuple:
+    """What must not change with a parameter for its derivative to be a new model's numbers: the DOFs, the
+    forces' kinds and discontinuities, the jumps' times, the generators' sizes."""
+    t0, t1 = float(grid[0]), float(grid[-1])
+    sizes = tuple(None if s.exo() is None else s.exo().S.shape for s in model.signals)
+    tables = tuple(tuple(s.t) if isinstance(s, Table) else () for s in model.signals)
+    return (model.dofs, tuple(type(s).__name__ for s in model.signals), model.force_dofs,
+            tuple(model.breakpoints(t0, t1)), tuple(t for t, _, _ in model.jumps), sizes, tables, model.is_linear)
+
+
+def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str) -> Derivative:
+    """The model's derivative with respect to one parameter path; UsageError where the path is not a number of
+    the scene, or moves what has no derivative (a force's discontinuity in time, the model's structure)."""
+    if path.startswith(_REFUSED) or path == "zeta":
+        raise UsageError(f"--param {path}: not a parameter of the scene (the run's span, its solver and its "
+                         "sweep are not differentiated; for zeta give the damper's c)")
+    value = parameter_value(doc, path)
+    scale = relative_size(value)
+    structure = _structure(base, grid)
+    t_end = float(grid[-1])
+    best = None
+    for relative in STEPS:
+        delta = relative * scale
+        for offsets in (CENTRAL, FORWARD):
+            doubled = offsets + tuple(2 * o for o in offsets if 2 * o not in offsets)
+            try:
+                models = {o: base if o == 0 else _scene_at(sc, doc, path, value + o * delta) for o in doubled}
+            except ScenarioError:
+                continue  # p - delta is not a scene: the one-sided stencil
+            break
+        else:
+            raise UsageError(f"--param {path}: the scene cannot be built at {path} = {value:g} +- "
+                             f"{4 * delta:.3g}: no derivative can be taken there")
+        for o, m in models.items():
+            if _structure(m, grid) != structure:
+                raise UsageError(f"--param {path}: changes the scene's structure, not only its numbers (a force's "
+                                 "discontinuity moves in time, or the model changes its form): its derivative is not "
+                                 "a response sensitivity smd can give")
+        weights = stencil_weights(offsets) / delta
+        wide = stencil_weights(tuple(2 * o for o in offsets)) / delta
+        near = [sum(w * a for w, a in zip(weights, parts)) for parts in
+                zip(*(_model_arrays(models[o], t_end) for o in offsets))]
+        far = [sum(w * a for w, a in zip(wide, parts)) for parts in
+               zip(*(_model_arrays(models[2 * o], t_end) for o in offsets))]
+        largest = max((float(np.abs(a).max(initial=0.0)) for a in near), default=0.0)
+        if largest == 0:
+            error, rounding = 0.0, 0.0
+        else:
+            # R(2 delta) - R(delta) is 15 times the error of R(delta) (both O(delta^4)); rounding: eps |f| sum |w| of
+            # each array that changes with p (one that does not is the same number at every point: no rounding)
+            error = max(float(np.abs(a - b).max(initial=0.0)) for a, b in zip(near, far)) / 15 / largest
+            values = list(zip(*(_model_arrays(models[o], t_end) for o in doubled)))
+            rounding = max((ROUNDING * EPS * max(float(np.abs(v).max(initial=0.0)) for v in parts)
+                            for parts in values if any(not np.array_equal(parts[0], v) for v in parts[1:])),
+                           default=0.0) * float(np.abs(weights).sum()) / largest
+        found = Derivative(path, value, delta, [models[o] for o in offsets], weights, error + rounding)
+        if best is None or found.error < best.error:
+            best = found
+        if error <= rounding:
+            break
+    return best
+
+
+class ParameterDerivative(Signal):
+    """du/dp of a force as a signal: the stencil's combination of the force at its points; its generator the
+    force's with the derivative's beside it, [[S, 0], [dS, S]] on [w; dw], read as dg w + g dw."""
+
+    exact = True
+
+    def __init__(self, base: Signal, points: list[Signal], weights: np.ndarray):
+        self.base, self.points, self.weights = base, points, weights
+
+    def value(self, t):
+        return sum(w * s.value(t) for w, s in zip(self.weights, self.points))
+
+    def value_left(self, t):
+        return sum(w * s.value_left(t) for w, s in zip(self.weights, self.points))
+
+    def breakpoints(self, t0, t1):
+        return self.base.breakpoints(t0, t1)
+
+    def exo(self):
+        exo = self.base.exo()
+        if exo is None:
+            return None
+        m = exo.S.shape[0]
+        S = np.zeros((2 * m, 2 * m))
+        S[:m, :m] = S[m:, m:] = exo.S
+        S[m:, :m] = sum(w * s.exo().S for w, s in zip(self.weights, self.points))
+        dg = sum(w * s.exo().g for w, s in zip(self.weights, self.points))
+        return Exo(S, np.concatenate([dg, exo.g]))
+
+    def exo_state(self, t):
+        return np.concatenate([self.base.exo_state(t),
+                               sum(w * s.exo_state(t) for w, s in zip(self.weights, self.points))])
+
+
+def _signal_derivative(base: Signal, d: Derivative, j: int) -> Signal | None:
+    """du_j/dp as a signal, None where the force does not depend on p."""
+    points = [m.signals[j] for m in d.models]
+    if isinstance(base, Table):
+        dv = sum(w * s.v for w, s in zip(d.weights, points))
+        if not np.any(dv):
+            return None
+        return Table(base.t, dv, "previous" if base.previous else "linear", ended=base.ended)
+    if all(_same_signal(base, s) for s in points):
+        return None
+    return ParameterDerivative(base, points, d.weights)
+
+
+def _same_signal(a: Signal, b: Signal) -> bool:
+    ea, eb = a.exo(), b.exo()
+    if ea is None or eb is None:
+        return a is b or (type(a) is type(b) and vars(a).keys() == vars(b).keys() and all(
+            np.array_equal(np.asarray(x), np.asarray(y)) if isinstance(x, np.ndarray) else x == y
+            for x, y in zip(vars(a).values(), vars(b).values())))
+    return (np.array_equal(ea.S, eb.S) and np.array_equal(ea.g, eb.g)
+            and np.array_equal(a.exo_state(0.0), b.exo_state(0.0)))
+
+
+def augmented_model(base: Model, derivatives: list[Derivative]) -> tuple[Model, np.ndarray]:
+    """The scene and its P sensitivity systems as one linear model of (P + 1) n DOFs, block i + 1 holding
+    scale_i dx/dp_i (scale_i = |p_i|, or 1 at p_i = 0, so that every block is a displacement), and the scales."""
+    base = base.dense()
+    n, P = base.n, len(derivatives)
+    size = (P + 1) * n
+    scales = np.array([relative_size(d.value) for d in derivatives])
+    M, C, K = (np.zeros((size, size)) for _ in range(3))
+    x0, v0 = np.zeros(size), np.zeros(size)
+    for block in range(P + 1):
+        rows = slice(block * n, (block + 1) * n)
+        M[rows, rows], C[rows, rows], K[rows, rows] = base.M, base.C, base.K
+    x0[:n], v0[:n] = base.x0, base.v0
+    for i, (d, scale) in enumerate(zip(derivatives, scales)):
+        rows = slice((i + 1) * n, (i + 2) * n)
+        for target, name in ((M, "M"), (C, "C"), (K, "K")):
+            target[rows, :n] = scale * d.of(lambda m, name=name: _dense(getattr(m, name)))
+        x0[rows], v0[rows] = scale * d.of(lambda m: m.x0), scale * d.of(lambda m: m.v0)
+    signals, columns = [], []
+    ones = np.ones(n)
+    for j, signal in enumerate(base.signals):
+        column = np.zeros(size)
+        if base.force_dofs[j] == GROUND_DOF:
+            column[:n] = -base.M @ ones
+            for i, (d, scale) in enumerate(zip(derivatives, scales)):
+                column[(i + 1) * n:(i + 2) * n] = -scale * d.of(lambda m: _dense(m.M)) @ ones
+        else:
+            column[base.force_dofs[j]] = 1.0
+        signals.append(signal)
+        columns.append(column)
+        for i, (d, scale) in enumerate(zip(derivatives, scales)):
+            derived = _signal_derivative(signal, d, j)
+            if derived is None:
+                continue
+            column = np.zeros(size)
+            on = slice((i + 1) * n, (i + 2) * n)
+            if base.force_dofs[j] == GROUND_DOF:
+                column[on] = -scale * (base.M @ ones)
+            else:
+                column[(i + 1) * n + base.force_dofs[j]] = scale
+            signals.append(derived)
+            columns.append(column)
+    jumps = []
+    for k, (t, dx, dv) in enumerate(base.jumps):
+        jx, jv = np.zeros(size), np.zeros(size)
+        jx[:n], jv[:n] = dx, dv
+        for i, (d, scale) in enumerate(zip(derivatives, scales)):
+            jx[(i + 1) * n:(i + 2) * n] = scale * d.of(lambda m: m.jumps[k][1])
+            jv[(i + 1) * n:(i + 2) * n] = scale * d.of(lambda m: m.jumps[k][2])
+        jumps.append((t, jx, jv))
+    names = tuple(base.dofs) + tuple(f"d{dof}/d{d.path}" for d in derivatives for dof in base.dofs)
+    model = dataclasses.replace(
+        base, dofs=names, M=M, C=C, K=K, x0=x0, v0=v0, signals=tuple(signals),
+        force_dofs=tuple(0 for _ in signals), force_paths=tuple(f"input[{j}]" for j in range(len(signals))),
+        force_types=tuple(type(s).__name__ for s in signals), cubic=None, quadratic=None, element_form=False,
+        ground=None, jumps=tuple(jumps), elements=(), added_damping=None, nonsmooth=())
+    # set, not derived: a column may act on several blocks (the ground's -M 1 and its derivative -dM 1), which
+    # force_dofs cannot say; and the modal path's test of classical damping does not apply to a non-symmetric M
+    model.__dict__["B"] = np.array(columns).T.reshape(size, len(columns))
+    model.__dict__["proportional_damping"] = False
+    return model, scales
+
+
+def _dense(A) -> np.ndarray:
+    return A if isinstance(A, np.ndarray) else A.toarray()
+
+
+def model_derivatives(sc: Scenario, base: Model, grid: np.ndarray, paths: list[str]) -> list[Derivative]:
+    """Each parameter's model derivative (paths as the sweep takes them); UsageError for a path given twice."""
+    repeated = sorted({p for p in paths if paths.count(p) > 1})
+    if repeated:
+        raise UsageError(f"--param {repeated[0]}: given more than once")
+    doc = tomllib.loads(sc.text)
+    return [derivative(sc, doc, base, grid, path) for path in paths]
+
+
+def relative_size(value: float) -> float:
+    """|p|, or 1 at p = 0: the scale a sensitivity is normalized by (p dx/dp)."""
+    return abs(value) if value != 0 and math.isfinite(value) else 1.0

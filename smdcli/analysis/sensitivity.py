@@ -1,0 +1,144 @@
+"""Response sensitivities dx/dp of a linear scene, exact: the scene and its sensitivity equations solved together
+by the matrix exponential (model_derivative.py builds the stacked system), and the derivatives of each DOF's
+peak |x|, taken where the peak is located between the samples.
+
+The derivative of a peak: at the time t* of max |x_i| the slope of x_i is zero (or t* is an end of the run), so
+d max|x_i| / dp = sign(x_i(t*)) dx_i/dp (t*) (the envelope theorem), with dx_i/dp read at t* on the quintic
+Hermite interpolant of its own samples, velocities and accelerations.
+
+Must not import: io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from smdcli.analysis.model_derivative import augmented_model, model_derivatives
+from smdcli.errors import SolverFailed, UsageError
+from smdcli.model import build, time_grid
+from smdcli.scenario import Scenario
+from smdcli.solvers.base import Tolerances
+from smdcli.solvers.ground import across_jumps
+from smdcli.solvers.peaks import jump_times, located_peaks, quintic_at
+from smdcli.solvers.registry import get_solver
+
+QUANTITIES = {"displacement": "m", "velocity": "m/s", "acceleration": "m/s^2"}
+MAX_SIZE = 3000  # DOFs of the stacked system, (P + 1) n: its dense exponential's memory and time
+METHOD = ("exact: the scene and its sensitivity equations (the same M, C and K driven by -dM x'' - dC x' - dK x + "
+          "B du/dp) solved together by the matrix exponential; the model's derivatives taken on the assembled model "
+          "(a five-point stencil in each parameter, exact for polynomials of degree 4: every matrix, initial state "
+          "and force generator of a linear scene)")
+
+
+@dataclass
+class Sensitivity:
+    """A scene's response and its derivatives with respect to P parameters (per unit of each)."""
+
+    scenario: str
+    parameter: tuple[str, ...]
+    value: np.ndarray  # (P,) the nominal values
+    parameter_units: tuple[str, ...]
+    time: np.ndarray
+    dof: tuple[str, ...]
+    displacement: np.ndarray  # (N, n)
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    d_displacement: np.ndarray  # (P, N, n)
+    d_velocity: np.ndarray
+    d_acceleration: np.ndarray
+    peak_displacement: np.ndarray  # (n,)
+    peak_time: np.ndarray  # (n,)
+    d_peak_displacement: np.ndarray  # (P, n)
+    accuracy: dict[str, np.ndarray]  # per data set, (P,): stated error relative to the parameter's largest value
+    method: str = METHOD
+    model_error: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (P,) the stencil's estimated error
+    wall_time_s: float = 0.0
+    forward_time_s: float = 0.0  # one forward exact solve of the scene, for the cost's comparison
+    notes: tuple[str, ...] = ()
+    outputs: list[Path] = field(default_factory=list)
+
+    def units(self, quantity: str) -> tuple[str, ...]:
+        """The units of d_<quantity>, one per parameter: m/(N/m), m/kg, ..."""
+        return tuple(derivative_units(QUANTITIES[quantity], u) for u in self.parameter_units)
+
+
+def derivative_units(of: str, parameter: str) -> str:
+    """The units of d(of)/d(parameter): m/(N/m), m/kg, m for a dimensionless parameter."""
+    if parameter in ("", "1"):
+        return of
+    return f"{of}/({parameter})" if any(c in parameter for c in "/*^ ") else f"{of}/{parameter}"
+
+
+def sensitivity(sc: Scenario, params: list[str]) -> Sensitivity:
+    """The sensitivities of a linear scene's response to each parameter path (the sweep's paths)."""
+    from smdcli.sweep.spec import parameter_units
+
+    if not params:
+        raise UsageError("smd sensitivity: give at least one --param PATH (spring[0].k, mass.m1.m, ...)")
+    start = time.perf_counter()
+    base = build(sc)
+    if not base.is_linear:
+        raise UsageError(f"{sc.path}: {base.nonlinear_paths[0]} is nonlinear; smd sensitivity takes linear scenes "
+                         "(sensitivities of yielding, friction, stop and smooth nonlinear scenes are not yet built)")
+    if (len(params) + 1) * base.n > MAX_SIZE:
+        raise UsageError(f"{sc.path}: {len(params)} parameters of a {base.n}-DOF scene stack {(len(params) + 1) * base.n} "
+                         f"DOFs; smd sensitivity takes at most {MAX_SIZE}")
+    grid = time_grid(sc.time)
+    derivatives = model_derivatives(sc, base, grid, list(params))
+    stacked, scales = augmented_model(base, derivatives)
+    exact = get_solver("exact")
+    tol = Tolerances()
+    result = across_jumps(lambda piece, times: exact.solve(piece, times, tol), stacked, grid)
+    if not result.success or not np.all(np.isfinite(result.displacement)):
+        raise SolverFailed(f"{sc.path}: the sensitivity equations could not be solved: {result.stats.message}")
+    wall = time.perf_counter() - start
+    forward = _forward_time(base, grid, tol)
+    n, P = base.n, len(derivatives)
+    blocks = {q: getattr(result, q).reshape(len(grid), P + 1, n) for q in QUANTITIES}
+    nominal = {q: np.ascontiguousarray(b[:, 0]) for q, b in blocks.items()}
+    derived = {q: np.ascontiguousarray(np.moveaxis(b[:, 1:], 1, 0) / scales[:, None, None])
+               for q, b in blocks.items()}
+    accuracy = {}
+    stated = float(result.stats.stated_accuracy)
+    for q, b in blocks.items():
+        # the run's error is relative to the stacked state's peak; each block is a displacement (scale dx/dp)
+        absolute = stated * float(np.abs(b).max(initial=0.0))
+        largest = np.abs(b[:, 1:]).max(axis=(0, 2))
+        accuracy[f"d_{q}"] = np.maximum(np.where(largest > 0, absolute / np.where(largest > 0, largest, 1.0), 0.0),
+                                        [d.error for d in derivatives])
+        accuracy[q] = np.full(1, stated)
+    events = jump_times(base, grid)
+    peaks, at = located_peaks(grid, nominal["displacement"], nominal["velocity"], nominal["acceleration"], events,
+                              with_times=True)
+    d_peaks = np.full((P, n), np.nan)
+    notes = []
+    for i in range(n):
+        if peaks[i] == 0:
+            notes.append(f"{base.dofs[i]} does not move: its peak |x| has no derivative (written as nan)")
+            continue
+        sign = np.sign(quintic_at(grid, nominal["displacement"][:, i], nominal["velocity"][:, i],
+                                  nominal["acceleration"][:, i], np.array([at[i]]))[0])
+        for p in range(P):
+            d_peaks[p, i] = sign * quintic_at(grid, derived["displacement"][p, :, i], derived["velocity"][p, :, i],
+                                              derived["acceleration"][p, :, i], np.array([at[i]]))[0]
+    units = tuple(parameter_units(path, sc) for path in params)
+    return Sensitivity(
+        scenario=str(sc.path), parameter=tuple(params), value=np.array([d.value for d in derivatives]),
+        parameter_units=units, time=grid, dof=tuple(base.dofs), displacement=nominal["displacement"],
+        velocity=nominal["velocity"], acceleration=nominal["acceleration"], d_displacement=derived["displacement"],
+        d_velocity=derived["velocity"], d_acceleration=derived["acceleration"], peak_displacement=peaks,
+        peak_time=at, d_peak_displacement=d_peaks, accuracy=accuracy,
+        model_error=np.array([d.error for d in derivatives]), wall_time_s=wall, forward_time_s=forward,
+        notes=tuple(notes))
+
+
+def _forward_time(base, grid: np.ndarray, tol: Tolerances) -> float:
+    """Seconds of one exact forward solve of the scene alone: what the P sensitivities are measured against."""
+    exact = get_solver("exact")
+    start = time.perf_counter()
+    across_jumps(lambda piece, times: exact.solve(piece, times, tol), base.dense(), grid)
+    return time.perf_counter() - start

@@ -1,0 +1,247 @@
+"""`smd sensitivity` against independent references: a complex-step derivative of the state transition written
+here from the book's matrices (no smd model assembly), closed forms (a linear scene's response is linear in its
+force's amplitude and in a record's scale), and tight central differences of exact runs for the peaks and for the
+parameters whose matrices are not polynomial in them (modal damping)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+import smdcli
+from tests.conftest import SCENARIOS, model_of
+
+H = 1e-30  # the complex step: no subtraction, so no cancellation however small
+
+
+def two_dof_reference(k1=90.0, c2=1.0, m1=5.0, F0=3.3, w=10.0, x10=1.0):
+    """two_dof_forced.toml's (x, v) on its grid by the state transition of its matrices, written here from the
+    book's Equation (9-38) (k1 joins the masses, k2 = 85 ties mass 2 to the wall; c1 = 2 and c3 = 3 to ground, c2
+    between): every argument may be complex."""
+    M = np.diag([m1, 3.0]).astype(complex)
+    K = np.array([[k1, -k1], [-k1, k1 + 85.0]], dtype=complex)
+    C = np.array([[2.0 + c2, -c2], [-c2, c2 + 3.0]], dtype=complex)
+    Minv = np.linalg.inv(M)
+    A = np.zeros((6, 6), complex)
+    A[:2, 2:4] = np.eye(2)
+    A[2:4, :2], A[2:4, 2:4] = -Minv @ K, -Minv @ C
+    A[4, 5], A[5, 4] = w, -w  # [sin w t, cos w t]
+    A[2:4, 4] = Minv @ np.array([F0, 0.0])
+    z = np.array([x10, -1.0, 1.5, 1.0, 0.0, 1.0], complex)
+    step = scipy.linalg.expm(A * 0.005)
+    out = [z]
+    for _ in range(1000):
+        z = step @ z
+        out.append(z)
+    return np.array(out)
+
+
+TWO_DOF = {"spring[0].k": {"k1": 90 + 1j * H}, "damper[1].c": {"c2": 1 + 1j * H}, "mass.m1.m": {"m1": 5 + 1j * H},
+           "force[0].amplitude": {"F0": 3.3 + 1j * H}, "force[0].omega": {"w": 10 + 1j * H},
+           "mass.m1.x0": {"x10": 1 + 1j * H}}
+
+
+def test_linear_sensitivities_match_the_complex_step_of_the_state_transition():
+    """Every parameter kind of a forced 2-DOF scene (stiffness, damper, mass, force amplitude and frequency, an
+    initial displacement) to 1e-10 of its largest sensitivity, in x and v, and the nominal response to rounding;
+    the stated accuracy is above the error found (measured 5e-14 to 2e-11)."""
+    s = smdcli.sensitivity(SCENARIOS / "two_dof_forced.toml", list(TWO_DOF))
+    nominal = two_dof_reference().real
+    assert np.abs(s.displacement - nominal[:, :2]).max() <= 1e-13 * np.abs(nominal[:, :2]).max()
+    for i, (path, arguments) in enumerate(TWO_DOF.items()):
+        reference = two_dof_reference(**arguments).imag / H
+        for got, want, quantity in ((s.d_displacement[i], reference[:, :2], "displacement"),
+                                    (s.d_velocity[i], reference[:, 2:4], "velocity")):
+            error = np.abs(got - want).max() / np.abs(want).max()
+            assert error <= 1e-10, (path, quantity, error)
+            assert error <= s.accuracy[f"d_{quantity}"][i], (path, quantity, error, s.accuracy[f"d_{quantity}"][i])
+    # the acceleration's derivative is the velocity's slope: M s'' = -(dM a + dC v + dK x) - C s' - K s + B du/dp
+    k = s.parameter.index("spring[0].k")
+    reference = two_dof_reference(k1=90 + 1j * H)
+    slope = np.gradient(reference.imag[:, 2:4] / H, s.time, axis=0, edge_order=2)
+    assert np.abs(s.d_acceleration[k] - slope)[5:-5].max() <= 1e-3 * np.abs(slope).max()  # the slope's own O(h^2)
+
+
+def frame_text(record: str, damping: str) -> str:
+    return f"""
+[time]
+end = 4.0
+step = 0.02
+[[mass]]
+name = "f1"
+m = 2.0
+[[mass]]
+name = "f2"
+m = 1.5
+[[spring]]
+connects = ["ground", "f1"]
+k = 800.0
+[[spring]]
+connects = ["f1", "f2"]
+k = 500.0
+{damping}
+[ground_motion]
+quantity = "acceleration"
+type = "table"
+t = {record}
+values = [0.0, 1.2, -2.0, 0.7, 1.5, -0.4, 0.0]
+"""
+
+
+def frame_reference(k1=800.0, m2=1.5, alpha=0.3, beta=0.002, scale=1.0):
+    """The 2-storey frame's relative (x, v) under the piecewise-linear record: each step of the grid (the
+    record's knots lie on it) exact by Van Loan's exponential with the record's ramp [a, slope] as exosystem."""
+    t_knots = np.array([0.0, 0.4, 0.8, 1.2, 1.6, 2.0, 2.4])
+    a_knots = scale * np.array([0.0, 1.2, -2.0, 0.7, 1.5, -0.4, 0.0])
+    M = np.diag([2.0, m2]).astype(complex)
+    K = np.array([[k1 + 500.0, -500.0], [-500.0, 500.0]], dtype=complex)
+    C = alpha * M + beta * K
+    Minv = np.linalg.inv(M)
+    A = np.zeros((6, 6), complex)
+    A[:2, 2:4] = np.eye(2)
+    A[2:4, :2], A[2:4, 2:4] = -Minv @ K, -Minv @ C
+    A[2:4, 4] = -Minv @ (M @ np.ones(2))  # the ground's -M 1 a_g
+    A[4, 5] = 1.0  # a_g' = slope
+    step = scipy.linalg.expm(A * 0.02)
+    grid = np.linspace(0.0, 4.0, 201)
+    z = np.zeros(6, complex)
+    out = [z[:4].copy()]
+    for t in grid[:-1]:
+        i = np.searchsorted(t_knots, t + 1e-9, side="right") - 1
+        if i < len(t_knots) - 1:
+            slope = (a_knots[i + 1] - a_knots[i]) / (t_knots[i + 1] - t_knots[i])
+            z[4], z[5] = a_knots[i] + slope * (t - t_knots[i]), slope
+        else:
+            z[4], z[5] = a_knots[-1], 0.0
+        z = step @ z
+        out.append(z[:4].copy())
+    return np.array(out)
+
+
+def test_a_frame_under_a_record_with_rayleigh_damping_matches_the_complex_step():
+    """Support motion from a table, Rayleigh damping (C = alpha M + beta K: a stiffness's derivative reaches C
+    too): a storey stiffness, a floor mass, both Rayleigh coefficients and the record's scale, to 1e-10."""
+    text = frame_text("[0.0, 0.4, 0.8, 1.2, 1.6, 2.0, 2.4]", "[damping]\nalpha = 0.3\nbeta = 0.002")
+    sc, _, _ = model_of(text, "frame.toml")
+    paths = {"spring[0].k": {"k1": 800 + 1j * H}, "mass.f2.m": {"m2": 1.5 + 1j * H},
+             "damping.alpha": {"alpha": 0.3 + 1j * H}, "damping.beta": {"beta": 0.002 + 1j * H},
+             "ground_motion.scale": {"scale": 1 + 1j * H}}
+    s = smdcli.sensitivity(sc, list(paths))
+    assert np.abs(s.displacement - frame_reference().real[:, :2]).max() <= 1e-12 * np.abs(s.displacement).max()
+    for i, (path, arguments) in enumerate(paths.items()):
+        want = frame_reference(**arguments).imag[:, :2] / H
+        error = np.abs(s.d_displacement[i] - want).max() / np.abs(want).max()
+        assert error <= 1e-10, (path, error)
+
+
+def test_amplitude_and_scale_derivatives_are_the_response_over_the_factor():
+    """From rest, x is linear in a force's amplitude and in a record's scale: dx/dA = x / A, exactly."""
+    s = smdcli.sensitivity(SCENARIOS / "shear_frame_record.toml", ["ground_motion.scale"])
+    assert s.value[0] == 1.0  # an absent scale is 1, not 0
+    assert np.abs(s.d_displacement[0] - s.displacement).max() <= 1e-12 * np.abs(s.displacement).max()
+    s = smdcli.sensitivity(SCENARIOS / "three_dof_forced.toml", ["force[0].amplitude", "force[1].amplitude"])
+    alone = [smdcli.simulate(_with(SCENARIOS / "three_dof_forced.toml", f"force[{1 - j}].amplitude", 0.0),
+                             method="exact") for j in range(2)]
+    for j in range(2):
+        want = alone[j].displacement / s.value[j]
+        assert np.abs(s.d_displacement[j] - want).max() <= 1e-11 * np.abs(want).max()
+
+
+def _with(path, parameter: str, value: float):
+    """A bundled scenario with one parameter changed, as a sweep member is made."""
+    import copy
+    import tomllib
+
+    from smdcli.scenario.load import parse_document
+    from smdcli.sweep.family import set_parameter
+
+    text = path.read_text()
+    doc = copy.deepcopy(tomllib.loads(text))
+    set_parameter(doc, parameter, value)
+    return parse_document(doc, text, str(path))
+
+
+def _central(path, parameter: str, value: float, read, relative: float = 1e-4):
+    """A five-point central difference of read(result) over exact runs at value +- h, +- 2h."""
+    h = relative * (abs(value) or 1.0)
+    runs = {o: read(smdcli.simulate(_with(path, parameter, value + o * h), method="exact")) for o in (-2, -1, 1, 2)}
+    return (8 * (runs[1] - runs[-1]) - (runs[2] - runs[-2])) / (12 * h)
+
+
+def test_peak_derivatives_match_central_differences_of_located_peaks():
+    """d max|x_i| / dp at the located peak against differences of the peaks smd simulate locates, to 1e-7
+    (the differences' own error is about 1e-10 here)."""
+    from smdcli.solvers.peaks import result_peaks
+
+    path = SCENARIOS / "two_dof_forced.toml"
+    params = ["spring[1].k", "damper[0].c", "mass.m2.m"]
+    s = smdcli.sensitivity(path, params)
+    for i, parameter in enumerate(params):
+        want = _central(path, parameter, s.value[i], result_peaks)
+        assert np.abs(s.d_peak_displacement[i] - want).max() <= 1e-7 * np.abs(want).max(), parameter
+
+
+def test_modal_damping_carries_its_stencil_error_and_meets_it():
+    """A modal damping ratio enters C through the modes, not as a polynomial: its derivative still holds to 1e-8
+    of the largest against central differences of exact runs, and the stated accuracy says how good it is."""
+    path = SCENARIOS / "shear_frame_record.toml"
+    s = smdcli.sensitivity(path, ["damping.modal"])
+    want = _central(path, "damping.modal", 0.05, lambda r: r.displacement)
+    error = np.abs(s.d_displacement[0] - want).max() / np.abs(want).max()
+    assert error <= 1e-8
+    assert s.accuracy["d_displacement"][0] < 1e-8
+
+
+def test_the_file_layout_units_and_json(cli, tmp_path):
+    """The contract's data sets and attributes, and --json strict with the peaks' derivatives."""
+    import h5py
+
+    ran = cli("sensitivity", SCENARIOS / "two_dof_forced.toml", "--param", "spring[0].k", "--param", "mass.m1.m",
+              "-o", tmp_path, "--json")
+    assert ran.exit_code == 0, ran.output
+    data = json.loads(ran.stdout)
+    assert set(data["peak_displacement"]) == {"m1", "m2"}
+    assert set(data["peak_displacement"]["m2"]["derivative"]) == {"spring[0].k", "mass.m1.m"}
+    with h5py.File(tmp_path / "two_dof_forced_sensitivity.h5") as f:
+        N = len(f["time"])
+        assert [p.decode() for p in f["parameter"][()]] == ["spring[0].k", "mass.m1.m"]
+        assert f["value"][()].tolist() == [90.0, 5.0]
+        for q in ("displacement", "velocity", "acceleration"):
+            assert f[q].shape == (N, 2)
+            assert f[f"d_{q}"].shape == (2, N, 2)
+            assert f[f"d_{q}"].attrs["stated_accuracy"].shape == (2,)
+        assert [u.decode() if isinstance(u, bytes) else u for u in f["d_displacement"].attrs["units"]] == \
+            ["m/(N/m)", "m/kg"]
+        assert f["metrics/peak_displacement"].shape == (2,)
+        assert f["d_metrics/peak_displacement"].shape == (2, 2)
+        assert f["d_metrics/peak_displacement"][1, 1] == pytest.approx(
+            data["peak_displacement"]["m2"]["derivative"]["mass.m1.m"], rel=1e-15)
+        assert "direct" not in f.attrs["method"] and "exponential" in f.attrs["method"]
+        simulated = smdcli.simulate(SCENARIOS / "two_dof_forced.toml", method="exact")
+        assert np.abs(f["displacement"][()] - simulated.displacement).max() <= 1e-13
+    assert (tmp_path / "two_dof_forced_sensitivity.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("args, message", [
+    (("scenarios/bouncing_ball.toml", "--param", "mass.ball.m"), "nonlinear"),
+    (("scenarios/two_dof_forced.toml", "--param", "spring[7].k"), "spring[7]"),
+    (("scenarios/two_dof_forced.toml", "--param", "time.end"), "not a parameter of the scene"),
+    (("scenarios/two_dof_forced.toml", "--param", "spring[0].k", "--param", "spring[0].k"), "more than once"),
+])
+def test_refusals_are_one_line_exit_2_and_write_nothing(cli, tmp_path, args, message):
+    ran = cli("sensitivity", *[a if not a.startswith("scenarios/") else SCENARIOS.parent / a for a in args],
+              "-o", tmp_path / "out")
+    assert ran.exit_code == 2, ran.output
+    assert message in ran.output and len(ran.output.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_force_start_time_has_no_smooth_derivative(cli, tmp_path):
+    """A parameter that moves a force's discontinuity in time is refused, not answered with a number."""
+    text = (SCENARIOS / "three_dof_forced.toml").read_text()
+    assert 'type = "step"' in text
+    ran = cli("sensitivity", SCENARIOS / "three_dof_forced.toml", "--param", "force[1].t0", "-o", tmp_path / "out")
+    assert ran.exit_code == 2 and "structure" in ran.output, ran.output
