@@ -6,6 +6,8 @@
     smdcli.write(result, "out/two_dof.h5")                          # the file `smd simulate` writes
     s = smdcli.sensitivity("scenarios/two_dof_forced.toml", ["spring[0].k", "mass.m1.m"])
     s.d_displacement                                                # (P, N, n): dx/dp per unit of each parameter
+    f = smdcli.fit("frame.toml", "shaker_test.csv", ["spring[0].k", "damping.alpha"])
+    f.estimate, f.standard_error, f.confidence_95                   # the fit of `smd fit`, nothing written
 
 The analyses (smdcli.analysis) take a record, a Model or a Result and return arrays; these are the ones the
 commands run, exposed here by name:
@@ -75,6 +77,23 @@ def sensitivity(scenario: Scenario | str | Path, params: list[str]):
 
     sc = scenario if isinstance(scenario, Scenario) else load(scenario)
     return sensitivities(sc, [params] if isinstance(params, str) else list(params))
+
+
+def fit(scenarios, data, params, bounds: dict | None = None, max_iterations: int = 100):
+    """Fit parameter paths of one or more scenarios (paths or Scenarios) to measured data (a CSV or an smd HDF5
+    result per scenario), writing nothing: .parameter, .estimate, .standard_error, .covariance, .confidence_95,
+    .converged and the rest of `smd fit`'s file. A scenario's [fit] channels and weights apply."""
+    from smdcli.analysis.fit import fit as fitted, make_test
+    from smdcli.analysis.fit_data import read_measured
+
+    scenarios = [scenarios] if isinstance(scenarios, (str, Path, Scenario)) else list(scenarios)
+    data = [data] if isinstance(data, (str, Path)) else list(data)
+    if len(data) != len(scenarios):
+        raise UsageError(f"fit(): give one data file per scenario ({len(scenarios)}), found {len(data)}")
+    loaded = [s if isinstance(s, Scenario) else load(s) for s in scenarios]
+    tests = [make_test(sc, read_measured(d), dict(sc.fit).get("channels"), dict(dict(sc.fit).get("weights", ())))
+             for sc, d in zip(loaded, data)]
+    return fitted(tests, [params] if isinstance(params, str) else list(params), bounds, max_iterations)
 
 
 # name -> (module, attribute): the analyses and the pieces they take, imported on first use

@@ -152,3 +152,35 @@ def sensitivity(
     _carried_out(lambda: sensitivity_command(scenario, list(param), out, plots=not no_plots),
                  {"scenario": str(scenario)}, as_json, quiet, sensitivity_summary,
                  lambda _, data: format_sensitivity(data))
+
+
+def fit(
+    scenarios: List[Path] = typer.Argument(..., help="Scenario TOML files, one per test of the same specimen "
+                                           "(parameters with the same path are shared)."),
+    data: Optional[List[Path]] = typer.Option(None, "--data", help="Measured data per scenario (repeat, in order): "
+                                              "a CSV of time and columns <mass>.displacement|velocity|acceleration "
+                                              "or <element>.force (units as 'm1.acceleration \\[g]'), or an smd HDF5 "
+                                              "result. Default: each scenario's \\[fit] data."),
+    param: Optional[List[str]] = typer.Option(None, "--param", help="A parameter path to fit (repeat), as a sweep "
+                                              "takes it. Default: \\[fit] parameters."),
+    bound: Optional[List[str]] = typer.Option(None, "--bound", help="PATH=LOWER:UPPER (repeat). Default: \\[fit] "
+                                              "bounds; a positive parameter is kept positive."),
+    max_iterations: int = typer.Option(100, "--max-iterations", help="Evaluations allowed before the fit stops "
+                                       "unconverged (exit 1, the best point written)."),
+    out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
+    no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 and TOML files only."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
+    as_json: bool = typer.Option(False, "--json", help="Print the estimates as JSON."),
+):
+    """Fit parameters to measured response: bounded least squares on exact sensitivities, with uncertainty.
+
+    Writes OUT/<stem>_fit.h5 (estimates, standard errors, covariance, correlation, 95 % intervals, measured and
+    fitted channels, history), OUT/<stem>_fitted.toml per scenario (runs as it is) and OUT/<stem>_fit.png. Exit 1
+    when the fit does not converge within --max-iterations."""
+    from smdcli.commands.fit import fit_command, fit_summary, format_fit
+
+    run = _carried_out(lambda: fit_command(list(scenarios), list(data or []), list(param or []), list(bound or []),
+                                           out, max_iterations, plots=not no_plots),
+                       {"scenario": str(scenarios[0])}, as_json, quiet, fit_summary, lambda _, d: format_fit(d))
+    if not run.converged:
+        raise typer.Exit(1)

@@ -19,7 +19,8 @@ STUDIES = ["one_dof_linear_stiff", "two_mass_stiff_chain"]  # stiff scenes for c
 SWEEPS = ["one_dof_regimes_sweep", "ic_underdamped", "ic_critical", "ic_overdamped", "frequency_response_zeta",
           "two_dof_frequency_response", "duffing_frequency_response"]  # scenes with a [sweep] table
 GROUND = ["shear_frame_record", "quarter_car_bump", "transmissibility_1dof", "shock_half_sine"]  # support motion
-ANALYSES = ["five_storey_building", "component_random_vibration"]  # response-spectrum analysis (smd rsa)
+ANALYSES = ["five_storey_building", "component_random_vibration",  # response-spectrum analysis (smd rsa)
+            "three_storey_shaker"]  # identification from a shaker test (smd fit)
 NONSMOOTH = ["elastoplastic_record", "shear_frame_bilinear", "bouc_wen_multisine", "bouc_wen_benchmark",
              "coulomb_free_decay", "stick_slip_belt", "bouncing_ball", "vibro_impact_gap", "friction_isolated_building"]  # yield, friction, stops
 

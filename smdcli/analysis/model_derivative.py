@@ -23,6 +23,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+import re
 import tomllib
 from dataclasses import dataclass
 
@@ -39,7 +40,8 @@ from smdcli.sweep.family import parameter_value, set_parameter
 
 CENTRAL = (-2.0, -1.0, 1.0, 2.0)  # offsets in units of delta: exact for polynomials of degree 4 (its symmetry)
 FORWARD = (0.0, 1.0, 2.0, 3.0, 4.0)  # where p - delta is not a valid scene (a damper at c = 0): degree 4 too
-STEPS = (1e-3, 1e-4, 2e-5)  # relative deltas tried, largest first, until the stencil's error is rounding's
+STEPS = (1e-3, 1e-4, 2e-5)
+AFFINE_STEP = 1e-2  # relative step of an affine parameter's one difference: exact for any step; larger, less rounding  # relative deltas tried, largest first, until the stencil's error is rounding's
 EPS = np.finfo(float).eps
 ROUNDING = 16  # units of rounding in a model's number (a generator's state at a late time: sin(w t) of a large w t)
 _REFUSED = ("time.", "solver.", "sweep.", "output.", "plot")  # the run's span and settings: not the scene's
@@ -113,6 +115,8 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
     scale = relative_size(value)
     structure = _structure(base, grid)
     t_end = float(grid[-1])
+    if affine(sc, base, path):
+        return _affine_derivative(sc, doc, base, grid, path, value, scale)
     best = None
     for relative in STEPS:
         delta = relative * scale
@@ -126,11 +130,8 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
         else:
             raise UsageError(f"--param {path}: the scene cannot be built at {path} = {value:g} +- "
                              f"{4 * delta:.3g}: no derivative can be taken there")
-        for o, m in models.items():
-            if _structure(m, grid) != structure:
-                raise UsageError(f"--param {path}: changes the scene's structure, not only its numbers (a force's "
-                                 "discontinuity moves in time, or the model changes its form): its derivative is not "
-                                 "a response sensitivity smd can give")
+        for m in models.values():
+            _same_structure(m, structure, grid, path)
         weights = stencil_weights(offsets) / delta
         wide = stencil_weights(tuple(2 * o for o in offsets)) / delta
         near = [sum(w * a for w, a in zip(weights, parts)) for parts in
@@ -144,16 +145,63 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
             # R(2 delta) - R(delta) is 15 times the error of R(delta) (both O(delta^4)); rounding: eps |f| sum |w| of
             # each array that changes with p (one that does not is the same number at every point: no rounding)
             error = max(float(np.abs(a - b).max(initial=0.0)) for a, b in zip(near, far)) / 15 / largest
-            values = list(zip(*(_model_arrays(models[o], t_end) for o in doubled)))
-            rounding = max((ROUNDING * EPS * max(float(np.abs(v).max(initial=0.0)) for v in parts)
-                            for parts in values if any(not np.array_equal(parts[0], v) for v in parts[1:])),
-                           default=0.0) * float(np.abs(weights).sum()) / largest
+            rounding = _rounding([models[o] for o in doubled], weights, t_end, largest)
         found = Derivative(path, value, delta, [models[o] for o in offsets], weights, error + rounding)
         if best is None or found.error < best.error:
             best = found
         if error <= rounding:
             break
     return best
+
+
+def _same_structure(model: Model, structure: tuple, grid: np.ndarray, path: str) -> None:
+    if _structure(model, grid) != structure:
+        raise UsageError(f"--param {path}: changes the scene's structure, not only its numbers (a force's "
+                         "discontinuity moves in time, or the model changes its form): its derivative is not "
+                         "a response sensitivity smd can give")
+
+
+def _rounding(models: list[Model], weights: np.ndarray, t_end: float, largest: float) -> float:
+    """The stencil's rounding relative to the largest derivative: eps |f| sum |w| of each array that changes with
+    p (one that does not is the same number at every point: no rounding)."""
+    values = list(zip(*(_model_arrays(m, t_end) for m in models)))
+    changed = [max(float(np.abs(v).max(initial=0.0)) for v in parts) for parts in values
+               if any(not np.array_equal(parts[0], v) for v in parts[1:])]
+    return ROUNDING * EPS * max(changed, default=0.0) * float(np.abs(weights).sum()) / largest
+
+
+def affine(sc: Scenario, base: Model, path: str) -> bool:
+    """Whether every number of the model is affine in the parameter: a mass, stiffness, damper, [system] entry,
+    initial state, Rayleigh coefficient, force amplitude or record scale (not with modal damping, whose C follows
+    the modes, nor a mass where the ground jumps, whose jump holds M^-1 C)."""
+    from smdcli.sweep.family import STRUCTURAL
+
+    if STRUCTURAL.match(path) and path != "zeta":
+        return not (sc.damping is not None and sc.damping.modal) and not (base.jumps and ".m" in path)
+    return bool(re.fullmatch(r"damping\.(alpha|beta)|force\[\d+\]\.amplitude|ground_motion\.scale", path))
+
+
+def _affine_derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str, value: float,
+                       scale: float) -> Derivative:
+    """An affine parameter's derivative: one difference over a step of AFFINE_STEP of it, exact up to rounding."""
+    structure = _structure(base, grid)
+    for sign in (1.0, -1.0):
+        delta = sign * AFFINE_STEP * scale
+        try:
+            other = _scene_at(sc, doc, path, value + delta)
+        except ScenarioError:
+            continue
+        break
+    else:
+        raise UsageError(f"--param {path}: the scene cannot be built at {path} = {value:g} +- "
+                         f"{AFFINE_STEP * scale:.3g}: no derivative can be taken there")
+    _same_structure(other, structure, grid, path)
+    weights = np.array([-1.0, 1.0]) / delta
+    largest = max((float(np.abs(b - a).max(initial=0.0)) for a, b in
+                   zip(_model_arrays(base, float(grid[-1])), _model_arrays(other, float(grid[-1])))),
+                  default=0.0) / abs(delta)
+    error = _rounding([base, other], weights, float(grid[-1]), largest) if largest > 0 else 0.0
+    return Derivative(path, value, delta, [base, other], weights, error)
 
 
 class ParameterDerivative(Signal):

@@ -60,6 +60,37 @@ class Sensitivity:
     forward_time_s: float = 0.0  # one forward exact solve of the scene, for the cost's comparison
     notes: tuple[str, ...] = ()
     outputs: list[Path] = field(default_factory=list)
+    model: object = None  # the scene's Model
+    derivatives: list = field(default_factory=list)  # model_derivative.Derivative per parameter
+
+    def ground_acceleration(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The support's acceleration on the grid (N,) and its derivative (P, N), or None without support motion:
+        what turns the relative acceleration into the absolute one an accelerometer reads."""
+        if self.model is None or self.model.ground is None:
+            return None
+        from smdcli.model.system import GROUND_DOF
+
+        ground = [j for j, dof in enumerate(self.model.force_dofs) if dof == GROUND_DOF]
+
+        def of(model):
+            return sum(model.signals[j].value(self.time) for j in ground)
+        return of(self.model), np.array([d.of(of) for d in self.derivatives]).reshape(len(self.derivatives), -1)
+
+    def element_tension(self, path: str) -> tuple[np.ndarray, np.ndarray]:
+        """A linear spring's or damper's tension on the grid (N,) and its derivative (P, N)."""
+        from smdcli.analysis.forces import element_forces
+
+        def tension(model, x, v):
+            forces = element_forces(model, x, v)
+            for names, values in ((forces.spring_names, forces.spring), (forces.damper_names, forces.damper)):
+                if path in names:
+                    return values[:, names.index(path)]
+            raise KeyError(path)
+        nominal = tension(self.model, self.displacement, self.velocity)
+        derived = [d.of(lambda m: tension(m, self.displacement, self.velocity))
+                   + tension(self.model, self.d_displacement[i], self.d_velocity[i])
+                   for i, d in enumerate(self.derivatives)]
+        return nominal, np.array(derived).reshape(len(self.derivatives), -1)
 
     def units(self, quantity: str) -> tuple[str, ...]:
         """The units of d_<quantity>, one per parameter: m/(N/m), m/kg, ..."""
@@ -73,10 +104,12 @@ def derivative_units(of: str, parameter: str) -> str:
     return f"{of}/({parameter})" if any(c in parameter for c in "/*^ ") else f"{of}/{parameter}"
 
 
-def sensitivity(sc: Scenario, params: list[str]) -> Sensitivity:
-    """The sensitivities of a linear scene's response to each parameter path (the sweep's paths)."""
-    from smdcli.sweep.spec import parameter_units
-
+def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None, timed: bool = False,
+                peaks: bool = True) -> Sensitivity:
+    """The sensitivities of a linear scene's response to each parameter path (the sweep's paths), on the
+    scenario's output grid or on `grid` (any increasing times from the scenario's start); `timed`: one forward
+    solve of the scene alone is timed beside it (forward_time_s), for the cost's comparison; without `peaks` the
+    peaks and their derivatives are left out (nan: a fit reads the histories only)."""
     if not params:
         raise UsageError("smd sensitivity: give at least one --param PATH (spring[0].k, mass.m1.m, ...)")
     start = time.perf_counter()
@@ -87,7 +120,7 @@ def sensitivity(sc: Scenario, params: list[str]) -> Sensitivity:
     if (len(params) + 1) * base.n > MAX_SIZE:
         raise UsageError(f"{sc.path}: {len(params)} parameters of a {base.n}-DOF scene stack {(len(params) + 1) * base.n} "
                          f"DOFs; smd sensitivity takes at most {MAX_SIZE}")
-    grid = time_grid(sc.time)
+    grid = time_grid(sc.time) if grid is None else np.asarray(grid, dtype=float)
     derivatives = model_derivatives(sc, base, grid, list(params))
     stacked, scales = augmented_model(base, derivatives)
     exact = get_solver("exact")
@@ -96,7 +129,7 @@ def sensitivity(sc: Scenario, params: list[str]) -> Sensitivity:
     if not result.success or not np.all(np.isfinite(result.displacement)):
         raise SolverFailed(f"{sc.path}: the sensitivity equations could not be solved: {result.stats.message}")
     wall = time.perf_counter() - start
-    forward = _forward_time(base, grid, tol)
+    forward = _forward_time(base, grid, tol) if timed else float("nan")
     n, P = base.n, len(derivatives)
     blocks = {q: getattr(result, q).reshape(len(grid), P + 1, n) for q in QUANTITIES}
     nominal = {q: np.ascontiguousarray(b[:, 0]) for q, b in blocks.items()}
@@ -111,6 +144,10 @@ def sensitivity(sc: Scenario, params: list[str]) -> Sensitivity:
         accuracy[f"d_{q}"] = np.maximum(np.where(largest > 0, absolute / np.where(largest > 0, largest, 1.0), 0.0),
                                         [d.error for d in derivatives])
         accuracy[q] = np.full(1, stated)
+    if not peaks:
+        nan = np.full(n, np.nan)
+        return _result(sc, params, derivatives, grid, base, nominal, derived, nan, nan, np.full((P, n), np.nan),
+                       accuracy, wall, forward, ())
     events = jump_times(base, grid)
     peaks, at = located_peaks(grid, nominal["displacement"], nominal["velocity"], nominal["acceleration"], events,
                               with_times=True)
@@ -125,15 +162,22 @@ def sensitivity(sc: Scenario, params: list[str]) -> Sensitivity:
         for p in range(P):
             d_peaks[p, i] = sign * quintic_at(grid, derived["displacement"][p, :, i], derived["velocity"][p, :, i],
                                               derived["acceleration"][p, :, i], np.array([at[i]]))[0]
-    units = tuple(parameter_units(path, sc) for path in params)
+    return _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_peaks, accuracy, wall,
+                   forward, tuple(notes))
+
+
+def _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_peaks, accuracy, wall, forward,
+            notes) -> Sensitivity:
+    from smdcli.sweep.spec import parameter_units
+
     return Sensitivity(
         scenario=str(sc.path), parameter=tuple(params), value=np.array([d.value for d in derivatives]),
-        parameter_units=units, time=grid, dof=tuple(base.dofs), displacement=nominal["displacement"],
-        velocity=nominal["velocity"], acceleration=nominal["acceleration"], d_displacement=derived["displacement"],
-        d_velocity=derived["velocity"], d_acceleration=derived["acceleration"], peak_displacement=peaks,
-        peak_time=at, d_peak_displacement=d_peaks, accuracy=accuracy,
+        parameter_units=tuple(parameter_units(path, sc) for path in params), time=grid, dof=tuple(base.dofs),
+        displacement=nominal["displacement"], velocity=nominal["velocity"], acceleration=nominal["acceleration"],
+        d_displacement=derived["displacement"], d_velocity=derived["velocity"], d_acceleration=derived["acceleration"],
+        peak_displacement=peaks, peak_time=at, d_peak_displacement=d_peaks, accuracy=accuracy,
         model_error=np.array([d.error for d in derivatives]), wall_time_s=wall, forward_time_s=forward,
-        notes=tuple(notes))
+        notes=notes, model=base, derivatives=derivatives)
 
 
 def _forward_time(base, grid: np.ndarray, tol: Tolerances) -> float:

@@ -23,7 +23,7 @@ def sensitivity_command(path: str | Path, params: list[str], out: str | Path, pl
     path = Path(path)
     sc = load(path)
     out_dir = output_folder(out, make=False)
-    s = sensitivity(sc, list(params))
+    s = sensitivity(sc, list(params), timed=True)
     out_dir = output_folder(out)
     with together():
         h5 = out_dir / f"{path.stem}_sensitivity.h5"

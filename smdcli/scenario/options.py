@@ -36,6 +36,44 @@ def _read_solver(t: _Table) -> SolverSpec:
     return SolverSpec(method=method, rtol=rtol, atol=atol, dt=dt, options=tuple(options))
 
 
+FIT_KEYS = ("data", "parameters", "bounds", "channels", "weights")
+
+
+def _read_fit(t: _Table) -> tuple[tuple[str, Any], ...]:
+    """[fit]'s keys, their types checked: `smd fit` reads the paths, channels and the data file, and names this
+    file in its errors."""
+    items = []
+    for key in FIT_KEYS:
+        if not t.has(key):
+            continue
+        value = t.raw(key)
+        if key == "data":
+            if not isinstance(value, str) or not value:
+                raise t.fail(key, f"expected a file name, found {_kind(value)}")
+        elif key in ("parameters", "channels"):
+            value = [value] if isinstance(value, str) else value
+            if not isinstance(value, list) or not value or not all(isinstance(v, str) for v in value):
+                raise t.fail(key, f"expected a string or an array of strings, found {_kind(value)}")
+            value = tuple(value)
+        else:  # bounds = { "path" = [lo, hi] }, weights = { "channel" = w }
+            if not isinstance(value, dict):
+                raise t.fail(key, f"expected a table, found {_kind(value)}")
+            for name, entry in value.items():
+                pair = key == "bounds"
+                good = (isinstance(entry, list) and len(entry) == 2 and all(
+                    isinstance(v, (int, float)) and not isinstance(v, bool) for v in entry) and entry[0] < entry[1]) \
+                    if pair else (isinstance(entry, (int, float)) and not isinstance(entry, bool) and entry > 0)
+                if not good:
+                    raise ScenarioError(t.file, f"fit.{key}.{name}", ("expected [lower, upper] with lower < upper"
+                                                                        if pair else "expected a number > 0")
+                                        + f", found {entry!r}")
+            value = tuple((name, tuple(float(v) for v in entry) if key == "bounds" else float(entry))
+                          for name, entry in value.items())
+        items.append((key, value))
+    t.finish(FIT_KEYS)
+    return tuple(items)
+
+
 SWEEP_KEYS = ("parameter", "values", "labels", "ic", "frequency", "normalized", "input", "direction",
               "measure", "quantity", "metric", "method")
 

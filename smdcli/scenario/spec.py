@@ -202,6 +202,7 @@ class Scenario:
     expect: tuple[ExpectSpec, ...] = ()
     frictions: tuple[ElementSpec, ...] = ()
     stops: tuple[ElementSpec, ...] = ()
+    fit: tuple[tuple[str, Any], ...] = ()  # [fit]'s keys, read by `smd fit`
 
     @property
     def stem(self) -> str:

@@ -1,0 +1,255 @@
+"""`smd fit`: the parameters of one or more scenarios that best explain measured response, by bounded nonlinear
+least squares whose Jacobian is the exact sensitivities (smdcli.analysis.sensitivity), never finite differences;
+with the estimates' covariance, standard errors, correlations and 95 % intervals, and a parameter the data cannot
+determine named as such instead of given a meaningless interval.
+
+The residual of channel c of test j at its sample k is w_c (model - measured), the model run from the scenario's
+own start and initial state to the data's last time, read at the data's times (the exact solver takes any
+increasing grid). The weights default to 1 / each channel's RMS. With sigma^2 = sum r^2 / (m - P) the covariance is
+sigma^2 (J^T J)^-1, J the Jacobian at the estimate.
+
+Must not import: io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import time as clock
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from smdcli.analysis.fit_data import Measured, quantity_of
+from smdcli.analysis.sensitivity import sensitivity
+from smdcli.errors import ScenarioError, UsageError
+from smdcli.scenario import Scenario
+
+TOLERANCE = 1e-12  # relative reduction of the cost and relative step below which the fit has converged
+IDENTIFIABLE = 1e7  # condition number of the column-normalized Jacobian above which a direction is undetermined
+JACOBIAN = "exact sensitivities: the scene and its sensitivity equations solved together (smd sensitivity)"
+
+
+@dataclass
+class Test:
+    """One scenario, the data measured on it, the channels fitted and their weights."""
+
+    scenario: Scenario
+    measured: Measured
+    channels: tuple[str, ...]
+    weights: np.ndarray
+    grid: np.ndarray  # the scenario's start, then the data's times
+    rows: np.ndarray  # where the data's times are in the grid
+
+
+@dataclass
+class FitResult:
+    """The estimates, their uncertainty, the history of the fit and each test's measured and fitted channels."""
+
+    parameter: tuple[str, ...]
+    units: tuple[str, ...]
+    initial: np.ndarray
+    estimate: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    standard_error: np.ndarray
+    covariance: np.ndarray
+    correlation: np.ndarray
+    confidence_95: np.ndarray  # (P, 2)
+    cost: float
+    rms_residual: float
+    iterations: int
+    solves: int
+    converged: bool
+    message: str
+    identifiable: bool
+    condition: float
+    null_direction: str
+    history_cost: np.ndarray
+    history_estimate: np.ndarray
+    tests: list[Test]
+    fitted: list[dict[str, np.ndarray]]  # per test, channel -> the model at the estimate
+    jacobian: str = JACOBIAN
+    wall_time_s: float = 0.0
+    outputs: list[Path] = field(default_factory=list)
+
+
+def scenario_with(sc: Scenario, values: dict[str, float]) -> Scenario:
+    """The scenario with parameter paths set to values, validated again (a fit's trial point, its fitted scene)."""
+    import tomli_w
+
+    from smdcli.scenario.load import parse_document
+    from smdcli.sweep.family import set_parameter
+
+    doc = copy.deepcopy(tomllib.loads(sc.text))
+    for path, value in values.items():
+        set_parameter(doc, path, float(value))
+    try:
+        return parse_document(doc, tomli_w.dumps(doc), sc.path)
+    except ScenarioError as exc:
+        at = ", ".join(f"{p} = {v:.6g}" for p, v in values.items())
+        raise ScenarioError(exc.file, exc.field, f"at {at}: {exc.message}") from None
+
+
+def make_test(sc: Scenario, measured: Measured, channels: tuple[str, ...] | None,
+              weights: dict[str, float] | None) -> Test:
+    """A test checked against its scene: every channel names a mass or an element of it, the data start no
+    earlier than the scene."""
+    from smdcli.model import build
+
+    model = build(sc)
+    chosen = tuple(channels) if channels else tuple(measured.channels)
+    elements = {e.name for e in model.elements if e.law == "linear"}
+    for channel in chosen:
+        if channel not in measured.channels:
+            raise UsageError(f"{measured.file}: no column {channel!r} (its columns: {', '.join(measured.channels)})")
+        owner = channel.rsplit(".", 1)[0]
+        quantity = quantity_of(channel)
+        if (quantity == "force" and owner not in elements) or (quantity != "force" and owner not in model.dofs):
+            names = sorted(elements) if quantity == "force" else list(model.dofs)
+            raise UsageError(f"{measured.file}: column {channel!r} names no {'linear element' if quantity == 'force' else 'mass'} "
+                             f"of {sc.path} (its {'elements' if quantity == 'force' else 'masses'}: "
+                             f"{', '.join(names)})")
+    for name in weights or {}:
+        if name not in chosen:
+            raise UsageError(f"{sc.path}: fit.weights names {name!r}, which is not a fitted channel "
+                             f"({', '.join(chosen)})")
+    start = sc.time.start
+    if measured.time[0] < start - 1e-12 * max(1.0, abs(start)):
+        raise UsageError(f"{measured.file}: the data start at t = {measured.time[0]:g} s, before the scenario's "
+                         f"start ({start:g} s): the run cannot reach them")
+    grid = measured.time if abs(measured.time[0] - start) <= 1e-12 * max(1.0, abs(start)) else \
+        np.concatenate([[start], measured.time])
+    rows = np.arange(len(grid) - len(measured.time), len(grid))
+    default = {c: 1.0 / max(float(np.sqrt(np.mean(measured.channels[c] ** 2))), 1e-300) for c in chosen}
+    given = dict(weights or {})
+    return Test(sc, measured, chosen, np.array([given.get(c, default[c]) for c in chosen]), grid, rows)
+
+
+def _model_channels(test: Test, sc: Scenario, params: list[str]) -> tuple[dict, dict]:
+    """Each channel of a test at the scene sc: its values (N,) and derivatives (P, N) at the data's times."""
+    s = sensitivity(sc, params, grid=test.grid, peaks=False)
+    dofs = {name: j for j, name in enumerate(s.dof)}
+    ground = s.ground_acceleration()
+    values, derivatives = {}, {}
+    for channel in test.channels:
+        owner, quantity = channel.rsplit(".", 1)
+        if quantity == "force":
+            value, derivative = s.element_tension(owner)
+        else:
+            j = dofs[owner]
+            value, derivative = getattr(s, quantity)[:, j], getattr(s, f"d_{quantity}")[:, :, j]
+            if quantity == "acceleration" and ground is not None:  # an accelerometer's: absolute
+                value, derivative = value + ground[0], derivative + ground[1]
+        values[channel], derivatives[channel] = value[test.rows], derivative[:, test.rows]
+    return values, derivatives
+
+
+def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, float]] | None = None,
+        max_iterations: int = 100) -> FitResult:
+    """Fit the shared parameters to every test's data at once; the estimate, its uncertainty and the history."""
+    from scipy.optimize import least_squares
+
+    from smdcli.sweep.family import parameter_value
+    from smdcli.sweep.spec import parameter_units
+
+    start = clock.perf_counter()
+    first = tomllib.loads(tests[0].scenario.text)
+    initial = np.array([parameter_value(first, p) for p in params])
+    for test in tests[1:]:  # every scene must hold every parameter (read now: a missing path is named before work)
+        doc = tomllib.loads(test.scenario.text)
+        for p in params:
+            parameter_value(doc, p)
+    bounds = dict(bounds or {})
+    unknown = [p for p in bounds if p not in params]
+    if unknown:
+        raise UsageError(f"bounds: {unknown[0]!r} is not a fitted parameter ({', '.join(params)})")
+    lower = np.array([bounds[p][0] if p in bounds else (0.0 if v > 0 else -np.inf) for p, v in zip(params, initial)])
+    upper = np.array([bounds[p][1] if p in bounds else np.inf for p in params])
+    outside = [p for p, v, lo, hi in zip(params, initial, lower, upper) if not lo <= v <= hi]
+    if outside:
+        raise UsageError(f"bounds: the start {outside[0]} = {initial[params.index(outside[0])]:g} lies outside its "
+                         "bounds")
+    samples = sum(len(t.rows) * len(t.channels) for t in tests)
+    if samples <= len(params):
+        raise UsageError(f"{tests[0].measured.file}: {samples} samples cannot determine {len(params)} parameters")
+    scale = np.where(initial != 0, np.abs(initial), 1.0)
+    cache: dict[bytes, tuple] = {}
+    history: list[tuple[float, np.ndarray]] = []
+    solves = 0
+
+    def evaluate(theta: np.ndarray) -> tuple:
+        nonlocal solves
+        key = theta.tobytes()
+        if key not in cache:
+            solves += 1
+            p = theta * scale
+            residuals, columns, fitted = [], [], []
+            for test in tests:
+                sc = scenario_with(test.scenario, dict(zip(params, p)))
+                values, derivatives = _model_channels(test, sc, params)
+                fitted.append(values)
+                for w, channel in zip(test.weights, test.channels):
+                    residuals.append(w * (values[channel] - test.measured.channels[channel]))
+                    columns.append(w * derivatives[channel])
+            r = np.concatenate(residuals)
+            J = np.concatenate(columns, axis=1).T  # (m, P) per unit of each parameter
+            cache.clear()  # the last point only: least_squares asks for fun and jac at the same theta
+            cache[key] = (r, J, fitted)
+        return cache[key]
+
+    def residual(theta):
+        return evaluate(theta)[0]
+
+    def jacobian(theta):
+        r, J, _ = evaluate(theta)
+        history.append((0.5 * float(r @ r), theta * scale))
+        return J * scale
+
+    theta0 = initial / scale
+    with np.errstate(all="ignore"):
+        found = least_squares(residual, theta0, jac=jacobian, bounds=(lower / scale, upper / scale), method="trf",
+                              ftol=TOLERANCE, xtol=TOLERANCE, gtol=TOLERANCE, max_nfev=max_iterations,
+                              x_scale=1.0)
+    estimate = found.x * scale
+    r, J, fitted = evaluate(found.x)
+    m, P = len(r), len(params)
+    sigma2 = float(r @ r) / (m - P)
+    norms = np.linalg.norm(J, axis=0)
+    normalized = J / np.where(norms > 0, norms, 1.0)
+    _, singular, vt = np.linalg.svd(normalized, full_matrices=False)
+    condition = float(singular[0] / singular[-1]) if singular[-1] > 0 else math.inf
+    identifiable = condition <= IDENTIFIABLE
+    inverse = (vt.T / np.where(singular > singular[0] / IDENTIFIABLE, singular, np.inf) ** 2) @ vt
+    covariance = sigma2 * inverse / np.outer(np.where(norms > 0, norms, np.inf), np.where(norms > 0, norms, np.inf))
+    standard_error = np.sqrt(np.maximum(np.diag(covariance), 0.0))
+    null_direction = ""
+    if not identifiable:
+        direction = vt[-1]
+        involved = np.abs(direction) > 0.1 * np.abs(direction).max()
+        standard_error[involved] = np.nan
+        covariance[involved, :] = covariance[:, involved] = np.nan
+        null_direction = " + ".join(f"{c:+.3g} {p}" for p, c, keep in zip(params, direction, involved) if keep)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        correlation = covariance / np.outer(standard_error, standard_error)
+    from scipy.special import stdtrit
+
+    t_value = float(stdtrit(m - P, 0.975))
+    confidence = np.stack([estimate - t_value * standard_error, estimate + t_value * standard_error], axis=1)
+    converged = bool(found.status > 0)
+    message = found.message if converged else (f"stopped after {max_iterations} evaluations (--max-iterations) "
+                                                f"without meeting the tolerance {TOLERANCE:g}; the best point is "
+                                                "written")
+    if not history or not np.array_equal(history[-1][1], estimate):
+        history.append((0.5 * float(r @ r), estimate))
+    units = tuple(parameter_units(p, tests[0].scenario) or "1" for p in params)
+    return FitResult(
+        parameter=tuple(params), units=units, initial=initial, estimate=estimate, lower=lower, upper=upper,
+        standard_error=standard_error, covariance=covariance, correlation=correlation, confidence_95=confidence,
+        cost=0.5 * float(r @ r), rms_residual=float(np.sqrt(np.mean(r ** 2))), iterations=int(found.njev or 0),
+        solves=solves, converged=converged, message=message, identifiable=identifiable, condition=condition,
+        null_direction=null_direction, history_cost=np.array([c for c, _ in history]),
+        history_estimate=np.array([e for _, e in history]), tests=tests, fitted=fitted,
+        wall_time_s=clock.perf_counter() - start)
