@@ -69,8 +69,10 @@ class Derivative:
     error: float
 
     def of(self, read) -> np.ndarray:
-        """d/dp of a model's array read(model), combined over the stencil."""
-        return sum(w * np.asarray(read(m), dtype=float) for w, m in zip(self.weights, self.models))
+        """d/dp of a model's array read(model), combined over the stencil (as differences from its first point: the
+        weights sum to zero only up to rounding, and an array p does not change must come out exactly zero)."""
+        first = np.asarray(read(self.models[0]), dtype=float)
+        return sum(w * (np.asarray(read(m), dtype=float) - first) for w, m in zip(self.weights[1:], self.models[1:]))
 
 
 def _scene_at(sc: Scenario, doc: dict, path: str, value: float) -> Model:
@@ -134,10 +136,8 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
             _same_structure(m, structure, grid, path)
         weights = stencil_weights(offsets) / delta
         wide = stencil_weights(tuple(2 * o for o in offsets)) / delta
-        near = [sum(w * a for w, a in zip(weights, parts)) for parts in
-                zip(*(_model_arrays(models[o], t_end) for o in offsets))]
-        far = [sum(w * a for w, a in zip(wide, parts)) for parts in
-               zip(*(_model_arrays(models[2 * o], t_end) for o in offsets))]
+        near = [combined(weights, parts) for parts in zip(*(_model_arrays(models[o], t_end) for o in offsets))]
+        far = [combined(wide, parts) for parts in zip(*(_model_arrays(models[2 * o], t_end) for o in offsets))]
         largest = max((float(np.abs(a).max(initial=0.0)) for a in near), default=0.0)
         if largest == 0:
             error, rounding = 0.0, 0.0
@@ -152,6 +152,11 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
         if error <= rounding:
             break
     return best
+
+
+def combined(weights: np.ndarray, values) -> np.ndarray:
+    """sum w_k f_k as differences from the first value (Derivative.of's rule)."""
+    return sum(w * (v - values[0]) for w, v in zip(weights[1:], values[1:]))
 
 
 def _same_structure(model: Model, structure: tuple, grid: np.ndarray, path: str) -> None:
@@ -214,10 +219,10 @@ class ParameterDerivative(Signal):
         self.base, self.points, self.weights = base, points, weights
 
     def value(self, t):
-        return sum(w * s.value(t) for w, s in zip(self.weights, self.points))
+        return combined(self.weights, [s.value(t) for s in self.points])
 
     def value_left(self, t):
-        return sum(w * s.value_left(t) for w, s in zip(self.weights, self.points))
+        return combined(self.weights, [s.value_left(t) for s in self.points])
 
     def breakpoints(self, t0, t1):
         return self.base.breakpoints(t0, t1)
@@ -229,20 +234,20 @@ class ParameterDerivative(Signal):
         m = exo.S.shape[0]
         S = np.zeros((2 * m, 2 * m))
         S[:m, :m] = S[m:, m:] = exo.S
-        S[m:, :m] = sum(w * s.exo().S for w, s in zip(self.weights, self.points))
-        dg = sum(w * s.exo().g for w, s in zip(self.weights, self.points))
+        S[m:, :m] = combined(self.weights, [s.exo().S for s in self.points])
+        dg = combined(self.weights, [s.exo().g for s in self.points])
         return Exo(S, np.concatenate([dg, exo.g]))
 
     def exo_state(self, t):
         return np.concatenate([self.base.exo_state(t),
-                               sum(w * s.exo_state(t) for w, s in zip(self.weights, self.points))])
+                               combined(self.weights, [s.exo_state(t) for s in self.points])])
 
 
 def _signal_derivative(base: Signal, d: Derivative, j: int) -> Signal | None:
     """du_j/dp as a signal, None where the force does not depend on p."""
     points = [m.signals[j] for m in d.models]
     if isinstance(base, Table):
-        dv = sum(w * s.v for w, s in zip(d.weights, points))
+        dv = combined(d.weights, [s.v for s in points])
         if not np.any(dv):
             return None
         return Table(base.t, dv, "previous" if base.previous else "linear", ended=base.ended)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from smdcli.analysis.model_derivative import augmented_model, model_derivatives
+from smdcli.analysis.model_derivative import augmented_model, model_derivatives, relative_size
 from smdcli.errors import SolverFailed, UsageError
 from smdcli.model import build, time_grid
 from smdcli.scenario import Scenario
@@ -27,6 +27,10 @@ from smdcli.solvers.peaks import jump_times, located_peaks, quintic_at
 from smdcli.solvers.registry import get_solver
 
 QUANTITIES = {"displacement": "m", "velocity": "m/s", "acceleration": "m/s^2"}
+SMOOTH_ERROR = 100  # a smooth scene's stated error, in units of its rtol: DOP853's global error over its local one
+SMOOTH_METHOD = ("forward sensitivity equations s' = J s + df/dp integrated beside the state by DOP853 (error "
+                 "controlled on both, restarted at force discontinuities and at the laws' kinks), J analytic, df/dp "
+                 "from the model at the parameter's stencil points")
 MAX_SIZE = 3000  # DOFs of the stacked system, (P + 1) n: its dense exponential's memory and time
 METHOD = ("exact: the scene and its sensitivity equations (the same M, C and K driven by -dM x'' - dC x' - dK x + "
           "B du/dp) solved together by the matrix exponential; the model's derivatives taken on the assembled model "
@@ -106,7 +110,7 @@ def derivative_units(of: str, parameter: str) -> str:
 
 def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None, timed: bool = False,
                 peaks: bool = True) -> Sensitivity:
-    """The sensitivities of a linear scene's response to each parameter path (the sweep's paths), on the
+    """The sensitivities of a linear or smooth nonlinear scene's response to each parameter path (the sweep's paths), on the
     scenario's output grid or on `grid` (any increasing times from the scenario's start); `timed`: one forward
     solve of the scene alone is timed beside it (forward_time_s), for the cost's comparison; without `peaks` the
     peaks and their derivatives are left out (nan: a fit reads the histories only)."""
@@ -115,39 +119,44 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
     start = time.perf_counter()
     base = build(sc)
     if not base.is_linear:
-        raise UsageError(f"{sc.path}: {base.nonlinear_paths[0]} is nonlinear; smd sensitivity takes linear scenes "
-                         "(sensitivities of yielding, friction, stop and smooth nonlinear scenes are not yet built)")
+        from smdcli.analysis.smooth_sensitivity import smooth_refusal
+
+        refusal = smooth_refusal(base)
+        if refusal:
+            raise UsageError(f"{sc.path}: {refusal}")
     if (len(params) + 1) * base.n > MAX_SIZE:
         raise UsageError(f"{sc.path}: {len(params)} parameters of a {base.n}-DOF scene stack {(len(params) + 1) * base.n} "
                          f"DOFs; smd sensitivity takes at most {MAX_SIZE}")
     grid = time_grid(sc.time) if grid is None else np.asarray(grid, dtype=float)
     derivatives = model_derivatives(sc, base, grid, list(params))
-    stacked, scales = augmented_model(base, derivatives)
-    exact = get_solver("exact")
+    n, P = base.n, len(derivatives)
     tol = Tolerances()
-    result = across_jumps(lambda piece, times: exact.solve(piece, times, tol), stacked, grid)
-    if not result.success or not np.all(np.isfinite(result.displacement)):
-        raise SolverFailed(f"{sc.path}: the sensitivity equations could not be solved: {result.stats.message}")
+    if base.is_linear:
+        blocks, stated = _linear(sc, base, derivatives, grid, tol)
+        method = METHOD
+    else:
+        blocks, stated = _smooth(sc, base, derivatives, grid)
+        method = SMOOTH_METHOD
     wall = time.perf_counter() - start
     forward = _forward_time(base, grid, tol) if timed else float("nan")
-    n, P = base.n, len(derivatives)
-    blocks = {q: getattr(result, q).reshape(len(grid), P + 1, n) for q in QUANTITIES}
+    scales = np.array([relative_size(d.value) for d in derivatives])
     nominal = {q: np.ascontiguousarray(b[:, 0]) for q, b in blocks.items()}
     derived = {q: np.ascontiguousarray(np.moveaxis(b[:, 1:], 1, 0) / scales[:, None, None])
                for q, b in blocks.items()}
     accuracy = {}
-    stated = float(result.stats.stated_accuracy)
     for q, b in blocks.items():
-        # the run's error is relative to the stacked state's peak; each block is a displacement (scale dx/dp)
-        absolute = stated * float(np.abs(b).max(initial=0.0))
         largest = np.abs(b[:, 1:]).max(axis=(0, 2))
+        if base.is_linear:  # the run's error is relative to the stacked state's peak (every block a displacement)
+            absolute = stated * float(np.abs(b).max(initial=0.0))
+        else:  # the integrator's: rtol of each component, atol a thousandth of rtol of the state's peak
+            absolute = stated * (largest + 1e-3 * float(np.abs(b[:, 0]).max(initial=0.0)))
         accuracy[f"d_{q}"] = np.maximum(np.where(largest > 0, absolute / np.where(largest > 0, largest, 1.0), 0.0),
                                         [d.error for d in derivatives])
         accuracy[q] = np.full(1, stated)
     if not peaks:
         nan = np.full(n, np.nan)
         return _result(sc, params, derivatives, grid, base, nominal, derived, nan, nan, np.full((P, n), np.nan),
-                       accuracy, wall, forward, ())
+                       accuracy, wall, forward, (), method)
     events = jump_times(base, grid)
     peaks, at = located_peaks(grid, nominal["displacement"], nominal["velocity"], nominal["acceleration"], events,
                               with_times=True)
@@ -163,11 +172,11 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
             d_peaks[p, i] = sign * quintic_at(grid, derived["displacement"][p, :, i], derived["velocity"][p, :, i],
                                               derived["acceleration"][p, :, i], np.array([at[i]]))[0]
     return _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_peaks, accuracy, wall,
-                   forward, tuple(notes))
+                   forward, tuple(notes), method)
 
 
 def _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_peaks, accuracy, wall, forward,
-            notes) -> Sensitivity:
+            notes, method) -> Sensitivity:
     from smdcli.sweep.spec import parameter_units
 
     return Sensitivity(
@@ -177,12 +186,48 @@ def _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_
         d_displacement=derived["displacement"], d_velocity=derived["velocity"], d_acceleration=derived["acceleration"],
         peak_displacement=peaks, peak_time=at, d_peak_displacement=d_peaks, accuracy=accuracy,
         model_error=np.array([d.error for d in derivatives]), wall_time_s=wall, forward_time_s=forward,
-        notes=notes, model=base, derivatives=derivatives)
+        notes=notes, model=base, derivatives=derivatives, method=method)
+
+
+def _linear(sc: Scenario, base, derivatives: list, grid: np.ndarray, tol: Tolerances) -> tuple[dict, float]:
+    """Each quantity's (N, P + 1, n) blocks (the scene, then scale_i d/dp_i) by the exact solver, and its accuracy."""
+    stacked, _ = augmented_model(base, derivatives)
+    exact = get_solver("exact")
+    result = across_jumps(lambda piece, times: exact.solve(piece, times, tol), stacked, grid)
+    if not result.success or not np.all(np.isfinite(result.displacement)):
+        raise SolverFailed(f"{sc.path}: the sensitivity equations could not be solved: {result.stats.message}")
+    P, n = len(derivatives), base.n
+    return {q: getattr(result, q).reshape(len(grid), P + 1, n) for q in QUANTITIES}, \
+        float(result.stats.stated_accuracy)
+
+
+def _smooth(sc: Scenario, base, derivatives: list, grid: np.ndarray) -> tuple[dict, float]:
+    """The same blocks for a smooth nonlinear scene, by the forward sensitivity equations (smooth_sensitivity.py)
+    at rtol 1e-9 or the scenario's tighter one; its stated accuracy SMOOTH_ERROR times that rtol."""
+    from smdcli.analysis.smooth_sensitivity import RTOL, smooth_sensitivities
+
+    rtol = min(RTOL, sc.solver.rtol)
+    scales = np.array([relative_size(d.value) for d in derivatives])
+    y, S, rates, d_rates = smooth_sensitivities(base, derivatives, scales, grid, rtol)
+    n, N = base.n, len(grid)
+
+    def stacked(nominal, derived):  # (N, n) and (N, n, P) -> (N, P + 1, n)
+        return np.concatenate([nominal[:, None, :], np.moveaxis(derived, 2, 1)], axis=1)
+    blocks = {"displacement": stacked(y[:, :n], S[:, :n]), "velocity": stacked(y[:, n:2 * n], S[:, n:2 * n]),
+              "acceleration": stacked(rates[:, n:2 * n], d_rates[:, n:2 * n])}
+    del N
+    return blocks, SMOOTH_ERROR * rtol
 
 
 def _forward_time(base, grid: np.ndarray, tol: Tolerances) -> float:
-    """Seconds of one exact forward solve of the scene alone: what the P sensitivities are measured against."""
-    exact = get_solver("exact")
+    """Seconds of one forward solve of the scene alone (exact, or auto's for a nonlinear scene): what the P
+    sensitivities are measured against."""
+    from smdcli.solvers.dispatch import solve
+
     start = time.perf_counter()
-    across_jumps(lambda piece, times: exact.solve(piece, times, tol), base.dense(), grid)
+    if base.is_linear:
+        exact = get_solver("exact")
+        across_jumps(lambda piece, times: exact.solve(piece, times, tol), base.dense(), grid)
+    else:
+        solve(base, grid, "auto", tol)
     return time.perf_counter() - start

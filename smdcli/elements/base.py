@@ -148,6 +148,13 @@ class Law:
         (stuck, in rigid contact): its force is then the reaction the scene needs, not its own."""
         raise NotImplementedError
 
+    def smooth_jacobian(self, state: State, d: float, rate: float) -> tuple[tuple, tuple] | None:
+        """The derivatives of its smooth tension and of its ode_states' rates with respect to (d, d', q), q the
+        ode_states: (2 + q numbers for the tension, q rows of 2 + q for the rates) at d, d' in this mode; what the
+        sensitivity equations of a smooth scene integrate. None where the law has none (piecewise-linear laws: their
+        sensitivities are event to event)."""
+        return None
+
     def internal_values(self, state: State, d: float) -> tuple[float, ...]:
         """The internal variables /elements records, at deformation d in this state."""
         return ()

@@ -21,6 +21,7 @@ Must not import: scenario, model, solvers, sweep, io, plots, commands, cli.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -122,6 +123,15 @@ class BoucWen(Law):
 
     def ode(self, state: State, d: float, rate: float) -> tuple[float, ...]:
         return (self.z_rate(state.internal["z"], rate),)
+
+    def smooth_jacobian(self, state: State, d: float, rate: float):
+        # T = (1 - alpha) k z (alpha k d is stamped into K); z' = A d' - beta |d'| |z|^(n-1) z - gamma d' |z|^n
+        z = state.internal["z"]
+        size = abs(z)
+        power = size ** (self.n - 1) if size > 0 or self.n > 1 else 1.0  # |z|^(n-1), 1 at z = 0 for n = 1
+        d_rate = self.A - self.beta * math.copysign(1.0, rate) * power * z - self.gamma * size ** self.n
+        d_z = -self.n * power * (self.beta * abs(rate) + self.gamma * rate * math.copysign(1.0, z))
+        return (0.0, 0.0, (1 - self.alpha) * self.k), ((0.0, d_rate, d_z),)
 
     def internal_values(self, state: State, d: float) -> tuple[float, ...]:
         return (state.internal["z"],)

@@ -1,0 +1,233 @@
+"""Sensitivities of a smooth nonlinear scene (cubic springs, quadratic dampers, Bouc-Wen springs): the forward
+sensitivity equations s' = J(t, y) s + df/dp integrated beside the state y = [x, v, q] (q the laws' internal
+variables) by DOP853, the error controlled on state and sensitivities together, restarted at the forces'
+discontinuities and wherever a law's right-hand side has a kink (a Bouc-Wen rate or z changing sign).
+
+J is analytic: the model's tangent for cubic springs and quadratic dampers, each law's smooth_jacobian for its
+tension and internal rates. df/dp is the right-hand side of the models at the parameter's stencil points
+(model_derivative.py) at the same state, combined by the stencil's weights: exact for a parameter that enters
+affinely (a stiffness, a cubic coefficient, a damper, a Bouc-Wen k), the stencil's own error otherwise (n, beta).
+
+Must not import: io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from smdcli.analysis.model_derivative import combined
+from smdcli.elements.base import KINK
+from smdcli.errors import SolverFailed, UsageError
+from smdcli.model import Model
+
+RTOL = 1e-9  # smd sensitivity's default for smooth nonlinear scenes (a scenario's tighter rtol applies)
+
+
+def smooth_refusal(model: Model) -> str | None:
+    """Why the smooth sensitivity equations cannot take the scene, or None."""
+    for element in model.nonsmooth:
+        law = element.law
+        state = law.start(0.0, 0.0)
+        piece = law.piece(state)
+        if law.piecewise_linear or piece.held or any(g.kind != KINK for g in piece.guards) or \
+                law.smooth_jacobian(state, 0.0, 0.0) is None:
+            return (f"{element.path} ({getattr(law, 'law_name', law.name)}) changes mode at events; sensitivities "
+                    "of yielding, friction and stop scenes are not yet built (linear scenes, cubic springs, "
+                    "quadratic dampers and Bouc-Wen springs are)")
+    return None
+
+
+class _Flow:
+    """The right-hand side of one model (its state y = [x, v, q]) and, for the nominal one, its Jacobian. Each smooth
+    law stays in the mode it starts in (its only one: smooth_refusal), so its piece is taken once."""
+
+    def __init__(self, model: Model):
+        self.model = model = model.dense()
+        self.n = n = model.n
+        self.elements = model.nonsmooth
+        self.R = np.array([e.row for e in self.elements], dtype=float).reshape(len(self.elements), n)
+        self.belts = np.array([e.belt for e in self.elements], dtype=float)
+        d0, rate0 = self.R @ model.x0, self.R @ model.v0 + self.belts
+        self.states = [e.law.start(float(d), float(r)) for e, d, r in zip(self.elements, d0, rate0)]
+        self.pieces = [e.law.piece(state) for e, state in zip(self.elements, self.states)]
+        self.slices, start = [], 2 * n
+        for element in self.elements:
+            self.slices.append(slice(start, start + len(element.law.ode_states)))
+            start += len(element.law.ode_states)
+        self.q = start - 2 * n
+        self.Kt, self.Ct, self.g = model.K.copy(), model.C.copy(), np.zeros(n)
+        for row, piece in zip(self.R, self.pieces):  # a mode's linear part, as Scene assembles it
+            self.Kt += piece.stiffness * np.outer(row, row)
+            self.Ct += piece.damping * np.outer(row, row)
+            self.g -= piece.constant * row
+        self.smooth = model.cubic is not None or model.quadratic is not None
+
+    def initial(self) -> np.ndarray:
+        y = [self.model.x0, self.model.v0]
+        y += [np.array([s.internal[name] for name in e.law.ode_states], dtype=float)
+              for e, s in zip(self.elements, self.states)]
+        return np.concatenate(y).astype(float)
+
+    def _live(self, e: int, y: np.ndarray):
+        """Element e's state with its internal variables read from y."""
+        from smdcli.elements import State
+
+        state, names = self.states[e], self.elements[e].law.ode_states
+        return State(state.mode, {**state.internal, **dict(zip(names, y[self.slices[e]]))}) if names else state
+
+    def f(self, t: float, y: np.ndarray) -> np.ndarray:
+        """y' at (t, y)."""
+        n, model = self.n, self.model
+        x, v = y[:n], y[n:2 * n]
+        F = self.g - self.Kt @ x - self.Ct @ v
+        if model.signals:
+            F = F + model.B @ model.forces(t)
+        if self.smooth:
+            F = F - model.nonlinear_force(x, v)
+        out = np.empty(len(y))
+        out[:n] = v
+        if len(self.elements):
+            d, rate = self.R @ x, self.R @ v + self.belts
+            for e, (element, piece) in enumerate(zip(self.elements, self.pieces)):
+                state = self._live(e, y)
+                if piece.nonlinear is not None:
+                    F = F - piece.nonlinear(d[e], rate[e], state.internal) * self.R[e]
+                if self.slices[e].stop > self.slices[e].start:
+                    out[self.slices[e]] = element.law.ode(state, d[e], rate[e])
+        out[n:2 * n] = model.Minv @ F
+        return out
+
+    def jacobian(self, t: float, y: np.ndarray) -> np.ndarray:
+        """df/dy at (t, y), analytic."""
+        n, model = self.n, self.model
+        size = 2 * n + self.q
+        J = np.zeros((size, size))
+        J[:n, n:2 * n] = np.eye(n)
+        x, v = y[:n], y[n:2 * n]
+        Kt, Ct = self.Kt, self.Ct
+        if self.smooth:
+            K_nl, C_nl = model.tangent(x, v)
+            Kt, Ct = Kt + K_nl - model.K, Ct + C_nl - model.C
+        Minv = model.Minv
+        J[n:2 * n, :n], J[n:2 * n, n:2 * n] = -Minv @ Kt, -Minv @ Ct
+        if len(self.elements):
+            d, rate = self.R @ x, self.R @ v + self.belts
+            for e, (element, part) in enumerate(zip(self.elements, self.slices)):
+                tension, rates = element.law.smooth_jacobian(self._live(e, y), float(d[e]), float(rate[e]))
+                row = self.R[e]
+                pushed = -Minv @ row  # a tension T on the element: M x'' gets -R_e T
+                J[n:2 * n, :n] += np.outer(pushed, tension[0] * row)
+                J[n:2 * n, n:2 * n] += np.outer(pushed, tension[1] * row)
+                J[n:2 * n, part] += np.outer(pushed, tension[2:])
+                for index, derivative in zip(range(part.start, part.stop), rates):
+                    J[index, :n] += derivative[0] * row
+                    J[index, n:2 * n] += derivative[1] * row
+                    J[index, part] += derivative[2:]
+        return J
+
+    def kink_rows(self) -> list[tuple[np.ndarray, float]]:
+        """Each law's kink quantities (an element's rate, an internal variable) as (row over y, constant)."""
+        out, n, size = [], self.n, 2 * self.n + self.q
+        for e, (element, piece, part) in enumerate(zip(self.elements, self.pieces, self.slices)):
+            names = element.law.ode_states
+            for key in dict.fromkeys(guard.quantity for guard in piece.guards):
+                row = np.zeros(size)
+                if key == "rate":
+                    row[n:2 * n] = self.R[e]
+                    out.append((row, float(self.belts[e])))
+                elif key.startswith("internal:"):
+                    row[part.start + names.index(key.split(":", 1)[1])] = 1.0
+                    out.append((row, 0.0))
+        return out
+
+
+def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, grid: np.ndarray, rtol: float):
+    """(y, dy/dp * scale, y', dy'/dp * scale) on the grid: (N, s), (N, s, P), (N, s), (N, s, P)."""
+    from scipy.integrate import solve_ivp
+
+    refusal = smooth_refusal(model)
+    if refusal:
+        raise UsageError(f"{model.source}: {refusal}")
+    flow = _Flow(model)
+    points = [[_Flow(m) for m in d.models] for d in derivatives]
+    weights = [d.weights * s for d, s in zip(derivatives, scales)]
+    size, P = 2 * model.n + flow.q, len(derivatives)
+    y0 = flow.initial()
+    s0 = np.stack([combined(ws, [f.initial() for f in fs]) for ws, fs in zip(weights, points)], axis=1) \
+        if P else np.zeros((size, 0))
+    n = model.n
+    masses = [combined(ws, [f.model.M for f in fs]) for ws, fs in zip(weights, points)]  # dM/dp (scaled)
+
+    def parameter_rates(t, y):
+        """df/dp at (t, y): the stencil's combination of each model's forces M x'' (affine where p is) and
+        internal rates, the accelerations then M^-1 (dF/dp - dM/dp x'')."""
+        rates = flow.f(t, y)
+        columns = []
+        for ws, fs, dM in zip(weights, points, masses):
+            values = [f.f(t, y) for f in fs]
+            forces = combined(ws, [f.model.M @ v[n:2 * n] for f, v in zip(fs, values)])
+            column = combined(ws, values)
+            column[:n] = 0.0
+            column[n:2 * n] = flow.model.Minv @ (forces - dM @ rates[n:2 * n])
+            columns.append(column)
+        return np.stack(columns, axis=1)
+
+    def rhs(t, Y):
+        y, S = Y[:size], Y[size:].reshape(size, P)
+        return np.concatenate([flow.f(t, y), (flow.jacobian(t, y) @ S + parameter_rates(t, y)).ravel()])
+
+    # a first pass of the state alone sets the absolute tolerances: rtol of each block's peak, a thousandth of it
+    peak = np.abs(solve_ivp(flow.f, (grid[0], grid[-1]), y0, method="DOP853", rtol=1e-6, atol=1e-12,
+                            t_eval=grid).y).max(axis=1)
+    floor = np.maximum(peak, 1e-12 * max(peak.max(initial=0.0), 1e-300))
+    atol = np.concatenate([floor, np.repeat(floor, P)]) * rtol * 1e-3
+    cuts = np.concatenate([[grid[0]], model.breakpoints(float(grid[0]), float(grid[-1])), [grid[-1]]])
+    kinks = flow.kink_rows()
+    Y = np.empty((len(grid), size * (1 + P)))
+    state = np.concatenate([y0, s0.ravel()])
+    filled = 0
+    for ta, tb in zip(cuts[:-1], cuts[1:]):
+        t, fired = float(ta), None
+        while t < tb:
+            wanted = grid[(grid >= t) & (grid <= tb)]
+            if filled and wanted.size and wanted[0] <= grid[filled - 1]:
+                wanted = wanted[1:]  # the point a restart stands on is filled already
+            events = [_kink_event(row, c, t, state, flow, i == fired) for i, (row, c) in enumerate(kinks)]
+            run = solve_ivp(rhs, (t, float(tb)), state, method="DOP853", rtol=rtol, atol=atol, t_eval=wanted,
+                            events=events or None, dense_output=True)
+            if run.status < 0:
+                raise SolverFailed(f"{model.source}: the sensitivity equations failed at t = {run.t[-1] if len(run.t) else t:.6g}"
+                                   f" s: {run.message}")
+            if len(run.t):
+                Y[filled:filled + len(run.t)] = np.asarray(run.y).T
+                filled += len(run.t)
+            if run.status == 1:  # a kink: restart there
+                fired = next(i for i, e in enumerate(run.t_events) if len(e))
+                t, state = float(run.t_events[fired][0]), run.y_events[fired][0]
+            else:
+                t, state = float(tb), run.sol(float(tb))
+    if filled != len(grid):
+        raise SolverFailed(f"{model.source}: the sensitivity equations filled {filled} of {len(grid)} output times")
+    y = Y[:, :size]
+    S = Y[:, size:].reshape(len(grid), size, P)
+    rates = np.array([flow.f(t, row) for t, row in zip(grid, y)])
+    d_rates = np.array([flow.jacobian(t, row) @ s + parameter_rates(t, row) for t, row, s in zip(grid, y, S)])
+    return y, S, rates, d_rates
+
+
+def _kink_event(row: np.ndarray, constant: float, start: float, state: np.ndarray, flow: _Flow, fired: bool):
+    """A terminal event where a kink quantity (row y + constant) crosses zero. One at zero where the run starts (the
+    kink that stopped the last run, a scene starting at rest) is read there as the sign it moves away with: else
+    its zero at the start would stop the run at once, again and again."""
+    size = len(row)
+    y = state[:size]
+    at_zero = fired or abs(row @ y + constant) <= 1e-9 * (np.abs(row) @ np.abs(y) + abs(constant)) or \
+        row @ y + constant == 0.0
+    leaving = float(np.sign(row @ flow.f(start, y))) or 1.0
+
+    def value(t, Y):
+        if at_zero and t <= start:
+            return leaving * 1e-300
+        return float(row @ Y[:size] + constant)
+    value.terminal = True
+    return value
