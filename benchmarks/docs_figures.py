@@ -74,7 +74,7 @@ def measure(command: str, stamp: str) -> str:
         done = subprocess.run(words, cwd=ROOT, capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"`{command}` exited {done.returncode}: {done.stderr.strip()[-400:]}")
-    printed = [line for line in done.stdout.rstrip().splitlines() if not line.startswith("wrote ")]
+    printed = [line for line in done.stdout.rstrip().splitlines() if not line.strip().startswith("wrote ")]
     return f"Measured {stamp}:\n\n```text\n$ {command}\n" + "\n".join(printed) + "\n```\n"
 
 
