@@ -149,7 +149,8 @@ def sensitivity(
     OUT/<stem>_sensitivity.png (p dx/dp of each DOF)."""
     from smdcli.commands.sensitivity import format_sensitivity, sensitivity_command, sensitivity_summary
 
-    _carried_out(lambda: sensitivity_command(scenario, list(param), out, plots=not no_plots),
+    _carried_out(lambda: sensitivity_command(scenario, list(param), out, plots=not no_plots,
+                                             progress=progress_wanted(quiet, as_json)),
                  {"scenario": str(scenario)}, as_json, quiet, sensitivity_summary,
                  lambda _, data: format_sensitivity(data))
 
@@ -180,7 +181,8 @@ def fit(
     from smdcli.commands.fit import fit_command, fit_summary, format_fit
 
     run = _carried_out(lambda: fit_command(list(scenarios), list(data or []), list(param or []), list(bound or []),
-                                           out, max_iterations, plots=not no_plots),
+                                           out, max_iterations, plots=not no_plots,
+                                           progress=progress_wanted(quiet, as_json)),
                        {"scenario": str(scenarios[0])}, as_json, quiet, fit_summary, lambda _, d: format_fit(d))
     if not run.converged:
         raise typer.Exit(1)

@@ -370,3 +370,21 @@ def test_the_bouc_wen_smooth_jacobian_is_the_derivative_of_its_tension_and_rate(
         dr = slope(lambda r: law.z_rate(z, r), rate)
         assert rates[0][1] == pytest.approx(dr, rel=1e-8) and rates[0][2] == pytest.approx(dz, rel=1e-8)
         assert tension[2] == pytest.approx(0.7e5)
+
+
+def test_a_nonlinear_scene_shows_its_progress_on_a_terminal_and_none_when_piped(tmp_path):
+    """A smooth scene's sensitivities take seconds: a bar over its output times under a pseudo-terminal, drawn to the
+    end; nothing on stderr when piped."""
+    import re
+    import subprocess
+
+    from tests.test_terminal import SMD, plain, run_in_pty
+
+    (tmp_path / "bw.toml").write_text(BOUC_WEN.replace("end = 0.1", "end = 0.04"))
+    code, screen = run_in_pty(["sensitivity", "bw.toml", "--param", "spring[0].k", "--no-plots"], tmp_path)
+    text = plain(screen)
+    assert code == 0 and "sensitivities" in text, text[-2000:]
+    assert any(a == b for a, b in re.findall(r"(\d+)/(\d+)", text)), text[-2000:]
+    piped = subprocess.run([*SMD, "sensitivity", "bw.toml", "--param", "spring[0].k", "--no-plots", "-o", "piped"],
+                           cwd=tmp_path, capture_output=True, text=True)
+    assert piped.returncode == 0 and piped.stderr == "", piped.stderr

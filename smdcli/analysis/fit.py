@@ -148,8 +148,9 @@ def _model_channels(test: Test, sc: Scenario, params: list[str]) -> tuple[dict, 
 
 
 def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, float]] | None = None,
-        max_iterations: int = 100) -> FitResult:
-    """Fit the shared parameters to every test's data at once; the estimate, its uncertainty and the history."""
+        max_iterations: int = 100, advance=None) -> FitResult:
+    """Fit the shared parameters to every test's data at once; the estimate, its uncertainty and the history;
+    advance(1, note) after each solve (a progress bar's)."""
     from scipy.optimize import least_squares
 
     from smdcli.sweep.family import parameter_value
@@ -198,6 +199,8 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
             J = np.concatenate(columns, axis=1).T  # (m, P) per unit of each parameter
             cache.clear()  # the last point only: least_squares asks for fun and jac at the same theta
             cache[key] = (r, J, fitted)
+            if advance is not None:
+                advance(1, f"cost {0.5 * float(r @ r):.4g}")
         return cache[key]
 
     def residual(theta):

@@ -109,11 +109,12 @@ def derivative_units(of: str, parameter: str) -> str:
 
 
 def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None, timed: bool = False,
-                peaks: bool = True) -> Sensitivity:
+                peaks: bool = True, advance=None) -> Sensitivity:
     """The sensitivities of a linear or smooth nonlinear scene's response to each parameter path (the sweep's paths), on the
     scenario's output grid or on `grid` (any increasing times from the scenario's start); `timed`: one forward
     solve of the scene alone is timed beside it (forward_time_s), for the cost's comparison; without `peaks` the
-    peaks and their derivatives are left out (nan: a fit reads the histories only)."""
+    peaks and their derivatives are left out (nan: a fit reads the histories only); advance(count): a progress
+    bar's, over the output times of a smooth scene's integration."""
     if not params:
         raise UsageError("smd sensitivity: give at least one --param PATH (spring[0].k, mass.m1.m, ...)")
     start = time.perf_counter()
@@ -135,7 +136,7 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
         blocks, stated = _linear(sc, base, derivatives, grid, tol)
         method = METHOD
     else:
-        blocks, stated = _smooth(sc, base, derivatives, grid)
+        blocks, stated = _smooth(sc, base, derivatives, grid, advance)
         method = SMOOTH_METHOD
     wall = time.perf_counter() - start
     forward = _forward_time(base, grid, tol) if timed else float("nan")
@@ -201,14 +202,14 @@ def _linear(sc: Scenario, base, derivatives: list, grid: np.ndarray, tol: Tolera
         float(result.stats.stated_accuracy)
 
 
-def _smooth(sc: Scenario, base, derivatives: list, grid: np.ndarray) -> tuple[dict, float]:
+def _smooth(sc: Scenario, base, derivatives: list, grid: np.ndarray, advance=None) -> tuple[dict, float]:
     """The same blocks for a smooth nonlinear scene, by the forward sensitivity equations (smooth_sensitivity.py)
     at rtol 1e-9 or the scenario's tighter one; its stated accuracy SMOOTH_ERROR times that rtol."""
     from smdcli.analysis.smooth_sensitivity import RTOL, smooth_sensitivities
 
     rtol = min(RTOL, sc.solver.rtol)
     scales = np.array([relative_size(d.value) for d in derivatives])
-    y, S, rates, d_rates = smooth_sensitivities(base, derivatives, scales, grid, rtol)
+    y, S, rates, d_rates = smooth_sensitivities(base, derivatives, scales, grid, rtol, advance)
     n, N = base.n, len(grid)
 
     def stacked(nominal, derived):  # (N, n) and (N, n, P) -> (N, P + 1, n)

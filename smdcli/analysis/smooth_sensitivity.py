@@ -141,8 +141,10 @@ class _Flow:
         return out
 
 
-def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, grid: np.ndarray, rtol: float):
-    """(y, dy/dp * scale, y', dy'/dp * scale) on the grid: (N, s), (N, s, P), (N, s), (N, s, P)."""
+def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, grid: np.ndarray, rtol: float,
+                         advance=None):
+    """(y, dy/dp * scale, y', dy'/dp * scale) on the grid: (N, s), (N, s, P), (N, s), (N, s, P); advance(count) is
+    called as output times are filled (a progress bar's)."""
     from scipy.integrate import solve_ivp
 
     refusal = smooth_refusal(model)
@@ -201,6 +203,8 @@ def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gr
             if len(run.t):
                 Y[filled:filled + len(run.t)] = np.asarray(run.y).T
                 filled += len(run.t)
+                if advance is not None:
+                    advance(len(run.t))
             if run.status == 1:  # a kink: restart there
                 fired = next(i for i, e in enumerate(run.t_events) if len(e))
                 t, state = float(run.t_events[fired][0]), run.y_events[fired][0]

@@ -28,7 +28,7 @@ def read_bound(text: str) -> tuple[str, tuple[float, float]]:
 
 
 def fit_command(paths: list[Path], data: list[Path], params: list[str], bounds: list[str], out: str | Path,
-                max_iterations: int = 100, plots: bool = True):
+                max_iterations: int = 100, plots: bool = True, progress: bool = False):
     """Read every scenario and data file first (input errors before any work), fit, write OUT/<stem>_fit.h5,
     OUT/<stem>_fitted.toml per scenario and OUT/<stem>_fit.png."""
     from smdcli.analysis.fit import fit, make_test
@@ -58,7 +58,10 @@ def fit_command(paths: list[Path], data: list[Path], params: list[str], bounds: 
     tests = [make_test(sc, m, table.get("channels"), dict(table.get("weights", ())))
              for sc, m, table in zip(scenarios, measured, tables)]
     out_dir = output_folder(out, make=False)
-    run = fit(tests, params, chosen, max_iterations)
+    from smdcli.progress import bar
+
+    with bar("fitting (solves)", max_iterations, enabled=progress, transient=True) as advance:
+        run = fit(tests, params, chosen, max_iterations, advance)
     out_dir = output_folder(out)
     from smdcli.io.atomic import atomic_path, together
     from smdcli.io.fit_hdf5 import fitted_toml, write_fit

@@ -13,8 +13,10 @@ import numpy as np
 from smdcli.io.folders import output_folder
 
 
-def sensitivity_command(path: str | Path, params: list[str], out: str | Path, plots: bool = True):
-    """Read the scene, take its sensitivities, write OUT/<stem>_sensitivity.h5 (and .png)."""
+def sensitivity_command(path: str | Path, params: list[str], out: str | Path, plots: bool = True,
+                        progress: bool = False):
+    """Read the scene, take its sensitivities, write OUT/<stem>_sensitivity.h5 (and .png); a bar on a terminal over a
+    nonlinear scene's output times (its integration takes seconds)."""
     from smdcli.analysis.sensitivity import sensitivity
     from smdcli.io.atomic import together
     from smdcli.io.sensitivity_hdf5 import write_sensitivity
@@ -23,7 +25,11 @@ def sensitivity_command(path: str | Path, params: list[str], out: str | Path, pl
     path = Path(path)
     sc = load(path)
     out_dir = output_folder(out, make=False)
-    s = sensitivity(sc, list(params), timed=True)
+    from smdcli.model import time_grid
+    from smdcli.progress import bar
+
+    with bar("sensitivities", len(time_grid(sc.time)), enabled=progress, transient=True) as advance:
+        s = sensitivity(sc, list(params), timed=True, advance=advance)
     out_dir = output_folder(out)
     with together():
         h5 = out_dir / f"{path.stem}_sensitivity.h5"
@@ -61,7 +67,11 @@ def sensitivity_summary(s) -> dict:
 
 def format_sensitivity(d: dict) -> str:
     """Terminal text: each DOF's peak and its derivatives, per unit and per 100 % of each parameter."""
-    lines = [f"{d['scenario']}: sensitivities of the peak displacement ({len(d['parameters'])} parameters, exact)"]
+    from smdcli.text import plural
+
+    how = "exact" if d["method"].startswith("exact") else "forward sensitivity equations, DOP853"
+    lines = [f"{d['scenario']}: sensitivities of the peak displacement ({plural(len(d['parameters']), 'parameter')}, "
+             f"{how})"]
     width = max(len(p["path"]) for p in d["parameters"])
     for dof, peak in d["peak_displacement"].items():
         lines.append(f"  {dof}: peak |x| {peak['value']:.6g} m at t = {peak['time']:.6g} s")
