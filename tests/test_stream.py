@@ -190,6 +190,8 @@ def whole_big_sweep(tmp_path_factory):
     return folder
 
 
+# the two tests of the big sweep on one worker: its module fixture (half a minute) runs once, not once per worker
+@pytest.mark.xdist_group("big_sweep")
 def test_a_sweep_killed_with_sigkill_is_finished_by_resume_with_the_same_data(cli, tmp_path, whole_big_sweep):
     """SIGKILL halfway (no handler runs): the partial file on disk is what --resume finishes."""
     command = _big_sweep(tmp_path)
@@ -229,6 +231,7 @@ def test_an_unreachable_scheduler_is_a_usage_error(cli, tmp_path):
     assert not list(tmp_path.glob("*.h5"))
 
 
+@pytest.mark.xdist_group("big_sweep")
 def test_a_cluster_sweep_stopped_by_sigterm_says_one_line_and_resumes_on_the_cluster(cli, tmp_path,
                                                                                     whole_big_sweep):
     pytest.importorskip("distributed")

@@ -82,7 +82,7 @@ def located_peaks(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray,
 def row_peaks(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray,
               events: np.ndarray = np.empty(0), with_times: bool = False):
     """located_peaks of histories laid out as rows (histories, N): a sweep's members and DOFs, contiguous in time."""
-    x, v, a = (np.asarray(q, dtype=float) for q in (x, v, a))  # a transposed view stays one: no copy of a big run
+    x, v, a = (np.ascontiguousarray(q, dtype=float) for q in (x, v, a))
     rows, N = x.shape
     magnitude = np.abs(x)
     magnitude[~np.isfinite(magnitude)] = 0.0
