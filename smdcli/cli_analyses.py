@@ -133,7 +133,7 @@ def rsa(
 
 
 def sensitivity(
-    scenario: Path = typer.Argument(..., help="Scenario TOML file of a linear scene."),
+    scenario: Path = typer.Argument(..., help="Scenario TOML file: a linear or smooth nonlinear scene."),
     param: List[str] = typer.Option(..., "--param", help="A parameter path, as a sweep takes it (repeat): "
                                     "spring[0].k, damper[1].c, mass.m1.m, mass.m1.x0, force[0].amplitude, "
                                     "force[0].omega, ground_motion.scale, damping.modal, system.K[0][0] ..."),
@@ -142,9 +142,10 @@ def sensitivity(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
     as_json: bool = typer.Option(False, "--json", help="Print the peaks' derivatives as JSON."),
 ):
-    """Exact sensitivities dx/dp of a linear scene's response to its parameters, and of each DOF's peak.
+    """Sensitivities dx/dp of a scene's response to its parameters, and of each DOF's peak.
 
-    The scene and its sensitivity equations are solved together by the matrix exponential; writes
+    Linear scenes exactly (the scene and its sensitivity equations solved together by the matrix exponential);
+    cubic springs, quadratic dampers and Bouc-Wen springs by the forward sensitivity equations; writes
     OUT/<stem>_sensitivity.h5 (d_displacement, d_velocity, d_acceleration per unit of each parameter) and
     OUT/<stem>_sensitivity.png (p dx/dp of each DOF)."""
     from smdcli.commands.sensitivity import format_sensitivity, sensitivity_command, sensitivity_summary
