@@ -21,8 +21,9 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import least_squares
 
 import smdcli
-from smdcli.analysis.fit import fit, make_test, scenario_with
+from smdcli.analysis.fit import fit, make_test
 from smdcli.analysis.fit_data import Measured
+from smdcli.sweep.family import scenario_with
 
 ROOT = Path(__file__).resolve().parents[1]
 TRUTH = {"spring[0].k": 3.0e6, "spring[1].k": 2.4e6, "spring[2].k": 1.6e6, "damping.alpha": 0.4,

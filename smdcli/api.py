@@ -91,8 +91,7 @@ def fit(scenarios, data, params, bounds: dict | None = None, max_iterations: int
     if len(data) != len(scenarios):
         raise UsageError(f"fit(): give one data file per scenario ({len(scenarios)}), found {len(data)}")
     loaded = [s if isinstance(s, Scenario) else load(s) for s in scenarios]
-    tests = [make_test(sc, read_measured(d), dict(sc.fit).get("channels"), dict(dict(sc.fit).get("weights", ())))
-             for sc, d in zip(loaded, data)]
+    tests = [make_test(sc, read_measured(d)) for sc, d in zip(loaded, data)]
     return fitted(tests, [params] if isinstance(params, str) else list(params), bounds, max_iterations)
 
 

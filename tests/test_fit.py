@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 import smdcli
-from smdcli.analysis.fit import fit, make_test, scenario_with
+from smdcli.analysis.fit import fit, make_test
 from smdcli.analysis.fit_data import Measured
-from tests.conftest import SCENARIOS, model_of
+from smdcli.sweep.family import scenario_with
+from tests.conftest import SCENARIOS, force_block, model_of, one_dof
 
 FRAME_TRUTH = {"spring[0].k": 3.0e6, "spring[1].k": 2.4e6, "spring[2].k": 1.6e6, "damping.alpha": 0.4,
                "damping.beta": 0.002}
@@ -44,26 +45,8 @@ def test_a_frame_is_recovered_from_noise_free_accelerations_to_1e_6():
 
 
 def one_dof_scene(k: float = 400.0, c: float = 1.6) -> str:
-    return f"""
-[time]
-end = 3.0
-step = 0.03
-[[mass]]
-name = "m"
-m = 1.0
-x0 = 0.05
-[[spring]]
-connects = ["ground", "m"]
-k = {k!r}
-[[damper]]
-connects = ["ground", "m"]
-c = {c!r}
-[[force]]
-on = "m"
-type = "sine"
-amplitude = 5.0
-omega = 14.0
-"""
+    """A 1-DOF scene from x0 = 0.05 m under a 5 N sine at 14 rad/s: conftest's, with the force."""
+    return one_dof(c, k=k, x0=0.05, end=3.0, step=0.03, extra=force_block("sine", amplitude=5.0, omega=14.0))
 
 
 def test_the_95_percent_intervals_cover_the_truth_88_to_99_percent_of_the_time():

@@ -12,6 +12,7 @@ import pytest
 import scipy.linalg
 
 import smdcli
+from smdcli.sweep.family import scenario_with
 from tests.conftest import SCENARIOS, model_of
 
 H = 1e-30  # the complex step: no subtraction, so no cancellation however small
@@ -143,31 +144,20 @@ def test_amplitude_and_scale_derivatives_are_the_response_over_the_factor():
     assert s.value[0] == 1.0  # an absent scale is 1, not 0
     assert np.abs(s.d_displacement[0] - s.displacement).max() <= 1e-12 * np.abs(s.displacement).max()
     s = smdcli.sensitivity(SCENARIOS / "three_dof_forced.toml", ["force[0].amplitude", "force[1].amplitude"])
-    alone = [smdcli.simulate(_with(SCENARIOS / "three_dof_forced.toml", f"force[{1 - j}].amplitude", 0.0),
+    alone = [smdcli.simulate(scenario_with(smdcli.load(SCENARIOS / "three_dof_forced.toml"),
+                                           {f"force[{1 - j}].amplitude": 0.0}),
                              method="exact") for j in range(2)]
     for j in range(2):
         want = alone[j].displacement / s.value[j]
         assert np.abs(s.d_displacement[j] - want).max() <= 1e-11 * np.abs(want).max()
 
 
-def _with(path, parameter: str, value: float):
-    """A bundled scenario with one parameter changed, as a sweep member is made."""
-    import copy
-    import tomllib
-
-    from smdcli.scenario.load import parse_document
-    from smdcli.sweep.family import set_parameter
-
-    text = path.read_text()
-    doc = copy.deepcopy(tomllib.loads(text))
-    set_parameter(doc, parameter, value)
-    return parse_document(doc, text, str(path))
-
-
 def _central(path, parameter: str, value: float, read, relative: float = 1e-4):
     """A five-point central difference of read(result) over exact runs at value +- h, +- 2h."""
     h = relative * (abs(value) or 1.0)
-    runs = {o: read(smdcli.simulate(_with(path, parameter, value + o * h), method="exact")) for o in (-2, -1, 1, 2)}
+    scene = smdcli.load(path)
+    runs = {o: read(smdcli.simulate(scenario_with(scene, {parameter: value + o * h}), method="exact"))
+            for o in (-2, -1, 1, 2)}
     return (8 * (runs[1] - runs[-1]) - (runs[2] - runs[-2])) / (12 * h)
 
 
@@ -229,6 +219,7 @@ def test_the_file_layout_units_and_json(cli, tmp_path):
     (("scenarios/bouncing_ball.toml", "--param", "mass.ball.m"), "not yet built"),
     (("scenarios/two_dof_forced.toml", "--param", "spring[7].k"), "spring[7]"),
     (("scenarios/two_dof_forced.toml", "--param", "time.end"), "not a parameter of the scene"),
+    (("scenarios/two_dof_forced.toml", "--param", "spring[0].kk"), "unknown key (did you mean 'k'?)"),
     (("scenarios/two_dof_forced.toml", "--param", "spring[0].k", "--param", "spring[0].k"), "more than once"),
 ])
 def test_refusals_are_one_line_exit_2_and_write_nothing(cli, tmp_path, args, message):
@@ -341,8 +332,6 @@ def test_the_bouc_wen_benchmark_law_matches_central_differences_of_tight_dop853_
     five-point differences of smd's own DOP853 at rtol 1e-13 (which restarts there too), to 1e-7 (measured 1.5e-8
     and 8e-9 over 0.2 s). A complex step through DOP853 is no reference here: across a kink of the Jacobian its
     derivative is the discrete scheme's, measured 1e-6 to 2e-5 away whether restarted or not."""
-    from smdcli.analysis.fit import scenario_with
-
     sc, _, _ = model_of(BOUC_WEN, "bouc_wen.toml")
     params = ["spring[0].k", "spring[0].beta"]
     s = smdcli.sensitivity(sc, params)

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 import smdcli
-from smdcli.analysis.fit import scenario_with
+from smdcli.sweep.family import scenario_with
 
 HERE = Path(__file__).resolve().parent
 TRUE = {"spring[0].k": 3.0e6, "spring[1].k": 2.4e6, "spring[2].k": 1.6e6, "damping.alpha": 0.4,

@@ -13,7 +13,6 @@ Must not import: io, plots, commands, cli.
 
 from __future__ import annotations
 
-import copy
 import math
 import time as clock
 import tomllib
@@ -24,8 +23,9 @@ import numpy as np
 
 from smdcli.analysis.fit_data import Measured, quantity_of
 from smdcli.analysis.sensitivity import sensitivity
-from smdcli.errors import ScenarioError, UsageError
+from smdcli.errors import UsageError
 from smdcli.scenario import Scenario
+from smdcli.sweep.family import scenario_with
 
 TOLERANCE = 1e-12  # relative reduction of the cost and relative step below which the fit has converged
 IDENTIFIABLE = 1e7  # condition number of the column-normalized Jacobian above which a direction is undetermined
@@ -76,27 +76,14 @@ class FitResult:
     outputs: list[Path] = field(default_factory=list)
 
 
-def scenario_with(sc: Scenario, values: dict[str, float]) -> Scenario:
-    """The scenario with parameter paths set to values, validated again (a fit's trial point, its fitted scene)."""
-    import tomli_w
-
-    from smdcli.scenario.load import parse_document
-    from smdcli.sweep.family import set_parameter
-
-    doc = copy.deepcopy(tomllib.loads(sc.text))
-    for path, value in values.items():
-        set_parameter(doc, path, float(value))
-    try:
-        return parse_document(doc, tomli_w.dumps(doc), sc.path)
-    except ScenarioError as exc:
-        at = ", ".join(f"{p} = {v:.6g}" for p, v in values.items())
-        raise ScenarioError(exc.file, exc.field, f"at {at}: {exc.message}") from None
-
-
-def make_test(sc: Scenario, measured: Measured, channels: tuple[str, ...] | None,
-              weights: dict[str, float] | None) -> Test:
+def make_test(sc: Scenario, measured: Measured, channels: tuple[str, ...] | None = None,
+              weights: dict[str, float] | None = None) -> Test:
     """A test checked against its scene: every channel names a mass or an element of it, the data start no
-    earlier than the scene."""
+    earlier than the scene. Channels and weights default to the scenario's [fit] table's, then to every column
+    of the data, each weighted by 1 / its RMS."""
+    table = dict(sc.fit)
+    channels = channels or table.get("channels")
+    weights = weights if weights is not None else dict(table.get("weights", ()))
     from smdcli.model import build
 
     model = build(sc)

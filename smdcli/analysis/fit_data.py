@@ -15,11 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
+from smdcli.analysis.sensitivity import QUANTITIES as RESPONSE_UNITS
 from smdcli.errors import UsageError
 from smdcli.scenario.spec import STANDARD_GRAVITY
 
 QUANTITIES = ("displacement", "velocity", "acceleration", "force")
-SI_UNITS = {"displacement": "m", "velocity": "m/s", "acceleration": "m/s^2", "force": "N", "time": "s"}
+SI_UNITS = {**RESPONSE_UNITS, "force": "N", "time": "s"}
 UNITS = {
     "time": {"s": 1.0, "ms": 1e-3},
     "displacement": {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "um": 1e-6, "in": 0.0254, "ft": 0.3048},

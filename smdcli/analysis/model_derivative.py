@@ -40,8 +40,8 @@ from smdcli.sweep.family import parameter_value, set_parameter
 
 CENTRAL = (-2.0, -1.0, 1.0, 2.0)  # offsets in units of delta: exact for polynomials of degree 4 (its symmetry)
 FORWARD = (0.0, 1.0, 2.0, 3.0, 4.0)  # where p - delta is not a valid scene (a damper at c = 0): degree 4 too
-STEPS = (1e-3, 1e-4, 2e-5)
-AFFINE_STEP = 1e-2  # relative step of an affine parameter's one difference: exact for any step; larger, less rounding  # relative deltas tried, largest first, until the stencil's error is rounding's
+STEPS = (1e-3, 1e-4, 2e-5)  # relative deltas tried, largest first, until the stencil's error is rounding's
+AFFINE_STEP = 1e-2  # relative step of an affine parameter's one difference: exact for any step; larger, less rounding
 EPS = np.finfo(float).eps
 ROUNDING = 16  # units of rounding in a model's number (a generator's state at a late time: sin(w t) of a large w t)
 _REFUSED = ("time.", "solver.", "sweep.", "output.", "plot")  # the run's span and settings: not the scene's
@@ -84,7 +84,8 @@ def _scene_at(sc: Scenario, doc: dict, path: str, value: float) -> Model:
 def _model_arrays(model: Model, t_end: float) -> list[np.ndarray]:
     """Every array of a model a derivative is taken of: matrices, initial state, jumps, generators (with their
     state at the run's end, where a frequency's stencil is least accurate)."""
-    arrays = [_dense(model.M), _dense(model.C), _dense(model.K), model.x0, model.v0]
+    dense = model.dense()
+    arrays = [dense.M, dense.C, dense.K, model.x0, model.v0]
     arrays += [np.concatenate([dx, dv]) for _, dx, dv in model.jumps]
     for signal in model.signals:
         exo = signal.exo()
@@ -118,7 +119,7 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
     structure = _structure(base, grid)
     t_end = float(grid[-1])
     if affine(sc, base, path):
-        return _affine_derivative(sc, doc, base, grid, path, value, scale)
+        return _affine_derivative(sc, doc, base, grid, path, value, scale, structure)
     best = None
     for relative in STEPS:
         delta = relative * scale
@@ -126,12 +127,12 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
             doubled = offsets + tuple(2 * o for o in offsets if 2 * o not in offsets)
             try:
                 models = {o: base if o == 0 else _scene_at(sc, doc, path, value + o * delta) for o in doubled}
-            except ScenarioError:
+            except ScenarioError as exc:
+                refused = exc
                 continue  # p - delta is not a scene: the one-sided stencil
             break
         else:
-            raise UsageError(f"--param {path}: the scene cannot be built at {path} = {value:g} +- "
-                             f"{4 * delta:.3g}: no derivative can be taken there")
+            raise _unbuildable(path, value, 4 * delta, refused)
         for m in models.values():
             _same_structure(m, structure, grid, path)
         weights = stencil_weights(offsets) / delta
@@ -159,6 +160,13 @@ def combined(weights: np.ndarray, values) -> np.ndarray:
     return sum(w * (v - values[0]) for w, v in zip(weights[1:], values[1:]))
 
 
+def _unbuildable(path: str, value: float, step: float, refused: ScenarioError) -> ScenarioError:
+    """Why no scene near the parameter could be built: the reader's own line (a misspelt key is named with the one
+    it likely means), at the values tried."""
+    return ScenarioError(refused.file, refused.field, f"{refused.message} (with --param {path} at {value:g} +- "
+                         f"{step:.3g}: no derivative can be taken there)")
+
+
 def _same_structure(model: Model, structure: tuple, grid: np.ndarray, path: str) -> None:
     if _structure(model, grid) != structure:
         raise UsageError(f"--param {path}: changes the scene's structure, not only its numbers (a force's "
@@ -181,25 +189,24 @@ def affine(sc: Scenario, base: Model, path: str) -> bool:
     the modes, nor a mass where the ground jumps, whose jump holds M^-1 C)."""
     from smdcli.sweep.family import STRUCTURAL
 
-    if STRUCTURAL.match(path) and path != "zeta":
+    if STRUCTURAL.match(path):
         return not (sc.damping is not None and sc.damping.modal) and not (base.jumps and ".m" in path)
     return bool(re.fullmatch(r"damping\.(alpha|beta)|force\[\d+\]\.amplitude|ground_motion\.scale", path))
 
 
 def _affine_derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str, value: float,
-                       scale: float) -> Derivative:
+                       scale: float, structure: tuple) -> Derivative:
     """An affine parameter's derivative: one difference over a step of AFFINE_STEP of it, exact up to rounding."""
-    structure = _structure(base, grid)
     for sign in (1.0, -1.0):
         delta = sign * AFFINE_STEP * scale
         try:
             other = _scene_at(sc, doc, path, value + delta)
-        except ScenarioError:
+        except ScenarioError as exc:
+            refused = exc
             continue
         break
     else:
-        raise UsageError(f"--param {path}: the scene cannot be built at {path} = {value:g} +- "
-                         f"{AFFINE_STEP * scale:.3g}: no derivative can be taken there")
+        raise _unbuildable(path, value, AFFINE_STEP * scale, refused)
     _same_structure(other, structure, grid, path)
     weights = np.array([-1.0, 1.0]) / delta
     largest = max((float(np.abs(b - a).max(initial=0.0)) for a, b in
@@ -282,7 +289,7 @@ def augmented_model(base: Model, derivatives: list[Derivative]) -> tuple[Model, 
     for i, (d, scale) in enumerate(zip(derivatives, scales)):
         rows = slice((i + 1) * n, (i + 2) * n)
         for target, name in ((M, "M"), (C, "C"), (K, "K")):
-            target[rows, :n] = scale * d.of(lambda m, name=name: _dense(getattr(m, name)))
+            target[rows, :n] = scale * d.of(lambda m, name=name: getattr(m.dense(), name))
         x0[rows], v0[rows] = scale * d.of(lambda m: m.x0), scale * d.of(lambda m: m.v0)
     signals, columns = [], []
     ones = np.ones(n)
@@ -291,7 +298,7 @@ def augmented_model(base: Model, derivatives: list[Derivative]) -> tuple[Model, 
         if base.force_dofs[j] == GROUND_DOF:
             column[:n] = -base.M @ ones
             for i, (d, scale) in enumerate(zip(derivatives, scales)):
-                column[(i + 1) * n:(i + 2) * n] = -scale * d.of(lambda m: _dense(m.M)) @ ones
+                column[(i + 1) * n:(i + 2) * n] = -scale * d.of(lambda m: m.dense().M) @ ones
         else:
             column[base.force_dofs[j]] = 1.0
         signals.append(signal)
@@ -329,15 +336,16 @@ def augmented_model(base: Model, derivatives: list[Derivative]) -> tuple[Model, 
     return model, scales
 
 
-def _dense(A) -> np.ndarray:
-    return A if isinstance(A, np.ndarray) else A.toarray()
+def check_once(paths: list[str]) -> None:
+    """UsageError naming a parameter path given more than once."""
+    repeated = sorted({p for p in paths if paths.count(p) > 1})
+    if repeated:
+        raise UsageError(f"--param {repeated[0]}: given more than once")
 
 
 def model_derivatives(sc: Scenario, base: Model, grid: np.ndarray, paths: list[str]) -> list[Derivative]:
     """Each parameter's model derivative (paths as the sweep takes them); UsageError for a path given twice."""
-    repeated = sorted({p for p in paths if paths.count(p) > 1})
-    if repeated:
-        raise UsageError(f"--param {repeated[0]}: given more than once")
+    check_once(paths)
     doc = tomllib.loads(sc.text)
     return [derivative(sc, doc, base, grid, path) for path in paths]
 

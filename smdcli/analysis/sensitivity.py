@@ -1,6 +1,7 @@
-"""Response sensitivities dx/dp of a linear scene, exact: the scene and its sensitivity equations solved together
-by the matrix exponential (model_derivative.py builds the stacked system), and the derivatives of each DOF's
-peak |x|, taken where the peak is located between the samples.
+"""Response sensitivities dx/dp: of a linear scene exactly, the scene and its sensitivity equations solved together
+by the matrix exponential (model_derivative.py builds the stacked system); of a smooth nonlinear scene by the
+forward sensitivity equations (smooth_sensitivity.py); and the derivatives of each DOF's peak |x|, taken where
+the peak is located between the samples.
 
 The derivative of a peak: at the time t* of max |x_i| the slope of x_i is zero (or t* is an end of the run), so
 d max|x_i| / dp = sign(x_i(t*)) dx_i/dp (t*) (the envelope theorem), with dx_i/dp read at t* on the quintic

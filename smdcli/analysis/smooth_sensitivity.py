@@ -17,7 +17,7 @@ import numpy as np
 
 from smdcli.analysis.model_derivative import combined
 from smdcli.elements.base import KINK
-from smdcli.errors import SolverFailed, UsageError
+from smdcli.errors import SolverFailed
 from smdcli.model import Model
 
 RTOL = 1e-9  # smd sensitivity's default for smooth nonlinear scenes (a scenario's tighter rtol applies)
@@ -143,13 +143,10 @@ class _Flow:
 
 def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, grid: np.ndarray, rtol: float,
                          advance=None):
-    """(y, dy/dp * scale, y', dy'/dp * scale) on the grid: (N, s), (N, s, P), (N, s), (N, s, P); advance(count) is
-    called as output times are filled (a progress bar's)."""
+    """(y, dy/dp * scale, y', dy'/dp * scale) on the grid: (N, s), (N, s, P), (N, s), (N, s, P), for a scene
+    smooth_refusal takes; advance(count) is called as output times are filled (a progress bar's)."""
     from scipy.integrate import solve_ivp
 
-    refusal = smooth_refusal(model)
-    if refusal:
-        raise UsageError(f"{model.source}: {refusal}")
     flow = _Flow(model)
     points = [[_Flow(m) for m in d.models] for d in derivatives]
     weights = [d.weights * s for d, s in zip(derivatives, scales)]

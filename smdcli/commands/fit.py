@@ -33,6 +33,7 @@ def fit_command(paths: list[Path], data: list[Path], params: list[str], bounds: 
     OUT/<stem>_fitted.toml per scenario and OUT/<stem>_fit.png."""
     from smdcli.analysis.fit import fit, make_test
     from smdcli.analysis.fit_data import read_measured
+    from smdcli.analysis.model_derivative import check_once
     from smdcli.solvers.run import load
 
     scenarios = [load(p) for p in paths]
@@ -47,16 +48,13 @@ def fit_command(paths: list[Path], data: list[Path], params: list[str], bounds: 
     params = list(params) or list(tables[0].get("parameters", ()))
     if not params:
         raise UsageError(f"{scenarios[0].path}: no parameter to fit: give --param PATH or [fit] parameters = [...]")
-    repeated = sorted({p for p in params if params.count(p) > 1})
-    if repeated:
-        raise UsageError(f"--param {repeated[0]}: given more than once")
+    check_once(params)
     chosen = dict(tables[0].get("bounds", ()))
     chosen.update(read_bound(b) for b in bounds)
     if max_iterations < 1:
         raise UsageError(f"--max-iterations: expected a positive number, found {max_iterations}")
     measured = [read_measured(f) for f in files]
-    tests = [make_test(sc, m, table.get("channels"), dict(table.get("weights", ())))
-             for sc, m, table in zip(scenarios, measured, tables)]
+    tests = [make_test(sc, m) for sc, m in zip(scenarios, measured)]
     out_dir = output_folder(out, make=False)
     from smdcli.progress import bar
 

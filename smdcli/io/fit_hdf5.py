@@ -87,7 +87,8 @@ def fitted_toml(run, test, out_dir: Path) -> str:
 
 
 def _moved(doc: dict, here: Path, there: Path) -> None:
-    """Relative file names (a table force's, a record's, [system]'s matrices, [fit].data) made relative to `there`."""
+    """Relative file names (a table force's, a record's, [system]'s matrices, an [[expect]] golden's, [fit].data) made
+    relative to `there`."""
     def fix(table: dict, key: str) -> None:
         value = table.get(key)
         if isinstance(value, str) and value and not os.path.isabs(value):
@@ -99,5 +100,7 @@ def _moved(doc: dict, here: Path, there: Path) -> None:
     if isinstance(doc.get("system"), dict):
         for key in ("M", "C", "K"):
             fix(doc["system"], key)
+    for check in doc.get("expect", []):
+        fix(check, "file")
     if isinstance(doc.get("fit"), dict):
         fix(doc["fit"], "data")

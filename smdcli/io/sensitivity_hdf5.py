@@ -9,12 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
+from smdcli.analysis.sensitivity import QUANTITIES
 from smdcli.io.atomic import atomic_path
 from smdcli.io.hdf5 import axis, stated, with_scales, write_header
 from smdcli.scenario import Scenario
-
-_UNITS = {"displacement": "m", "velocity": "m/s", "acceleration": "m/s^2"}
-
 
 def write_sensitivity(path: Path, scenario: Scenario, s) -> None:
     """/time, /dof, /parameter, /value, the nominal /displacement /velocity /acceleration (N, n), their derivatives
@@ -35,7 +33,7 @@ def write_sensitivity(path: Path, scenario: Scenario, s) -> None:
         value.attrs["units"] = np.array([u or "1" for u in s.parameter_units], dtype=h5py.string_dtype())
         with_scales(f.create_dataset("model_error", data=s.model_error), parameter).attrs["description"] = (
             "the estimated relative error of each parameter's derivative of the assembled model (the stencil's)")
-        for quantity, units in _UNITS.items():
+        for quantity, units in QUANTITIES.items():
             ds = with_scales(f.create_dataset(quantity, data=getattr(s, quantity)), time, dof)
             ds.attrs["units"] = units
             stated(ds, float(s.accuracy[quantity][0]))

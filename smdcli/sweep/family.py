@@ -242,6 +242,15 @@ def _set_initial_state(doc: dict, x0: np.ndarray, v0: np.ndarray) -> None:
             mass["x0"], mass["v0"] = float(a), float(b)
 
 
+def scenario_with(sc: Scenario, values: dict[str, float]) -> Scenario:
+    """The scenario with parameter paths set to values and validated again, as a member is (a fit's trial point, its
+    fitted scene); a ScenarioError names the values."""
+    doc = tomllib.loads(sc.text)
+    for path, value in values.items():
+        set_parameter(doc, path, float(value))
+    return _validated(doc, sc, ", ".join(f"{p} = {v:.6g}" for p, v in values.items()))
+
+
 def _validated(doc: dict, sc: Scenario, what: str) -> Scenario:
     """A member's document as a Scenario, validated; its text is the member's own TOML."""
     import tomli_w
