@@ -133,7 +133,8 @@ def rsa(
 
 
 def sensitivity(
-    scenario: Path = typer.Argument(..., help="Scenario TOML file: a linear or smooth nonlinear scene."),
+    scenario: Path = typer.Argument(..., help="Scenario TOML file: a linear, yielding, friction, stop or "
+                                  "smooth nonlinear scene."),
     param: List[str] = typer.Option(..., "--param", help="A parameter path, as a sweep takes it (repeat): "
                                     "spring[0].k, damper[1].c, mass.m1.m, mass.m1.x0, force[0].amplitude, "
                                     "force[0].omega, ground_motion.scale, damping.modal, system.K[0][0] ..."),
@@ -145,7 +146,9 @@ def sensitivity(
     """Sensitivities dx/dp of a scene's response to its parameters, and of each DOF's peak.
 
     Linear scenes exactly (the scene and its sensitivity equations solved together by the matrix exponential);
-    cubic springs, quadratic dampers and Bouc-Wen springs by the forward sensitivity equations; writes
+    elastoplastic and bilinear springs, Coulomb friction and stops exactly event to event (each event's time
+    derivative and the jump it makes); cubic springs, quadratic dampers and Bouc-Wen springs by the forward
+    sensitivity equations; where a derivative does not exist (a graze) nan from there, and a note; writes
     OUT/<stem>_sensitivity.h5 (d_displacement, d_velocity, d_acceleration per unit of each parameter) and
     OUT/<stem>_sensitivity.png (p dx/dp of each DOF)."""
     from smdcli.commands.sensitivity import format_sensitivity, sensitivity_command, sensitivity_summary

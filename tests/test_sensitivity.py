@@ -216,7 +216,6 @@ def test_the_file_layout_units_and_json(cli, tmp_path):
 
 
 @pytest.mark.parametrize("args, message", [
-    (("scenarios/bouncing_ball.toml", "--param", "mass.ball.m"), "not yet built"),
     (("scenarios/two_dof_forced.toml", "--param", "spring[7].k"), "spring[7]"),
     (("scenarios/two_dof_forced.toml", "--param", "time.end"), "not a parameter of the scene"),
     (("scenarios/two_dof_forced.toml", "--param", "spring[0].kk"), "unknown key (did you mean 'k'?)"),

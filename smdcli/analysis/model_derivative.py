@@ -67,6 +67,7 @@ class Derivative:
     models: list[Model]
     weights: np.ndarray
     error: float
+    offsets: tuple[float, ...] = ()  # each model's offset from the value, in units of delta
 
     def of(self, read) -> np.ndarray:
         """d/dp of a model's array read(model), combined over the stencil (as differences from its first point: the
@@ -147,7 +148,7 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
             # each array that changes with p (one that does not is the same number at every point: no rounding)
             error = max(float(np.abs(a - b).max(initial=0.0)) for a, b in zip(near, far)) / 15 / largest
             rounding = _rounding([models[o] for o in doubled], weights, t_end, largest)
-        found = Derivative(path, value, delta, [models[o] for o in offsets], weights, error + rounding)
+        found = Derivative(path, value, delta, [models[o] for o in offsets], weights, error + rounding, offsets)
         if best is None or found.error < best.error:
             best = found
         if error <= rounding:
@@ -189,6 +190,8 @@ def affine(sc: Scenario, base: Model, path: str) -> bool:
     the modes, nor a mass where the ground jumps, whose jump holds M^-1 C)."""
     from smdcli.sweep.family import STRUCTURAL
 
+    if any(e.law.piecewise_linear for e in base.nonsmooth):
+        return False  # a mode's numbers multiply the parameter by internal variables that move with it (k d_p)
     if STRUCTURAL.match(path):
         return not (sc.damping is not None and sc.damping.modal) and not (base.jumps and ".m" in path)
     return bool(re.fullmatch(r"damping\.(alpha|beta)|force\[\d+\]\.amplitude|ground_motion\.scale", path))
@@ -213,7 +216,7 @@ def _affine_derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, p
                    zip(_model_arrays(base, float(grid[-1])), _model_arrays(other, float(grid[-1])))),
                   default=0.0) / abs(delta)
     error = _rounding([base, other], weights, float(grid[-1]), largest) if largest > 0 else 0.0
-    return Derivative(path, value, delta, [base, other], weights, error)
+    return Derivative(path, value, delta, [base, other], weights, error, (0.0, 1.0))
 
 
 class ParameterDerivative(Signal):

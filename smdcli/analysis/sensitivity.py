@@ -32,6 +32,11 @@ SMOOTH_ERROR = 100  # a smooth scene's stated error, in units of its rtol: DOP85
 SMOOTH_METHOD = ("forward sensitivity equations s' = J s + df/dp integrated beside the state by DOP853 (error "
                  "controlled on both, restarted at force discontinuities and at the laws' kinks), J analytic, df/dp "
                  "from the model at the parameter's stencil points")
+EVENT_METHOD = ("exact, event to event: between events the scene and its sensitivity equations solved together by "
+                "the matrix exponential; at each event its time's derivative from the guard it crosses and the "
+                "state's jump across it (the saltation), internal variables (plastic deformation) carried with "
+                "their own sensitivities; the model's derivatives taken on the assembled scene (a five-point "
+                "stencil in each parameter)")
 MAX_SIZE = 3000  # DOFs of the stacked system, (P + 1) n: its dense exponential's memory and time
 METHOD = ("exact: the scene and its sensitivity equations (the same M, C and K driven by -dM x'' - dC x' - dK x + "
           "B du/dp) solved together by the matrix exponential; the model's derivatives taken on the assembled model "
@@ -120,10 +125,14 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
         raise UsageError("smd sensitivity: give at least one --param PATH (spring[0].k, mass.m1.m, ...)")
     start = time.perf_counter()
     base = build(sc)
+    piecewise = _piecewise(base)
+    if piecewise:
+        from smdcli.analysis.event_sensitivity import EVENT_ERROR
     if not base.is_linear:
+        from smdcli.analysis.event_sensitivity import event_refusal
         from smdcli.analysis.smooth_sensitivity import smooth_refusal
 
-        refusal = smooth_refusal(base)
+        refusal = event_refusal(base) if piecewise else smooth_refusal(base)
         if refusal:
             raise UsageError(f"{sc.path}: {refusal}")
     if (len(params) + 1) * base.n > MAX_SIZE:
@@ -133,9 +142,13 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
     derivatives = model_derivatives(sc, base, grid, list(params))
     n, P = base.n, len(derivatives)
     tol = Tolerances()
+    run = None
     if base.is_linear:
         blocks, stated = _linear(sc, base, derivatives, grid, tol)
         method = METHOD
+    elif piecewise:
+        blocks, stated, run = _events(base, derivatives, grid)
+        method = EVENT_METHOD
     else:
         blocks, stated = _smooth(sc, base, derivatives, grid, advance)
         method = SMOOTH_METHOD
@@ -147,9 +160,11 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
                for q, b in blocks.items()}
     accuracy = {}
     for q, b in blocks.items():
-        largest = np.abs(b[:, 1:]).max(axis=(0, 2))
+        largest = np.abs(np.nan_to_num(b[:, 1:])).max(axis=(0, 2))  # nan: where no derivative exists
         if base.is_linear:  # the run's error is relative to the stacked state's peak (every block a displacement)
             absolute = stated * float(np.abs(b).max(initial=0.0))
+        elif piecewise:
+            absolute = max(stated, EVENT_ERROR) * float(np.abs(np.nan_to_num(b)).max(initial=0.0))
         else:  # the integrator's: rtol of each component, atol a thousandth of rtol of the state's peak
             absolute = stated * (largest + 1e-3 * float(np.abs(b[:, 0]).max(initial=0.0)))
         accuracy[f"d_{q}"] = np.maximum(np.where(largest > 0, absolute / np.where(largest > 0, largest, 1.0), 0.0),
@@ -159,17 +174,23 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
         nan = np.full(n, np.nan)
         return _result(sc, params, derivatives, grid, base, nominal, derived, nan, nan, np.full((P, n), np.nan),
                        accuracy, wall, forward, (), method)
-    events = jump_times(base, grid)
+    notes = []
+    if run is not None and run.undefined_from is not None:
+        when, why = run.undefined_from
+        notes.append(f"from t = {when:.9g} s the response has no derivative ({why}): written as nan")
+    events = jump_times(base, grid) if run is None else np.array([e[0] for e in run.events], dtype=float)
     peaks, at = located_peaks(grid, nominal["displacement"], nominal["velocity"], nominal["acceleration"], events,
                               with_times=True)
     d_peaks = np.full((P, n), np.nan)
-    notes = []
     for i in range(n):
         if peaks[i] == 0:
             notes.append(f"{base.dofs[i]} does not move: its peak |x| has no derivative (written as nan)")
             continue
         sign = np.sign(quintic_at(grid, nominal["displacement"][:, i], nominal["velocity"][:, i],
                                   nominal["acceleration"][:, i], np.array([at[i]]))[0])
+        if run is not None:  # on the exact flow at the peak's time
+            d_peaks[:, i] = sign * run.at(float(at[i]))[:, i] / scales
+            continue
         for p in range(P):
             d_peaks[p, i] = sign * quintic_at(grid, derived["displacement"][p, :, i], derived["velocity"][p, :, i],
                                               derived["acceleration"][p, :, i], np.array([at[i]]))[0]
@@ -201,6 +222,27 @@ def _linear(sc: Scenario, base, derivatives: list, grid: np.ndarray, tol: Tolera
     P, n = len(derivatives), base.n
     return {q: getattr(result, q).reshape(len(grid), P + 1, n) for q in QUANTITIES}, \
         float(result.stats.stated_accuracy)
+
+
+def _piecewise(base) -> bool:
+    """Whether a nonlinear scene is piecewise linear (yielding, friction, stops): solved exactly event to event."""
+    return bool(base.nonsmooth) and all(e.law.piecewise_linear for e in base.nonsmooth) and \
+        base.cubic is None and base.quadratic is None
+
+
+def _events(base, derivatives: list, grid: np.ndarray) -> tuple[dict, float, object]:
+    """The same blocks for a piecewise-linear scene, exact event to event (event_sensitivity.py), its stated
+    accuracy and the run (its sensitivities between samples, and where they stop existing)."""
+    from smdcli.analysis.event_sensitivity import event_sensitivities
+
+    scales = np.array([relative_size(d.value) for d in derivatives])
+    x, v, a, S, d_a, run, stated = event_sensitivities(base, derivatives, scales, grid)
+    n = base.n
+
+    def stacked(nominal, derived):  # (N, n) and (N, P, n) -> (N, P + 1, n)
+        return np.concatenate([nominal[:, None, :], derived], axis=1)
+    return {"displacement": stacked(x, S[:, :, :n]), "velocity": stacked(v, S[:, :, n:2 * n]),
+            "acceleration": stacked(a, d_a)}, stated, run
 
 
 def _smooth(sc: Scenario, base, derivatives: list, grid: np.ndarray, advance=None) -> tuple[dict, float]:

@@ -31,9 +31,10 @@ def smooth_refusal(model: Model) -> str | None:
         piece = law.piece(state)
         if law.piecewise_linear or piece.held or any(g.kind != KINK for g in piece.guards) or \
                 law.smooth_jacobian(state, 0.0, 0.0) is None:
-            return (f"{element.path} ({getattr(law, 'law_name', law.name)}) changes mode at events; sensitivities "
-                    "of yielding, friction and stop scenes are not yet built (linear scenes, cubic springs, "
-                    "quadratic dampers and Bouc-Wen springs are)")
+            return (f"{element.path} ({getattr(law, 'law_name', law.name)}) changes mode at events beside smooth "
+                    "nonlinear terms: sensitivities of such a mix are not yet built (linear scenes; yielding, "
+                    "Coulomb friction and stop scenes; and cubic springs, quadratic dampers and Bouc-Wen springs "
+                    "each are)")
     return None
 
 

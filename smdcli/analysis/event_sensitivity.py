@@ -1,0 +1,348 @@
+"""Sensitivities of piecewise-linear scenes (elastoplastic and bilinear springs, Coulomb friction, stops), exact
+event to event.
+
+Between two events the scene is z' = A z + b (solvers.events.scene), so its sensitivity s = dz/dp obeys
+s' = A s + dA/dp z + db/dp: stacked with z, one linear system whose exact flow (the block-triangular exponential)
+carries s beside the state, the mode's derivatives taken on the assembled scene (the stencil of
+model_derivative, never on a solution). An event of p-dependent time t*, where a guard h = row z + c crosses zero,
+moves with the parameter: dt*/dp = -(row s + dh/dp) / (row z'), and the state's sensitivity jumps across it
+(the saltation): s+ = D[Delta](s- + z'- dt*/dp) - z'+ dt*/dp, with Delta the event's map of the state (the
+identity for a change of mode, the velocity jump of an impact) and D its derivative along the moved event point.
+The elements' internal variables (a spring's plastic deformation, set where it unloads) carry sensitivities of
+their own, set the same way from the law's own event at the moved point; the mode after an event reads them.
+
+Where a derivative does not exist (an event met tangentially, a graze: its time's derivative is infinite; an
+accumulation of impacts), the sensitivities from that time on are not numbers: they are nan, and the result says
+from when and why.
+
+Must not import: io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from smdcli.elements.base import KINK
+from smdcli.elements import State
+from smdcli.model import Model
+from smdcli.solvers.events.decisions import impact, project
+from smdcli.solvers.events.piecewise import PiecewiseRun
+from smdcli.solvers.events.scene import Scene
+from smdcli.solvers.exact.flow import Flow
+from smdcli.solvers.exact.linear import first_order_hold
+
+GRAZING = 1e-9  # a crossing whose rate is below this share of the terms it sums is met tangentially: no dt*/dp
+# what the sensitivities are stated to, relative to each parameter's largest: the rounding of each event's time
+# divided by its crossing rate is not bounded a priori; differences of the exact runs agree to 6e-11 - 3e-10 (their
+# own error) on yielding, stick-slip, impacts and a bilinear frame
+EVENT_ERROR = 1e-9
+GRAZE = 1e-9  # a guard's top within this share of its terms below its level: a near miss, no derivative from it
+SUPPORTED = ("elastoplastic", "bilinear", "coulomb", "stop")  # the laws whose events carry their sensitivities
+
+
+class NotDifferentiable(Exception):
+    """The response has no derivative from this event on."""
+
+
+def event_refusal(model: Model) -> str | None:
+    """Why the event-to-event sensitivities cannot take the scene, or None."""
+    for element in model.nonsmooth:
+        law = element.law
+        if not law.piecewise_linear or law.name not in SUPPORTED:
+            return (f"{element.path} ({getattr(law, 'law_name', law.name)}): sensitivities of this law are not yet "
+                    "built (linear scenes, elastoplastic and bilinear springs, Coulomb friction, stops, cubic "
+                    "springs, quadratic dampers and Bouc-Wen springs are)")
+    if model.cubic is not None or model.quadratic is not None:
+        return "a scene of cubic springs or quadratic dampers with yielding, friction or stops has no exact sensitivities"
+    if model.jumps:
+        return "the ground's displacement jumps in a yielding, friction or stop scene: its sensitivities are not built"
+    return None
+
+
+class EventSensitivityRun(PiecewiseRun):
+    """The exact event-driven run with the P scaled sensitivities scale_i dz/dp_i carried beside the state."""
+
+    def __init__(self, model: Model, grid: np.ndarray, derivatives: list, scales: np.ndarray):
+        super().__init__(model, grid)
+        self.P = len(derivatives)
+        # each parameter's stencil: the scenes at its points, their offsets (in the parameter's units) and weights
+        # (times its scale: the sensitivities carried are scale_i d/dp_i, every block the size of the state)
+        self.stencils = [([Scene(first_order_hold(m, grid)[0]) for m in d.models],
+                          np.asarray(d.offsets, dtype=float) * d.delta, d.weights * scale)
+                         for d, scale in zip(derivatives, scales)]
+        self.scales = scales
+        self.dq = [{} for _ in self.scene.elements]  # internal variable -> its (P,) scaled sensitivities
+        self.h_out = float(grid[1] - grid[0]) if len(grid) > 1 else 0.0
+        self.S_out = np.full((len(grid), self.P, self.scene.size), np.nan)
+        self.rate_out = np.full((len(grid), self.P, self.scene.size), np.nan)
+        self.checkpoints: list[tuple] = []  # (t, z, S, states) at each event, break and output point
+        self.undefined_from: tuple[float, str] | None = None
+        self._augmented: dict = {}
+
+    # ----------------------------------------------------------------------------- stencils
+    def total(self, i: int, read) -> np.ndarray:
+        """scale_i times the total derivative along parameter i of read(scene, c): the scene at a stencil point
+        and c, what to multiply a scaled sensitivity by to move a quantity with the parameter to that point."""
+        scenes, offsets, weights = self.stencils[i]
+        values = [np.asarray(read(scene, o / self.scales[i]), dtype=float) for scene, o in zip(scenes, offsets)]
+        return sum(w * (v - values[0]) for w, v in zip(weights[1:], values[1:]))
+
+    def shifted(self, states, i: int, c: float) -> list[State]:
+        """The states with their internal variables moved c times their scaled sensitivities to parameter i."""
+        return [State(s.mode, {name: value + c * float(self.dq[e][name][i]) if name in self.dq[e] else value
+                               for name, value in s.internal.items()}) for e, s in enumerate(states)]
+
+    def augmented(self, states) -> tuple[Flow, np.ndarray, np.ndarray]:
+        """The flow of [z; S] in these states, its forcing and its matrix: the mode with each parameter's total
+        derivative of A and b below it."""
+        mode = self.scene.mode(states)
+        key = (mode.key, tuple(tuple(sorted((k, v.tobytes()) for k, v in dq.items())) for dq in self.dq))
+        found = self._augmented.get(key)
+        if found is None:
+            s, P = self.scene.size, self.P
+            big = np.zeros(((P + 1) * s, (P + 1) * s))
+            forcing = np.zeros((P + 1) * s)
+            forcing[:s] = mode.b
+            for block in range(P + 1):
+                big[block * s:(block + 1) * s, block * s:(block + 1) * s] = mode.A
+            for i in range(P):
+                def read(scene, c, i=i):
+                    shifted = scene.mode(self.shifted(states, i, c))
+                    return np.concatenate([shifted.A.ravel(), shifted.b])
+                flat = self.total(i, read)
+                big[(i + 1) * s:(i + 2) * s, :s] = flat[:s * s].reshape(s, s)
+                forcing[(i + 1) * s:(i + 2) * s] = flat[s * s:]
+            found = self._augmented[key] = (Flow(big), forcing, big)
+        return found
+
+    # ----------------------------------------------------------------------------- carrying S
+    def advance(self, t: float, z: np.ndarray) -> None:
+        """S carried from the last checkpoint to t on the flow of its mode (the run's own z at t kept)."""
+        t_c, z_c, S_c, states_c = self.checkpoints[-1]
+        h = t - t_c
+        if h > 0:
+            flow, forcing, _ = self.augmented(states_c)
+            keep = abs(h - self.h_out) <= 1e-9 * self.h_out
+            Z = flow.at(np.concatenate([z_c, S_c.ravel()]), forcing, h, keep)
+            S_c = Z[len(z):].reshape(self.P, len(z))
+        self.checkpoints.append((t, z.copy(), S_c, states_c))
+
+    def settle_checkpoint(self, t: float, z: np.ndarray, S: np.ndarray, states) -> None:
+        """The state after an event or break, with its sensitivities, as the next segment's start."""
+        self.checkpoints.append((t, z.copy(), S, list(states)))
+
+    def no_derivative(self, t: float, why: str) -> None:
+        """From t on the response has no derivative: nan from here, the reason kept."""
+        if self.undefined_from is None:
+            self.undefined_from = (t, why)
+
+    # ----------------------------------------------------------------------------- the run's hooks
+    def flow(self, mode, t: float) -> Flow:
+        self.now = t  # the step's start, for what first_crossing finds
+        return super().flow(mode, t)
+
+    def first_crossing(self, flow: Flow, mode, z0: np.ndarray, z1: np.ndarray, h: float):
+        found = super().first_crossing(flow, mode, z0, z1, h)
+        if self.undefined_from is None:
+            end = h if found is None else found[0]
+            self.near_miss(flow, mode, z0, z1 if found is None else flow.at(z0, mode.b, end), end)
+        return found
+
+    def near_miss(self, flow: Flow, mode, z0: np.ndarray, z1: np.ndarray, h: float) -> None:
+        """A guard whose top comes within GRAZE of its level on (0, h] without crossing it: an event that a change
+        of the parameters this small makes appear, so that the response has no derivative from there."""
+        for e, guard, row, const in mode.guards:
+            direction = guard.direction
+            scale = float(np.abs(row) @ np.abs(z0)) + abs(const)
+            if not (direction * float(row @ z0 + const) < -GRAZE * scale and direction * float(row @ z1 + const) < 0):
+                continue
+            slope0, slope1 = (direction * float(row @ (mode.A @ z + mode.b)) for z in (z0, z1))
+            if not slope0 > 0 > slope1:
+                continue
+            turn = self._root(flow, mode, z0, row @ mode.A, float(row @ mode.b), 0.0, h)
+            top = direction * float(row @ flow.at(z0, mode.b, turn) + const)
+            if top >= -GRAZE * scale:
+                self.no_derivative(self.now + turn, f"{self.scene.elements[e].path} comes within {-top:.3g} of its "
+                                   f"{guard.kind} without reaching it: a graze, which a change of the parameters that "
+                                   "small turns into an event")
+
+    def batch(self, *args, **kwargs):
+        """No batches: the sensitivities are carried from one output point to the next."""
+        return None
+
+    def start(self, states, z: np.ndarray, t: float):
+        before = len(self.events)
+        states, z = super().start(states, z, t)
+        if any(kind == "impact" for _, _, kind in self.events[before:]):
+            self.no_derivative(t, "a stop is met moving into it at the start")
+        n, E = self.n, self.scene.E
+        S = np.zeros((self.P, self.scene.size))
+        for i in range(self.P):
+            def initial(scene, c):
+                model = scene.model
+                z0 = np.zeros(scene.size)
+                z0[:n], z0[n:2 * n] = model.x0, model.v0
+                scene.reseed(z0, t)
+                d0, rate0 = scene.R @ model.x0, scene.R @ model.v0 + scene.belts
+                starts = [el.law.start(float(d0[e]), float(rate0[e])) for e, el in enumerate(scene.elements)]
+                return np.concatenate([z0] + [_values(s) for s in starts])
+            flat = self.total(i, initial)
+            S[i] = flat[:self.scene.size]
+            at = self.scene.size
+            for e in range(E):
+                for name in sorted(states[e].internal):
+                    self.dq[e].setdefault(name, np.zeros(self.P))[i] = flat[at]
+                    at += 1
+        self.settle_checkpoint(t, z, S, states)
+        self.keep_output(0)
+        return states, z
+
+    def apply(self, states, z: np.ndarray, t: float, element: int, kind: str):
+        if kind == KINK or self.undefined_from is not None:
+            return super().apply(states, z, t, element, kind)
+        self.advance(t, z)
+        S = self.checkpoints[-1][2]
+        mode = self.scene.mode(states)
+        rate_of_z = mode.A @ z + mode.b
+        index = min((j for j, (e, guard, _, _) in enumerate(mode.guards) if e == element and guard.kind == kind),
+                    key=lambda j: abs(float(mode.guards[j][2] @ z + mode.guards[j][3])))
+        row = mode.guards[index][2]
+        crossing = float(row @ rate_of_z)
+        dt = np.zeros(self.P)
+        if abs(crossing) <= GRAZING * float(np.abs(row) @ np.abs(rate_of_z)):
+            self.no_derivative(t, f"{self.scene.elements[element].path} meets its {kind} tangentially: a graze, "
+                               "whose time has no derivative")
+        else:
+            for i in range(self.P):
+                def guard(scene, c):
+                    _, _, r, const = scene.mode(self.shifted(states, i, c)).guards[index]
+                    return r @ z + const
+                dt[i] = -(float(row @ S[i]) + float(self.total(i, guard))) / crossing
+        moved = S + dt[:, None] * rate_of_z[None]  # the event point's total derivative
+        before = len(self.events)
+        after, z_after = super().apply(states, z, t, element, kind)
+        recorded = self.events[before:]
+        if kind == "impact":
+            S_after = self.impact_jump(states, after, z, moved, element, recorded, t)
+        else:
+            S_after = moved.copy()
+        self.carry_internal(states, after, z, moved, recorded)
+        mode_after = self.scene.mode(after)
+        S_after -= dt[:, None] * (mode_after.A @ z_after + mode_after.b)[None]
+        self.settle_checkpoint(t, z_after, S_after, after)
+        return after, z_after
+
+    def impact_jump(self, before, after, z, moved, element, recorded, t) -> np.ndarray:
+        """D[Delta] of an impact along the moved event point: the velocity jump (and a rest's projection) of the
+        scene at each stencil point."""
+        kinds = [kind for _, path, kind in recorded if path == self.scene.elements[element].path]
+        if "impact" not in kinds:
+            self.no_derivative(t, f"{self.scene.elements[element].path} is touched, not struck (a graze)")
+            return moved.copy()
+        if any(kind == "rest" and when != t for when, _, kind in recorded):
+            self.no_derivative(t, f"{self.scene.elements[element].path}'s impacts accumulate to rest")
+            return moved.copy()
+        out = np.empty_like(moved)
+        for i in range(self.P):
+            def jumped(scene, c, i=i):
+                law = scene.elements[element].law
+                struck = impact(scene, self.shifted(before, i, c), z + c * moved[i], element, law.rebound)
+                return project(scene, self.shifted(after, i, c), struck, self.v_scale)
+            out[i] = self.total(i, jumped)
+        return out
+
+    def carry_internal(self, before, after, z, moved, recorded) -> None:
+        """The internal variables' sensitivities an event sets: the law's own event at the moved point."""
+        for e, (old, new) in enumerate(zip(before, after)):
+            if old.internal == new.internal:
+                continue
+            path = self.scene.elements[e].path
+            kinds = [kind for _, p, kind in recorded if p == path]
+            if len(kinds) != 1:
+                self.no_derivative(recorded[0][0] if recorded else 0.0,
+                                   f"{path} changes its internal variables by several events at one instant")
+                return
+            names = sorted(new.internal)
+            for i in range(self.P):
+                def event(scene, c, i=i):
+                    shifted = self.shifted(before, i, c)
+                    d, rate, tension, _ = scene.evaluate(shifted, z + c * moved[i])
+                    law = scene.elements[e].law
+                    made = law.event(shifted[e], kinds[0], float(d[e]), float(rate[e]), float(tension[e]))
+                    return [made.internal[name] for name in names]
+                values = self.total(i, event)
+                for name, value in zip(names, values):
+                    self.dq[e].setdefault(name, np.zeros(self.P))[i] = value
+
+    def cross_break(self, states, z: np.ndarray, t: float, jump):
+        self.advance(t, z)
+        S = self.checkpoints[-1][2].copy()
+        before = len(self.events)
+        after, z_after = super().cross_break(states, z, t, jump)
+        n, s = self.n, self.scene.size
+        for i in range(self.P):  # the generators reseeded: their state's derivative there
+            def reseeded(scene, c):
+                w = np.zeros(s)
+                scene.reseed(w, t)
+                return w[2 * n:]
+            S[i, 2 * n:] = self.total(i, reseeded)
+        self.carry_internal(states, after, z, S, self.events[before:])
+        self.settle_checkpoint(t, z_after, S, after)
+        return after, z_after
+
+    def land(self, states, z, t, k, target, break_time, breaks, b_next, outputs):
+        self.advance(t, z)
+        states, z, k_after = super().land(states, z, t, k, target, break_time, breaks, b_next, outputs)
+        if k_after > k:
+            self.checkpoints[-1] = (t, z.copy(), self.checkpoints[-1][2], list(states))
+            self.keep_output(k)
+        return states, z, k_after
+
+    def keep_output(self, k: int) -> None:
+        """S and its rate at output point k (nan once the response has no derivative)."""
+        if self.undefined_from is not None:
+            return
+        t, z, S, states = self.checkpoints[-1]
+        _, forcing, big = self.augmented(states)
+        s = self.scene.size
+        rates = big @ np.concatenate([z, S.ravel()]) + forcing
+        self.S_out[k] = S
+        self.rate_out[k] = rates[s:].reshape(self.P, s)
+
+    # ----------------------------------------------------------------------------- between samples
+    def at(self, t: float) -> np.ndarray:
+        """S at time t (nan where the response has no derivative), from the last checkpoint before it."""
+        if self.undefined_from is not None and t >= self.undefined_from[0]:
+            return np.full((self.P, self.scene.size), np.nan)
+        times = [c[0] for c in self.checkpoints]
+        j = int(np.searchsorted(times, t, side="right")) - 1
+        t_c, z_c, S_c, states_c = self.checkpoints[max(j, 0)]
+        if t == t_c:
+            return S_c
+        flow, forcing, _ = self.augmented(states_c)
+        Z = flow.at(np.concatenate([z_c, S_c.ravel()]), forcing, t - t_c)
+        return Z[len(z_c):].reshape(self.P, len(z_c))
+
+
+def _values(state: State) -> list[float]:
+    """A state's internal variables in name order."""
+    return [float(state.internal[name]) for name in sorted(state.internal)]
+
+
+def event_sensitivities(model: Model, derivatives: list, scales: np.ndarray, grid: np.ndarray):
+    """(x, v, a (N, n), S (N, P, 2n) scaled sensitivities of x and v, dA (N, P, n) of a, the run, the state's stated
+    accuracy (the sensitivities': EVENT_ERROR at least)) of a piecewise-linear scene by the exact event-driven run."""
+    from smdcli.solvers.base import stated_rounding
+
+    held, _ = first_order_hold(model, grid)
+    run = EventSensitivityRun(held, grid, derivatives, scales)
+    x, v, a, history = run.run()
+    n = model.n
+    if run.undefined_from is not None:
+        later = grid >= run.undefined_from[0]
+        run.S_out[later] = np.nan
+        run.rate_out[later] = np.nan
+    growth = max((flow.omega for flow in run.flows.values()), default=0.0)
+    h = run.h_out
+    stated = stated_rounding(len(grid) + 8 * len(history.events), max(1.0, growth * h))
+    return x, v, a, run.S_out[:, :, :2 * n], run.rate_out[:, :, n:2 * n], run, stated

@@ -1,0 +1,162 @@
+"""Sensitivities of piecewise-linear scenes, exact event to event (analysis/event_sensitivity.py): yielding, stick-slip
+friction and impacts against central differences of smd's independent event-driven DOP853 at rtol 1e-13; where
+the derivative does not exist (a graze, impacts accumulating to rest), nan and a note, not a number; and the fit
+they serve (an elastoplastic storey's k and fy from its response)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import smdcli
+from smdcli.analysis.fit import fit, make_test
+from smdcli.analysis.fit_data import Measured
+from smdcli.sweep.family import scenario_with
+from tests.conftest import SCENARIOS, model_of
+
+ELASTOPLASTIC = """
+[time]
+end = 1.2
+step = 0.005
+[[mass]]
+name = "m1"
+m = 1.0
+[[spring]]
+connects = ["ground", "m1"]
+law = "elastoplastic"
+k = 400.0
+fy = 20.0
+[[damper]]
+connects = ["ground", "m1"]
+c = 1.0
+[[force]]
+on = "m1"
+type = "sine"
+amplitude = 30.0
+omega = 12.0
+"""
+
+
+def dop853_differences(sc, s, paths, relative=1e-4):
+    """Five-point central differences of DOP853 runs (rtol 1e-13, events located on its interpolant, restarted at
+    each) in each parameter: an integrator independent of the exponentials, its global error about 3e-13 of the
+    response, so the differences carry about 1e-8 of rounding (1.5 * 3e-13 / 1e-4) and 1e-16 of truncation."""
+    out = {}
+    for i, path in enumerate(paths):
+        h = relative * abs(s.value[i])
+        runs = {o: smdcli.simulate(scenario_with(sc, {path: s.value[i] + o * h}), method="DOP853", rtol=1e-13,
+                                   atol=1e-18).displacement for o in (-2, -1, 1, 2)}
+        out[path] = (8 * (runs[1] - runs[-1]) - (runs[2] - runs[-2])) / (12 * h)
+    return out
+
+
+def away_from_events(sc, s, margin=1e-3):
+    """The samples farther than margin from every event of the nominal run: a sample an event passes within the
+    differences' offsets is no place to difference a response that jumps in slope there."""
+    times = np.array([t for t, _, _ in smdcli.simulate(sc, method="exact").nonsmooth.events])
+    if not len(times):
+        return np.ones(len(s.time), dtype=bool)
+    return np.abs(s.time[:, None] - times[None, :]).min(axis=1) > margin
+
+
+def check_against_dop853(sc, paths, bar=1e-7):
+    """Every DOF's dx/dp within bar of the largest, on the samples away from events; the stated accuracy met."""
+    s = smdcli.sensitivity(sc, paths)
+    assert s.notes == () and "event to event" in s.method
+    want = dop853_differences(sc, s, paths)
+    keep = away_from_events(sc, s)
+    assert keep.mean() > 0.8
+    for i, path in enumerate(paths):
+        error = np.abs(s.d_displacement[i][keep] - want[path][keep]).max() / np.abs(want[path]).max()
+        assert error <= bar, (path, error)
+    return s
+
+
+def test_yielding_matches_differences_of_dop853():
+    """An elastoplastic oscillator yielding both ways under a sine (22 events): k, fy and c, to 1e-7 of each
+    parameter's largest sensitivity (measured 1e-9 to 2e-9, the differences' own error)."""
+    sc, _, _ = model_of(ELASTOPLASTIC, "ep.toml")
+    check_against_dop853(sc, ["spring[0].k", "spring[0].fy", "damper[0].c"])
+
+
+def test_stick_slip_with_static_above_kinetic_matches_differences_of_dop853():
+    """The belt's stick-slip (breakaway at 3 N, slipping at 2 N): both friction forces and the spring, through
+    twelve stick and slip events; the sensitivities jump at each event (the saltation)."""
+    text = (SCENARIOS / "stick_slip_belt.toml").read_text().replace("end = 10.0", "end = 4.0")
+    sc, _, _ = model_of(text, "belt.toml")
+    s = check_against_dop853(sc, ["friction[0].force", "friction[0].static", "spring[0].k"])
+    slips = [t for t, _, kind in smdcli.simulate(sc, method="exact").nonsmooth.events if kind == "slip"]
+    k = int(np.searchsorted(s.time, slips[1]))
+    assert abs(s.d_velocity[1, k, 0] - s.d_velocity[1, k - 1, 0]) > 1e-3 * np.abs(s.d_velocity[1]).max()
+
+
+def test_impacts_with_restitution_match_differences_of_dop853():
+    """The vibro-impact absorber (a rigid stop, restitution 0.5): e and the primary's spring through its impacts."""
+    text = (SCENARIOS / "vibro_impact_gap.toml").read_text().replace("end = 10.0", "end = 2.0")
+    sc, _, _ = model_of(text, "gap.toml")
+    check_against_dop853(sc, ["stop[0].restitution", "spring[0].k"])
+
+
+def test_a_graze_has_no_derivative_and_says_so():
+    """An undamped oscillator whose elastic peak force is its yield force exactly (v0 = fy omega / k) touches its
+    yield surface at a quarter period: a larger k yields, a smaller one does not, so dx/dk does not exist from
+    there; the result says so and writes nan from that time, the numbers before it exact."""
+    text = """
+[time]
+end = 0.5
+step = 0.01
+[[mass]]
+name = "m1"
+m = 1.0
+v0 = 0.5
+[[spring]]
+connects = ["ground", "m1"]
+law = "elastoplastic"
+k = 100.0
+fy = 5.0
+"""
+    sc, _, _ = model_of(text, "graze.toml")
+    s = smdcli.sensitivity(sc, ["spring[0].k"])
+    touch = np.pi / 20
+    assert len(s.notes) == 1 and "graze" in s.notes[0] and f"{touch:.7f}" in s.notes[0]
+    before, after = s.time < touch, s.time >= touch
+    assert np.isnan(s.d_displacement[0][after]).all() and np.isfinite(s.d_displacement[0][before]).all()
+    # before the touch: x = (v0 / w) sin(w t), w = sqrt(k / m): dx/dk = (v0 / 2k) (t cos(w t) - sin(w t) / w)
+    t, w, v0, k = s.time[before], 10.0, 0.5, 100.0
+    want = v0 / (2 * k) * (t * np.cos(w * t) - np.sin(w * t) / w)
+    assert np.abs(s.d_displacement[0][before, 0] - want).max() <= 1e-10 * np.abs(want).max()
+
+
+def test_impacts_accumulating_to_rest_say_from_when_the_derivative_is_not_given(cli, tmp_path):
+    """The bouncing ball: exact through its impacts (each flight's x0 derivative is the rebound's), then nan from
+    the impact where the run sums the remaining flights, with that note on the terminal."""
+    ran = cli("sensitivity", SCENARIOS / "bouncing_ball.toml", "--param", "mass.ball.x0", "-o", tmp_path)
+    assert ran.exit_code == 0, ran.output
+    assert "accumulate to rest" in ran.output and "nan" in ran.output
+    s = smdcli.sensitivity(SCENARIOS / "bouncing_ball.toml", ["mass.ball.x0"])
+    # the first flight: x = x0 - g t^2 / 2, so dx/dx0 = 1 until the first impact
+    first = float(np.sqrt(2 * 1.0 / 9.80665))
+    assert np.abs(s.d_displacement[0][s.time < first, 0] - 1).max() <= 1e-12
+    assert np.isnan(s.d_displacement[0][-1, 0])
+
+
+def test_an_elastoplastic_storey_k_and_fy_are_recovered_from_a_start_30_percent_off():
+    """Noise-free response of the yielding oscillator: k, fy and c from 0.7, 1.3 and 0.7 times their values, to
+    1e-6, its Jacobian exact event to event."""
+    sc, _, _ = model_of(ELASTOPLASTIC, "ep.toml")
+    truth = smdcli.simulate(sc, method="exact")
+    data = Measured("synthetic", truth.time[1:], {"m1.displacement": truth.displacement[1:, 0]}, {})
+    start = scenario_with(sc, {"spring[0].k": 0.7 * 400.0, "spring[0].fy": 1.3 * 20.0, "damper[0].c": 0.7})
+    run = fit([make_test(start, data, None, None)], ["spring[0].k", "spring[0].fy", "damper[0].c"])
+    assert run.converged, run.message
+    assert np.abs(run.estimate / [400.0, 20.0, 1.0] - 1).max() <= 1e-6
+    assert run.solves < 50
+
+
+def test_laws_without_event_sensitivities_are_refused_naming_the_element(cli, tmp_path):
+    """A Clough spring's degrading branches: refused with one line, exit 2, nothing written."""
+    text = ELASTOPLASTIC.replace('law = "elastoplastic"', 'law = "clough"')
+    (tmp_path / "clough.toml").write_text(text)
+    ran = cli("sensitivity", tmp_path / "clough.toml", "--param", "spring[0].k", "-o", tmp_path / "out")
+    assert ran.exit_code == 2 and "spring[0] (clough)" in ran.output and "not yet built" in ran.output, ran.output
+    assert len(ran.output.strip().splitlines()) == 1 and not (tmp_path / "out").exists()
