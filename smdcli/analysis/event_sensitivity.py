@@ -53,7 +53,8 @@ def event_refusal(model: Model) -> str | None:
                     "built (linear scenes, elastoplastic and bilinear springs, Coulomb friction, stops, cubic "
                     "springs, quadratic dampers and Bouc-Wen springs are)")
     if model.cubic is not None or model.quadratic is not None:
-        return "a scene of cubic springs or quadratic dampers with yielding, friction or stops has no exact sensitivities"
+        return ("cubic springs or quadratic dampers beside yielding, friction or stops: sensitivities of such a mix are "
+                "not yet built")
     if model.jumps:
         return "the ground's displacement jumps in a yielding, friction or stop scene: its sensitivities are not built"
     return None
@@ -73,11 +74,10 @@ class EventSensitivityRun(PiecewiseRun):
         self.scales = scales
         self.dq = [{} for _ in self.scene.elements]  # internal variable -> its (P,) scaled sensitivities
         self.h_out = float(grid[1] - grid[0]) if len(grid) > 1 else 0.0
-        self.S_out = np.full((len(grid), self.P, self.scene.size), np.nan)
-        self.rate_out = np.full((len(grid), self.P, self.scene.size), np.nan)
-        self.checkpoints: list[tuple] = []  # (t, z, S, states) at each event, break and output point
+        self.checkpoints: list[tuple] = []  # (t, z, S, states, dq) at the start, each event and each break
         self.undefined_from: tuple[float, str] | None = None
         self._augmented: dict = {}
+        self._seeds: dict[float, tuple] = {}  # (sensitivities', state's) generators reseeded at a break, by its time
 
     # ----------------------------------------------------------------------------- stencils
     def total(self, i: int, read) -> np.ndarray:
@@ -87,16 +87,18 @@ class EventSensitivityRun(PiecewiseRun):
         values = [np.asarray(read(scene, o / self.scales[i]), dtype=float) for scene, o in zip(scenes, offsets)]
         return sum(w * (v - values[0]) for w, v in zip(weights[1:], values[1:]))
 
-    def shifted(self, states, i: int, c: float) -> list[State]:
-        """The states with their internal variables moved c times their scaled sensitivities to parameter i."""
-        return [State(s.mode, {name: value + c * float(self.dq[e][name][i]) if name in self.dq[e] else value
+    def shifted(self, states, i: int, c: float, dq: list | None = None) -> list[State]:
+        """The states with their internal variables moved c times their scaled sensitivities to parameter i (dq: as
+        a checkpoint kept them; the run's current ones by default)."""
+        dq = self.dq if dq is None else dq
+        return [State(s.mode, {name: value + c * float(dq[e][name][i]) if name in dq[e] else value
                                for name, value in s.internal.items()}) for e, s in enumerate(states)]
 
-    def augmented(self, states) -> tuple[Flow, np.ndarray, np.ndarray]:
-        """The flow of [z; S] in these states, its forcing and its matrix: the mode with each parameter's total
-        derivative of A and b below it."""
+    def augmented(self, states, dq: list) -> tuple[Flow, np.ndarray, np.ndarray]:
+        """The flow of [z; S] in these states with these internal sensitivities, its forcing and its matrix: the mode
+        with each parameter's total derivative of A and b below it."""
         mode = self.scene.mode(states)
-        key = (mode.key, tuple(tuple(sorted((k, v.tobytes()) for k, v in dq.items())) for dq in self.dq))
+        key = (mode.key, tuple(tuple(sorted((k, v.tobytes()) for k, v in d.items())) for d in dq))
         found = self._augmented.get(key)
         if found is None:
             s, P = self.scene.size, self.P
@@ -107,7 +109,7 @@ class EventSensitivityRun(PiecewiseRun):
                 big[block * s:(block + 1) * s, block * s:(block + 1) * s] = mode.A
             for i in range(P):
                 def read(scene, c, i=i):
-                    shifted = scene.mode(self.shifted(states, i, c))
+                    shifted = scene.mode(self.shifted(states, i, c, dq))
                     return np.concatenate([shifted.A.ravel(), shifted.b])
                 flat = self.total(i, read)
                 big[(i + 1) * s:(i + 2) * s, :s] = flat[:s * s].reshape(s, s)
@@ -116,20 +118,73 @@ class EventSensitivityRun(PiecewiseRun):
         return found
 
     # ----------------------------------------------------------------------------- carrying S
+    def carry(self, Z: np.ndarray, t_from: float, t_to: float, checkpoint: tuple, augmented=None) -> np.ndarray:
+        """[z; S] carried from t_from to t_to on the flow of a checkpoint's mode (`augmented`: its flow, if at hand),
+        the generators' sensitivities reseeded at each break between (a record's samples, which a batch takes in
+        stride, and one at t_to: its right limits, as the run stores)."""
+        _, _, _, states_c, dq_c = checkpoint
+        flow, forcing, _ = augmented or self.augmented(states_c, dq_c)
+        if not len(self.break_times):
+            h = t_to - t_from
+            return flow.at(Z, forcing, h, abs(h - self.h_out) <= 1e-9 * self.h_out)
+        lo = int(np.searchsorted(self.break_times, t_from, side="right"))
+        hi = int(np.searchsorted(self.break_times, t_to, side="right"))
+        for stop in [*self.break_times[lo:hi].tolist(), t_to]:
+            h = stop - t_from
+            if h > 0:
+                Z = flow.at(Z, forcing, h, abs(h - self.h_out) <= 1e-9 * self.h_out)
+                t_from = stop
+            if stop in self._break_set:
+                Z = self._reseeded(Z.copy(), stop)
+        return Z
+
+    @property
+    def _break_set(self) -> set[float]:
+        """The run's break times (set once the run has started)."""
+        if getattr(self, "_breaks_seen", None) is None:
+            self._breaks_seen = set(self.break_times.tolist())
+        return self._breaks_seen
+
+    def _reseeded(self, Z: np.ndarray, t: float) -> np.ndarray:
+        """Z with its generators reseeded at t and each sensitivity's generator block set to their derivative there."""
+        if not self._seeds and len(self.break_times):  # every break's at once: the generators' states in one call
+            at = self.break_times
+
+            def reseeded(scene, c):
+                return np.hstack([signal.exo_states(at) for _, _, signal, _ in scene.blocks])
+            table = [self.total(i, reseeded) for i in range(self.P)]
+            own = np.hstack([signal.exo_states(at) for _, _, signal, _ in self.scene.blocks])
+            self._seeds.update({float(time): ([d[row] for d in table], own[row]) for row, time in enumerate(at)})
+        found = self._seeds.get(t)
+        if found is None:
+            n, s = self.n, self.scene.size
+
+            def reseeded_at(scene, c):
+                w = np.zeros(s)
+                scene.reseed(w, t)
+                return w[2 * n:]
+            w = np.zeros(s)
+            self.scene.reseed(w, t)
+            found = self._seeds[t] = ([self.total(i, reseeded_at) for i in range(self.P)], w[2 * n:])
+        seeds, own = found
+        s, n = self.scene.size, self.n
+        Z[2 * n:s] = own  # the state's own generators, as the run reseeds them
+        for i, seed in enumerate(seeds):
+            Z[(i + 1) * s + 2 * n:(i + 2) * s] = seed
+        return Z
+
     def advance(self, t: float, z: np.ndarray) -> None:
-        """S carried from the last checkpoint to t on the flow of its mode (the run's own z at t kept)."""
-        t_c, z_c, S_c, states_c = self.checkpoints[-1]
-        h = t - t_c
-        if h > 0:
-            flow, forcing, _ = self.augmented(states_c)
-            keep = abs(h - self.h_out) <= 1e-9 * self.h_out
-            Z = flow.at(np.concatenate([z_c, S_c.ravel()]), forcing, h, keep)
+        """S carried from the last checkpoint to t (the run's own z at t kept), as a checkpoint."""
+        last = self.checkpoints[-1]
+        t_c, z_c, S_c, states_c, dq_c = last
+        if t > t_c:
+            Z = self.carry(np.concatenate([z_c, S_c.ravel()]), t_c, t, last)
             S_c = Z[len(z):].reshape(self.P, len(z))
-        self.checkpoints.append((t, z.copy(), S_c, states_c))
+        self.checkpoints.append((t, z.copy(), S_c, states_c, dq_c))
 
     def settle_checkpoint(self, t: float, z: np.ndarray, S: np.ndarray, states) -> None:
         """The state after an event or break, with its sensitivities, as the next segment's start."""
-        self.checkpoints.append((t, z.copy(), S, list(states)))
+        self.checkpoints.append((t, z.copy(), S, list(states), [{k: v.copy() for k, v in d.items()} for d in self.dq]))
 
     def no_derivative(self, t: float, why: str) -> None:
         """From t on the response has no derivative: nan from here, the reason kept."""
@@ -167,8 +222,26 @@ class EventSensitivityRun(PiecewiseRun):
                                    "small turns into an event")
 
     def batch(self, *args, **kwargs):
-        """No batches: the sensitivities are carried from one output point to the next."""
-        return None
+        """Whole output steps at once where no break falls among them: the sensitivities are carried from event to
+        event and read at the output points after the run (outputs). A record's samples are breaks that a batch
+        reseeds in stride, and a jump there may settle modes inside it: step by step, each break a checkpoint."""
+        before = len(self.events)
+        found = super().batch(*args, **kwargs)
+        if found is not None and len(self.events) > before:  # a jump at a sample settled modes inside the batch
+            states, z, t, _ = found
+            self.advance(t, z)
+            S = self.checkpoints[-1][2]
+            self.carry_internal(args[2], states, z, S, self.events[before:])
+            self.settle_checkpoint(t, z, S, states)
+        return found
+
+    def turn_may_hold_event(self, flow: Flow, mode, guard, row, const, z0, h) -> bool:
+        # a near miss inside a batch: the step-by-step path takes that step, where first_crossing sees it
+        if super().turn_may_hold_event(flow, mode, guard, row, const, z0, h):
+            return True
+        scale = float(np.abs(row) @ np.abs(z0)) + abs(const)
+        turn = self._root(flow, mode, z0, row @ mode.A, float(row @ mode.b), 0.0, h)
+        return guard.direction * float(row @ flow.at(z0, mode.b, turn) + const) >= -GRAZE * scale
 
     def start(self, states, z: np.ndarray, t: float):
         before = len(self.events)
@@ -194,7 +267,6 @@ class EventSensitivityRun(PiecewiseRun):
                     self.dq[e].setdefault(name, np.zeros(self.P))[i] = flat[at]
                     at += 1
         self.settle_checkpoint(t, z, S, states)
-        self.keep_output(0)
         return states, z
 
     def apply(self, states, z: np.ndarray, t: float, element: int, kind: str):
@@ -276,51 +348,51 @@ class EventSensitivityRun(PiecewiseRun):
 
     def cross_break(self, states, z: np.ndarray, t: float, jump):
         self.advance(t, z)
-        S = self.checkpoints[-1][2].copy()
+        S = self.checkpoints[-1][2]
         before = len(self.events)
         after, z_after = super().cross_break(states, z, t, jump)
-        n, s = self.n, self.scene.size
-        for i in range(self.P):  # the generators reseeded: their state's derivative there
-            def reseeded(scene, c):
-                w = np.zeros(s)
-                scene.reseed(w, t)
-                return w[2 * n:]
-            S[i, 2 * n:] = self.total(i, reseeded)
+        S = self._reseeded(np.concatenate([z, S.ravel()]), t)[self.scene.size:].reshape(S.shape)
         self.carry_internal(states, after, z, S, self.events[before:])
         self.settle_checkpoint(t, z_after, S, after)
         return after, z_after
 
-    def land(self, states, z, t, k, target, break_time, breaks, b_next, outputs):
-        self.advance(t, z)
-        states, z, k_after = super().land(states, z, t, k, target, break_time, breaks, b_next, outputs)
-        if k_after > k:
-            self.checkpoints[-1] = (t, z.copy(), self.checkpoints[-1][2], list(states))
-            self.keep_output(k)
-        return states, z, k_after
-
-    def keep_output(self, k: int) -> None:
-        """S and its rate at output point k (nan once the response has no derivative)."""
-        if self.undefined_from is not None:
-            return
-        t, z, S, states = self.checkpoints[-1]
-        _, forcing, big = self.augmented(states)
-        s = self.scene.size
-        rates = big @ np.concatenate([z, S.ravel()]) + forcing
-        self.S_out[k] = S
-        self.rate_out[k] = rates[s:].reshape(self.P, s)
-
     # ----------------------------------------------------------------------------- between samples
+    def outputs(self) -> tuple[np.ndarray, np.ndarray]:
+        """S (N, P, s) and its rate at the output points, each on the flow from the last checkpoint at or before it
+        (after an event at its time: the right limits, as the run stores), step by step from the output before in
+        the same segment; nan from where the response has no derivative."""
+        N, P, s = len(self.grid), self.P, self.scene.size
+        S_out, rates_out = np.full((N, P, s), np.nan), np.full((N, P, s), np.nan)
+        times = np.array([c[0] for c in self.checkpoints])
+        ends = self.undefined_from[0] if self.undefined_from is not None else np.inf
+        grid = self.grid[self.grid < ends]
+        segments = np.searchsorted(times, grid, side="right") - 1
+        Zs = np.empty((len(grid), (P + 1) * s))
+        for j in np.unique(segments):  # each checkpoint's outputs, stepped from one to the next on its flow
+            t_c, z_c, S_c, states_c, dq_c = self.checkpoints[j]
+            augmented = self.augmented(states_c, dq_c)
+            Z, t_prev = np.concatenate([z_c, S_c.ravel()]), t_c
+            for k in np.flatnonzero(segments == j):
+                t = float(grid[k])
+                if t > t_prev:
+                    Z = self.carry(Z, t_prev, t, self.checkpoints[j], augmented)
+                Zs[k], t_prev = Z, t
+            _, forcing, big = augmented
+            at = segments == j
+            S_out[:len(grid)][at] = Zs[at, s:].reshape(-1, P, s)
+            rates_out[:len(grid)][at] = (Zs[at] @ big[s:].T + forcing[s:]).reshape(-1, P, s)
+        return S_out, rates_out
+
     def at(self, t: float) -> np.ndarray:
         """S at time t (nan where the response has no derivative), from the last checkpoint before it."""
         if self.undefined_from is not None and t >= self.undefined_from[0]:
             return np.full((self.P, self.scene.size), np.nan)
         times = [c[0] for c in self.checkpoints]
         j = int(np.searchsorted(times, t, side="right")) - 1
-        t_c, z_c, S_c, states_c = self.checkpoints[max(j, 0)]
+        t_c, z_c, S_c, states_c, dq_c = self.checkpoints[max(j, 0)]
         if t == t_c:
             return S_c
-        flow, forcing, _ = self.augmented(states_c)
-        Z = flow.at(np.concatenate([z_c, S_c.ravel()]), forcing, t - t_c)
+        Z = self.carry(np.concatenate([z_c, S_c.ravel()]), t_c, t, self.checkpoints[max(j, 0)])
         return Z[len(z_c):].reshape(self.P, len(z_c))
 
 
@@ -338,11 +410,8 @@ def event_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gri
     run = EventSensitivityRun(held, grid, derivatives, scales)
     x, v, a, history = run.run()
     n = model.n
-    if run.undefined_from is not None:
-        later = grid >= run.undefined_from[0]
-        run.S_out[later] = np.nan
-        run.rate_out[later] = np.nan
+    S, rates = run.outputs()
     growth = max((flow.omega for flow in run.flows.values()), default=0.0)
     h = run.h_out
     stated = stated_rounding(len(grid) + 8 * len(history.events), max(1.0, growth * h))
-    return x, v, a, run.S_out[:, :, :2 * n], run.rate_out[:, :, n:2 * n], run, stated
+    return x, v, a, S[:, :, :2 * n], rates[:, :, n:2 * n], run, stated

@@ -116,7 +116,8 @@ def derivative_units(of: str, parameter: str) -> str:
 
 def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None, timed: bool = False,
                 peaks: bool = True, advance=None) -> Sensitivity:
-    """The sensitivities of a linear or smooth nonlinear scene's response to each parameter path (the sweep's paths), on the
+    """The sensitivities of a linear, piecewise-linear (yielding, friction, stops) or smooth nonlinear scene's response
+    to each parameter path (the sweep's paths), on the
     scenario's output grid or on `grid` (any increasing times from the scenario's start); `timed`: one forward
     solve of the scene alone is timed beside it (forward_time_s), for the cost's comparison; without `peaks` the
     peaks and their derivatives are left out (nan: a fit reads the histories only); advance(count): a progress
