@@ -190,3 +190,35 @@ def fit(
                        {"scenario": str(scenarios[0])}, as_json, quiet, fit_summary, lambda _, d: format_fit(d))
     if not run.converged:
         raise typer.Exit(1)
+
+
+def optimize(
+    scenario: Path = typer.Argument(..., help="Scenario TOML file."),
+    param: List[str] = typer.Option(..., "--param", help="PATH=LO:HI, a parameter path as a sweep takes it and its "
+                                    "bounds (repeat): spring[1].k=10:100, damper[0].c=0.1:5, mass.tmd.m=..."),
+    minimize: str = typer.Option(..., "--minimize", help="peak_receptance:DOF (the largest |x/F| over all "
+                                 "frequencies), rms:DOF (RMS under white noise of one-sided PSD 1 N^2/Hz on the "
+                                 "input) or peak_displacement:DOF (the scenario's own run)."),
+    starts: int = typer.Option(8, "--starts", help="Local searches: from the scenario's values and a Latin "
+                               "hypercube in the bounds; every distinct optimum is reported."),
+    input_dof: Optional[str] = typer.Option(None, "--input", help="The DOF a unit force acts on for the frequency "
+                                            "objectives (default: the first force's)."),
+    out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
+    no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 and TOML files only."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
+    as_json: bool = typer.Option(False, "--json", help="Print the optimum as JSON."),
+):
+    """Tune parameters within bounds to minimize a response measure, with exact gradients.
+
+    A receptance's peak is minimized as the minimax it is (every peak located on the exact receptance, each with its
+    exact gradient); an RMS under white noise from the Lyapunov equation; a run's peak displacement from its exact
+    sensitivities. Writes OUT/<stem>_optimize.h5, OUT/<stem>_optimized.toml (runs as it is) and
+    OUT/<stem>_optimize.png. Exit 1 when no search converged."""
+    from smdcli.commands.optimize import format_optimize, optimize_command, optimize_summary
+
+    run = _carried_out(lambda: optimize_command(scenario, list(param), minimize, out, starts, input_dof,
+                                                plots=not no_plots, progress=progress_wanted(quiet, as_json)),
+                       {"scenario": str(scenario)}, as_json, quiet, optimize_summary,
+                       lambda _, d: format_optimize(d))
+    if not run.converged:
+        raise typer.Exit(1)

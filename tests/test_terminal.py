@@ -58,6 +58,8 @@ def plain(screen: str) -> str:
     (["phase", "scenarios/one_dof_regimes_sweep.toml"], "phase portraits"),
     (["simulate", "scenarios/one_dof_underdamped.toml", "scenarios/one_dof_harmonic.toml", "--no-plots"], "simulating"),
     (["spectrum", str(SCENARIOS.parent / "records" / "synthetic_20s_100hz.csv"), "--no-plots"], "spectra"),
+    (["optimize", "scenarios/tmd_one_dof.toml", "--param", "spring[1].k=0.5:2", "--minimize", "rms:primary",
+      "--starts", "3", "--no-plots"], "starts"),
 ])
 def test_long_commands_show_progress_on_a_terminal(tmp_path, args, label):
     """The crash the issue reported lived only at a terminal (click's progress bar API moved): each long command

@@ -1,0 +1,107 @@
+"""`smd optimize`: the parameters within bounds that minimize a response measure (a receptance's peak, an RMS under
+white noise, a run's peak displacement), with exact gradients, from several starts.
+
+Must not import: cli.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from smdcli.io.folders import output_folder
+
+
+def optimize_command(path: str | Path, params: list[str], objective: str, out: str | Path, starts: int = 8,
+                     input_name: str | None = None, plots: bool = True, progress: bool = False):
+    """Read the scene and the bounds, optimize, write OUT/<stem>_optimize.h5, OUT/<stem>_optimized.toml and
+    OUT/<stem>_optimize.png (nothing where the input is refused); a bar over the starts on a terminal."""
+    from smdcli.analysis.optimize import optimize, read_bounds
+    from smdcli.io.atomic import atomic_path, together
+    from smdcli.io.optimize_hdf5 import optimized_toml, write_optimize
+    from smdcli.progress import bar
+    from smdcli.solvers.run import load
+
+    path = Path(path)
+    sc = load(path)
+    bounds = [read_bounds(text) for text in params]
+    output_folder(out, make=False)
+    with bar("starts", starts, enabled=progress, transient=True) as advance:
+        run = optimize(sc, bounds, objective, starts, input_name, advance)
+    out_dir = output_folder(out)
+    with together():
+        h5 = out_dir / f"{path.stem}_optimize.h5"
+        write_optimize(h5, run)
+        toml = out_dir / f"{path.stem}_optimized.toml"
+        with atomic_path(toml) as tmp:
+            tmp.write_text(optimized_toml(run, out_dir))
+        run.outputs += [h5, toml]
+        if plots:
+            from smdcli.plots.common import save_figure
+            from smdcli.plots.optimize import optimize_figure
+
+            png = out_dir / f"{path.stem}_optimize.png"
+            save_figure(optimize_figure(run, *_responses(run)), png)
+            run.outputs.append(png)
+    return run
+
+
+def _responses(run):
+    """The objective's response at the start and at the optimum, as the figure draws them."""
+    if run.objective.startswith("peak_receptance"):
+        from smdcli.plots.optimize import receptance_curve
+
+        return receptance_curve(run, np.clip(run.initial, run.lower, run.upper)), receptance_curve(run, run.optimum)
+    import smdcli
+    from smdcli.sweep.family import scenario_with
+
+    dof = run.sc.dof_names.index(run.objective.partition(":")[2])
+    out = []
+    for values in (np.clip(run.initial, run.lower, run.upper), run.optimum):
+        result = smdcli.simulate(scenario_with(run.sc, dict(zip(run.parameter, map(float, values)))))
+        out.append((result.time, result.displacement[:, dof]))
+    return out
+
+
+def optimize_summary(run) -> dict:
+    """The optimum as plain data."""
+    from smdcli.sweep.spec import parameter_units
+
+    return {
+        "scenario": run.scenario, "status": "ok" if run.converged else "not converged",
+        "exit_code": 0 if run.converged else 1, "objective": run.objective, "units": run.units,
+        "before": run.value_before, "optimum_value": run.value,
+        "parameters": [{"path": p, "units": parameter_units(p, run.sc) or "1", "lower": float(lo), "upper": float(hi),
+                        "initial": float(a), "optimum": float(b), "on_bound": ["lower", None, "upper"][int(e) + 1]}
+                       for p, lo, hi, a, b, e in zip(run.parameter, run.lower, run.upper, run.initial, run.optimum,
+                                                     run.on_bound)],
+        "peaks": [{"frequency_rad_s": float(w), "value": float(h)} for w, h in run.peaks],
+        "optima": [{"parameters": [float(v) for v in o], "value": float(f)} for o, f in run.optima],
+        "converged": run.converged, "message": run.message, "iterations": run.iterations, "solves": run.solves,
+        "wall_time_s": run.wall_time_s, "outputs": [str(p) for p in run.outputs]}
+
+
+def format_optimize(d: dict) -> str:
+    """Terminal text: the objective before and at the optimum, each parameter, the active peaks, the optima."""
+    lines = [f"{d['scenario']}: minimize {d['objective']}: {d['before']:.6g} -> {d['optimum_value']:.6g} {d['units']}"
+             + ("" if d["converged"] else f" (NOT CONVERGED: {d['message']})")]
+    width = max(len(p["path"]) for p in d["parameters"])
+    for p in d["parameters"]:
+        where = f"  on its {p['on_bound']} bound" if p["on_bound"] else ""
+        unit = "" if p["units"] == "1" else f" {p['units']}"
+        lines.append(f"  {p['path']:<{width}}  {p['initial']:.6g} -> {p['optimum']:.10g}{unit}"
+                     f"   (bounds {p['lower']:.4g} .. {p['upper']:.4g}){where}")
+    if d["peaks"]:
+        top = max(peak["value"] for peak in d["peaks"])
+        active = [peak for peak in d["peaks"] if peak["value"] >= top * (1 - 1e-6)]
+        lines.append("  active peaks: " + ", ".join(f"{peak['value']:.6g} at {peak['frequency_rad_s']:.6g} rad/s"
+                                                    for peak in active))
+    if len(d["optima"]) > 1:
+        lines.append(f"  {len(d['optima'])} distinct optima found: " +
+                     "; ".join(f"{o['value']:.6g} at ({', '.join(f'{v:.4g}' for v in o['parameters'])})"
+                               for o in d["optima"]))
+    lines.append(f"  {d['solves']} solves, {d['wall_time_s']:.3g} s")
+    if d["outputs"]:
+        lines.append(f"  wrote {', '.join(d['outputs'])}")
+    return "\n".join(lines)

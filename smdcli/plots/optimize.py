@@ -1,0 +1,54 @@
+"""The response before and at the optimum: a receptance with its peaks marked, or the time history.
+
+Plot functions return a Figure; only save_figure touches disk. Must not import: commands, cli."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from smdcli.plots.common import _figure, envelope, plain_log_labels
+
+
+def optimize_figure(run, before, after):
+    """before, after: (x axis, y) of the objective's response at the start and at the optimum (frequency in rad/s
+    and |H|, or time and x), drawn together; a receptance's located peaks marked."""
+    fig = _figure(figsize=(9.0, 4.2))
+    ax = fig.subplots()
+    receptance = run.objective.startswith("peak_receptance")
+    dof = run.objective.partition(":")[2]
+    for (xs, ys), label, color in ((before, f"start ({run.value_before:.4g} {run.units})", "0.55"),
+                                   (after, f"optimum ({run.value:.4g} {run.units})", "C0")):
+        if receptance:
+            ax.plot(xs, ys, color=color, lw=1.4, label=label)
+        else:
+            ax.plot(*envelope(xs, ys), color=color, lw=1.2, label=label)
+    if receptance:
+        for rows, color in ((run.peaks_before, "0.55"), (run.peaks, "C3")):
+            ax.plot(rows[:, 0], rows[:, 1], "o", color=color, ms=5, mfc="none")
+        ax.set_yscale("log")
+        ax.set_xlabel("Frequency [rad/s]")
+        ax.set_ylabel(f"|x_{dof} / F| [m/N]")
+        plain_log_labels(ax.yaxis)
+    else:
+        ax.set_xlabel("Time [s]")
+        ax.set_ylabel(f"x_{dof} [m]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    values = ", ".join(f"{p} = {v:.4g}" for p, v in zip(run.parameter, run.optimum))
+    fig.suptitle(f"minimize {run.objective}: {values}", fontsize=10)
+    fig.subplots_adjust(left=0.1, right=0.97, bottom=0.13, top=0.9)
+    return fig
+
+
+def receptance_curve(run, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """|H_dof(w)| of the scene at these parameter values, on a grid over its peaks."""
+    from smdcli.model import build
+    from smdcli.sweep.frequency import receptance
+    from smdcli.sweep.family import scenario_with
+
+    model = build(scenario_with(run.sc, dict(zip(run.parameter, map(float, values))))).dense()
+    top = max(float(np.concatenate([run.peaks[:, 0], run.peaks_before[:, 0]]).max(initial=0.0)), 1e-6)
+    omega = np.linspace(0.0, 2.0 * top, 2000)
+    H = receptance(model.M[None], model.C[None], model.K[None], omega, run.input_dof)[0]
+    dof = run.sc.dof_names.index(run.objective.partition(":")[2])
+    return omega, np.abs(H[:, dof])
