@@ -95,14 +95,16 @@ def fit(scenarios, data, params, bounds: dict | None = None, max_iterations: int
     return fitted(tests, [params] if isinstance(params, str) else list(params), bounds, max_iterations)
 
 
-def optimize(scenario: Scenario | str | Path, params: dict, minimize: str, starts: int = 8, input_dof: str | None = None):
-    """The parameter values within bounds ({path: (lo, hi)}) that minimize an objective (`smd optimize`'s), writing
-    nothing: .parameter, .optimum, .value, .value_before, .optima, .peaks, .converged and the rest of its file."""
+def optimize(scenario: Scenario | str | Path, params: dict, minimize: str, starts: int = 8, input_dof: str | None = None,
+             subject_to: tuple[str, ...] = ()):
+    """The parameter values within bounds ({path: (lo, hi)}) that minimize an objective subject to 'MEASURE <= VALUE'
+    constraints (`smd optimize`'s), writing nothing: .parameter, .optimum, .value, .value_before, .optima, .peaks,
+    .constraints, .converged and the rest of its file."""
     from smdcli.analysis.optimize import optimize as optimized
 
     sc = scenario if isinstance(scenario, Scenario) else load(scenario)
     return optimized(sc, [(path, float(lo), float(hi)) for path, (lo, hi) in params.items()], minimize, starts,
-                     input_dof)
+                     input_dof, subject_to=tuple([subject_to] if isinstance(subject_to, str) else subject_to))
 
 
 # name -> (module, attribute): the analyses and the pieces they take, imported on first use

@@ -199,6 +199,9 @@ def optimize(
     minimize: str = typer.Option(..., "--minimize", help="peak_receptance:DOF (the largest |x/F| over all "
                                  "frequencies), rms:DOF (RMS under white noise of one-sided PSD 1 N^2/Hz on the "
                                  "input) or peak_displacement:DOF (the scenario's own run)."),
+    subject_to: Optional[List[str]] = typer.Option(None, "--subject-to", help="'OBJECTIVE <= VALUE' (repeat): a "
+                                                   "constraint on another measure, as --minimize names it "
+                                                   "('peak_receptance:tmd <= 0.8')."),
     starts: int = typer.Option(8, "--starts", help="Local searches: from the scenario's values and a Latin "
                                "hypercube in the bounds; every distinct optimum is reported."),
     input_dof: Optional[str] = typer.Option(None, "--input", help="The DOF a unit force acts on for the frequency "
@@ -217,7 +220,8 @@ def optimize(
     from smdcli.commands.optimize import format_optimize, optimize_command, optimize_summary
 
     run = _carried_out(lambda: optimize_command(scenario, list(param), minimize, out, starts, input_dof,
-                                                plots=not no_plots, progress=progress_wanted(quiet, as_json)),
+                                                plots=not no_plots, progress=progress_wanted(quiet, as_json),
+                                                subject_to=tuple(subject_to or ())),
                        {"scenario": str(scenario)}, as_json, quiet, optimize_summary,
                        lambda _, d: format_optimize(d))
     if not run.converged:

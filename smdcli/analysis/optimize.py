@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from smdcli.analysis.model_derivative import check_once, derivative
+from smdcli.analysis.response_measures import receptance_peaks, rms
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import build, time_grid
 from smdcli.scenario import Scenario
@@ -38,10 +39,9 @@ from smdcli.sweep.family import parameter_value, scenario_with
 
 OBJECTIVES = ("peak_receptance", "rms", "peak_displacement")
 UNITS = {"peak_receptance": "m/N", "rms": "m", "peak_displacement": "m"}
-GRID_POINTS = 400  # frequencies a receptance is first sampled at: its peaks then located to rounding between them
 DISTINCT = 1e-3  # optima closer than this share of the bounds' widths are one
+FEASIBLE = 1e-8  # a constraint's relative excess that still meets it
 TOLERANCE = 1e-15  # SLSQP's on the objective scaled to its start
-EPS = float(np.finfo(float).eps)
 
 
 @dataclass(frozen=True)
@@ -82,6 +82,7 @@ class Optimum:
     outputs: list = field(default_factory=list)
     sc: Scenario | None = None
     input_dof: int = 0
+    constraints: list = field(default_factory=list)  # (text, limit, value at the optimum, binds)
 
 
 def read_objective(text: str, dofs: tuple[str, ...], source: str) -> Objective:
@@ -96,6 +97,23 @@ def read_objective(text: str, dofs: tuple[str, ...], source: str) -> Objective:
         raise UsageError(f"--minimize {text}: no DOF {dof!r} in {source} (" +
                          (f"did you mean {hint[0]!r}?" if hint else f"DOFs are {', '.join(dofs)}") + ")")
     return Objective(kind, dofs.index(dof), text)
+
+
+def read_constraint(text: str, dofs: tuple[str, ...], source: str) -> tuple[Objective, float]:
+    """'OBJECTIVE <= VALUE' as (the measure, its limit); UsageError naming what is wrong."""
+    found = re.fullmatch(r"\s*(\S+)\s*<=\s*(\S+)\s*", text)
+    if not found:
+        raise UsageError(f"--subject-to {text}: expected OBJECTIVE <= VALUE (rms:tmd <= 0.05)")
+    try:
+        limit = float(found.group(2))
+    except ValueError:
+        raise UsageError(f"--subject-to {text}: expected a number after <=, found {found.group(2)!r}") from None
+    if not (math.isfinite(limit) and limit > 0):
+        raise UsageError(f"--subject-to {text}: expected a positive finite limit, found {limit:g}")
+    try:
+        return read_objective(found.group(1), dofs, source), limit
+    except UsageError as exc:
+        raise UsageError(f"--subject-to {text}: {exc.args[0].split(': ', 1)[1]}") from None
 
 
 def read_bounds(text: str) -> tuple[str, float, float]:
@@ -114,141 +132,65 @@ def read_bounds(text: str) -> tuple[str, float, float]:
 
 
 class Problem:
-    """The objective and its exact gradient at any parameter values within the bounds, counting solves."""
+    """The objective and the constraints' measures, each with its exact gradient, at any parameter values within
+    the bounds; a scene solved once per point (its model's derivatives, or its sensitivities, serve every measure)."""
 
-    def __init__(self, sc: Scenario, paths: list[str], objective: Objective, input_dof: int):
+    def __init__(self, sc: Scenario, paths: list[str], objective: Objective, input_dof: int,
+                 constraints: tuple = ()):
         self.sc, self.paths, self.objective, self.input_dof = sc, paths, objective, input_dof
-        self.doc = tomllib.loads(sc.text)
+        self.constraints = constraints  # (Objective, limit) pairs: measure <= limit
         self.solves = 0
-        self._cache: dict[bytes, tuple] = {}
+        self._cache: dict[bytes, dict] = {}
 
     def scene(self, values: np.ndarray) -> Scenario:
         """The scenario at these values (ScenarioError naming what a value makes invalid)."""
         return scenario_with(self.sc, dict(zip(self.paths, map(float, values))))
 
-    def derivatives(self, sc: Scenario, model):
-        """Each parameter's model derivative at the scenario sc."""
-        doc = tomllib.loads(sc.text)
-        return [derivative(sc, doc, model, time_grid(sc.time), path) for path in self.paths]
-
-    def evaluate(self, values: np.ndarray) -> tuple:
-        """(objective, gradient, detail) at values: detail the receptance's peaks (w, |H|, d|H|/dp rows)."""
+    def evaluate(self, values: np.ndarray, measure: Objective | None = None) -> tuple:
+        """(value, gradient, detail) of a measure (the objective by default) at values: detail a receptance's peaks
+        (w, |H|, d|H|/dp rows)."""
+        measure = measure or self.objective
         key = np.asarray(values, dtype=float).tobytes()
-        if key not in self._cache:
+        point = self._cache.get(key)
+        if point is None:
             self.solves += 1
-            sc = self.scene(values)
-            kind = self.objective.kind
-            if kind == "peak_displacement":
+            point = self._cache[key] = {"scene": self.scene(values)}
+        if measure.text not in point:
+            point[measure.text] = self._measure(point, measure)
+        return point[measure.text]
+
+    def _measure(self, point: dict, measure: Objective) -> tuple:
+        sc, kind = point["scene"], measure.kind
+        if kind == "peak_displacement":
+            if "sensitivity" not in point:
                 from smdcli.analysis.sensitivity import sensitivity
 
-                s = sensitivity(sc, self.paths)
-                j = self.objective.dof
-                found = (float(s.peak_displacement[j]), s.d_peak_displacement[:, j].copy(), None)
-            else:
-                model = build(sc)
-                if not model.is_linear:
-                    raise UsageError(f"{self.sc.path}: {kind} needs a linear scene (its receptance); a nonlinear "
-                                     "one takes peak_displacement")
-                model = model.dense()
-                derived = [(d.of(lambda m: m.dense().M), d.of(lambda m: m.dense().C), d.of(lambda m: m.dense().K))
-                           for d in self.derivatives(sc, model)]
-                if kind == "rms":
-                    found = (*rms(model.M, model.C, model.K, self.input_dof, self.objective.dof, derived), None)
-                else:
-                    peaks = receptance_peaks(model.M, model.C, model.K, self.input_dof, self.objective.dof, derived)
-                    best = int(np.argmax(peaks[:, 1]))
-                    found = (float(peaks[best, 1]), peaks[best, 2:].copy(), peaks)
-            self._cache[key] = found
-        return self._cache[key]
-
-
-def dynamic_stiffness(M, C, K, w: float) -> np.ndarray:
-    """Z(w) = K - w^2 M + i w C."""
-    return K - w * w * M + 1j * w * C
-
-
-def receptance_peaks(M, C, K, input_dof: int, dof: int, derived) -> np.ndarray:
-    """Every local maximum of |H_dof(w)| over w >= 0 (w = 0 where |H| falls from it), rows (w, |H|, d|H|/dp...),
-    located as the zeros of d|H|^2/dw between the neighbours of a grid over the modes; the derivative at each
-    peak's fixed frequency (the envelope theorem)."""
-    from scipy.optimize import brentq
-
-    n = len(M)
-    b = np.zeros(n, complex)
-    b[input_dof] = 1.0
-    squared = np.linalg.eigvals(np.linalg.solve(M, K)).real
-    top = math.sqrt(max(float(squared.max(initial=0.0)), 0.0)) or 1.0
-    grid = np.concatenate([[0.0], np.geomspace(1e-3 * top, 3.0 * top, GRID_POINTS)])
-
-    def slope(w: float) -> float:  # d|H_dof|^2 / dw
-        Z = dynamic_stiffness(M, C, K, w)
-        H = np.linalg.solve(Z, b)
-        dH = -np.linalg.solve(Z, (-2 * w * M + 1j * C) @ H)
-        return 2.0 * float((np.conj(H[dof]) * dH[dof]).real)
-
-    W = grid[:, None, None]
-    Z = K[None] - W**2 * M[None] + 1j * W * C[None]  # every grid frequency at once
-    H = np.linalg.solve(Z, np.broadcast_to(b, (len(grid), n))[..., None])
-    dH = -np.linalg.solve(Z, (-2 * W * M[None] + 1j * C[None]) @ H)
-    slopes = 2.0 * (np.conj(H[:, dof, 0]) * dH[:, dof, 0]).real
-    located = [0.0] if slopes[1] < 0 else []
-    for i in np.flatnonzero((slopes[:-1] > 0) & (slopes[1:] <= 0)):
-        located.append(float(brentq(slope, grid[i], grid[i + 1], xtol=1e-15 * top, rtol=4 * EPS, maxiter=200)))
-    if slopes[-1] > 0:  # still rising at 3 times the highest mode: a massless DOF or a rigid input; take the end
-        located.append(float(grid[-1]))
-    rows = []
-    for w in located:
-        Z = dynamic_stiffness(M, C, K, w)
-        H = np.linalg.solve(Z, b)
-        size = abs(H[dof])
-        row = [w, size]
-        for dM, dC, dK in derived:
-            dH = -np.linalg.solve(Z, dynamic_stiffness(dM, dC, dK, w) @ H)
-            row.append(float((np.conj(H[dof]) * dH[dof]).real) / size if size else 0.0)
-        rows.append(row)
-    return np.array(rows, dtype=float).reshape(len(rows), 2 + len(derived))
-
-
-def rms(M, C, K, input_dof: int, dof: int, derived) -> tuple[float, np.ndarray]:
-    """The RMS of x_dof under white noise of one-sided PSD 1 N^2/Hz on the input, and its gradient (Lyapunov)."""
-    from scipy.linalg import solve_continuous_lyapunov
-
-    n = len(M)
-    Minv = np.linalg.inv(M)
-
-    def state(Mi, Cm, Km):
-        A = np.zeros((2 * n, 2 * n))
-        A[:n, n:] = np.eye(n)
-        A[n:, :n], A[n:, n:] = -Mi @ Km, -Mi @ Cm
-        B = np.zeros(2 * n)
-        B[n:] = Mi[:, input_dof]
-        return A, B
-
-    A, B = state(Minv, C, K)
-    Sigma = solve_continuous_lyapunov(A, -0.5 * np.outer(B, B))
-    variance = float(Sigma[dof, dof])
-    if not variance > 0 or not np.isfinite(variance):
-        raise ScenarioError("", "damping", "the RMS response to white noise is unbounded: the scene needs damping in "
-                            "every mode its input reaches")
-    value = math.sqrt(variance)
-    gradient = []
-    for dM, dC, dK in derived:
-        dMinv = -Minv @ dM @ Minv
-        dA = np.zeros_like(A)
-        dA[n:, :n] = -(dMinv @ K + Minv @ dK)
-        dA[n:, n:] = -(dMinv @ C + Minv @ dC)
-        dB = np.zeros(2 * n)
-        dB[n:] = dMinv[:, input_dof]
-        rhs = dA @ Sigma + Sigma @ dA.T + 0.5 * (np.outer(dB, B) + np.outer(B, dB))
-        dSigma = solve_continuous_lyapunov(A, -rhs)
-        gradient.append(float(dSigma[dof, dof]) / (2 * value))
-    return value, np.array(gradient)
+                point["sensitivity"] = sensitivity(sc, self.paths)
+            s = point["sensitivity"]
+            return float(s.peak_displacement[measure.dof]), s.d_peak_displacement[:, measure.dof].copy(), None
+        if "linear" not in point:
+            model = build(sc)
+            if not model.is_linear:
+                raise UsageError(f"{self.sc.path}: {kind} needs a linear scene (its receptance); a nonlinear one "
+                                 "takes peak_displacement")
+            model = model.dense()
+            doc, grid = tomllib.loads(sc.text), time_grid(sc.time)
+            derived = [derivative(sc, doc, model, grid, path) for path in self.paths]
+            point["linear"] = (model, [(d.of(lambda m: m.dense().M), d.of(lambda m: m.dense().C),
+                                        d.of(lambda m: m.dense().K)) for d in derived])
+        model, derived = point["linear"]
+        if kind == "rms":
+            return (*rms(model.M, model.C, model.K, self.input_dof, measure.dof, derived), None)
+        peaks = receptance_peaks(model.M, model.C, model.K, self.input_dof, measure.dof, derived)
+        best = int(np.argmax(peaks[:, 1]))
+        return float(peaks[best, 1]), peaks[best, 2:].copy(), peaks
 
 
 def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: str, starts: int = 8,
-             input_name: str | None = None, advance=None) -> Optimum:
-    """The parameters within bounds minimizing the objective, from the scenario's own values and a Latin
-    hypercube of starts - 1 more; advance(1) after each start (a progress bar's)."""
+             input_name: str | None = None, advance=None, subject_to: tuple[str, ...] = ()) -> Optimum:
+    """The parameters within bounds minimizing the objective subject to 'MEASURE <= VALUE' constraints, from the
+    scenario's own values and a Latin hypercube of starts - 1 more; advance(1) after each start (a progress bar's).
+    UsageError where no start finds a point that meets the constraints."""
     from scipy.optimize import minimize
     from scipy.stats import qmc
 
@@ -266,7 +208,8 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
     lower, upper = np.array([b[1] for b in bounds]), np.array([b[2] for b in bounds])
     doc = tomllib.loads(sc.text)
     initial = np.array([parameter_value(doc, p) for p in paths], dtype=float)
-    problem = Problem(sc, paths, goal, input_index(base, input_name, str(sc.path)))
+    limits = tuple(read_constraint(text, tuple(base.dofs), str(sc.path)) for text in subject_to)
+    problem = Problem(sc, paths, goal, input_index(base, input_name, str(sc.path)), limits)
     _check_bounds(problem, initial, lower, upper)
     width = upper - lower
     inside = np.clip((initial - lower) / width, 0.0, 1.0)
@@ -278,7 +221,14 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
         runs.append(_local(problem, np.asarray(point, float), lower, width, scale, minimize))
         if advance is not None:
             advance(1)
-    runs.sort(key=lambda r: r[1])
+    feasible = [r for r in runs if _violation(problem, lower + r[0] * width) <= FEASIBLE]
+    if not feasible:
+        worst = min(runs, key=lambda r: _violation(problem, lower + r[0] * width))
+        text, excess = max(((t, problem.evaluate(lower + worst[0] * width, m)[0] / limit - 1)
+                            for t, (m, limit) in zip(subject_to, limits)), key=lambda pair: pair[1])
+        raise UsageError(f"--subject-to {text}: infeasible within the bounds (every search ends {excess:.3g} above "
+                         "its limit, relative)")
+    runs = sorted(feasible, key=lambda r: r[1])
     optima: list[tuple[np.ndarray, float]] = []
     for theta, value, *_ in runs:
         if all(np.abs(theta - (o - lower) / width).max() > DISTINCT for o, _ in optima):
@@ -289,6 +239,8 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
     value, gradient, detail = problem.evaluate(best)
     on_bound = np.where(theta <= 1e-9, -1, np.where(theta >= 1 - 1e-9, 1, 0))
     peaks = detail[:, :2] if detail is not None else np.zeros((0, 2))
+    met = [(text, limit, problem.evaluate(best, m)[0]) for text, (m, limit) in zip(subject_to, limits)]
+    met = [(text, limit, value, value >= limit * (1 - 1e-6)) for text, limit, value in met]
     return Optimum(
         scenario=str(sc.path), objective=objective, units=UNITS[goal.kind], parameter=tuple(paths), lower=lower,
         upper=upper, initial=initial, optimum=best, value_before=float(before), value=float(value),
@@ -297,7 +249,12 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
         history_objective=np.array([h[1] for h in history]),
         history_parameters=np.array([lower + h[0] * width for h in history]).reshape(len(history), len(paths)),
         optima=optima, peaks_before=detail_before[:, :2] if detail_before is not None else np.zeros((0, 2)),
-        peaks=peaks, wall_time_s=time.perf_counter() - begin, sc=sc, input_dof=problem.input_dof)
+        peaks=peaks, wall_time_s=time.perf_counter() - begin, sc=sc, input_dof=problem.input_dof, constraints=met)
+
+
+def _violation(problem: Problem, values: np.ndarray) -> float:
+    """The largest relative excess of a constraint's measure over its limit at values (0 where all are met)."""
+    return max([0.0] + [problem.evaluate(values, m)[0] / limit - 1 for m, limit in problem.constraints])
 
 
 def _check_bounds(problem: Problem, initial: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> None:
@@ -327,12 +284,17 @@ def _local(problem: Problem, start: np.ndarray, lower: np.ndarray, width: np.nda
 
     box = [(0.0, 1.0)] * len(start)
     options = {"ftol": TOLERANCE, "maxiter": 200}
+    P = len(start)
+    limits = [_limit(problem, m, limit, lower, width, slots, P + minimax) for m, limit in problem.constraints]
     if not minimax:
         def fun(theta):
             value, gradient, _ = at(theta)
             return value / scale, gradient * width / scale
-        result = minimize(fun, start, jac=True, method="SLSQP", bounds=box, options=options)
-        theta = _polished(problem, np.clip(result.x, 0.0, 1.0), lower, width, history)
+        result = minimize(fun, start, jac=True, method="SLSQP", bounds=box, constraints=limits, options=options)
+        theta = np.clip(result.x, 0.0, 1.0)
+        if not limits or _violation(problem, lower + theta * width) == 0 and all(
+                problem.evaluate(lower + theta * width, m)[0] < limit * (1 - 1e-6) for m, limit in problem.constraints):
+            theta = _polished(problem, theta, lower, width, history)  # no constraint binds: a smooth optimum
         return theta, problem.evaluate(lower + theta * width)[0], result, history
 
     def constraints(y):
@@ -348,9 +310,28 @@ def _local(problem: Problem, start: np.ndarray, lower: np.ndarray, width: np.nda
     value0 = at(start)[0]
     result = minimize(lambda y: y[-1], np.append(start, value0 / scale), jac=lambda y: np.eye(len(y))[-1],
                       method="SLSQP", bounds=box + [(None, None)],
-                      constraints=[{"type": "ineq", "fun": constraints, "jac": jacobian}], options=options)
+                      constraints=[{"type": "ineq", "fun": constraints, "jac": jacobian}] + limits, options=options)
     theta = np.clip(result.x[:-1], 0.0, 1.0)
     return theta, problem.evaluate(lower + theta * width)[0], result, history
+
+
+def _limit(problem: Problem, measure: Objective, limit: float, lower, width, slots: int, size: int) -> dict:
+    """SLSQP's inequality for measure <= limit (every located peak of a receptance), scaled by the limit, over the
+    first P of its size variables (the minimax's t after them)."""
+    P = len(lower)
+
+    def values(y):
+        value, _, detail = problem.evaluate(lower + np.clip(y[:P], 0.0, 1.0) * width, measure)
+        tops = detail[:, 1] if detail is not None else np.array([value])
+        out = 1.0 - tops / limit
+        return np.resize(out, slots) if detail is not None else out
+
+    def jacobian(y):
+        value, gradient, detail = problem.evaluate(lower + np.clip(y[:P], 0.0, 1.0) * width, measure)
+        rows = -(detail[:, 2:] if detail is not None else gradient[None]) * width / limit
+        rows = np.hstack([rows, np.zeros((len(rows), size - P))])
+        return np.resize(rows, (slots, size)) if detail is not None else rows
+    return {"type": "ineq", "fun": values, "jac": jacobian}
 
 
 def _polished(problem: Problem, theta: np.ndarray, lower: np.ndarray, width: np.ndarray, history: list,

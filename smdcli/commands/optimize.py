@@ -14,7 +14,8 @@ from smdcli.io.folders import output_folder
 
 
 def optimize_command(path: str | Path, params: list[str], objective: str, out: str | Path, starts: int = 8,
-                     input_name: str | None = None, plots: bool = True, progress: bool = False):
+                     input_name: str | None = None, plots: bool = True, progress: bool = False,
+                     subject_to: tuple[str, ...] = ()):
     """Read the scene and the bounds, optimize, write OUT/<stem>_optimize.h5, OUT/<stem>_optimized.toml and
     OUT/<stem>_optimize.png (nothing where the input is refused); a bar over the starts on a terminal."""
     from smdcli.analysis.optimize import optimize, read_bounds
@@ -28,7 +29,7 @@ def optimize_command(path: str | Path, params: list[str], objective: str, out: s
     bounds = [read_bounds(text) for text in params]
     output_folder(out, make=False)
     with bar("starts", starts, enabled=progress, transient=True) as advance:
-        run = optimize(sc, bounds, objective, starts, input_name, advance)
+        run = optimize(sc, bounds, objective, starts, input_name, advance, tuple(subject_to))
     out_dir = output_folder(out)
     with together():
         h5 = out_dir / f"{path.stem}_optimize.h5"
@@ -77,6 +78,8 @@ def optimize_summary(run) -> dict:
                        for p, lo, hi, a, b, e in zip(run.parameter, run.lower, run.upper, run.initial, run.optimum,
                                                      run.on_bound)],
         "peaks": [{"frequency_rad_s": float(w), "value": float(h)} for w, h in run.peaks],
+        "constraints": [{"constraint": text, "limit": limit, "value": value, "binds": bool(binds)}
+                        for text, limit, value, binds in run.constraints],
         "optima": [{"parameters": [float(v) for v in o], "value": float(f)} for o, f in run.optima],
         "converged": run.converged, "message": run.message, "iterations": run.iterations, "solves": run.solves,
         "wall_time_s": run.wall_time_s, "outputs": [str(p) for p in run.outputs]}
@@ -97,6 +100,8 @@ def format_optimize(d: dict) -> str:
         active = [peak for peak in d["peaks"] if peak["value"] >= top * (1 - 1e-6)]
         lines.append("  active peaks: " + ", ".join(f"{peak['value']:.6g} at {peak['frequency_rad_s']:.6g} rad/s"
                                                     for peak in active))
+    for c in d["constraints"]:
+        lines.append(f"  subject to {c['constraint']}: {c['value']:.6g}" + ("  (binds)" if c["binds"] else ""))
     if len(d["optima"]) > 1:
         lines.append(f"  {len(d['optima'])} distinct optima found: " +
                      "; ".join(f"{o['value']:.6g} at ({', '.join(f'{v:.4g}' for v in o['parameters'])})"

@@ -19,8 +19,9 @@ from smdcli.io.hdf5 import axis, with_scales, write_provenance
 
 def write_optimize(path: Path, run) -> None:
     """/parameter, /lower, /upper, /initial, /optimum, /gradient, /objective (before, at the optimum), /optima/...,
-    /history/objective and /history/parameters (the best start's path), /peaks/before and /peaks/optimum (a
-    receptance's: frequency rad/s, |H| m/N); root attributes objective, converged, message, iterations, solves."""
+    /history/objective and /history/parameters (the best start's path), /constraints/... (each one's limit, value at
+    the optimum, whether it binds), /peaks/before and /peaks/optimum (a receptance's: frequency rad/s, |H| m/N); root
+    attributes objective, converged, message, iterations, solves."""
     import h5py
 
     from smdcli.sweep.spec import parameter_units
@@ -51,6 +52,12 @@ def write_optimize(path: Path, run) -> None:
         step = axis(history, "evaluation", np.arange(len(run.history_objective)))
         with_scales(history.create_dataset("objective", data=run.history_objective), step)
         with_scales(history.create_dataset("parameters", data=run.history_parameters), step, parameter)
+        if run.constraints:
+            bound = f.create_group("constraints")
+            axis(bound, "constraint", [text for text, *_ in run.constraints])
+            bound.create_dataset("limit", data=np.array([c[1] for c in run.constraints]))
+            bound.create_dataset("value", data=np.array([c[2] for c in run.constraints]))
+            bound.create_dataset("binds", data=np.array([int(c[3]) for c in run.constraints]))
         if len(run.peaks):
             peaks = f.create_group("peaks")
             for name, rows in (("before", run.peaks_before), ("optimum", run.peaks)):
