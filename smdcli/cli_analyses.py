@@ -194,16 +194,19 @@ def fit(
 
 def optimize(
     scenario: Path = typer.Argument(..., help="Scenario TOML file."),
-    param: List[str] = typer.Option(..., "--param", help="PATH=LO:HI, a parameter path as a sweep takes it and its "
-                                    "bounds (repeat): spring[1].k=10:100, damper[0].c=0.1:5, mass.tmd.m=..."),
-    minimize: str = typer.Option(..., "--minimize", help="peak_receptance:DOF (the largest |x/F| over all "
-                                 "frequencies), rms:DOF (RMS under white noise of one-sided PSD 1 N^2/Hz on the "
-                                 "input) or peak_displacement:DOF (the scenario's own run)."),
+    param: Optional[List[str]] = typer.Option(None, "--param", help="PATH=LO:HI, a parameter path as a sweep takes "
+                                              "it and its bounds (repeat): spring[1].k=10:100, damper[0].c=0.1:5. "
+                                              "Default: \\[optimize] parameters."),
+    minimize: Optional[str] = typer.Option(None, "--minimize", help="peak_receptance:DOF (the largest |x/F| over "
+                                           "all frequencies), rms:DOF (RMS under white noise of one-sided PSD 1 "
+                                           "N^2/Hz on the input) or peak_displacement:DOF (the scenario's own run). "
+                                           "Default: \\[optimize] minimize."),
     subject_to: Optional[List[str]] = typer.Option(None, "--subject-to", help="'OBJECTIVE <= VALUE' (repeat): a "
                                                    "constraint on another measure, as --minimize names it "
                                                    "('peak_receptance:tmd <= 0.8')."),
-    starts: int = typer.Option(8, "--starts", help="Local searches: from the scenario's values and a Latin "
-                               "hypercube in the bounds; every distinct optimum is reported."),
+    starts: Optional[int] = typer.Option(None, "--starts", help="Local searches (default 8): from the scenario's "
+                                         "values and a Latin hypercube in the bounds; every distinct optimum is "
+                                         "reported."),
     input_dof: Optional[str] = typer.Option(None, "--input", help="The DOF a unit force acts on for the frequency "
                                             "objectives (default: the first force's)."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
@@ -219,7 +222,7 @@ def optimize(
     OUT/<stem>_optimize.png. Exit 1 when no search converged."""
     from smdcli.commands.optimize import format_optimize, optimize_command, optimize_summary
 
-    run = _carried_out(lambda: optimize_command(scenario, list(param), minimize, out, starts, input_dof,
+    run = _carried_out(lambda: optimize_command(scenario, list(param or []), minimize, out, starts, input_dof,
                                                 plots=not no_plots, progress=progress_wanted(quiet, as_json),
                                                 subject_to=tuple(subject_to or ())),
                        {"scenario": str(scenario)}, as_json, quiet, optimize_summary,

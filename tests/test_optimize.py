@@ -254,3 +254,21 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(cli, tmp_path, args, me
     ran = cli("optimize", TMD, *args, "-o", tmp_path / "out")
     assert ran.exit_code == 2 and message in ran.output, ran.output
     assert len(ran.output.strip().splitlines()) == 1 and not (tmp_path / "out").exists()
+
+
+def test_the_optimize_table_is_read_and_the_flags_override_it(cli, tmp_path):
+    """The bundled scene's [optimize] table alone runs the tuning of docs/optimize.md; --minimize replaces its
+    objective; a table entry that is not [lower, upper] is one line, exit 2, naming it."""
+    ran = cli("optimize", TMD, "--starts", "2", "--no-plots", "--json", "-o", tmp_path)
+    assert ran.exit_code == 0, ran.output
+    data = json.loads(ran.output)
+    assert data["objective"] == "peak_receptance:primary" and [p["path"] for p in data["parameters"]] == \
+        ["spring[1].k", "damper[0].c"]
+    assert data["parameters"][0]["optimum"] == pytest.approx(0.05 * (5.0 * 0.9523720443351102) ** 2, rel=1e-8)
+    ran = cli("optimize", TMD, "--minimize", "rms:primary", "--starts", "2", "--no-plots", "--json", "-o", tmp_path)
+    assert json.loads(ran.output)["objective"] == "rms:primary"
+    bad = tmp_path / "bad.toml"
+    bad.write_text(TMD.read_text().replace('"spring[1].k" = [0.5, 2.0]', '"spring[1].k" = [2.0, 0.5]'))
+    ran = cli("optimize", bad, "-o", tmp_path / "out")
+    assert ran.exit_code == 2 and "optimize.parameters.spring[1].k" in ran.output and "lower < upper" in ran.output
+    assert len(ran.output.strip().splitlines()) == 1 and not (tmp_path / "out").exists()

@@ -13,12 +13,14 @@ import numpy as np
 from smdcli.io.folders import output_folder
 
 
-def optimize_command(path: str | Path, params: list[str], objective: str, out: str | Path, starts: int = 8,
-                     input_name: str | None = None, plots: bool = True, progress: bool = False,
-                     subject_to: tuple[str, ...] = ()):
-    """Read the scene and the bounds, optimize, write OUT/<stem>_optimize.h5, OUT/<stem>_optimized.toml and
-    OUT/<stem>_optimize.png (nothing where the input is refused); a bar over the starts on a terminal."""
+def optimize_command(path: str | Path, params: list[str], objective: str | None, out: str | Path,
+                     starts: int | None = None, input_name: str | None = None, plots: bool = True,
+                     progress: bool = False, subject_to: tuple[str, ...] = ()):
+    """Read the scene and the bounds (the flags, else its [optimize] table), optimize, write OUT/<stem>_optimize.h5,
+    OUT/<stem>_optimized.toml and OUT/<stem>_optimize.png (nothing where the input is refused); a bar over the
+    starts on a terminal."""
     from smdcli.analysis.optimize import optimize, read_bounds
+    from smdcli.errors import UsageError
     from smdcli.io.atomic import atomic_path, together
     from smdcli.io.optimize_hdf5 import optimized_toml, write_optimize
     from smdcli.progress import bar
@@ -26,7 +28,17 @@ def optimize_command(path: str | Path, params: list[str], objective: str, out: s
 
     path = Path(path)
     sc = load(path)
-    bounds = [read_bounds(text) for text in params]
+    table = dict(sc.optimize)
+    bounds = [read_bounds(text) for text in params] if params else \
+        [(name, lo, hi) for name, (lo, hi) in table.get("parameters", ())]
+    objective = objective or table.get("minimize")
+    if not bounds:
+        raise UsageError(f"{path}: nothing to optimize: give --param PATH=LO:HI or [optimize] parameters = {{...}}")
+    if not objective:
+        raise UsageError(f"{path}: no objective: give --minimize OBJECTIVE or [optimize] minimize = \"...\"")
+    subject_to = tuple(subject_to) or tuple(table.get("subject_to", ()))
+    starts = starts if starts is not None else table.get("starts", 8)
+    input_name = input_name or table.get("input")
     output_folder(out, make=False)
     with bar("starts", starts, enabled=progress, transient=True) as advance:
         run = optimize(sc, bounds, objective, starts, input_name, advance, tuple(subject_to))

@@ -11,7 +11,8 @@ from pathlib import Path
 
 from smdcli.errors import ScenarioError
 from smdcli.scenario.forces import _ANY_FORCE_KEYS, GROUND_KEYS, _read_force, _read_ground_motion
-from smdcli.scenario.options import EXPECT_KEYS, FIT_KEYS, SWEEP_KEYS, _read_expect, _read_fit, _read_solver, _read_sweep
+from smdcli.scenario.options import (EXPECT_KEYS, FIT_KEYS, OPTIMIZE_KEYS, SWEEP_KEYS, _read_expect, _read_fit,
+                                     _read_optimize, _read_solver, _read_sweep)
 from smdcli.scenario.reader import (_SYSTEM_KEYS, _TIME_KEYS, _TOP_KEYS, MAX_SCENARIO_BYTES, _NotRegular, _Table,
                                     read_regular_file)
 from smdcli.scenario.spec import MAX_SAMPLES, Scenario, SolverSpec, TimeSpec
@@ -107,6 +108,8 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
     expect = tuple(_read_expect(_Table(file, f"expect[{i}]", raw, EXPECT_KEYS), i, dofs, file)
                    for i, raw in enumerate(top.tables("expect")))
     fit = _read_fit(_Table(file, "fit", top.raw("fit"), FIT_KEYS)) if top.has("fit") else ()
+    optimize = _read_optimize(_Table(file, "optimize", top.raw("optimize"), OPTIMIZE_KEYS)) \
+        if top.has("optimize") else ()
     top.finish(_TOP_KEYS)
 
     _check_size(file, len(dofs), system is not None)
@@ -131,6 +134,7 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
         system=system, forces=forces, solver=solver, title=title, description=description,
         sweep=sweep, damping=damping, ground_motion=ground_motion, expect=expect, frictions=frictions, stops=stops,
         fit=fit,
+        optimize=optimize,
     )
 
 

@@ -74,6 +74,42 @@ def _read_fit(t: _Table) -> tuple[tuple[str, Any], ...]:
     return tuple(items)
 
 
+OPTIMIZE_KEYS = ("parameters", "minimize", "subject_to", "starts", "input")
+
+
+def _read_optimize(t: _Table) -> tuple[tuple[str, Any], ...]:
+    """[optimize]'s keys, their types checked (`smd optimize` reads the paths, objectives and DOFs themselves, and
+    names this file in its errors): parameters = { "path" = [lo, hi] }, minimize = "OBJECTIVE", subject_to = a
+    string or strings 'OBJECTIVE <= VALUE', starts = N, input = "DOF"."""
+    items = []
+    for key in OPTIMIZE_KEYS:
+        if not t.has(key):
+            continue
+        value = t.raw(key)
+        if key == "parameters":
+            if not isinstance(value, dict) or not value:
+                raise t.fail(key, f"expected a table of path = [lower, upper], found {_kind(value)}")
+            for name, entry in value.items():
+                if not (isinstance(entry, list) and len(entry) == 2 and all(
+                        isinstance(v, (int, float)) and not isinstance(v, bool) for v in entry) and entry[0] < entry[1]):
+                    raise ScenarioError(t.file, f"optimize.parameters.{name}",
+                                        f"expected [lower, upper] with lower < upper, found {entry!r}")
+            value = tuple((name, (float(entry[0]), float(entry[1]))) for name, entry in value.items())
+        elif key == "subject_to":
+            value = [value] if isinstance(value, str) else value
+            if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+                raise t.fail(key, f"expected a string or an array of strings, found {_kind(value)}")
+            value = tuple(value)
+        elif key == "starts":
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise t.fail(key, f"expected a whole number >= 1, found {value!r}")
+        elif not isinstance(value, str) or not value:
+            raise t.fail(key, f"expected a string, found {_kind(value)}")
+        items.append((key, value))
+    t.finish(OPTIMIZE_KEYS)
+    return tuple(items)
+
+
 SWEEP_KEYS = ("parameter", "values", "labels", "ic", "frequency", "normalized", "input", "direction",
               "measure", "quantity", "metric", "method")
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from smdcli.elements.registry import SPRING_LAWS, TABLES
 from smdcli.scenario.forces import _ANY_FORCE_KEYS, GROUND_KEYS
-from smdcli.scenario.options import EXPECT_KEYS, FIT_KEYS, SOLVER_KEYS, SWEEP_KEYS
+from smdcli.scenario.options import EXPECT_KEYS, FIT_KEYS, OPTIMIZE_KEYS, SOLVER_KEYS, SWEEP_KEYS
 from smdcli.scenario.reader import _MASS_KEYS, _SYSTEM_KEYS, _TIME_KEYS, _TOP_KEYS
 from smdcli.scenario.spec import EXPECT_QUANTITIES, FORCE_TYPES, GROUND_QUANTITIES, GROUND_UNITS
 from smdcli.scenario.structure import DAMPING_KEYS
@@ -85,6 +85,10 @@ def scenario_schema() -> dict:
         "fit": _table(FIT_KEYS, data=STRING, parameters={"anyOf": [STRING, STRINGS]}, channels=STRINGS,
                       bounds={"type": "object", "additionalProperties": {**NUMBERS, "minItems": 2, "maxItems": 2}},
                       weights={"type": "object", "additionalProperties": NUMBER}),
+        "optimize": _table(OPTIMIZE_KEYS, minimize=STRING, subject_to={"anyOf": [STRING, STRINGS]}, input=STRING,
+                           starts={"type": "integer", "minimum": 1},
+                           parameters={"type": "object",
+                                       "additionalProperties": {**NUMBERS, "minItems": 2, "maxItems": 2}}),
     }
     assert set(properties) == set(_TOP_KEYS), "every top-level table the reader knows is described"
     return {

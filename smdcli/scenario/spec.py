@@ -203,6 +203,7 @@ class Scenario:
     frictions: tuple[ElementSpec, ...] = ()
     stops: tuple[ElementSpec, ...] = ()
     fit: tuple[tuple[str, Any], ...] = ()  # [fit]'s keys, read by `smd fit`
+    optimize: tuple[tuple[str, Any], ...] = ()  # [optimize]'s keys, read by `smd optimize`
 
     @property
     def stem(self) -> str:
