@@ -76,8 +76,6 @@ def test_a_damped_primary_agrees_with_an_independent_minimax():
     peaks are equal (Brent's method on their difference, each peak located by Brent's minimization on the receptance
     written here), and minimizes that equal peak over the damping (Brent, 1e-12). Tuning, damping and peak to 1e-7
     (measured 5e-11, 6e-9 (the reference's own sqrt(eps) in the damping) and 1e-15)."""
-    from scipy.optimize import brentq, minimize_scalar
-
     mu, c_p = 0.05, 2 * 0.02 * 5.0
     text = TMD.read_text() + f'\n[[damper]]\nconnects = ["ground", "primary"]\nc = {c_p!r}\n'
     sc, _, _ = model_of(text, "damped_tmd.toml")
@@ -94,19 +92,70 @@ def test_a_damped_primary_agrees_with_an_independent_minimax():
             Z = np.array([[25.0 + k_t - w * w + 1j * w * (c_p + c_t), -k_t - 1j * w * c_t],
                           [-k_t - 1j * w * c_t, k_t - mu * w * w + 1j * w * c_t]])
             return abs(np.linalg.solve(Z, [1.0, 0.0])[0])
-        grid = np.linspace(3.0, 7.0, 801)
-        values = np.array([size(w) for w in grid])
-        tops = np.flatnonzero((values[1:-1] > values[:-2]) & (values[1:-1] >= values[2:])) + 1
-        return [-minimize_scalar(lambda w: -size(w), bracket=(grid[i - 1], grid[i], grid[i + 1]), tol=1e-14).fun
-                for i in tops]
-
-    def equal_tuning(z_t):  # the tuning whose two peaks are equal, near the optimum found
-        return brentq(lambda f_t: np.subtract(*peaks(f_t, z_t)), f - 0.004, f + 0.004, xtol=1e-15, rtol=1e-15)
-    z_ref = minimize_scalar(lambda z_t: peaks(equal_tuning(z_t), z_t)[0], bracket=(zeta - 0.003, zeta, zeta + 0.003),
-                            tol=1e-12).x
-    f_ref = equal_tuning(z_ref)
+        return two_peaks(size)
+    f_ref, z_ref, top = equal_peak_minimax(peaks, f, zeta)
     assert f == pytest.approx(f_ref, rel=1e-7) and zeta == pytest.approx(z_ref, rel=1e-7)
-    assert run.value == pytest.approx(peaks(f_ref, z_ref)[0], rel=1e-7)
+    assert run.value == pytest.approx(top, rel=1e-7)
+
+
+def equal_peak_minimax(peaks, f0: float, zeta0: float) -> tuple[float, float, float]:
+    """An independent minimax of two peaks (peaks(f, zeta) -> their heights in frequency order): for each damping the
+    tuning that makes them equal (Brent's method on their difference near f0), that height minimized over the
+    damping near zeta0 (Brent, 1e-12). (f, zeta, the peak)."""
+    from scipy.optimize import brentq, minimize_scalar
+
+    def equal(z_t):
+        return brentq(lambda f_t: np.subtract(*peaks(f_t, z_t)), f0 - 0.004, f0 + 0.004, xtol=1e-15, rtol=1e-15)
+    z_ref = minimize_scalar(lambda z_t: peaks(equal(z_t), z_t)[0], bracket=(zeta0 - 0.003, zeta0, zeta0 + 0.003),
+                            tol=1e-12).x
+    f_ref = equal(z_ref)
+    return f_ref, z_ref, peaks(f_ref, z_ref)[0]
+
+
+def two_peaks(response) -> list[float]:
+    """The local maxima of response(w) over 3..7 rad/s, each by Brent's minimization from a grid's."""
+    from scipy.optimize import minimize_scalar
+
+    grid = np.linspace(3.0, 7.0, 801)
+    values = np.array([response(w) for w in grid])
+    tops = np.flatnonzero((values[1:-1] > values[:-2]) & (values[1:-1] >= values[2:])) + 1
+    return [-minimize_scalar(lambda w: -response(w), bracket=(grid[i - 1], grid[i], grid[i + 1]), tol=1e-14).fun
+            for i in tops]
+
+
+def test_a_ground_shaken_primary_s_transmissibility_agrees_with_an_independent_minimax():
+    """Under support motion: the primary's absolute acceleration per the ground's, T = 1 + Y with Z Y = w^2 M 1,
+    written here in numpy; the absorber tuned by the same independent equal-peak minimax, to 1e-7."""
+    mu, c_p = 0.05, 0.2
+    text = TMD.read_text().split("[[force]]")[0] + f"""
+[[damper]]
+connects = ["ground", "primary"]
+c = {c_p!r}
+[ground_motion]
+quantity = "acceleration"
+type = "sine"
+amplitude = 1.0
+omega = 5.0
+"""
+    sc, _, _ = model_of(text, "shaken_tmd.toml")
+    run = smdcli.optimize(sc, {"spring[1].k": (0.5, 2.0), "damper[0].c": (0.01, 1.0)},
+                          "peak_transmissibility:primary", starts=3)
+    assert run.converged, run.message
+    f, zeta = tuning(run, mu)
+
+    def peaks(f_t, z_t):
+        w_t = 5.0 * f_t
+        k_t, c_t = mu * w_t**2, 2 * mu * z_t * w_t
+        M = np.diag([1.0, mu])
+
+        def size(w):
+            Z = np.array([[25.0 + k_t - w * w + 1j * w * (c_p + c_t), -k_t - 1j * w * c_t],
+                          [-k_t - 1j * w * c_t, k_t - mu * w * w + 1j * w * c_t]])
+            return abs(1.0 + np.linalg.solve(Z, w * w * M @ [1.0, 1.0])[0])
+        return two_peaks(size)
+    f_ref, z_ref, top = equal_peak_minimax(peaks, f, zeta)
+    assert f == pytest.approx(f_ref, rel=1e-7) and zeta == pytest.approx(z_ref, rel=1e-7)
+    assert run.value == pytest.approx(top, rel=1e-7)
 
 
 @pytest.mark.parametrize("mu", [0.01, 0.05, 0.2])

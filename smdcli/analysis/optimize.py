@@ -31,14 +31,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from smdcli.analysis.model_derivative import check_once, derivative
-from smdcli.analysis.response_measures import receptance_peaks, rms
+from smdcli.analysis.response_measures import receptance_peaks, rms, transmissibility_peaks
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import build, time_grid
 from smdcli.scenario import Scenario
 from smdcli.sweep.family import parameter_value, scenario_with
 
-OBJECTIVES = ("peak_receptance", "rms", "peak_displacement")
-UNITS = {"peak_receptance": "m/N", "rms": "m", "peak_displacement": "m"}
+OBJECTIVES = ("peak_receptance", "peak_transmissibility", "rms", "peak_displacement")
+UNITS = {"peak_receptance": "m/N", "peak_transmissibility": "1", "rms": "m", "peak_displacement": "m"}
+PEAKS = ("peak_receptance", "peak_transmissibility")  # minimized as the minimax over located peaks
 DISTINCT = 1e-3  # optima closer than this share of the bounds' widths are one
 FEASIBLE = 1e-8  # a constraint's relative excess that still meets it
 TOLERANCE = 1e-15  # SLSQP's on the objective scaled to its start
@@ -181,7 +182,13 @@ class Problem:
         model, derived = point["linear"]
         if kind == "rms":
             return (*rms(model.M, model.C, model.K, self.input_dof, measure.dof, derived), None)
-        peaks = receptance_peaks(model.M, model.C, model.K, self.input_dof, measure.dof, derived)
+        if kind == "peak_transmissibility":
+            if model.ground is None:
+                raise UsageError(f"{self.sc.path}: {measure.text} needs support motion (a [ground_motion] table); "
+                                 "under a force, peak_receptance")
+            peaks = transmissibility_peaks(model.M, model.C, model.K, measure.dof, derived)
+        else:
+            peaks = receptance_peaks(model.M, model.C, model.K, self.input_dof, measure.dof, derived)
         best = int(np.argmax(peaks[:, 1]))
         return float(peaks[best, 1]), peaks[best, 2:].copy(), peaks
 
@@ -274,7 +281,7 @@ def _local(problem: Problem, start: np.ndarray, lower: np.ndarray, width: np.nda
     """One SLSQP run from start (in [0, 1]^P): (theta, value, scipy's result, history of (theta, value)). The
     receptance's peak is minimized as the epigraph min t, t >= each located peak; the others directly."""
     history = []
-    minimax = problem.objective.kind == "peak_receptance"
+    minimax = problem.objective.kind in PEAKS
     slots = len(problem.sc.dof_names) + 1  # the most peaks a receptance has: one a mode, and the static one
 
     def at(theta):

@@ -1,5 +1,6 @@
 """The measures `smd optimize` minimizes of a linear scene, each with its exact gradient in the parameters: a
-receptance's located peaks (the H-infinity norm) and the RMS under white noise (the H2 norm, by Lyapunov).
+receptance's or a transmissibility's located peaks (the H-infinity norm) and the RMS under white noise (the H2
+norm, by Lyapunov).
 
 derived: per parameter (dM, dC, dK), the model's derivatives (model_derivative's). Must not import: io, plots,
 commands, cli.
@@ -23,43 +24,67 @@ def dynamic_stiffness(M, C, K, w: float) -> np.ndarray:
 
 
 def receptance_peaks(M, C, K, input_dof: int, dof: int, derived) -> np.ndarray:
-    """Every local maximum of |H_dof(w)| over w >= 0 (w = 0 where |H| falls from it), rows (w, |H|, d|H|/dp...),
-    located as the zeros of d|H|^2/dw between the neighbours of a grid over the modes; the derivative at each
-    peak's fixed frequency (the envelope theorem)."""
+    """Every local maximum of |H_dof(w)| = |x_dof / F| for a unit force on input_dof (frequency_peaks)."""
+    return frequency_peaks(M, C, K, dof, derived, input_dof)
+
+
+def transmissibility_peaks(M, C, K, dof: int, derived) -> np.ndarray:
+    """Every local maximum of |T_dof(w)|, the absolute acceleration (or displacement) of dof per the ground's, under
+    support motion: T = 1 + Y with Z Y = w^2 M 1 (frequency_peaks)."""
+    return frequency_peaks(M, C, K, dof, derived, None)
+
+
+def frequency_peaks(M, C, K, dof: int, derived, input_dof: int | None) -> np.ndarray:
+    """Every local maximum over w >= 0 of |R_dof(w)|, R = offset + Z^-1 r(w): a receptance (r = the unit force on
+    input_dof, offset 0) or, with input_dof None, a transmissibility (r = w^2 M 1, offset 1). Rows (w, |R|,
+    d|R|/dp...): each located as the zero of d|R|^2/dw between neighbours of a grid over the modes (w = 0 where |R|
+    falls from it), its derivative at the peak's fixed frequency (the envelope theorem: dR/dp = Z^-1 (dr/dp -
+    dZ/dp Y), Y = Z^-1 r)."""
     from scipy.optimize import brentq
 
     n = len(M)
-    b = np.zeros(n, complex)
-    b[input_dof] = 1.0
+    support = input_dof is None
+    ones = np.ones(n)
+    force = np.zeros(n, complex)
+    if not support:
+        force[input_dof] = 1.0
+    offset = 1.0 if support else 0.0
     squared = np.linalg.eigvals(np.linalg.solve(M, K)).real
     top = math.sqrt(max(float(squared.max(initial=0.0)), 0.0)) or 1.0
     grid = np.concatenate([[0.0], np.geomspace(1e-3 * top, 3.0 * top, GRID_POINTS)])
 
-    def slope(w: float) -> float:  # d|H_dof|^2 / dw
-        Z = dynamic_stiffness(M, C, K, w)
-        H = np.linalg.solve(Z, b)
-        dH = -np.linalg.solve(Z, (-2 * w * M + 1j * C) @ H)
-        return 2.0 * float((np.conj(H[dof]) * dH[dof]).real)
+    def load(w):  # r(w) and dr/dw, (..., n) for an array of frequencies
+        w = np.asarray(w, dtype=float)[..., None]
+        if support:
+            return (w**2 * (M @ ones)).astype(complex), 2 * w * (M @ ones)
+        return np.broadcast_to(force, w.shape[:-1] + (n,)), np.zeros(w.shape[:-1] + (n,))
 
-    W = grid[:, None, None]
-    Z = K[None] - W**2 * M[None] + 1j * W * C[None]  # every grid frequency at once
-    H = np.linalg.solve(Z, np.broadcast_to(b, (len(grid), n))[..., None])
-    dH = -np.linalg.solve(Z, (-2 * W * M[None] + 1j * C[None]) @ H)
-    slopes = 2.0 * (np.conj(H[:, dof, 0]) * dH[:, dof, 0]).real
+    def slopes_at(ws):  # d|R_dof|^2 / dw at each of ws
+        W = np.asarray(ws, dtype=float)[:, None, None]
+        Z = K[None] - W**2 * M[None] + 1j * W * C[None]
+        r, dr = load(ws)
+        Y = np.linalg.solve(Z, r[..., None])
+        dY = np.linalg.solve(Z, dr[..., None] - (-2 * W * M[None] + 1j * C[None]) @ Y)
+        return 2.0 * (np.conj(offset + Y[:, dof, 0]) * dY[:, dof, 0]).real
+
+    slopes = slopes_at(grid)  # every grid frequency at once
     located = [0.0] if slopes[1] < 0 else []
     for i in np.flatnonzero((slopes[:-1] > 0) & (slopes[1:] <= 0)):
-        located.append(float(brentq(slope, grid[i], grid[i + 1], xtol=1e-15 * top, rtol=4 * EPS, maxiter=200)))
+        located.append(float(brentq(lambda w: float(slopes_at([w])[0]), grid[i], grid[i + 1], xtol=1e-15 * top,
+                                    rtol=4 * EPS, maxiter=200)))
     if slopes[-1] > 0:  # still rising at 3 times the highest mode: a massless DOF or a rigid input; take the end
         located.append(float(grid[-1]))
     rows = []
     for w in located:
         Z = dynamic_stiffness(M, C, K, w)
-        H = np.linalg.solve(Z, b)
-        size = abs(H[dof])
+        Y = np.linalg.solve(Z, load(w)[0])
+        R = offset + Y[dof]
+        size = abs(R)
         row = [w, size]
         for dM, dC, dK in derived:
-            dH = -np.linalg.solve(Z, dynamic_stiffness(dM, dC, dK, w) @ H)
-            row.append(float((np.conj(H[dof]) * dH[dof]).real) / size if size else 0.0)
+            dr = w * w * (dM @ ones) if support else np.zeros(n)
+            dY = np.linalg.solve(Z, dr - dynamic_stiffness(dM, dC, dK, w) @ Y)
+            row.append(float((np.conj(R) * dY[dof]).real) / size if size else 0.0)
         rows.append(row)
     return np.array(rows, dtype=float).reshape(len(rows), 2 + len(derived))
 

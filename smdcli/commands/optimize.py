@@ -62,7 +62,7 @@ def optimize_command(path: str | Path, params: list[str], objective: str | None,
 
 def _responses(run):
     """The objective's response at the start and at the optimum, as the figure draws them."""
-    if run.objective.startswith("peak_receptance"):
+    if run.objective.startswith(("peak_receptance", "peak_transmissibility")):
         from smdcli.plots.optimize import receptance_curve
 
         return receptance_curve(run, np.clip(run.initial, run.lower, run.upper)), receptance_curve(run, run.optimum)
@@ -99,7 +99,8 @@ def optimize_summary(run) -> dict:
 
 def format_optimize(d: dict) -> str:
     """Terminal text: the objective before and at the optimum, each parameter, the active peaks, the optima."""
-    lines = [f"{d['scenario']}: minimize {d['objective']}: {d['before']:.6g} -> {d['optimum_value']:.6g} {d['units']}"
+    unit = "" if d["units"] == "1" else f" {d['units']}"
+    lines = [f"{d['scenario']}: minimize {d['objective']}: {d['before']:.6g} -> {d['optimum_value']:.6g}{unit}"
              + ("" if d["converged"] else f" (NOT CONVERGED: {d['message']})")]
     width = max(len(p["path"]) for p in d["parameters"])
     for p in d["parameters"]:

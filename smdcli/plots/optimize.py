@@ -14,10 +14,12 @@ def optimize_figure(run, before, after):
     and |H|, or time and x), drawn together; a receptance's located peaks marked."""
     fig = _figure(figsize=(9.0, 4.2))
     ax = fig.subplots()
-    receptance = run.objective.startswith("peak_receptance")
+    receptance = run.objective.startswith(("peak_receptance", "peak_transmissibility"))
+    support = run.objective.startswith("peak_transmissibility")
     dof = run.objective.partition(":")[2]
-    for (xs, ys), label, color in ((before, f"start ({run.value_before:.4g} {run.units})", "0.55"),
-                                   (after, f"optimum ({run.value:.4g} {run.units})", "C0")):
+    unit = "" if run.units == "1" else f" {run.units}"
+    for (xs, ys), label, color in ((before, f"start ({run.value_before:.4g}{unit})", "0.55"),
+                                   (after, f"optimum ({run.value:.4g}{unit})", "C0")):
         if receptance:
             ax.plot(xs, ys, color=color, lw=1.4, label=label)
         else:
@@ -27,7 +29,7 @@ def optimize_figure(run, before, after):
             ax.plot(rows[:, 0], rows[:, 1], "o", color=color, ms=5, mfc="none")
         ax.set_yscale("log")
         ax.set_xlabel("Frequency [rad/s]")
-        ax.set_ylabel(f"|x_{dof} / F| [m/N]")
+        ax.set_ylabel(f"|a_{dof} / a_ground| (absolute)" if support else f"|x_{dof} / F| [m/N]")
         plain_log_labels(ax.yaxis)
     else:
         ax.set_xlabel("Time [s]")
@@ -41,14 +43,18 @@ def optimize_figure(run, before, after):
 
 
 def receptance_curve(run, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """|H_dof(w)| of the scene at these parameter values, on a grid over its peaks."""
+    """|H_dof(w)| (or under support motion the transmissibility |T_dof(w)|) of the scene at these parameter values,
+    on a grid over its peaks."""
     from smdcli.model import build
-    from smdcli.sweep.frequency import receptance
+    from smdcli.sweep.frequency import receptance, transmissibility
     from smdcli.sweep.family import scenario_with
 
     model = build(scenario_with(run.sc, dict(zip(run.parameter, map(float, values))))).dense()
     top = max(float(np.concatenate([run.peaks[:, 0], run.peaks_before[:, 0]]).max(initial=0.0)), 1e-6)
     omega = np.linspace(0.0, 2.0 * top, 2000)
-    H = receptance(model.M[None], model.C[None], model.K[None], omega, run.input_dof)[0]
+    if run.objective.startswith("peak_transmissibility"):
+        H = transmissibility(model.M[None], model.C[None], model.K[None], omega)[0][0]
+    else:
+        H = receptance(model.M[None], model.C[None], model.K[None], omega, run.input_dof)[0]
     dof = run.sc.dof_names.index(run.objective.partition(":")[2])
     return omega, np.abs(H[:, dof])
