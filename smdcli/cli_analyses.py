@@ -198,9 +198,11 @@ def optimize(
                                               "it and its bounds (repeat): spring[1].k=10:100, damper[0].c=0.1:5. "
                                               "Default: \\[optimize] parameters."),
     minimize: Optional[str] = typer.Option(None, "--minimize", help="peak_receptance:DOF (the largest |x/F| over "
-                                           "all frequencies), rms:DOF (RMS under white noise of one-sided PSD 1 "
-                                           "N^2/Hz on the input) or peak_displacement:DOF (the scenario's own run). "
-                                           "Default: \\[optimize] minimize."),
+                                           "all frequencies), peak_transmissibility:DOF (under support motion), "
+                                           "rms:DOF (RMS under white noise of one-sided PSD 1 N^2/Hz on the input), "
+                                           "or of the scenario's own run peak_displacement:DOF, peak_drift:A-B, "
+                                           "peak_acceleration:DOF, residual_displacement:DOF. Default: \\[optimize] "
+                                           "minimize."),
     subject_to: Optional[List[str]] = typer.Option(None, "--subject-to", help="'OBJECTIVE <= VALUE' (repeat): a "
                                                    "constraint on another measure, as --minimize names it "
                                                    "('peak_receptance:tmd <= 0.8')."),

@@ -37,8 +37,12 @@ from smdcli.model import build, time_grid
 from smdcli.scenario import Scenario
 from smdcli.sweep.family import parameter_value, scenario_with
 
-OBJECTIVES = ("peak_receptance", "peak_transmissibility", "rms", "peak_displacement")
-UNITS = {"peak_receptance": "m/N", "peak_transmissibility": "1", "rms": "m", "peak_displacement": "m"}
+OBJECTIVES = ("peak_receptance", "peak_transmissibility", "rms", "peak_displacement", "peak_drift",
+              "peak_acceleration", "residual_displacement")
+UNITS = {"peak_receptance": "m/N", "peak_transmissibility": "1", "rms": "m", "peak_displacement": "m",
+         "peak_drift": "m", "peak_acceleration": "m/s^2", "residual_displacement": "m"}
+GROUND = -2  # a drift measured from the ground: x_a itself
+TIME_DOMAIN = ("peak_displacement", "peak_drift", "peak_acceleration", "residual_displacement")
 PEAKS = ("peak_receptance", "peak_transmissibility")  # minimized as the minimax over located peaks
 DISTINCT = 1e-3  # optima closer than this share of the bounds' widths are one
 FEASIBLE = 1e-8  # a constraint's relative excess that still meets it
@@ -52,6 +56,7 @@ class Objective:
     kind: str
     dof: int
     text: str
+    other: int = -1  # a drift's lower DOF (peak_drift:<a>-<b>: x_a - x_b), GROUND for <a>-ground
 
 
 @dataclass
@@ -93,6 +98,13 @@ def read_objective(text: str, dofs: tuple[str, ...], source: str) -> Objective:
         hint = difflib.get_close_matches(kind, OBJECTIVES, n=1)
         raise UsageError(f"--minimize {text}: unknown objective {kind!r} (" +
                          (f"did you mean {hint[0]!r}?" if hint else f"known: {', '.join(OBJECTIVES)}") + ")")
+    if kind == "peak_drift":
+        pairs = [(dof[:i], dof[i + 1:]) for i, c in enumerate(dof) if c == "-"]
+        pair = next(((a, b) for a, b in pairs if a in dofs and (b in dofs or b == "ground")), None)
+        if pair is None:
+            raise UsageError(f"--minimize {text}: expected peak_drift:<dof>-<dof> of two DOFs of {source}, or "
+                             f"<dof>-ground (DOFs are {', '.join(dofs)})")
+        return Objective(kind, dofs.index(pair[0]), text, GROUND if pair[1] == "ground" else dofs.index(pair[1]))
     if dof not in dofs:
         hint = difflib.get_close_matches(dof, dofs, n=1)
         raise UsageError(f"--minimize {text}: no DOF {dof!r} in {source} (" +
@@ -162,13 +174,12 @@ class Problem:
 
     def _measure(self, point: dict, measure: Objective) -> tuple:
         sc, kind = point["scene"], measure.kind
-        if kind == "peak_displacement":
+        if kind in TIME_DOMAIN:
             if "sensitivity" not in point:
                 from smdcli.analysis.sensitivity import sensitivity
 
                 point["sensitivity"] = sensitivity(sc, self.paths)
-            s = point["sensitivity"]
-            return float(s.peak_displacement[measure.dof]), s.d_peak_displacement[:, measure.dof].copy(), None
+            return (*time_measure(point["sensitivity"], measure), None)
         if "linear" not in point:
             model = build(sc)
             if not model.is_linear:
@@ -191,6 +202,39 @@ class Problem:
             peaks = receptance_peaks(model.M, model.C, model.K, self.input_dof, measure.dof, derived)
         best = int(np.argmax(peaks[:, 1]))
         return float(peaks[best, 1]), peaks[best, 2:].copy(), peaks
+
+
+def time_measure(s, measure: Objective) -> tuple[float, np.ndarray]:
+    """A time-domain measure of a run and its gradient from the run's sensitivities s: the located peak of |x| or of
+    a drift |x_a - x_b| (its derivative at the peak's time, the envelope theorem), the largest sampled |a| (absolute
+    under support motion: relative plus the ground's), or |x| at the run's end."""
+    from smdcli.solvers.peaks import located_peaks, quintic_at
+
+    j, kind = measure.dof, measure.kind
+    if kind == "peak_displacement":
+        return float(s.peak_displacement[j]), s.d_peak_displacement[:, j].copy()
+    if kind == "residual_displacement":
+        x = float(s.displacement[-1, j])
+        return abs(x), np.sign(x) * s.d_displacement[:, -1, j]
+    if kind == "peak_acceleration":
+        a, da = s.acceleration[:, j].copy(), s.d_acceleration[:, :, j].copy()
+        ground = s.ground_acceleration()
+        if ground is not None:
+            a, da = a + ground[0], da + ground[1]
+        k = int(np.argmax(np.abs(a)))
+        return float(abs(a[k])), np.sign(a[k]) * da[:, k]
+    k = measure.other  # peak_drift
+
+    def drift(q):  # (..., N, n) -> (..., N)
+        return q[..., j] - (q[..., k] if k != GROUND else 0.0)
+    series = [drift(q) for q in (s.displacement, s.velocity, s.acceleration)]
+    peak, at = located_peaks(s.time, *(q[:, None] for q in series), s.event_times, with_times=True)
+    when = np.array([at[0]])
+    sign = np.sign(quintic_at(s.time, *series, when)[0])
+    derived = [drift(q) for q in (s.d_displacement, s.d_velocity, s.d_acceleration)]
+    gradient = np.array([sign * quintic_at(s.time, derived[0][p], derived[1][p], derived[2][p], when)[0]
+                         for p in range(len(s.parameter))])
+    return float(peak[0]), gradient
 
 
 def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: str, starts: int = 8,

@@ -72,6 +72,7 @@ class Sensitivity:
     outputs: list[Path] = field(default_factory=list)
     model: object = None  # the scene's Model
     derivatives: list = field(default_factory=list)  # model_derivative.Derivative per parameter
+    event_times: np.ndarray = field(default_factory=lambda: np.zeros(0))  # where the solution is not smooth
 
     def ground_acceleration(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The support's acceleration on the grid (N,) and its derivative (P, N), or None without support motion:
@@ -195,8 +196,10 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
         for p in range(P):
             d_peaks[p, i] = sign * quintic_at(grid, derived["displacement"][p, :, i], derived["velocity"][p, :, i],
                                               derived["acceleration"][p, :, i], np.array([at[i]]))[0]
-    return _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_peaks, accuracy, wall,
-                   forward, tuple(notes), method)
+    found = _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_peaks, accuracy, wall,
+                    forward, tuple(notes), method)
+    found.event_times = events
+    return found
 
 
 def _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_peaks, accuracy, wall, forward,

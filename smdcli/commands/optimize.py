@@ -67,13 +67,20 @@ def _responses(run):
 
         return receptance_curve(run, np.clip(run.initial, run.lower, run.upper)), receptance_curve(run, run.optimum)
     import smdcli
+    from smdcli.analysis.optimize import read_objective
     from smdcli.sweep.family import scenario_with
 
-    dof = run.sc.dof_names.index(run.objective.partition(":")[2])
+    measure = read_objective(run.objective, tuple(run.sc.dof_names), run.scenario)
     out = []
     for values in (np.clip(run.initial, run.lower, run.upper), run.optimum):
         result = smdcli.simulate(scenario_with(run.sc, dict(zip(run.parameter, map(float, values)))))
-        out.append((result.time, result.displacement[:, dof]))
+        if measure.kind == "peak_acceleration":  # relative: the ground's own acceleration is the same in both
+            series = result.acceleration[:, measure.dof]
+        elif measure.kind == "peak_drift" and measure.other >= 0:
+            series = result.displacement[:, measure.dof] - result.displacement[:, measure.other]
+        else:
+            series = result.displacement[:, measure.dof]
+        out.append((result.time, series))
     return out
 
 

@@ -33,7 +33,9 @@ def optimize_figure(run, before, after):
         plain_log_labels(ax.yaxis)
     else:
         ax.set_xlabel("Time [s]")
-        ax.set_ylabel(f"x_{dof} [m]")
+        kind = run.objective.partition(":")[0]
+        ax.set_ylabel({"peak_acceleration": f"a_{dof} (relative) [m/s^2]", "peak_drift": f"x_{dof.replace('-', ' - x_')} [m]"}
+                      .get(kind, f"x_{dof} [m]"))
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8, loc="best")
     values = ", ".join(f"{p} = {v:.4g}" for p, v in zip(run.parameter, run.optimum))
