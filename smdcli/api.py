@@ -96,7 +96,7 @@ def fit(scenarios, data, params, bounds: dict | None = None, max_iterations: int
 
 
 def optimize(scenario: Scenario | str | Path, params: dict, minimize: str, starts: int = 8, input_dof: str | None = None,
-             subject_to: tuple[str, ...] = ()):
+             subject_to: tuple[str, ...] = (), records: tuple = (), over: str = "max"):
     """The parameter values within bounds ({path: (lo, hi)}) that minimize an objective subject to 'MEASURE <= VALUE'
     constraints (`smd optimize`'s), writing nothing: .parameter, .optimum, .value, .value_before, .optima, .peaks,
     .constraints, .converged and the rest of its file."""
@@ -104,7 +104,8 @@ def optimize(scenario: Scenario | str | Path, params: dict, minimize: str, start
 
     sc = scenario if isinstance(scenario, Scenario) else load(scenario)
     return optimized(sc, [(path, float(lo), float(hi)) for path, (lo, hi) in params.items()], minimize, starts,
-                     input_dof, subject_to=tuple([subject_to] if isinstance(subject_to, str) else subject_to))
+                     input_dof, subject_to=tuple([subject_to] if isinstance(subject_to, str) else subject_to),
+                     records=tuple(records), over=over)
 
 
 # name -> (module, attribute): the analyses and the pieces they take, imported on first use

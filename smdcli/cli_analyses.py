@@ -206,6 +206,11 @@ def optimize(
     subject_to: Optional[List[str]] = typer.Option(None, "--subject-to", help="'OBJECTIVE <= VALUE' (repeat): a "
                                                    "constraint on another measure, as --minimize names it "
                                                    "('peak_receptance:tmd <= 0.8')."),
+    records: Optional[str] = typer.Option(None, "--records", help="A,B,...: record files, each in turn replacing "
+                                          "the scenario's \\[ground_motion] file (its units and processing kept), "
+                                          "for a time-domain objective."),
+    over: str = typer.Option("max", "--over", help="With --records: max (the worst record, minimized as a minimax) "
+                             "or mean."),
     starts: Optional[int] = typer.Option(None, "--starts", help="Local searches (default 8): from the scenario's "
                                          "values and a Latin hypercube in the bounds; every distinct optimum is "
                                          "reported."),
@@ -226,7 +231,9 @@ def optimize(
 
     run = _carried_out(lambda: optimize_command(scenario, list(param or []), minimize, out, starts, input_dof,
                                                 plots=not no_plots, progress=progress_wanted(quiet, as_json),
-                                                subject_to=tuple(subject_to or ())),
+                                                subject_to=tuple(subject_to or ()),
+                                                records=tuple(r for r in (records or "").split(",") if r),
+                                                over=over),
                        {"scenario": str(scenario)}, as_json, quiet, optimize_summary,
                        lambda _, d: format_optimize(d))
     if not run.converged:

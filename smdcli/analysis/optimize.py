@@ -27,11 +27,12 @@ import re
 import time
 import tomllib
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from smdcli.analysis.model_derivative import check_once, derivative
-from smdcli.analysis.response_measures import receptance_peaks, rms, transmissibility_peaks
+from smdcli.analysis.response_measures import GROUND, receptance_peaks, rms, time_measure, transmissibility_peaks
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import build, time_grid
 from smdcli.scenario import Scenario
@@ -41,7 +42,6 @@ OBJECTIVES = ("peak_receptance", "peak_transmissibility", "rms", "peak_displacem
               "peak_acceleration", "residual_displacement")
 UNITS = {"peak_receptance": "m/N", "peak_transmissibility": "1", "rms": "m", "peak_displacement": "m",
          "peak_drift": "m", "peak_acceleration": "m/s^2", "residual_displacement": "m"}
-GROUND = -2  # a drift measured from the ground: x_a itself
 TIME_DOMAIN = ("peak_displacement", "peak_drift", "peak_acceleration", "residual_displacement")
 PEAKS = ("peak_receptance", "peak_transmissibility")  # minimized as the minimax over located peaks
 DISTINCT = 1e-3  # optima closer than this share of the bounds' widths are one
@@ -89,6 +89,8 @@ class Optimum:
     sc: Scenario | None = None
     input_dof: int = 0
     constraints: list = field(default_factory=list)  # (text, limit, value at the optimum, binds)
+    records: list = field(default_factory=list)  # (record file, the measure under it at the optimum)
+    over: str = "max"
 
 
 def read_objective(text: str, dofs: tuple[str, ...], source: str) -> Objective:
@@ -149,11 +151,18 @@ class Problem:
     the bounds; a scene solved once per point (its model's derivatives, or its sensitivities, serve every measure)."""
 
     def __init__(self, sc: Scenario, paths: list[str], objective: Objective, input_dof: int,
-                 constraints: tuple = ()):
+                 constraints: tuple = (), records: tuple = (), over: str = "max"):
         self.sc, self.paths, self.objective, self.input_dof = sc, paths, objective, input_dof
         self.constraints = constraints  # (Objective, limit) pairs: measure <= limit
+        self.records, self.over = records, over  # (path, the scenario under that record) pairs
         self.solves = 0
         self._cache: dict[bytes, dict] = {}
+
+    @property
+    def minimax(self) -> bool:
+        """Whether the objective is a largest of several smooth pieces, minimized as such (the epigraph): a
+        frequency response's peaks, or the worst of several records."""
+        return self.objective.kind in PEAKS or bool(self.records) and self.over == "max"
 
     def scene(self, values: np.ndarray) -> Scenario:
         """The scenario at these values (ScenarioError naming what a value makes invalid)."""
@@ -167,7 +176,8 @@ class Problem:
         point = self._cache.get(key)
         if point is None:
             self.solves += 1
-            point = self._cache[key] = {"scene": self.scene(values)}
+            point = self._cache[key] = {"scene": self.scene(values),
+                                        "values": dict(zip(self.paths, map(float, values)))}
         if measure.text not in point:
             point[measure.text] = self._measure(point, measure)
         return point[measure.text]
@@ -175,11 +185,21 @@ class Problem:
     def _measure(self, point: dict, measure: Objective) -> tuple:
         sc, kind = point["scene"], measure.kind
         if kind in TIME_DOMAIN:
-            if "sensitivity" not in point:
-                from smdcli.analysis.sensitivity import sensitivity
+            from smdcli.analysis.sensitivity import sensitivity
 
-                point["sensitivity"] = sensitivity(sc, self.paths)
-            return (*time_measure(point["sensitivity"], measure), None)
+            if not self.records:
+                if "sensitivity" not in point:
+                    point["sensitivity"] = sensitivity(sc, self.paths)
+                return (*time_measure(point["sensitivity"], measure), None)
+            if "records" not in point:  # each record's run at these values
+                point["records"] = [sensitivity(scenario_with(under, point["values"]), self.paths)
+                                    for _, under in self.records]
+            each = [time_measure(s, measure) for s in point["records"]]
+            rows = np.array([[r, value, *gradient] for r, (value, gradient) in enumerate(each)])
+            if self.over == "mean":
+                return float(rows[:, 1].mean()), rows[:, 2:].mean(axis=0), rows
+            worst = int(np.argmax(rows[:, 1]))
+            return float(rows[worst, 1]), rows[worst, 2:].copy(), rows
         if "linear" not in point:
             model = build(sc)
             if not model.is_linear:
@@ -204,41 +224,9 @@ class Problem:
         return float(peaks[best, 1]), peaks[best, 2:].copy(), peaks
 
 
-def time_measure(s, measure: Objective) -> tuple[float, np.ndarray]:
-    """A time-domain measure of a run and its gradient from the run's sensitivities s: the located peak of |x| or of
-    a drift |x_a - x_b| (its derivative at the peak's time, the envelope theorem), the largest sampled |a| (absolute
-    under support motion: relative plus the ground's), or |x| at the run's end."""
-    from smdcli.solvers.peaks import located_peaks, quintic_at
-
-    j, kind = measure.dof, measure.kind
-    if kind == "peak_displacement":
-        return float(s.peak_displacement[j]), s.d_peak_displacement[:, j].copy()
-    if kind == "residual_displacement":
-        x = float(s.displacement[-1, j])
-        return abs(x), np.sign(x) * s.d_displacement[:, -1, j]
-    if kind == "peak_acceleration":
-        a, da = s.acceleration[:, j].copy(), s.d_acceleration[:, :, j].copy()
-        ground = s.ground_acceleration()
-        if ground is not None:
-            a, da = a + ground[0], da + ground[1]
-        k = int(np.argmax(np.abs(a)))
-        return float(abs(a[k])), np.sign(a[k]) * da[:, k]
-    k = measure.other  # peak_drift
-
-    def drift(q):  # (..., N, n) -> (..., N)
-        return q[..., j] - (q[..., k] if k != GROUND else 0.0)
-    series = [drift(q) for q in (s.displacement, s.velocity, s.acceleration)]
-    peak, at = located_peaks(s.time, *(q[:, None] for q in series), s.event_times, with_times=True)
-    when = np.array([at[0]])
-    sign = np.sign(quintic_at(s.time, *series, when)[0])
-    derived = [drift(q) for q in (s.d_displacement, s.d_velocity, s.d_acceleration)]
-    gradient = np.array([sign * quintic_at(s.time, derived[0][p], derived[1][p], derived[2][p], when)[0]
-                         for p in range(len(s.parameter))])
-    return float(peak[0]), gradient
-
-
 def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: str, starts: int = 8,
-             input_name: str | None = None, advance=None, subject_to: tuple[str, ...] = ()) -> Optimum:
+             input_name: str | None = None, advance=None, subject_to: tuple[str, ...] = (),
+             records: tuple = (), over: str = "max") -> Optimum:
     """The parameters within bounds minimizing the objective subject to 'MEASURE <= VALUE' constraints, from the
     scenario's own values and a Latin hypercube of starts - 1 more; advance(1) after each start (a progress bar's).
     UsageError where no start finds a point that meets the constraints."""
@@ -260,7 +248,8 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
     doc = tomllib.loads(sc.text)
     initial = np.array([parameter_value(doc, p) for p in paths], dtype=float)
     limits = tuple(read_constraint(text, tuple(base.dofs), str(sc.path)) for text in subject_to)
-    problem = Problem(sc, paths, goal, input_index(base, input_name, str(sc.path)), limits)
+    problem = Problem(sc, paths, goal, input_index(base, input_name, str(sc.path)), limits,
+                      _under_records(sc, records, goal, over), over)
     _check_bounds(problem, initial, lower, upper)
     width = upper - lower
     inside = np.clip((initial - lower) / width, 0.0, 1.0)
@@ -289,7 +278,7 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
     best = lower + theta * width
     value, gradient, detail = problem.evaluate(best)
     on_bound = np.where(theta <= 1e-9, -1, np.where(theta >= 1 - 1e-9, 1, 0))
-    peaks = detail[:, :2] if detail is not None else np.zeros((0, 2))
+    peaks = detail[:, :2] if detail is not None and goal.kind in PEAKS else np.zeros((0, 2))
     met = [(text, limit, problem.evaluate(best, m)[0]) for text, (m, limit) in zip(subject_to, limits)]
     met = [(text, limit, value, value >= limit * (1 - 1e-6)) for text, limit, value in met]
     return Optimum(
@@ -299,8 +288,37 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
         message=str(result.message), iterations=int(result.nit), solves=problem.solves,
         history_objective=np.array([h[1] for h in history]),
         history_parameters=np.array([lower + h[0] * width for h in history]).reshape(len(history), len(paths)),
-        optima=optima, peaks_before=detail_before[:, :2] if detail_before is not None else np.zeros((0, 2)),
-        peaks=peaks, wall_time_s=time.perf_counter() - begin, sc=sc, input_dof=problem.input_dof, constraints=met)
+        optima=optima, peaks_before=detail_before[:, :2] if detail_before is not None and goal.kind in PEAKS
+        else np.zeros((0, 2)),
+        peaks=peaks, wall_time_s=time.perf_counter() - begin, sc=sc, input_dof=problem.input_dof, constraints=met,
+        records=[(str(path), float(row[1])) for (path, _), row in zip(problem.records, detail)]
+        if problem.records else [], over=over)
+
+
+def _under_records(sc: Scenario, records: tuple, goal: Objective, over: str) -> tuple:
+    """(path, the scenario under that record) for each record file: the scenario's [ground_motion] table's file
+    replaced, its units and processing kept; UsageError where that cannot be."""
+    if not records:
+        return ()
+    from smdcli.sweep.family import _validated
+
+    if over not in ("max", "mean"):
+        raise UsageError(f"--over {over}: expected max or mean")
+    if goal.kind not in TIME_DOMAIN:
+        raise UsageError(f"--records: {goal.text} is not a time-domain measure (peak_displacement, peak_drift, "
+                         "peak_acceleration, residual_displacement)")
+    doc = tomllib.loads(sc.text)
+    table = doc.get("ground_motion")
+    if not isinstance(table, dict) or "file" not in table:
+        raise UsageError(f"--records: {sc.path} has no [ground_motion] table with a file to replace")
+    out = []
+    for record in records:
+        path = Path(record)
+        if not path.is_file():
+            raise UsageError(f"--records: {record}: no such file")
+        member = {**doc, "ground_motion": {**table, "file": str(path.resolve())}}
+        out.append((path, _validated(member, sc, f"--records {record}")))  # its text the member's own
+    return tuple(out)
 
 
 def _violation(problem: Problem, values: np.ndarray) -> float:
@@ -325,8 +343,9 @@ def _local(problem: Problem, start: np.ndarray, lower: np.ndarray, width: np.nda
     """One SLSQP run from start (in [0, 1]^P): (theta, value, scipy's result, history of (theta, value)). The
     receptance's peak is minimized as the epigraph min t, t >= each located peak; the others directly."""
     history = []
-    minimax = problem.objective.kind in PEAKS
-    slots = len(problem.sc.dof_names) + 1  # the most peaks a receptance has: one a mode, and the static one
+    minimax = problem.minimax
+    # the most pieces of the largest: a receptance's peaks (one a mode, and the static one), or the records
+    slots = len(problem.records) if problem.records else len(problem.sc.dof_names) + 1
 
     def at(theta):
         value, gradient, detail = problem.evaluate(lower + np.clip(theta, 0.0, 1.0) * width)

@@ -1,6 +1,7 @@
-"""The measures `smd optimize` minimizes of a linear scene, each with its exact gradient in the parameters: a
+"""The measures `smd optimize` minimizes, each with its exact gradient in the parameters: of a linear scene a
 receptance's or a transmissibility's located peaks (the H-infinity norm) and the RMS under white noise (the H2
-norm, by Lyapunov).
+norm, by Lyapunov); of any scene's run its peaks, drifts, accelerations and residual displacement (from its
+sensitivities).
 
 derived: per parameter (dM, dC, dK), the model's derivatives (model_derivative's). Must not import: io, plots,
 commands, cli.
@@ -16,6 +17,7 @@ from smdcli.errors import ScenarioError
 
 GRID_POINTS = 400  # frequencies a receptance is first sampled at: its peaks then located to rounding between them
 EPS = float(np.finfo(float).eps)
+GROUND = -2  # a drift measured from the ground: x_a itself
 
 
 def dynamic_stiffness(M, C, K, w: float) -> np.ndarray:
@@ -123,3 +125,36 @@ def rms(M, C, K, input_dof: int, dof: int, derived) -> tuple[float, np.ndarray]:
         dSigma = solve_continuous_lyapunov(A, -rhs)
         gradient.append(float(dSigma[dof, dof]) / (2 * value))
     return value, np.array(gradient)
+
+
+def time_measure(s, measure) -> tuple[float, np.ndarray]:
+    """A time-domain measure of a run and its gradient from the run's sensitivities s: the located peak of |x| or of
+    a drift |x_a - x_b| (its derivative at the peak's time, the envelope theorem), the largest sampled |a| (absolute
+    under support motion: relative plus the ground's), or |x| at the run's end."""
+    from smdcli.solvers.peaks import located_peaks, quintic_at
+
+    j, kind = measure.dof, measure.kind
+    if kind == "peak_displacement":
+        return float(s.peak_displacement[j]), s.d_peak_displacement[:, j].copy()
+    if kind == "residual_displacement":
+        x = float(s.displacement[-1, j])
+        return abs(x), np.sign(x) * s.d_displacement[:, -1, j]
+    if kind == "peak_acceleration":
+        a, da = s.acceleration[:, j].copy(), s.d_acceleration[:, :, j].copy()
+        ground = s.ground_acceleration()
+        if ground is not None:
+            a, da = a + ground[0], da + ground[1]
+        k = int(np.argmax(np.abs(a)))
+        return float(abs(a[k])), np.sign(a[k]) * da[:, k]
+    k = measure.other  # peak_drift
+
+    def drift(q):  # (..., N, n) -> (..., N)
+        return q[..., j] - (q[..., k] if k != GROUND else 0.0)
+    series = [drift(q) for q in (s.displacement, s.velocity, s.acceleration)]
+    peak, at = located_peaks(s.time, *(q[:, None] for q in series), s.event_times, with_times=True)
+    when = np.array([at[0]])
+    sign = np.sign(quintic_at(s.time, *series, when)[0])
+    derived = [drift(q) for q in (s.d_displacement, s.d_velocity, s.d_acceleration)]
+    gradient = np.array([sign * quintic_at(s.time, derived[0][p], derived[1][p], derived[2][p], when)[0]
+                         for p in range(len(s.parameter))])
+    return float(peak[0]), gradient

@@ -15,7 +15,8 @@ from smdcli.io.folders import output_folder
 
 def optimize_command(path: str | Path, params: list[str], objective: str | None, out: str | Path,
                      starts: int | None = None, input_name: str | None = None, plots: bool = True,
-                     progress: bool = False, subject_to: tuple[str, ...] = ()):
+                     progress: bool = False, subject_to: tuple[str, ...] = (), records: tuple[str, ...] = (),
+                     over: str = "max"):
     """Read the scene and the bounds (the flags, else its [optimize] table), optimize, write OUT/<stem>_optimize.h5,
     OUT/<stem>_optimized.toml and OUT/<stem>_optimize.png (nothing where the input is refused); a bar over the
     starts on a terminal."""
@@ -41,7 +42,7 @@ def optimize_command(path: str | Path, params: list[str], objective: str | None,
     input_name = input_name or table.get("input")
     output_folder(out, make=False)
     with bar("starts", starts, enabled=progress, transient=True) as advance:
-        run = optimize(sc, bounds, objective, starts, input_name, advance, tuple(subject_to))
+        run = optimize(sc, bounds, objective, starts, input_name, advance, tuple(subject_to), tuple(records), over)
     out_dir = output_folder(out)
     with together():
         h5 = out_dir / f"{path.stem}_optimize.h5"
@@ -99,6 +100,7 @@ def optimize_summary(run) -> dict:
         "peaks": [{"frequency_rad_s": float(w), "value": float(h)} for w, h in run.peaks],
         "constraints": [{"constraint": text, "limit": limit, "value": value, "binds": bool(binds)}
                         for text, limit, value, binds in run.constraints],
+        "records": [{"file": path, "value": value} for path, value in run.records], "over": run.over,
         "optima": [{"parameters": [float(v) for v in o], "value": float(f)} for o, f in run.optima],
         "converged": run.converged, "message": run.message, "iterations": run.iterations, "solves": run.solves,
         "wall_time_s": run.wall_time_s, "outputs": [str(p) for p in run.outputs]}
@@ -120,6 +122,9 @@ def format_optimize(d: dict) -> str:
         active = [peak for peak in d["peaks"] if peak["value"] >= top * (1 - 1e-6)]
         lines.append("  active peaks: " + ", ".join(f"{peak['value']:.6g} at {peak['frequency_rad_s']:.6g} rad/s"
                                                     for peak in active))
+    if d["records"]:
+        lines.append(f"  over {len(d['records'])} records ({d['over']}): " +
+                     ", ".join(f"{Path(r['file']).name} {r['value']:.6g}" for r in d["records"]))
     for c in d["constraints"]:
         lines.append(f"  subject to {c['constraint']}: {c['value']:.6g}" + ("  (binds)" if c["binds"] else ""))
     if len(d["optima"]) > 1:

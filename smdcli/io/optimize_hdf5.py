@@ -52,6 +52,11 @@ def write_optimize(path: Path, run) -> None:
         step = axis(history, "evaluation", np.arange(len(run.history_objective)))
         with_scales(history.create_dataset("objective", data=run.history_objective), step)
         with_scales(history.create_dataset("parameters", data=run.history_parameters), step, parameter)
+        if run.records:
+            f.attrs["over"] = run.over
+            group = f.create_group("records")
+            axis(group, "record", [path for path, _ in run.records])
+            group.create_dataset("objective", data=np.array([value for _, value in run.records]))
         if run.constraints:
             bound = f.create_group("constraints")
             axis(bound, "constraint", [text for text, *_ in run.constraints])
