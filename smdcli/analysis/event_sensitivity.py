@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from smdcli.elements.base import KINK
+from smdcli.elements.base import KINK, RATE
 from smdcli.elements import State
 from smdcli.model import Model
 from smdcli.solvers.events.decisions import impact, project
@@ -200,15 +200,19 @@ class EventSensitivityRun(PiecewiseRun):
         found = super().first_crossing(flow, mode, z0, z1, h)
         if self.undefined_from is None:
             end = h if found is None else found[0]
-            self.near_miss(flow, mode, z0, z1 if found is None else flow.at(z0, mode.b, end), end)
+            crossing = None if found is None else found[1:]
+            self.near_miss(flow, mode, z0, z1 if found is None else flow.at(z0, mode.b, end), end, crossing)
         return found
 
-    def near_miss(self, flow: Flow, mode, z0: np.ndarray, z1: np.ndarray, h: float) -> None:
+    def near_miss(self, flow: Flow, mode, z0: np.ndarray, z1: np.ndarray, h: float, crossing=None) -> None:
         """A guard whose top comes within GRAZE of its level on (0, h] without crossing it: an event that a change
-        of the parameters this small makes appear, so that the response has no derivative from there."""
+        of the parameters this small makes appear, so that the response has no derivative from there. The guard
+        an event crosses at h (crossing: its element and guard) reaches its level there: not a miss."""
         for e, guard, row, const in mode.guards:
+            if crossing is not None and (e, guard) == tuple(crossing):
+                continue
             direction = guard.direction
-            scale = float(np.abs(row) @ np.abs(z0)) + abs(const)
+            scale = self._graze_scale(guard, row, const, z0)
             if not (direction * float(row @ z0 + const) < -GRAZE * scale and direction * float(row @ z1 + const) < 0):
                 continue
             slope0, slope1 = (direction * float(row @ (mode.A @ z + mode.b)) for z in (z0, z1))
@@ -239,9 +243,15 @@ class EventSensitivityRun(PiecewiseRun):
         # a near miss inside a batch: the step-by-step path takes that step, where first_crossing sees it
         if super().turn_may_hold_event(flow, mode, guard, row, const, z0, h):
             return True
-        scale = float(np.abs(row) @ np.abs(z0)) + abs(const)
+        scale = self._graze_scale(guard, row, const, z0)
         turn = self._root(flow, mode, z0, row @ mode.A, float(row @ mode.b), 0.0, h)
         return guard.direction * float(row @ flow.at(z0, mode.b, turn) + const) >= -GRAZE * scale
+
+    def _graze_scale(self, guard, row: np.ndarray, const: float, z0: np.ndarray) -> float:
+        """What a guard's nearness to its level is judged against: the terms it sums, or for a rate the run's speeds
+        (a contact that has just broken away has no speed of its own to judge by)."""
+        size = float(np.abs(row) @ np.abs(z0)) + abs(const)
+        return max(size, self.v_scale) if guard.quantity == RATE else size
 
     def start(self, states, z: np.ndarray, t: float):
         before = len(self.events)

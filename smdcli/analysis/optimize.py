@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from smdcli.analysis.model_derivative import check_once, derivative
+from smdcli.analysis.optimize_search import FEASIBLE, local_search, violation
 from smdcli.analysis.response_measures import GROUND, receptance_peaks, rms, time_measure, transmissibility_peaks
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import build, time_grid
@@ -45,8 +46,6 @@ UNITS = {"peak_receptance": "m/N", "peak_transmissibility": "1", "rms": "m", "pe
 TIME_DOMAIN = ("peak_displacement", "peak_drift", "peak_acceleration", "residual_displacement")
 PEAKS = ("peak_receptance", "peak_transmissibility")  # minimized as the minimax over located peaks
 DISTINCT = 1e-3  # optima closer than this share of the bounds' widths are one
-FEASIBLE = 1e-8  # a constraint's relative excess that still meets it
-TOLERANCE = 1e-15  # SLSQP's on the objective scaled to its start
 
 
 @dataclass(frozen=True)
@@ -230,7 +229,6 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
     """The parameters within bounds minimizing the objective subject to 'MEASURE <= VALUE' constraints, from the
     scenario's own values and a Latin hypercube of starts - 1 more; advance(1) after each start (a progress bar's).
     UsageError where no start finds a point that meets the constraints."""
-    from scipy.optimize import minimize
     from scipy.stats import qmc
 
     from smdcli.sweep.frequency import input_index
@@ -258,12 +256,13 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
     scale = abs(before) or 1.0
     runs = []
     for point in points:
-        runs.append(_local(problem, np.asarray(point, float), lower, width, scale, minimize))
+        (theta, value), result, history = local_search(problem, np.asarray(point, float), lower, width, scale)
+        runs.append((theta, value, result, history))
         if advance is not None:
             advance(1)
-    feasible = [r for r in runs if _violation(problem, lower + r[0] * width) <= FEASIBLE]
+    feasible = [r for r in runs if violation(problem, lower + r[0] * width) <= FEASIBLE]
     if not feasible:
-        worst = min(runs, key=lambda r: _violation(problem, lower + r[0] * width))
+        worst = min(runs, key=lambda r: violation(problem, lower + r[0] * width))
         text, excess = max(((t, problem.evaluate(lower + worst[0] * width, m)[0] / limit - 1)
                             for t, (m, limit) in zip(subject_to, limits)), key=lambda pair: pair[1])
         raise UsageError(f"--subject-to {text}: infeasible within the bounds (every search ends {excess:.3g} above "
@@ -321,11 +320,6 @@ def _under_records(sc: Scenario, records: tuple, goal: Objective, over: str) -> 
     return tuple(out)
 
 
-def _violation(problem: Problem, values: np.ndarray) -> float:
-    """The largest relative excess of a constraint's measure over its limit at values (0 where all are met)."""
-    return max([0.0] + [problem.evaluate(values, m)[0] / limit - 1 for m, limit in problem.constraints])
-
-
 def _check_bounds(problem: Problem, initial: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> None:
     """Each bound must give a valid scene (the others at their values): UsageError naming the one that does not."""
     for i, path in enumerate(problem.paths):
@@ -337,105 +331,3 @@ def _check_bounds(problem: Problem, initial: np.ndarray, lower: np.ndarray, uppe
             except ScenarioError as exc:
                 raise UsageError(f"--param {path}={lower[i]:g}:{upper[i]:g}: at {end:g} the scene is not valid "
                                  f"({exc.field}: {exc.message})") from None
-
-
-def _local(problem: Problem, start: np.ndarray, lower: np.ndarray, width: np.ndarray, scale: float, minimize):
-    """One SLSQP run from start (in [0, 1]^P): (theta, value, scipy's result, history of (theta, value)). The
-    receptance's peak is minimized as the epigraph min t, t >= each located peak; the others directly."""
-    history = []
-    minimax = problem.minimax
-    # the most pieces of the largest: a receptance's peaks (one a mode, and the static one), or the records
-    slots = len(problem.records) if problem.records else len(problem.sc.dof_names) + 1
-
-    def at(theta):
-        value, gradient, detail = problem.evaluate(lower + np.clip(theta, 0.0, 1.0) * width)
-        history.append((np.clip(theta, 0.0, 1.0).copy(), value))
-        return value, gradient, detail
-
-    box = [(0.0, 1.0)] * len(start)
-    options = {"ftol": TOLERANCE, "maxiter": 200}
-    P = len(start)
-    limits = [_limit(problem, m, limit, lower, width, slots, P + minimax) for m, limit in problem.constraints]
-    if not minimax:
-        def fun(theta):
-            value, gradient, _ = at(theta)
-            return value / scale, gradient * width / scale
-        result = minimize(fun, start, jac=True, method="SLSQP", bounds=box, constraints=limits, options=options)
-        theta = np.clip(result.x, 0.0, 1.0)
-        if not limits or _violation(problem, lower + theta * width) == 0 and all(
-                problem.evaluate(lower + theta * width, m)[0] < limit * (1 - 1e-6) for m, limit in problem.constraints):
-            theta = _polished(problem, theta, lower, width, history)  # no constraint binds: a smooth optimum
-        return theta, problem.evaluate(lower + theta * width)[0], result, history
-
-    def constraints(y):
-        _, _, detail = at(y[:-1])
-        values = y[-1] - detail[:, 1] / scale
-        return np.resize(values[np.argsort(detail[:, 0])], slots) if len(values) < slots else values[:slots]
-
-    def jacobian(y):
-        _, _, detail = at(y[:-1])
-        rows = np.hstack([-detail[:, 2:] * width / scale, np.ones((len(detail), 1))])[np.argsort(detail[:, 0])]
-        return np.resize(rows, (slots, rows.shape[1])) if len(rows) < slots else rows[:slots]
-
-    value0 = at(start)[0]
-    result = minimize(lambda y: y[-1], np.append(start, value0 / scale), jac=lambda y: np.eye(len(y))[-1],
-                      method="SLSQP", bounds=box + [(None, None)],
-                      constraints=[{"type": "ineq", "fun": constraints, "jac": jacobian}] + limits, options=options)
-    theta = np.clip(result.x[:-1], 0.0, 1.0)
-    return theta, problem.evaluate(lower + theta * width)[0], result, history
-
-
-def _limit(problem: Problem, measure: Objective, limit: float, lower, width, slots: int, size: int) -> dict:
-    """SLSQP's inequality for measure <= limit (every located peak of a receptance), scaled by the limit, over the
-    first P of its size variables (the minimax's t after them)."""
-    P = len(lower)
-
-    def values(y):
-        value, _, detail = problem.evaluate(lower + np.clip(y[:P], 0.0, 1.0) * width, measure)
-        tops = detail[:, 1] if detail is not None else np.array([value])
-        out = 1.0 - tops / limit
-        return np.resize(out, slots) if detail is not None else out
-
-    def jacobian(y):
-        value, gradient, detail = problem.evaluate(lower + np.clip(y[:P], 0.0, 1.0) * width, measure)
-        rows = -(detail[:, 2:] if detail is not None else gradient[None]) * width / limit
-        rows = np.hstack([rows, np.zeros((len(rows), size - P))])
-        return np.resize(rows, (slots, size)) if detail is not None else rows
-    return {"type": "ineq", "fun": values, "jac": jacobian}
-
-
-def _polished(problem: Problem, theta: np.ndarray, lower: np.ndarray, width: np.ndarray, history: list,
-              steps: int = 4, h: float = 1e-5) -> np.ndarray:
-    """A smooth objective's optimum refined by Newton's method on its exact gradient in the parameters off their
-    bounds (the Hessian from central differences of the gradient): SLSQP stops where the objective stops changing,
-    a flat optimum's parameters then known only to the square root of rounding (rms's damping to 4e-8). A step is
-    kept only where the gradient shrinks and the objective does not grow."""
-    free = (theta > 1e-9) & (theta < 1 - 1e-9)
-    if not free.any():
-        return theta
-    value, gradient, _ = problem.evaluate(lower + theta * width)
-    g = (gradient * width)[free]
-    for _ in range(steps):
-        if not np.all(np.isfinite(g)) or np.abs(g).max() == 0:
-            break
-        columns = []
-        for j in np.flatnonzero(free):
-            shifted = [theta.copy(), theta.copy()]
-            shifted[0][j] += h
-            shifted[1][j] -= h
-            up, down = ((problem.evaluate(lower + t * width)[1] * width)[free] for t in shifted)
-            columns.append((up - down) / (2 * h))
-        hessian = np.array(columns).T
-        try:
-            step = np.linalg.solve(0.5 * (hessian + hessian.T), -g)
-        except np.linalg.LinAlgError:
-            break
-        trial = theta.copy()
-        trial[free] = np.clip(theta[free] + step, 0.0, 1.0)
-        trial_value, trial_gradient, _ = problem.evaluate(lower + trial * width)
-        trial_g = (trial_gradient * width)[free]
-        if not (np.abs(trial_g).max() < np.abs(g).max() and trial_value <= value * (1 + 1e-14)):
-            break
-        theta, value, g = trial, trial_value, trial_g
-        history.append((theta.copy(), value))
-    return theta

@@ -74,9 +74,16 @@ def _responses(run):
     measure = read_objective(run.objective, tuple(run.sc.dof_names), run.scenario)
     out = []
     for values in (np.clip(run.initial, run.lower, run.upper), run.optimum):
-        result = smdcli.simulate(scenario_with(run.sc, dict(zip(run.parameter, map(float, values)))))
-        if measure.kind == "peak_acceleration":  # relative: the ground's own acceleration is the same in both
-            series = result.acceleration[:, measure.dof]
+        member = scenario_with(run.sc, dict(zip(run.parameter, map(float, values))))
+        result = smdcli.simulate(member)
+        if measure.kind == "peak_acceleration":  # absolute, as the objective: relative plus the ground's
+            from smdcli.model import build
+            from smdcli.model.system import GROUND_DOF
+
+            model = build(member)
+            series = result.acceleration[:, measure.dof] + sum(
+                (signal.value(result.time) for signal, dof in zip(model.signals, model.force_dofs)
+                 if dof == GROUND_DOF), np.zeros(len(result.time)))
         elif measure.kind == "peak_drift" and measure.other >= 0:
             series = result.displacement[:, measure.dof] - result.displacement[:, measure.other]
         else:

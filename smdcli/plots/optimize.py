@@ -34,7 +34,7 @@ def optimize_figure(run, before, after):
     else:
         ax.set_xlabel("Time [s]")
         kind = run.objective.partition(":")[0]
-        ax.set_ylabel({"peak_acceleration": f"a_{dof} (relative) [m/s^2]", "peak_drift": f"x_{dof.replace('-', ' - x_')} [m]"}
+        ax.set_ylabel({"peak_acceleration": f"a_{dof} (absolute) [m/s^2]", "peak_drift": f"x_{dof.replace('-', ' - x_')} [m]"}
                       .get(kind, f"x_{dof} [m]"))
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8, loc="best")
