@@ -199,7 +199,8 @@ def optimize(
                                               "Default: \\[optimize] parameters."),
     minimize: Optional[str] = typer.Option(None, "--minimize", help="peak_receptance:DOF (the largest |x/F| over "
                                            "all frequencies), peak_transmissibility:DOF (under support motion), "
-                                           "rms:DOF (RMS under white noise of one-sided PSD 1 N^2/Hz on the input), "
+                                           "rms:DOF or rms_drift:A-B (RMS under white noise of one-sided PSD 1 N^2/Hz on the "
+                                           "input), "
                                            "or of the scenario's own run peak_displacement:DOF, peak_drift:A-B, "
                                            "peak_acceleration:DOF, residual_displacement:DOF. Default: \\[optimize] "
                                            "minimize."),

@@ -403,3 +403,34 @@ units = "g"
         assert run.value == pytest.approx(combine(each), rel=1e-10)
         assert run.value <= combine(table, axis=1).min() * (1 + 1e-9)
 
+
+
+def test_an_absorber_s_rms_stroke_and_its_gradient_match_the_integral_and_differences():
+    """rms_drift:tmd-primary (the absorber's stroke under white noise on the primary): sqrt of the integral of
+    |H_tmd - H_primary|^2 over frequency (one-sided PSD 1 N^2/Hz), to 1e-8, and its gradient in k and c against
+    central differences of that integral's own Lyapunov value, to 1e-6."""
+    from scipy.integrate import quad
+
+    from smdcli.analysis.optimize import Problem, read_objective
+
+    sc = smdcli.load(TMD)
+    paths = ["spring[1].k", "damper[0].c"]
+    problem = Problem(sc, paths, read_objective("rms_drift:tmd-primary", tuple(sc.dof_names), "tmd"), 0)
+    values = np.array([1.1, 0.07])
+    value, gradient, _ = problem.evaluate(values)
+
+    def power(hz, k_t=1.1, c_t=0.07):
+        w = 2 * np.pi * hz
+        Z = np.array([[25.0 + k_t - w * w + 1j * w * c_t, -k_t - 1j * w * c_t],
+                      [-k_t - 1j * w * c_t, k_t - 0.05 * w * w + 1j * w * c_t]])
+        H = np.linalg.solve(Z, [1.0, 0.0])
+        return abs(H[1] - H[0]) ** 2
+    variance = sum(quad(power, a, b, limit=400, epsabs=0, epsrel=1e-12)[0]
+                   for a, b in ((0, 0.6), (0.6, 1.0), (1.0, 5.0), (5.0, np.inf)))
+    assert value == pytest.approx(np.sqrt(variance), rel=1e-8)
+    for i in range(2):
+        h = 1e-5 * values[i]
+        at = {o: problem.evaluate(values + o * h * np.eye(2)[i])[0] for o in (-2, -1, 1, 2)}
+        slope = (8 * (at[1] - at[-1]) - (at[2] - at[-2])) / (12 * h)
+        # (the stroke's variance does not depend on the absorber's k here: its derivative is rounding's)
+        assert gradient[i] == pytest.approx(slope, rel=1e-6, abs=1e-6 * np.abs(gradient).max())

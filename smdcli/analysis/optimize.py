@@ -39,9 +39,9 @@ from smdcli.model import build, time_grid
 from smdcli.scenario import Scenario
 from smdcli.sweep.family import parameter_value, scenario_with
 
-OBJECTIVES = ("peak_receptance", "peak_transmissibility", "rms", "peak_displacement", "peak_drift",
+OBJECTIVES = ("peak_receptance", "peak_transmissibility", "rms", "rms_drift", "peak_displacement", "peak_drift",
               "peak_acceleration", "residual_displacement")
-UNITS = {"peak_receptance": "m/N", "peak_transmissibility": "1", "rms": "m", "peak_displacement": "m",
+UNITS = {"peak_receptance": "m/N", "peak_transmissibility": "1", "rms": "m", "rms_drift": "m", "peak_displacement": "m",
          "peak_drift": "m", "peak_acceleration": "m/s^2", "residual_displacement": "m"}
 TIME_DOMAIN = ("peak_displacement", "peak_drift", "peak_acceleration", "residual_displacement")
 PEAKS = ("peak_receptance", "peak_transmissibility")  # minimized as the minimax over located peaks
@@ -99,11 +99,11 @@ def read_objective(text: str, dofs: tuple[str, ...], source: str) -> Objective:
         hint = difflib.get_close_matches(kind, OBJECTIVES, n=1)
         raise UsageError(f"--minimize {text}: unknown objective {kind!r} (" +
                          (f"did you mean {hint[0]!r}?" if hint else f"known: {', '.join(OBJECTIVES)}") + ")")
-    if kind == "peak_drift":
+    if kind in ("peak_drift", "rms_drift"):
         pairs = [(dof[:i], dof[i + 1:]) for i, c in enumerate(dof) if c == "-"]
         pair = next(((a, b) for a, b in pairs if a in dofs and (b in dofs or b == "ground")), None)
         if pair is None:
-            raise UsageError(f"--minimize {text}: expected peak_drift:<dof>-<dof> of two DOFs of {source}, or "
+            raise UsageError(f"--minimize {text}: expected {kind}:<dof>-<dof> of two DOFs of {source}, or "
                              f"<dof>-ground (DOFs are {', '.join(dofs)})")
         return Objective(kind, dofs.index(pair[0]), text, GROUND if pair[1] == "ground" else dofs.index(pair[1]))
     if dof not in dofs:
@@ -210,8 +210,8 @@ class Problem:
             point["linear"] = (model, [(d.of(lambda m: m.dense().M), d.of(lambda m: m.dense().C),
                                         d.of(lambda m: m.dense().K)) for d in derived])
         model, derived = point["linear"]
-        if kind == "rms":
-            return (*rms(model.M, model.C, model.K, self.input_dof, measure.dof, derived), None)
+        if kind in ("rms", "rms_drift"):
+            return (*rms(model.M, model.C, model.K, self.input_dof, measure.dof, derived, measure.other), None)
         if kind == "peak_transmissibility":
             if model.ground is None:
                 raise UsageError(f"{self.sc.path}: {measure.text} needs support motion (a [ground_motion] table); "

@@ -91,8 +91,9 @@ def frequency_peaks(M, C, K, dof: int, derived, input_dof: int | None) -> np.nda
     return np.array(rows, dtype=float).reshape(len(rows), 2 + len(derived))
 
 
-def rms(M, C, K, input_dof: int, dof: int, derived) -> tuple[float, np.ndarray]:
-    """The RMS of x_dof under white noise of one-sided PSD 1 N^2/Hz on the input, and its gradient (Lyapunov)."""
+def rms(M, C, K, input_dof: int, dof: int, derived, other: int | None = None) -> tuple[float, np.ndarray]:
+    """The RMS of x_dof (or of the drift x_dof - x_other) under white noise of one-sided PSD 1 N^2/Hz on the input,
+    and its gradient (Lyapunov)."""
     from scipy.linalg import solve_continuous_lyapunov
 
     n = len(M)
@@ -108,7 +109,11 @@ def rms(M, C, K, input_dof: int, dof: int, derived) -> tuple[float, np.ndarray]:
 
     A, B = state(Minv, C, K)
     Sigma = solve_continuous_lyapunov(A, -0.5 * np.outer(B, B))
-    variance = float(Sigma[dof, dof])
+    pick = np.zeros(2 * n)  # the measured combination of the state
+    pick[dof] = 1.0
+    if other is not None and other >= 0:
+        pick[other] -= 1.0
+    variance = float(pick @ Sigma @ pick)
     if not variance > 0 or not np.isfinite(variance):
         raise ScenarioError("", "damping", "the RMS response to white noise is unbounded: the scene needs damping in "
                             "every mode its input reaches")
@@ -123,7 +128,7 @@ def rms(M, C, K, input_dof: int, dof: int, derived) -> tuple[float, np.ndarray]:
         dB[n:] = dMinv[:, input_dof]
         rhs = dA @ Sigma + Sigma @ dA.T + 0.5 * (np.outer(dB, B) + np.outer(B, dB))
         dSigma = solve_continuous_lyapunov(A, -rhs)
-        gradient.append(float(dSigma[dof, dof]) / (2 * value))
+        gradient.append(float(pick @ dSigma @ pick) / (2 * value))
     return value, np.array(gradient)
 
 
