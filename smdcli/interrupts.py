@@ -68,8 +68,11 @@ def install() -> None:
 
     def unraisable(info) -> None:
         # An interrupt raised inside a weakref callback or __del__ cannot propagate; it is recorded, so no
-        # "Exception ignored" traceback: the run still stops at the next check with 130/143.
-        if not isinstance(info.exc_value, KeyboardInterrupt):
+        # "Exception ignored" traceback: the run still stops at the next check with 130/143. Once one has been
+        # received, an object it cut short in its constructor may fail in its own __del__ (llvmlite's pass
+        # options, interrupted while numba compiled: "no attribute '_as_parameter_'"): the run is ending with its
+        # one line, so that is not printed either
+        if not isinstance(info.exc_value, KeyboardInterrupt) and _received is None:
             default(info)
 
     sys.unraisablehook = unraisable

@@ -483,3 +483,25 @@ def test_interrupted_sweeps_never_print_a_traceback(tmp_path):
         if process.returncode == 130:
             assert stderr.strip().splitlines()[-1].startswith("smd: interrupted"), stderr
     assert codes.count(130) >= runs // 2, codes
+
+
+def test_a_finalizer_that_an_interrupt_cut_short_prints_no_traceback():
+    """An object whose constructor an interrupt cut short may fail in its own __del__ (llvmlite's pass options,
+    interrupted while numba compiled, printed "Exception ignored ... no attribute '_as_parameter_'" after smd's one
+    line): once a signal has been received such a failure is not printed; before any, it still is."""
+    code = ("import os, signal, time\n"
+            "from smdcli import interrupts\n"
+            "interrupts.install()\n"
+            "class Torn:\n"
+            "    def __del__(self):\n"
+            "        raise AttributeError('half-built')\n"
+            "Torn()\n"
+            "try:\n"
+            "    os.kill(os.getpid(), signal.SIGINT)\n"
+            "    time.sleep(5)\n"
+            "except KeyboardInterrupt:\n"
+            "    pass\n"
+            "Torn()\n")
+    ran = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert ran.returncode == 0, ran.stderr
+    assert ran.stderr.count("half-built") == 1, ran.stderr
