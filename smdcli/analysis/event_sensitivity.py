@@ -24,6 +24,7 @@ import numpy as np
 
 from smdcli.elements.base import KINK, RATE
 from smdcli.elements import State
+from smdcli.analysis.model_derivative import combined
 from smdcli.model import Model
 from smdcli.solvers.events.decisions import impact, project
 from smdcli.solvers.events.piecewise import PiecewiseRun
@@ -84,8 +85,8 @@ class EventSensitivityRun(PiecewiseRun):
         """scale_i times the total derivative along parameter i of read(scene, c): the scene at a stencil point
         and c, what to multiply a scaled sensitivity by to move a quantity with the parameter to that point."""
         scenes, offsets, weights = self.stencils[i]
-        values = [np.asarray(read(scene, o / self.scales[i]), dtype=float) for scene, o in zip(scenes, offsets)]
-        return sum(w * (v - values[0]) for w, v in zip(weights[1:], values[1:]))
+        return combined(weights, [np.asarray(read(scene, o / self.scales[i]), dtype=float)
+                                  for scene, o in zip(scenes, offsets)])
 
     def shifted(self, states, i: int, c: float, dq: list | None = None) -> list[State]:
         """The states with their internal variables moved c times their scaled sensitivities to parameter i (dq: as
@@ -146,8 +147,9 @@ class EventSensitivityRun(PiecewiseRun):
         return self._breaks_seen
 
     def _reseeded(self, Z: np.ndarray, t: float) -> np.ndarray:
-        """Z with its generators reseeded at t and each sensitivity's generator block set to their derivative there."""
-        if not self._seeds and len(self.break_times):  # every break's at once: the generators' states in one call
+        """Z with its generators reseeded at break t and each sensitivity's generator block set to their derivative
+        there."""
+        if not self._seeds:  # every break's at once: the generators' states in one call
             at = self.break_times
 
             def reseeded(scene, c):
@@ -155,18 +157,7 @@ class EventSensitivityRun(PiecewiseRun):
             table = [self.total(i, reseeded) for i in range(self.P)]
             own = np.hstack([signal.exo_states(at) for _, _, signal, _ in self.scene.blocks])
             self._seeds.update({float(time): ([d[row] for d in table], own[row]) for row, time in enumerate(at)})
-        found = self._seeds.get(t)
-        if found is None:
-            n, s = self.n, self.scene.size
-
-            def reseeded_at(scene, c):
-                w = np.zeros(s)
-                scene.reseed(w, t)
-                return w[2 * n:]
-            w = np.zeros(s)
-            self.scene.reseed(w, t)
-            found = self._seeds[t] = ([self.total(i, reseeded_at) for i in range(self.P)], w[2 * n:])
-        seeds, own = found
+        seeds, own = self._seeds[t]  # t is a break: carry and cross_break reseed nowhere else
         s, n = self.scene.size, self.n
         Z[2 * n:s] = own  # the state's own generators, as the run reseeds them
         for i, seed in enumerate(seeds):
@@ -414,14 +405,9 @@ def _values(state: State) -> list[float]:
 def event_sensitivities(model: Model, derivatives: list, scales: np.ndarray, grid: np.ndarray):
     """(x, v, a (N, n), S (N, P, 2n) scaled sensitivities of x and v, dA (N, P, n) of a, the run, the state's stated
     accuracy (the sensitivities': EVENT_ERROR at least)) of a piecewise-linear scene by the exact event-driven run."""
-    from smdcli.solvers.base import stated_rounding
-
     held, _ = first_order_hold(model, grid)
     run = EventSensitivityRun(held, grid, derivatives, scales)
     x, v, a, history = run.run()
     n = model.n
     S, rates = run.outputs()
-    growth = max((flow.omega for flow in run.flows.values()), default=0.0)
-    h = run.h_out
-    stated = stated_rounding(len(grid) + 8 * len(history.events), max(1.0, growth * h))
-    return x, v, a, S[:, :, :2 * n], rates[:, :, n:2 * n], run, stated
+    return x, v, a, S[:, :, :2 * n], rates[:, :, n:2 * n], run, run.stated(len(history.events))

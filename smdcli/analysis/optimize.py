@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from smdcli.analysis.model_derivative import check_once, derivative
+from smdcli.analysis.model_derivative import check_once, model_derivatives
 from smdcli.analysis.optimize_search import FEASIBLE, local_search, violation
 from smdcli.analysis.response_measures import GROUND, receptance_peaks, rms, time_measure, transmissibility_peaks
 from smdcli.errors import ScenarioError, UsageError
@@ -90,6 +90,11 @@ class Optimum:
     constraints: list = field(default_factory=list)  # (text, limit, value at the optimum, binds)
     records: list = field(default_factory=list)  # (record file, the measure under it at the optimum)
     over: str = "max"
+
+    @property
+    def in_frequency(self) -> bool:
+        """Whether the objective is a frequency response's peak (drawn against frequency, its peaks marked)."""
+        return self.objective.partition(":")[0] in PEAKS
 
 
 def read_objective(text: str, dofs: tuple[str, ...], source: str) -> Objective:
@@ -205,8 +210,7 @@ class Problem:
                 raise UsageError(f"{self.sc.path}: {kind} needs a linear scene (its receptance); a nonlinear one "
                                  "takes peak_displacement")
             model = model.dense()
-            doc, grid = tomllib.loads(sc.text), time_grid(sc.time)
-            derived = [derivative(sc, doc, model, grid, path) for path in self.paths]
+            derived = model_derivatives(sc, model, time_grid(sc.time), self.paths)
             point["linear"] = (model, [(d.of(lambda m: m.dense().M), d.of(lambda m: m.dense().C),
                                         d.of(lambda m: m.dense().K)) for d in derived])
         model, derived = point["linear"]

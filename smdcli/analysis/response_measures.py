@@ -44,6 +44,8 @@ def frequency_peaks(M, C, K, dof: int, derived, input_dof: int | None) -> np.nda
     dZ/dp Y), Y = Z^-1 r)."""
     from scipy.optimize import brentq
 
+    from smdcli.sweep.frequency import amplitude_slope  # the slope one frequency at a time, as the sweep locates
+
     n = len(M)
     support = input_dof is None
     ones = np.ones(n)
@@ -61,7 +63,7 @@ def frequency_peaks(M, C, K, dof: int, derived, input_dof: int | None) -> np.nda
             return (w**2 * (M @ ones)).astype(complex), 2 * w * (M @ ones)
         return np.broadcast_to(force, w.shape[:-1] + (n,)), np.zeros(w.shape[:-1] + (n,))
 
-    def slopes_at(ws):  # d|R_dof|^2 / dw at each of ws
+    def slopes_at(ws):  # d|R_dof|^2 / dw at each of ws at once (amplitude_slope's, vectorized over the grid)
         W = np.asarray(ws, dtype=float)[:, None, None]
         Z = K[None] - W**2 * M[None] + 1j * W * C[None]
         r, dr = load(ws)
@@ -72,8 +74,8 @@ def frequency_peaks(M, C, K, dof: int, derived, input_dof: int | None) -> np.nda
     slopes = slopes_at(grid)  # every grid frequency at once
     located = [0.0] if slopes[1] < 0 else []
     for i in np.flatnonzero((slopes[:-1] > 0) & (slopes[1:] <= 0)):
-        located.append(float(brentq(lambda w: float(slopes_at([w])[0]), grid[i], grid[i + 1], xtol=1e-15 * top,
-                                    rtol=4 * EPS, maxiter=200)))
+        located.append(float(brentq(lambda w: amplitude_slope((M, C, K), w, dof, input_dof or 0, support)[0],
+                                    grid[i], grid[i + 1], xtol=1e-15 * top, rtol=4 * EPS, maxiter=200)))
     if slopes[-1] > 0:  # still rising at 3 times the highest mode: a massless DOF or a rigid input; take the end
         located.append(float(grid[-1]))
     rows = []

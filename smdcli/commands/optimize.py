@@ -63,7 +63,7 @@ def optimize_command(path: str | Path, params: list[str], objective: str | None,
 
 def _responses(run):
     """The objective's response at the start and at the optimum, as the figure draws them."""
-    if run.objective.startswith(("peak_receptance", "peak_transmissibility")):
+    if run.in_frequency:
         from smdcli.plots.optimize import receptance_curve
 
         return receptance_curve(run, np.clip(run.initial, run.lower, run.upper)), receptance_curve(run, run.optimum)
@@ -74,16 +74,9 @@ def _responses(run):
     measure = read_objective(run.objective, tuple(run.sc.dof_names), run.scenario)
     out = []
     for values in (np.clip(run.initial, run.lower, run.upper), run.optimum):
-        member = scenario_with(run.sc, dict(zip(run.parameter, map(float, values))))
-        result = smdcli.simulate(member)
+        result = smdcli.simulate(scenario_with(run.sc, dict(zip(run.parameter, map(float, values)))))
         if measure.kind == "peak_acceleration":  # absolute, as the objective: relative plus the ground's
-            from smdcli.model import build
-            from smdcli.model.system import GROUND_DOF
-
-            model = build(member)
-            series = result.acceleration[:, measure.dof] + sum(
-                (signal.value(result.time) for signal, dof in zip(model.signals, model.force_dofs)
-                 if dof == GROUND_DOF), np.zeros(len(result.time)))
+            series = result.absolute("acceleration")[:, measure.dof]
         elif measure.kind == "peak_drift" and measure.other >= 0:
             series = result.displacement[:, measure.dof] - result.displacement[:, measure.other]
         else:

@@ -14,7 +14,7 @@ def optimize_figure(run, before, after):
     and |H|, or time and x), drawn together; a receptance's located peaks marked."""
     fig = _figure(figsize=(9.0, 4.2))
     ax = fig.subplots()
-    receptance = run.objective.startswith(("peak_receptance", "peak_transmissibility"))
+    receptance = run.in_frequency
     support = run.objective.startswith("peak_transmissibility")
     dof = run.objective.partition(":")[2]
     unit = "" if run.units == "1" else f" {run.units}"

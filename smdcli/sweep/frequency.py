@@ -163,7 +163,7 @@ def resonance_peaks(family: Family, omega: np.ndarray, amplitude: np.ndarray, do
     return peaks
 
 
-def _slope(matrices, w: float, j: int, dof: int, ground: bool) -> tuple[float, float, float, float]:
+def amplitude_slope(matrices, w: float, j: int, dof: int, ground: bool) -> tuple[float, float, float, float]:
     """(d|H_j|^2/dw, |H_j|, the condition number of Z, a bound of the slope's rounding) at w: H = Z^-1 b with
     Z = K - w^2 M + i w C, dH/dw = Z^-1 (db/dw - Z' H), Z' = -2 w M + i C; under ground motion H is the absolute
     motion 1 + Y with b = w^2 M 1."""
@@ -191,19 +191,19 @@ def _peak(matrices, low: float, high: float, j: int, dof: int, ground: bool) -> 
     from scipy.optimize import brentq
 
     def slope(w):
-        return _slope(matrices, w, j, dof, ground)[0]
+        return amplitude_slope(matrices, w, j, dof, ground)[0]
 
     grid = np.linspace(low, high, 17)
     values = np.array([slope(w) for w in grid])
     falls = np.flatnonzero((values[:-1] > 0) & (values[1:] <= 0))
     if not len(falls):  # flat to rounding: the sample with the largest amplitude
-        sizes = [_slope(matrices, w, j, dof, ground)[1] for w in grid]
+        sizes = [amplitude_slope(matrices, w, j, dof, ground)[1] for w in grid]
         w = float(grid[int(np.argmax(sizes))])
         return w, float(max(sizes)), float(grid[1] - grid[0]), 0.0
-    best = max(falls, key=lambda i: _slope(matrices, grid[i + 1], j, dof, ground)[1])
+    best = max(falls, key=lambda i: amplitude_slope(matrices, grid[i + 1], j, dof, ground)[1])
     lo, hi = grid[best], grid[best + 1]
     w = float(brentq(slope, lo, hi, xtol=1e-300, rtol=4 * np.finfo(float).eps))
-    _, size, condition, rounding = _slope(matrices, w, j, dof, ground)
+    _, size, condition, rounding = amplitude_slope(matrices, w, j, dof, ground)
     # The zero moves by the slope's rounding over the slope's own derivative there (a central difference)
     h = 1e-5 * max(w, 1e-300)
     curvature = abs(slope(w + h) - slope(w - h)) / (2 * h)

@@ -340,6 +340,15 @@ class PiecewiseRun(Crossings, Batches):
             contact += value if term == "contact" else 0.0
         return self.kinetic(z), strain, contact
 
+    def stated(self, events: int) -> float:
+        """The run's stated accuracy: rounding over its output steps and events, grown by its fastest mode's step."""
+        from smdcli.solvers.base import stated_rounding
+
+        grid = self.grid
+        growth = max((flow.omega for flow in self.flows.values()), default=0.0)
+        h = float(grid[-1] - grid[0]) / max(len(grid) - 1, 1) if len(grid) > 1 else 0.0
+        return stated_rounding(len(grid) + 8 * events, max(1.0, growth * h))
+
     # ------------------------------------------------------------------------------------- energy
     def kinetic(self, z: np.ndarray) -> float:
         """1/2 v^T M v."""
@@ -360,12 +369,7 @@ def solve_piecewise(model: Model, grid: np.ndarray):
     start = time.perf_counter()
     run = PiecewiseRun(model, grid)
     x, v, a, history = run.run()
-    from smdcli.solvers.base import stated_rounding
-
-    growth = max((flow.omega for flow in run.flows.values()), default=0.0)
-    span = float(grid[-1] - grid[0]) if len(grid) > 1 else 0.0
-    h = span / max(len(grid) - 1, 1)
-    stated = stated_rounding(len(grid) + 8 * len(history.events), max(1.0, growth * h))
+    stated = run.stated(len(history.events))
     counts = {}
     for _, _, kind in history.events:
         counts[kind] = counts.get(kind, 0) + 1
