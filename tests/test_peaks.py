@@ -170,3 +170,21 @@ def test_histories_at_rest_cost_no_located_intervals(monkeypatch):
     assert found[0] == pytest.approx(1.0, abs=1e-8) and np.abs(x[0]).max() < 1 - 1e-4  # quintic: O(h^6)
     assert not found[1:].any()
     assert sum(located) <= 2 * 8 + 2  # either side of each of |sin|'s 8 crests in 3.7 periods (and an end)
+
+
+def test_a_run_s_largest_peaks_in_time_are_each_located():
+    """local_peaks, the pieces of a largest-peak objective: the 8 largest local maxima of |x| of a damped free
+    vibration x = exp(-s t) cos(w t), sampled at w h = 0.04, against their closed form (the start, then
+    t_k = (k pi - atan(s / w)) / w), to 1e-10 in value and 1e-7 s in time."""
+    from smdcli.solvers.peaks import local_peaks
+
+    s, w = 0.1, 2.0
+    t = np.arange(0.0, 20.0 + 1e-9, 0.02)
+    decay, c, d = np.exp(-s * t), np.cos(w * t), np.sin(w * t)
+    x = decay * c
+    v = -decay * (s * c + w * d)
+    a = decay * ((s * s - w * w) * c + 2 * s * w * d)
+    values, times = local_peaks(t, x, v, a, count=8)
+    t_k = np.concatenate([[0.0], (np.arange(1, 8) * np.pi - np.arctan(s / w)) / w])
+    np.testing.assert_allclose(times, t_k, atol=1e-7)
+    np.testing.assert_allclose(values, np.abs(np.exp(-s * t_k) * np.cos(w * t_k)), rtol=1e-10)

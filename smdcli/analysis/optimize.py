@@ -33,7 +33,8 @@ import numpy as np
 
 from smdcli.analysis.model_derivative import check_once, model_derivatives
 from smdcli.analysis.optimize_search import FEASIBLE, local_search, violation
-from smdcli.analysis.response_measures import GROUND, receptance_peaks, rms, time_measure, transmissibility_peaks
+from smdcli.analysis.response_measures import (GROUND, TIME_PEAKS, receptance_peaks, rms, time_measure,
+                                               transmissibility_peaks)
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import build, time_grid
 from smdcli.scenario import Scenario
@@ -44,6 +45,7 @@ OBJECTIVES = ("peak_receptance", "peak_transmissibility", "rms", "rms_drift", "p
 UNITS = {"peak_receptance": "m/N", "peak_transmissibility": "1", "rms": "m", "rms_drift": "m", "peak_displacement": "m",
          "peak_drift": "m", "peak_acceleration": "m/s^2", "residual_displacement": "m"}
 TIME_DOMAIN = ("peak_displacement", "peak_drift", "peak_acceleration", "residual_displacement")
+TIME_PEAK_KINDS = ("peak_displacement", "peak_drift")  # the largest of a run's located peaks in time
 PEAKS = ("peak_receptance", "peak_transmissibility")  # minimized as the minimax over located peaks
 DISTINCT = 1e-3  # optima closer than this share of the bounds' widths are one
 
@@ -81,7 +83,8 @@ class Optimum:
     history_objective: np.ndarray
     history_parameters: np.ndarray
     optima: list[tuple[np.ndarray, float]]  # distinct local optima found, best first
-    peaks_before: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (frequency rad/s, |H|) rows
+    # located peaks: (frequency rad/s, |H|) rows, or (time s, |x|) of a largest peak in time
+    peaks_before: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     peaks: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     wall_time_s: float = 0.0
     outputs: list = field(default_factory=list)
@@ -95,6 +98,11 @@ class Optimum:
     def in_frequency(self) -> bool:
         """Whether the objective is a frequency response's peak (drawn against frequency, its peaks marked)."""
         return self.objective.partition(":")[0] in PEAKS
+
+    @property
+    def peak_axis(self) -> tuple[str, str]:
+        """What the first column of peaks is: (name, units)."""
+        return ("frequency", "rad/s") if self.in_frequency else ("time", "s")
 
 
 def read_objective(text: str, dofs: tuple[str, ...], source: str) -> Objective:
@@ -165,8 +173,23 @@ class Problem:
     @property
     def minimax(self) -> bool:
         """Whether the objective is a largest of several smooth pieces, minimized as such (the epigraph): a
-        frequency response's peaks, or the worst of several records."""
-        return self.objective.kind in PEAKS or bool(self.records) and self.over == "max"
+        frequency response's peaks, a run's peaks in time, or the worst of several records."""
+        kind = self.objective.kind
+        return kind in PEAKS or (bool(self.records) or kind in TIME_PEAK_KINDS) and self.over == "max"
+
+    def slots(self, measure: Objective) -> int:
+        """How many pieces of a largest the search holds a constraint for: a receptance's peaks (one a mode, and
+        the static one), a run's largest peaks in time, one per record or both."""
+        each = TIME_PEAKS if measure.kind in TIME_PEAK_KINDS else 1
+        if self.records:
+            return len(self.records) * each
+        return len(self.sc.dof_names) + 1 if measure.kind in PEAKS else each
+
+    def record_values(self, values: np.ndarray) -> list[float]:
+        """The objective under each record at values."""
+        self.evaluate(values)
+        point = self._cache[np.asarray(values, dtype=float).tobytes()]
+        return [time_measure(s, self.objective)[0] for s in point["records"]]
 
     def scene(self, values: np.ndarray) -> Scenario:
         """The scenario at these values (ScenarioError naming what a value makes invalid)."""
@@ -194,16 +217,21 @@ class Problem:
             if not self.records:
                 if "sensitivity" not in point:
                     point["sensitivity"] = sensitivity(sc, self.paths)
-                return (*time_measure(point["sensitivity"], measure), None)
+                return time_measure(point["sensitivity"], measure)
             if "records" not in point:  # each record's run at these values
                 point["records"] = [sensitivity(scenario_with(under, point["values"]), self.paths)
                                     for _, under in self.records]
             each = [time_measure(s, measure) for s in point["records"]]
-            rows = np.array([[r, value, *gradient] for r, (value, gradient) in enumerate(each)])
+            values = np.array([value for value, _, _ in each])
             if self.over == "mean":
-                return float(rows[:, 1].mean()), rows[:, 2:].mean(axis=0), rows
-            worst = int(np.argmax(rows[:, 1]))
-            return float(rows[worst, 1]), rows[worst, 2:].copy(), rows
+                return float(values.mean()), np.mean([gradient for _, gradient, _ in each], axis=0), None
+            worst = int(np.argmax(values))
+            if each[0][2] is None:  # one piece a record: (record, value, gradient...) rows
+                pieces = np.array([[r, value, *gradient] for r, (value, gradient, _) in enumerate(each)])
+            else:  # every record's largest peaks in time, largest first
+                pieces = np.concatenate([rows for _, _, rows in each])
+                pieces = pieces[np.argsort(-pieces[:, 1], kind="stable")]
+            return float(values[worst]), each[worst][1].copy(), pieces
         if "linear" not in point:
             model = build(sc)
             if not model.is_linear:
@@ -281,7 +309,7 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
     best = lower + theta * width
     value, gradient, detail = problem.evaluate(best)
     on_bound = np.where(theta <= 1e-9, -1, np.where(theta >= 1 - 1e-9, 1, 0))
-    peaks = detail[:, :2] if detail is not None and goal.kind in PEAKS else np.zeros((0, 2))
+    peaks = _peaks(detail, goal, problem)
     met = [(text, limit, problem.evaluate(best, m)[0]) for text, (m, limit) in zip(subject_to, limits)]
     met = [(text, limit, value, value >= limit * (1 - 1e-6)) for text, limit, value in met]
     return Optimum(
@@ -291,11 +319,18 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
         message=str(result.message), iterations=int(result.nit), solves=problem.solves,
         history_objective=np.array([h[1] for h in history]),
         history_parameters=np.array([lower + h[0] * width for h in history]).reshape(len(history), len(paths)),
-        optima=optima, peaks_before=detail_before[:, :2] if detail_before is not None and goal.kind in PEAKS
-        else np.zeros((0, 2)),
+        optima=optima, peaks_before=_peaks(detail_before, goal, problem),
         peaks=peaks, wall_time_s=time.perf_counter() - begin, sc=sc, input_dof=problem.input_dof, constraints=met,
-        records=[(str(path), float(row[1])) for (path, _), row in zip(problem.records, detail)]
+        records=list(zip(map(str, (path for path, _ in problem.records)), problem.record_values(best)))
         if problem.records else [], over=over)
+
+
+def _peaks(detail, goal: Objective, problem: Problem) -> np.ndarray:
+    """The located peaks drawn and reported: a frequency response's (frequency rad/s, value) or one run's largest in
+    time (time s, value) rows; none for the other measures."""
+    if detail is None or goal.kind not in PEAKS and (goal.kind not in TIME_PEAK_KINDS or problem.records):
+        return np.zeros((0, 2))
+    return detail[:, :2].copy()
 
 
 def _under_records(sc: Scenario, records: tuple, goal: Objective, over: str) -> tuple:

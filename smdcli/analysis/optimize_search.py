@@ -25,8 +25,7 @@ def local_search(problem, start: np.ndarray, lower: np.ndarray, width: np.ndarra
 
     history = []
     minimax = problem.minimax
-    # the most pieces of the largest: a receptance's peaks (one a mode, and the static one), or the records
-    slots = len(problem.records) if problem.records else len(problem.sc.dof_names) + 1
+    slots = problem.slots(problem.objective)
 
     def at(theta):
         value, gradient, detail = problem.evaluate(lower + np.clip(theta, 0.0, 1.0) * width)
@@ -36,7 +35,8 @@ def local_search(problem, start: np.ndarray, lower: np.ndarray, width: np.ndarra
     box = [(0.0, 1.0)] * len(start)
     options = {"ftol": TOLERANCE, "maxiter": 200}
     P = len(start)
-    limits = [_limit(problem, m, limit, lower, width, slots, P + minimax) for m, limit in problem.constraints]
+    limits = [_limit(problem, m, limit, lower, width, problem.slots(m), P + minimax)
+              for m, limit in problem.constraints]
     if not minimax:
         def fun(theta):
             value, gradient, _ = at(theta)
@@ -50,12 +50,12 @@ def local_search(problem, start: np.ndarray, lower: np.ndarray, width: np.ndarra
 
     def constraints(y):
         _, _, detail = at(y[:-1])
-        values = y[-1] - detail[:, 1] / scale
-        return np.resize(values[np.argsort(detail[:, 0])], slots) if len(values) < slots else values[:slots]
+        values = y[-1] - detail[:, 1] / scale  # the pieces in their producer's order (largest first in time)
+        return np.resize(values, slots) if len(values) < slots else values[:slots]
 
     def jacobian(y):
         _, _, detail = at(y[:-1])
-        rows = np.hstack([-detail[:, 2:] * width / scale, np.ones((len(detail), 1))])[np.argsort(detail[:, 0])]
+        rows = np.hstack([-detail[:, 2:] * width / scale, np.ones((len(detail), 1))])
         return np.resize(rows, (slots, rows.shape[1])) if len(rows) < slots else rows[:slots]
 
     value0 = at(start)[0]

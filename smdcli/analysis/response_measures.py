@@ -134,34 +134,40 @@ def rms(M, C, K, input_dof: int, dof: int, derived, other: int | None = None) ->
     return value, np.array(gradient)
 
 
-def time_measure(s, measure) -> tuple[float, np.ndarray]:
-    """A time-domain measure of a run and its gradient from the run's sensitivities s: the located peak of |x| or of
-    a drift |x_a - x_b| (its derivative at the peak's time, the envelope theorem), the largest sampled |a| (absolute
-    under support motion: relative plus the ground's), or |x| at the run's end."""
-    from smdcli.solvers.peaks import located_peaks, quintic_at
+TIME_PEAKS = 8  # a largest peak in time minimized as the minimax over this many of its run's largest local peaks
+
+
+def time_measure(s, measure) -> tuple[float, np.ndarray, np.ndarray | None]:
+    """A time-domain measure of a run, its gradient from the run's sensitivities s, and the smooth pieces of a largest
+    peak: the located peak of |x| or of a drift |x_a - x_b| with rows (time, |peak|, d|peak|/dp...) of the run's
+    TIME_PEAKS largest local peaks in time (each one's derivative at its own time, the envelope theorem: the
+    largest is their maximum, minimized as such); the largest sampled |a| (absolute under support motion: relative
+    plus the ground's); |x| at the run's end."""
+    from smdcli.solvers.peaks import local_peaks, quintic_at
 
     j, kind = measure.dof, measure.kind
-    if kind == "peak_displacement":
-        return float(s.peak_displacement[j]), s.d_peak_displacement[:, j].copy()
     if kind == "residual_displacement":
         x = float(s.displacement[-1, j])
-        return abs(x), np.sign(x) * s.d_displacement[:, -1, j]
+        return abs(x), np.sign(x) * s.d_displacement[:, -1, j], None
     if kind == "peak_acceleration":
         a, da = s.acceleration[:, j].copy(), s.d_acceleration[:, :, j].copy()
         ground = s.ground_acceleration()
         if ground is not None:
             a, da = a + ground[0], da + ground[1]
         k = int(np.argmax(np.abs(a)))
-        return float(abs(a[k])), np.sign(a[k]) * da[:, k]
-    k = measure.other  # peak_drift
+        return float(abs(a[k])), np.sign(a[k]) * da[:, k], None
+    k = measure.other if kind == "peak_drift" else GROUND
 
-    def drift(q):  # (..., N, n) -> (..., N)
+    def drift(q):  # (..., N, n) -> (..., N): x_j, or the drift x_j - x_k
         return q[..., j] - (q[..., k] if k != GROUND else 0.0)
     series = [drift(q) for q in (s.displacement, s.velocity, s.acceleration)]
-    peak, at = located_peaks(s.time, *(q[:, None] for q in series), s.event_times, with_times=True)
-    when = np.array([at[0]])
-    sign = np.sign(quintic_at(s.time, *series, when)[0])
-    derived = [drift(q) for q in (s.d_displacement, s.d_velocity, s.d_acceleration)]
-    gradient = np.array([sign * quintic_at(s.time, derived[0][p], derived[1][p], derived[2][p], when)[0]
-                         for p in range(len(s.parameter))])
-    return float(peak[0]), gradient
+    values, times = local_peaks(s.time, *series, s.event_times, TIME_PEAKS)
+    signs = np.sign(quintic_at(s.time, *series, times))
+    if s.exact_at is not None:  # on the exact flow at each peak's time
+        derivative = np.array([drift(s.exact_at(float(t))) for t in times]).reshape(len(times), -1)
+    else:
+        derived = [drift(q) for q in (s.d_displacement, s.d_velocity, s.d_acceleration)]
+        derivative = np.array([quintic_at(s.time, derived[0][p], derived[1][p], derived[2][p], times)
+                               for p in range(len(s.parameter))]).T.reshape(len(times), -1)
+    rows = np.column_stack([times, values, signs[:, None] * derivative])
+    return float(values[0]), rows[0, 2:].copy(), rows

@@ -13,6 +13,7 @@ Must not import: io, plots, commands, cli.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -73,6 +74,7 @@ class Sensitivity:
     model: object = None  # the scene's Model
     derivatives: list = field(default_factory=list)  # model_derivative.Derivative per parameter
     event_times: np.ndarray = field(default_factory=lambda: np.zeros(0))  # where the solution is not smooth
+    exact_at: Callable | None = None  # t -> (P, n) d_displacement at any time, on the exact flow (event runs)
 
     def ground_acceleration(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The support's acceleration on the grid (N,) and its derivative (P, N), or None without support motion:
@@ -199,6 +201,8 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
     found = _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_peaks, accuracy, wall,
                     forward, tuple(notes), method)
     found.event_times = events
+    if run is not None:
+        found.exact_at = lambda t: run.at(t)[:, :n] / scales[:, None]
     return found
 
 

@@ -97,7 +97,7 @@ def optimize_summary(run) -> dict:
                         "initial": float(a), "optimum": float(b), "on_bound": ["lower", None, "upper"][int(e) + 1]}
                        for p, lo, hi, a, b, e in zip(run.parameter, run.lower, run.upper, run.initial, run.optimum,
                                                      run.on_bound)],
-        "peaks": [{"frequency_rad_s": float(w), "value": float(h)} for w, h in run.peaks],
+        "peaks": [{"_".join(run.peak_axis).replace("/", "_"): float(w), "value": float(h)} for w, h in run.peaks],
         "constraints": [{"constraint": text, "limit": limit, "value": value, "binds": bool(binds)}
                         for text, limit, value, binds in run.constraints],
         "records": [{"file": path, "value": value} for path, value in run.records], "over": run.over,
@@ -120,8 +120,9 @@ def format_optimize(d: dict) -> str:
     if d["peaks"]:
         top = max(peak["value"] for peak in d["peaks"])
         active = [peak for peak in d["peaks"] if peak["value"] >= top * (1 - 1e-6)]
-        lines.append("  active peaks: " + ", ".join(f"{peak['value']:.6g} at {peak['frequency_rad_s']:.6g} rad/s"
-                                                    for peak in active))
+        lines.append("  active peaks: " + ", ".join(
+            f"{peak['value']:.6g} at {peak['frequency_rad_s']:.6g} rad/s" if "frequency_rad_s" in peak
+            else f"{peak['value']:.6g} at t = {peak['time_s']:.6g} s" for peak in active))
     if d["records"]:
         lines.append(f"  over {len(d['records'])} records ({d['over']}): " +
                      ", ".join(f"{Path(r['file']).name} {r['value']:.6g}" for r in d["records"]))

@@ -20,7 +20,8 @@ from smdcli.io.hdf5 import axis, with_scales, write_provenance
 def write_optimize(path: Path, run) -> None:
     """/parameter, /lower, /upper, /initial, /optimum, /gradient, /objective (before, at the optimum), /optima/...,
     /history/objective and /history/parameters (the best start's path), /constraints/... (each one's limit, value at
-    the optimum, whether it binds), /peaks/before and /peaks/optimum (a receptance's: frequency rad/s, |H| m/N); root
+    the optimum, whether it binds), /peaks/before and /peaks/optimum (a receptance's: frequency rad/s, |H| m/N; a peak in time's: time s,
+    |x| m); root
     attributes objective, converged, message, iterations, solves."""
     import h5py
 
@@ -67,7 +68,8 @@ def write_optimize(path: Path, run) -> None:
             peaks = f.create_group("peaks")
             for name, rows in (("before", run.peaks_before), ("optimum", run.peaks)):
                 ds = peaks.create_dataset(name, data=rows)
-                ds.attrs["columns"] = np.array(["frequency rad/s", "|H| m/N"], dtype=h5py.string_dtype())
+                name, unit = run.peak_axis
+                ds.attrs["columns"] = np.array([f"{name} {unit}", f"value {run.units}"], dtype=h5py.string_dtype())
 
 
 def optimized_toml(run, out_dir: Path) -> str:

@@ -11,7 +11,7 @@ from smdcli.plots.common import _figure, envelope, plain_log_labels
 
 def optimize_figure(run, before, after):
     """before, after: (x axis, y) of the objective's response at the start and at the optimum (frequency in rad/s
-    and |H|, or time and x), drawn together; a receptance's located peaks marked."""
+    and |H|, or time and x), drawn together; the located peaks marked (a receptance's, or the largest in time)."""
     fig = _figure(figsize=(9.0, 4.2))
     ax = fig.subplots()
     receptance = run.in_frequency
@@ -31,7 +31,11 @@ def optimize_figure(run, before, after):
         ax.set_xlabel("Frequency [rad/s]")
         ax.set_ylabel(f"|a_{dof} / a_ground| (absolute)" if support else f"|x_{dof} / F| [m/N]")
         plain_log_labels(ax.yaxis)
-    else:
+    else:  # the largest peaks in time, those within 1e-6 of the largest (the active ones) marked on their curve
+        for rows, (xs, ys), color in ((run.peaks_before, before, "0.55"), (run.peaks, after, "C3")):
+            active = rows[rows[:, 1] >= (1 - 1e-6) * rows[:, 1].max(initial=0.0)] if len(rows) else rows
+            ax.plot(active[:, 0], np.sign(np.interp(active[:, 0], xs, ys)) * active[:, 1], "o", color=color, ms=6,
+                    mfc="none")
         ax.set_xlabel("Time [s]")
         kind = run.objective.partition(":")[0]
         ax.set_ylabel({"peak_acceleration": f"a_{dof} (absolute) [m/s^2]", "peak_drift": f"x_{dof.replace('-', ' - x_')} [m]"}

@@ -130,6 +130,46 @@ def row_peaks(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray,
     return done()
 
 
+def local_peaks(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray, events: np.ndarray = np.empty(0),
+                count: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """The count largest local maxima in time of |x| (one history, (N,) each), each located between its samples as
+    located_peaks locates the largest: (values, times), largest first. The pieces of a largest-peak objective, each
+    smooth in the parameters where the largest itself has a kink (two peaks in time trading places)."""
+    magnitude = np.abs(np.nan_to_num(x))
+    N = len(time)
+    if N < 3:
+        k = int(np.argmax(magnitude)) if N else 0
+        return (magnitude[k:k + 1].copy(), time[k:k + 1].copy()) if N else (np.zeros(0), np.zeros(0))
+    inner = magnitude[1:-1]
+    turn = (inner >= magnitude[:-2]) & (inner >= magnitude[2:]) & ((inner > magnitude[:-2]) | (inner > magnitude[2:]))
+    at = np.flatnonzero(turn) + 1
+    ends = [e for e, o in ((0, 1), (N - 1, N - 2)) if magnitude[e] > magnitude[o]]
+    at = np.concatenate([at, np.array(ends, dtype=int)])
+    if not len(at):
+        k = int(np.argmax(magnitude))
+        return magnitude[k:k + 1].copy(), time[k:k + 1].copy()
+    at = at[np.argsort(-magnitude[at], kind="stable")[:count]]
+    values, times = magnitude[at].copy(), time[at].copy()
+    usable = np.ones(N - 1, dtype=bool)
+    if len(events):
+        usable[np.clip(np.searchsorted(time, events, side="right") - 1, 0, N - 2)] = False
+        usable[np.clip(np.searchsorted(time, events, side="left") - 1, 0, N - 2)] = False
+    for side in (-1, 0):  # the interval before each sample, then the one after
+        k = at + side
+        inside = (k >= 0) & (k < N - 1)
+        inside[inside] &= usable[k[inside]]
+        if not inside.any():
+            continue
+        k = k[inside]
+        found, s = _interval_peaks(x[k], v[k], a[k], x[k + 1], v[k + 1], a[k + 1], time[k + 1] - time[k])
+        better = np.nan_to_num(found, nan=-1.0) > values[inside]
+        rows = np.flatnonzero(inside)[better]
+        values[rows] = found[better]
+        times[rows] = time[k[better]] + s[better] * (time[k[better] + 1] - time[k[better]])
+    order = np.argsort(-values, kind="stable")
+    return values[order], times[order]
+
+
 def jump_times(model, grid: np.ndarray) -> np.ndarray:
     """Where a scene's acceleration or state jumps within the grid: its forces' discontinuities (a kink leaves the
     acceleration continuous) and the ground's jumps."""
