@@ -96,16 +96,28 @@ def fit(scenarios, data, params, bounds: dict | None = None, max_iterations: int
 
 
 def optimize(scenario: Scenario | str | Path, params: dict, minimize: str, starts: int = 8, input_dof: str | None = None,
-             subject_to: tuple[str, ...] = (), records: tuple = (), over: str = "max"):
+             subject_to: tuple[str, ...] = (), records: tuple = (), over: str = "max", input_psd=None):
     """The parameter values within bounds ({path: (lo, hi)}) that minimize an objective subject to 'MEASURE <= VALUE'
     constraints (`smd optimize`'s), writing nothing: .parameter, .optimum, .value, .value_before, .optima, .peaks,
-    .constraints, .converged and the rest of its file."""
+    .constraints, .converged and the rest of its file. input_psd: the rms measures' one-sided input PSD in SI, a
+    white level or (frequencies Hz, levels) breakpoints (default white noise of level 1)."""
     from smdcli.analysis.optimize import optimize as optimized
 
     sc = scenario if isinstance(scenario, Scenario) else load(scenario)
     return optimized(sc, [(path, float(lo), float(hi)) for path, (lo, hi) in params.items()], minimize, starts,
                      input_dof, subject_to=tuple([subject_to] if isinstance(subject_to, str) else subject_to),
-                     records=tuple(records), over=over)
+                     records=tuple(records), over=over, psd=_psd(input_psd))
+
+
+def _psd(given):
+    """A white level, or (frequencies, levels) as random_vibration's Profile; None as it is."""
+    if given is None or isinstance(given, (int, float)):
+        return None if given is None else float(given)
+    import numpy as np
+
+    from smdcli.analysis.random_vibration import Profile
+
+    return Profile(*(np.asarray(q, dtype=float) for q in given))
 
 
 # name -> (module, attribute): the analyses and the pieces they take, imported on first use

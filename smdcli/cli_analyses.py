@@ -199,8 +199,9 @@ def optimize(
                                               "Default: \\[optimize] parameters."),
     minimize: Optional[str] = typer.Option(None, "--minimize", help="peak_receptance:DOF (the largest |x/F| over "
                                            "all frequencies), peak_transmissibility:DOF (under support motion), "
-                                           "rms:DOF or rms_drift:A-B (RMS under white noise of one-sided PSD 1 N^2/Hz on the "
-                                           "input), "
+                                           "rms:DOF, rms_drift:A-B or rms_acceleration:DOF (RMS under white noise of "
+                                           "one-sided PSD 1 N^2/Hz on the input, 1 (m/s^2)^2/Hz on a shaking support, "
+                                           "or --input-psd), "
                                            "or of the scenario's own run peak_displacement:DOF, peak_drift:A-B, "
                                            "peak_acceleration:DOF, residual_displacement:DOF. Default: \\[optimize] "
                                            "minimize."),
@@ -217,6 +218,11 @@ def optimize(
                                          "reported."),
     input_dof: Optional[str] = typer.Option(None, "--input", help="The DOF a unit force acts on for the frequency "
                                             "objectives (default: the first force's)."),
+    input_psd: Optional[str] = typer.Option(None, "--input-psd", help="The rms measures' input PSD, as smd psd "
+                                            "takes it: a two-column file of Hz and one-sided level (log-log between "
+                                            "breakpoints), or white:LEVEL. Default: white noise of level 1."),
+    psd_units: Optional[str] = typer.Option(None, "--psd-units", help="g (default) or m/s^2: the levels of a "
+                                            "support acceleration PSD (a force's are N^2/Hz)."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
     no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 and TOML files only."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
@@ -234,7 +240,7 @@ def optimize(
                                                 plots=not no_plots, progress=progress_wanted(quiet, as_json),
                                                 subject_to=tuple(subject_to or ()),
                                                 records=tuple(r for r in (records or "").split(",") if r),
-                                                over=over),
+                                                over=over, input_psd=input_psd, psd_units=psd_units),
                        {"scenario": str(scenario)}, as_json, quiet, optimize_summary,
                        lambda _, d: format_optimize(d))
     if not run.converged:

@@ -486,3 +486,105 @@ def test_an_absorber_s_rms_stroke_and_its_gradient_match_the_integral_and_differ
         slope = (8 * (at[1] - at[-1]) - (at[2] - at[-2])) / (12 * h)
         # (the stroke's variance does not depend on the absorber's k here: its derivative is rounding's)
         assert gradient[i] == pytest.approx(slope, rel=1e-6, abs=1e-6 * np.abs(gradient).max())
+
+
+SHAKEN_TMD = TMD.read_text().split("[[force]]")[0] + """
+[ground_motion]
+quantity = "acceleration"
+type = "sine"
+amplitude = 1.0
+omega = 5.0
+"""
+PROFILE = (np.array([0.2, 1.0, 3.0]), np.array([0.5, 2.0, 1.0]))  # Hz, one-sided level: log-log between
+
+
+def independent_variance(objective, support, k_t, c_t, profile):
+    """The variance of an rms measure of the TMD (primary m 1, k 25; absorber m 0.05) written out here: the integral
+    over f of |q(f)|^2 S(f) by scipy's quad, q from numpy's solve of the dynamic stiffness (a unit force on the
+    primary, or a unit support acceleration in relative coordinates, its absolute acceleration adding it back)."""
+    from scipy.integrate import quad
+
+    kind, _, dofs = objective.partition(":")
+    names = ["primary", "tmd"]
+
+    def power(hz):
+        w = 2 * np.pi * hz
+        Z = np.array([[25.0 + k_t - w * w + 1j * w * c_t, -k_t - 1j * w * c_t],
+                      [-k_t - 1j * w * c_t, k_t - 0.05 * w * w + 1j * w * c_t]])
+        x = np.linalg.solve(Z, -np.array([1.0, 0.05]) if support else np.array([1.0, 0.0]))
+        if kind == "rms_drift":
+            a, b = dofs.split("-")
+            return abs(x[names.index(a)] - x[names.index(b)]) ** 2
+        j = names.index(dofs)
+        q = -w * w * x[j] + (1.0 if support else 0.0) if kind == "rms_acceleration" else x[j]
+        return abs(q) ** 2
+    if profile is None:
+        pieces = [(a, b, lambda f: 1.0) for a, b in ((0, 0.6), (0.6, 1.0), (1.0, 5.0), (5.0, 50.0), (50.0, np.inf))]
+    else:
+        f, level = profile
+        pieces = [(f[i], f[i + 1], lambda x, i=i: level[i] * (x / f[i]) ** (np.log(level[i + 1] / level[i])
+                                                                         / np.log(f[i + 1] / f[i])))
+                  for i in range(len(f) - 1)]
+    return sum(quad(lambda x: power(x) * S(x), a, b, limit=500, epsabs=0, epsrel=1e-12,
+                    points=[0.7, 0.8, 0.9] if a < 0.8 < b and np.isfinite(b) else None)[0] for a, b, S in pieces)
+
+
+@pytest.mark.parametrize("objective, support, profile", [
+    ("rms_acceleration:tmd", False, None), ("rms_acceleration:primary", False, PROFILE), ("rms:primary", False, PROFILE),
+    ("rms:primary", True, None), ("rms_acceleration:primary", True, None), ("rms_drift:tmd-primary", True, PROFILE)])
+def test_rms_measures_under_white_noise_or_a_profile_on_a_force_or_the_support(objective, support, profile, tmp_path):
+    """Every rms measure (displacement, drift, absolute acceleration) on the TMD forced on its primary or shaken by
+    its support (which, without a force, is the input: 1 (m/s^2)^2/Hz), under white noise (Lyapunov) or a log-log
+    PSD profile (quadrature): the value against the integral of |q|^2 S written out here, to 1e-8, and the gradient
+    in the absorber's k and c against five-point differences of that integral, to 1e-6."""
+    from smdcli.analysis.optimize import Problem, read_objective, shaken
+    from smdcli.analysis.random_vibration import Profile
+    from smdcli.model import build
+
+    path = tmp_path / "scene.toml"
+    path.write_text(SHAKEN_TMD if support else TMD.read_text())
+    sc = smdcli.load(path)
+    assert shaken(build(sc), None) == support
+    paths = ["spring[1].k", "damper[0].c"]
+    problem = Problem(sc, paths, read_objective(objective, tuple(sc.dof_names), "tmd"), None if support else 0,
+                      psd=None if profile is None else Profile(*profile))
+    values = np.array([1.1, 0.07])
+    value, gradient, _ = problem.evaluate(values)
+    assert value == pytest.approx(np.sqrt(independent_variance(objective, support, *values, profile)), rel=1e-8)
+    for i in range(2):
+        h = 1e-4 * values[i]
+        at = {o: np.sqrt(independent_variance(objective, support, *(values + o * h * np.eye(2)[i]), profile))
+              for o in (-2, -1, 1, 2)}
+        slope = (8 * (at[1] - at[-1]) - (at[2] - at[-2])) / (12 * h)
+        assert gradient[i] == pytest.approx(slope, rel=1e-6, abs=1e-6 * np.abs(gradient).max()), i
+    run = smdcli.optimize(path, {"damper[0].c": (0.01, 1.0)}, objective, starts=1,
+                          input_psd=profile)  # the input as optimize finds it: the scene's at its own values
+    assert run.value_before == pytest.approx(np.sqrt(independent_variance(objective, support, 1.25, 0.1, profile)),
+                                             rel=1e-8)
+
+
+def test_an_input_psd_is_read_as_smd_psd_reads_it_and_white_noise_of_a_force_on_the_mass_is_refused(cli, tmp_path):
+    """--input-psd takes smd psd's profile file (g^2/Hz on a shaking support by default): the optimum's RMS equals
+    the Python API's under the same profile in SI; white noise on the primary gives its own acceleration infinite
+    variance: exit 2 in one line naming the measure, nothing written; a receptance of a scene with no force refused."""
+    shaken_scene = tmp_path / "shaken.toml"
+    shaken_scene.write_text(SHAKEN_TMD)
+    table = tmp_path / "profile.csv"
+    table.write_text("frequency,level\n" + "".join(f"{f},{s}\n" for f, s in zip(*PROFILE)))
+    ran = cli("optimize", shaken_scene, "--param", "damper[0].c=0.01:1", "--minimize", "rms:primary",
+              "--input-psd", table, "--starts", "2", "--no-plots", "-o", tmp_path / "out", "--json")
+    assert ran.exit_code == 0, ran.output
+    data = json.loads(ran.output)
+    api = smdcli.optimize(shaken_scene, {"damper[0].c": (0.01, 1.0)}, "rms:primary", starts=2,
+                          input_psd=(PROFILE[0], PROFILE[1] * 9.80665**2))
+    assert data["optimum_value"] == pytest.approx(api.value, rel=1e-12)
+    assert data["parameters"][0]["optimum"] == pytest.approx(api.optimum[0], rel=1e-9)
+    for args, message in (
+            ((TMD, "--minimize", "rms_acceleration:primary"), "infinite variance under white noise"),
+            ((shaken_scene, "--minimize", "peak_receptance:primary"), "peak_transmissibility:primary"),
+            ((TMD, "--minimize", "rms:primary", "--input-psd", tmp_path / "none.csv"), "--input-psd"),
+            ((TMD, "--minimize", "peak_receptance:primary", "--input-psd", table), "only the RMS measures"),
+            ((TMD, "--minimize", "rms:primary", "--input-psd", table, "--psd-units", "g"), "--psd-units")):
+        ran = cli("optimize", *args, "--param", "damper[0].c=0.01:1", "-o", tmp_path / "refused")
+        assert ran.exit_code == 2 and message in ran.output, ran.output
+        assert len(ran.output.strip().splitlines()) == 1 and not (tmp_path / "refused").exists()

@@ -6,9 +6,11 @@ Objectives (the parameter paths are the sweep's, every one bounded):
   of d|H|^2/dw (Brent's method between the neighbours of a grid laid over the modes), and the minimax is solved as
   such: the epigraph min t subject to t >= |H(w_j)| for each peak j, each with its exact gradient (at a peak
   d|H|/dw = 0, so d|H(w_j)|/dp = Re(conj(H) dH/dp) / |H| at the fixed w_j, dH/dp = -Z^-1 dZ/dp H), by SLSQP.
-- rms:<dof>: the RMS displacement under white noise of one-sided PSD 1 N^2/Hz on the input (smd psd's convention),
-  sqrt(Sigma_dd) of the Lyapunov equation A Sigma + Sigma A^T + B B^T / 2 = 0, its gradient from the same equation
-  differentiated (A dSigma + dSigma A^T = -(dA Sigma + Sigma dA^T + d(B B^T) / 2)).
+- rms:<dof>: the RMS displacement under white noise of one-sided PSD 1 N^2/Hz on the input (smd psd's convention;
+  1 (m/s^2)^2/Hz on a support that shakes a scene without forces), sqrt(Sigma_dd) of the Lyapunov equation
+  A Sigma + Sigma A^T + B B^T / 2 = 0, its gradient from the same equation differentiated (A dSigma + dSigma A^T =
+  -(dA Sigma + Sigma dA^T + d(B B^T) / 2)); rms_drift:<a>-<b> and rms_acceleration:<dof> (absolute) the same way;
+  under a PSD profile, the integral of |H|^2 S and of its derivative by quadrature.
 - peak_displacement:<dof>: the largest |x_dof| of the scenario's own run, located between samples, its gradient the
   exact sensitivity of the located peak (linear, yielding, friction, stop and smooth nonlinear scenes).
 
@@ -37,13 +39,15 @@ from smdcli.analysis.response_measures import (GROUND, TIME_PEAKS, receptance_pe
                                                transmissibility_peaks)
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import build, time_grid
+from smdcli.model.system import GROUND_DOF
 from smdcli.scenario import Scenario
 from smdcli.sweep.family import parameter_value, scenario_with
 
-OBJECTIVES = ("peak_receptance", "peak_transmissibility", "rms", "rms_drift", "peak_displacement", "peak_drift",
-              "peak_acceleration", "residual_displacement")
-UNITS = {"peak_receptance": "m/N", "peak_transmissibility": "1", "rms": "m", "rms_drift": "m", "peak_displacement": "m",
-         "peak_drift": "m", "peak_acceleration": "m/s^2", "residual_displacement": "m"}
+OBJECTIVES = ("peak_receptance", "peak_transmissibility", "rms", "rms_drift", "rms_acceleration", "peak_displacement",
+              "peak_drift", "peak_acceleration", "residual_displacement")
+UNITS = {"peak_receptance": "m/N", "peak_transmissibility": "1", "rms": "m", "rms_drift": "m", "rms_acceleration": "m/s^2",
+         "peak_displacement": "m", "peak_drift": "m", "peak_acceleration": "m/s^2", "residual_displacement": "m"}
+RMS = ("rms", "rms_drift", "rms_acceleration")  # under an input PSD: white noise, or a profile
 TIME_DOMAIN = ("peak_displacement", "peak_drift", "peak_acceleration", "residual_displacement")
 TIME_PEAK_KINDS = ("peak_displacement", "peak_drift")  # the largest of a run's located peaks in time
 PEAKS = ("peak_receptance", "peak_transmissibility")  # minimized as the minimax over located peaks
@@ -89,7 +93,7 @@ class Optimum:
     wall_time_s: float = 0.0
     outputs: list = field(default_factory=list)
     sc: Scenario | None = None
-    input_dof: int = 0
+    input_dof: int | None = 0  # the DOF a unit force acts on; None: the support's acceleration
     constraints: list = field(default_factory=list)  # (text, limit, value at the optimum, binds)
     records: list = field(default_factory=list)  # (record file, the measure under it at the optimum)
     over: str = "max"
@@ -162,9 +166,10 @@ class Problem:
     """The objective and the constraints' measures, each with its exact gradient, at any parameter values within
     the bounds; a scene solved once per point (its model's derivatives, or its sensitivities, serve every measure)."""
 
-    def __init__(self, sc: Scenario, paths: list[str], objective: Objective, input_dof: int,
-                 constraints: tuple = (), records: tuple = (), over: str = "max"):
+    def __init__(self, sc: Scenario, paths: list[str], objective: Objective, input_dof: int | None,
+                 constraints: tuple = (), records: tuple = (), over: str = "max", psd=None):
         self.sc, self.paths, self.objective, self.input_dof = sc, paths, objective, input_dof
+        self.psd = psd  # the input's one-sided PSD in SI: a profile, a white level, or None for white noise of 1
         self.constraints = constraints  # (Objective, limit) pairs: measure <= limit
         self.records, self.over = records, over  # (path, the scenario under that record) pairs
         self.solves = 0
@@ -242,8 +247,18 @@ class Problem:
             point["linear"] = (model, [(d.of(lambda m: m.dense().M), d.of(lambda m: m.dense().C),
                                         d.of(lambda m: m.dense().K)) for d in derived])
         model, derived = point["linear"]
-        if kind in ("rms", "rms_drift"):
-            return (*rms(model.M, model.C, model.K, self.input_dof, measure.dof, derived, measure.other), None)
+        if kind in RMS:
+            white = self.psd if isinstance(self.psd, float) else 1.0
+            profile = None if isinstance(self.psd, float) else self.psd
+            try:
+                value, gradient = rms(model.M, model.C, model.K, self.input_dof, measure.dof, derived, measure.other,
+                                      kind == "rms_acceleration", profile)
+            except UsageError as exc:
+                raise UsageError(f"{self.sc.path}: {measure.text}: {exc}") from None
+            return value * math.sqrt(white), gradient * math.sqrt(white), None
+        if self.input_dof is None and kind == "peak_receptance":
+            raise UsageError(f"{self.sc.path}: {measure.text} needs a force: the scene is shaken by its support "
+                             f"(peak_transmissibility:{self.sc.dof_names[measure.dof]}, or --input DOF)")
         if kind == "peak_transmissibility":
             if model.ground is None:
                 raise UsageError(f"{self.sc.path}: {measure.text} needs support motion (a [ground_motion] table); "
@@ -257,10 +272,12 @@ class Problem:
 
 def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: str, starts: int = 8,
              input_name: str | None = None, advance=None, subject_to: tuple[str, ...] = (),
-             records: tuple = (), over: str = "max") -> Optimum:
+             records: tuple = (), over: str = "max", psd=None) -> Optimum:
     """The parameters within bounds minimizing the objective subject to 'MEASURE <= VALUE' constraints, from the
     scenario's own values and a Latin hypercube of starts - 1 more; advance(1) after each start (a progress bar's).
-    UsageError where no start finds a point that meets the constraints."""
+    The rms measures take the input's one-sided PSD in SI (random_vibration.Profile, a white level, or None: white
+    noise of level 1): on the support's acceleration where the scene is shaken by it and has no force (and no
+    input_name), else on the input's DOF. UsageError where no start finds a point that meets the constraints."""
     from scipy.stats import qmc
 
     from smdcli.sweep.frequency import input_index
@@ -278,8 +295,12 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
     doc = tomllib.loads(sc.text)
     initial = np.array([parameter_value(doc, p) for p in paths], dtype=float)
     limits = tuple(read_constraint(text, tuple(base.dofs), str(sc.path)) for text in subject_to)
-    problem = Problem(sc, paths, goal, input_index(base, input_name, str(sc.path)), limits,
-                      _under_records(sc, records, goal, over), over)
+    if psd is not None and not all(m.kind in RMS for m in (goal, *(m for m, _ in limits))):
+        raise UsageError(f"--input-psd: only the RMS measures ({', '.join(RMS)}) are under an input PSD; "
+                         f"{next(m.text for m in (goal, *(m for m, _ in limits)) if m.kind not in RMS)} is not")
+    problem = Problem(sc, paths, goal, None if shaken(base, input_name) else input_index(base, input_name, str(sc.path)),
+                      limits,
+                      _under_records(sc, records, goal, over), over, psd)
     _check_bounds(problem, initial, lower, upper)
     width = upper - lower
     inside = np.clip((initial - lower) / width, 0.0, 1.0)
@@ -323,6 +344,12 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
         peaks=peaks, wall_time_s=time.perf_counter() - begin, sc=sc, input_dof=problem.input_dof, constraints=met,
         records=list(zip(map(str, (path for path, _ in problem.records)), problem.record_values(best)))
         if problem.records else [], over=over)
+
+
+def shaken(model, input_name: str | None) -> bool:
+    """Whether the measures' input is the support's acceleration: a scene shaken by its support with no force, and
+    no --input DOF named."""
+    return input_name is None and model.ground is not None and all(d == GROUND_DOF for d in model.force_dofs)
 
 
 def _peaks(detail, goal: Objective, problem: Problem) -> np.ndarray:

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from smdcli.errors import ScenarioError
+from smdcli.errors import ScenarioError, UsageError
 
 GRID_POINTS = 400  # frequencies a receptance is first sampled at: its peaks then located to rounding between them
 EPS = float(np.finfo(float).eps)
@@ -93,45 +93,92 @@ def frequency_peaks(M, C, K, dof: int, derived, input_dof: int | None) -> np.nda
     return np.array(rows, dtype=float).reshape(len(rows), 2 + len(derived))
 
 
-def rms(M, C, K, input_dof: int, dof: int, derived, other: int | None = None) -> tuple[float, np.ndarray]:
-    """The RMS of x_dof (or of the drift x_dof - x_other) under white noise of one-sided PSD 1 N^2/Hz on the input,
-    and its gradient (Lyapunov)."""
-    from scipy.linalg import solve_continuous_lyapunov
-
+def rms(M, C, K, input_dof: int | None, dof: int, derived, other: int | None = None, acceleration: bool = False,
+        profile=None) -> tuple[float, np.ndarray]:
+    """The RMS of x_dof (of the drift x_dof - x_other, or with `acceleration` of the absolute acceleration) and its
+    gradient, under a one-sided input PSD: a force on input_dof (N^2/Hz) or, input_dof None, the support's
+    acceleration ((m/s^2)^2/Hz). White noise of level 1 by Lyapunov, A Sigma + Sigma A^T + B B^T / 2 = 0 and the
+    same differentiated; a profile (random_vibration.Profile, SI) by quadrature of |H|^2 S and of its derivative
+    2 Re(conj(H) dH/dp) S, the natural frequencies as break points."""
     n = len(M)
     Minv = np.linalg.inv(M)
+    support = input_dof is None
 
-    def state(Mi, Cm, Km):
+    def system(d=None):  # (A, B, L, D) of z' = A z + B u, q = L z + D u; or their derivatives along d = (dMi, dC, dK)
         A = np.zeros((2 * n, 2 * n))
-        A[:n, n:] = np.eye(n)
-        A[n:, :n], A[n:, n:] = -Mi @ Km, -Mi @ Cm
-        B = np.zeros(2 * n)
-        B[n:] = Mi[:, input_dof]
-        return A, B
+        B, L = np.zeros(2 * n), np.zeros(2 * n)
+        inverse = Minv if d is None else d[0]
+        stiffness = -(Minv @ K if d is None else d[0] @ K + Minv @ d[2])
+        damping = -(Minv @ C if d is None else d[0] @ C + Minv @ d[1])
+        A[n:, :n], A[n:, n:] = stiffness, damping
+        if d is None:
+            A[:n, n:] = np.eye(n)
+        if not support:
+            B[n:] = inverse[:, input_dof]
+        elif d is None:
+            B[n:] = -1.0  # relative coordinates: x'' = ... - a_g
+        if acceleration:  # x'' + a_g under support motion (no feedthrough); x'' = ... + M^-1 F under a force
+            L[:n], L[n:] = stiffness[dof], damping[dof]
+        elif d is None:
+            L[dof] = 1.0
+            if other is not None and other >= 0:
+                L[other] -= 1.0
+        return A, B, L, 0.0 if support or not acceleration else float(inverse[dof, input_dof])
 
-    A, B = state(Minv, C, K)
-    Sigma = solve_continuous_lyapunov(A, -0.5 * np.outer(B, B))
-    pick = np.zeros(2 * n)  # the measured combination of the state
-    pick[dof] = 1.0
-    if other is not None and other >= 0:
-        pick[other] -= 1.0
-    variance = float(pick @ Sigma @ pick)
+    A, B, L, D = system()
+    steps = [system((-Minv @ dM @ Minv, dC, dK)) for dM, dC, dK in derived]
+    if profile is None:
+        if D != 0.0:
+            raise UsageError("the acceleration of a mass the force acts on directly has infinite "
+                             "variance under white noise (its receptance does not fall with frequency); give a "
+                             "band-limited PSD (--input-psd FILE)")
+        variance, gradient = _white_noise(A, B, L, steps)
+    else:
+        variance, gradient = _profile_noise(A, B, L, D, steps, profile, M, K)
     if not variance > 0 or not np.isfinite(variance):
         raise ScenarioError("", "damping", "the RMS response to white noise is unbounded: the scene needs damping in "
                             "every mode its input reaches")
     value = math.sqrt(variance)
+    return value, np.asarray(gradient) / (2 * value)
+
+
+def _white_noise(A, B, L, steps) -> tuple[float, list[float]]:
+    """L Sigma L^T and its derivatives along steps ((dA, dB, dL, dD) each) by the Lyapunov equation and its twin."""
+    from scipy.linalg import solve_continuous_lyapunov
+
+    Sigma = solve_continuous_lyapunov(A, -0.5 * np.outer(B, B))
     gradient = []
-    for dM, dC, dK in derived:
-        dMinv = -Minv @ dM @ Minv
-        dA = np.zeros_like(A)
-        dA[n:, :n] = -(dMinv @ K + Minv @ dK)
-        dA[n:, n:] = -(dMinv @ C + Minv @ dC)
-        dB = np.zeros(2 * n)
-        dB[n:] = dMinv[:, input_dof]
+    for dA, dB, dL, _ in steps:
         rhs = dA @ Sigma + Sigma @ dA.T + 0.5 * (np.outer(dB, B) + np.outer(B, dB))
         dSigma = solve_continuous_lyapunov(A, -rhs)
-        gradient.append(float(pick @ dSigma @ pick) / (2 * value))
-    return value, np.array(gradient)
+        gradient.append(float(L @ dSigma @ L + 2 * dL @ Sigma @ L))
+    return float(L @ Sigma @ L), gradient
+
+
+def _profile_noise(A, B, L, D, steps, profile, M, K) -> tuple[float, np.ndarray]:
+    """The integral over the profile of |H|^2 S and of 2 Re(conj(H) dH/dp) S, H = L (i w - A)^-1 B + D, each
+    segment by quad_vec to 1e-12 relative with the natural frequencies inside it as break points."""
+    from scipy.integrate import quad_vec
+
+    natural_hz = np.sqrt(np.maximum(np.linalg.eigvals(np.linalg.solve(M, K)).real, 0.0)) / (2 * math.pi)
+    eye = np.eye(len(A))
+
+    def integrand(f):
+        resolvent = 2j * math.pi * f * eye - A
+        z = np.linalg.solve(resolvent, B)
+        H = L @ z + D
+        row = [abs(H) ** 2]
+        for dA, dB, dL, dD in steps:
+            dz = np.linalg.solve(resolvent, dA @ z + dB)
+            row.append(2.0 * (np.conj(H) * (dL @ z + L @ dz + dD)).real)
+        return np.array(row) * profile(np.array([f]))[0]
+
+    total = np.zeros(1 + len(steps))
+    for f0, f1, _, _ in profile.segments():
+        inside = [float(f) for f in natural_hz if f0 < f < f1]
+        value, _ = quad_vec(integrand, f0, f1, epsrel=1e-12, epsabs=0.0, points=inside or None, limit=10_000)
+        total += value
+    return float(total[0]), total[1:]
 
 
 TIME_PEAKS = 8  # a largest peak in time minimized as the minimax over this many of its run's largest local peaks

@@ -16,7 +16,7 @@ from smdcli.io.folders import output_folder
 def optimize_command(path: str | Path, params: list[str], objective: str | None, out: str | Path,
                      starts: int | None = None, input_name: str | None = None, plots: bool = True,
                      progress: bool = False, subject_to: tuple[str, ...] = (), records: tuple[str, ...] = (),
-                     over: str = "max"):
+                     over: str = "max", input_psd: str | None = None, psd_units: str | None = None):
     """Read the scene and the bounds (the flags, else its [optimize] table), optimize, write OUT/<stem>_optimize.h5,
     OUT/<stem>_optimized.toml and OUT/<stem>_optimize.png (nothing where the input is refused); a bar over the
     starts on a terminal."""
@@ -38,11 +38,16 @@ def optimize_command(path: str | Path, params: list[str], objective: str | None,
     if not objective:
         raise UsageError(f"{path}: no objective: give --minimize OBJECTIVE or [optimize] minimize = \"...\"")
     subject_to = tuple(subject_to) or tuple(table.get("subject_to", ()))
+    if input_psd is None and "input_psd" in table and not table["input_psd"].startswith("white:"):
+        input_psd = str(path.parent / table["input_psd"])  # the table's profile is beside the scenario
+    psd = _input_psd(sc, input_psd or table.get("input_psd"), psd_units or table.get("psd_units"),
+                     input_name or table.get("input"))
     starts = starts if starts is not None else table.get("starts", 8)
     input_name = input_name or table.get("input")
     output_folder(out, make=False)
     with bar("starts", starts, enabled=progress, transient=True) as advance:
-        run = optimize(sc, bounds, objective, starts, input_name, advance, tuple(subject_to), tuple(records), over)
+        run = optimize(sc, bounds, objective, starts, input_name, advance, tuple(subject_to), tuple(records), over,
+                       psd)
     out_dir = output_folder(out)
     with together():
         h5 = out_dir / f"{path.stem}_optimize.h5"
@@ -59,6 +64,28 @@ def optimize_command(path: str | Path, params: list[str], objective: str | None,
             save_figure(optimize_figure(run, *_responses(run)), png)
             run.outputs.append(png)
     return run
+
+
+def _input_psd(sc, spec: str | None, units: str | None, input_name: str | None):
+    """The rms measures' input PSD in SI from --input-psd (a two-column profile of Hz and level, or white:LEVEL, as
+    `smd psd --input` takes it): levels in g^2/Hz (or --psd-units m/s^2) on a shaking support, N^2/Hz on a force."""
+    from smdcli.analysis.optimize import shaken
+    from smdcli.commands.psd import read_profile
+    from smdcli.errors import UsageError
+    from smdcli.model import build
+    from smdcli.scenario.spec import STANDARD_GRAVITY
+
+    if spec is None:
+        if units is not None:
+            raise UsageError(f"--psd-units {units}: given without --input-psd")
+        return None
+    support = shaken(build(sc), input_name)
+    if units not in (None, "g", "m/s^2") or units is not None and not support:
+        raise UsageError(f"--psd-units {units}: expected g or m/s^2 for a support acceleration PSD" +
+                         ("" if support else " (a force's PSD is in N^2/Hz: no --psd-units)"))
+    factor = STANDARD_GRAVITY**2 if support and (units or "g") == "g" else 1.0
+    profile, white = read_profile(spec, factor, "--input-psd")
+    return white if profile is None else profile
 
 
 def _responses(run):

@@ -45,23 +45,24 @@ class PsdRun:
     outputs: list[Path] = field(default_factory=list)
 
 
-def read_profile(spec: str, factor: float) -> tuple[Profile | None, float | None]:
-    """(profile, None) from a two-column table of Hz and level, or (None, level) from white:LEVEL; levels in SI."""
+def read_profile(spec: str, factor: float, option: str = "--input") -> tuple[Profile | None, float | None]:
+    """(profile, None) from a two-column table of Hz and level, or (None, level) from white:LEVEL; levels in SI (the
+    file's times factor); errors name the option that gave it."""
     if spec.startswith("white:"):
         try:
             level = float(spec[len("white:"):])
         except ValueError:
-            raise UsageError(f"--input: expected white:LEVEL with a number, found {spec!r}") from None
+            raise UsageError(f"{option}: expected white:LEVEL with a number, found {spec!r}") from None
         if not (math.isfinite(level) and level > 0):
-            raise UsageError(f"--input: expected a white-noise level > 0, found {spec!r}")
+            raise UsageError(f"{option}: expected a white-noise level > 0, found {spec!r}")
         if not math.isfinite(level * factor):
-            raise UsageError(f"--input: {spec}: the level overflows double precision once converted to SI")
+            raise UsageError(f"{option}: {spec}: the level overflows double precision once converted to SI")
         return None, level * factor
     from smdcli.scenario.records import ColumnsError, read_columns
 
     path = Path(spec)
     if not path.exists():
-        raise UsageError(f"--input: {spec}: no such PSD profile (a two-column table of Hz and level, or white:LEVEL)")
+        raise UsageError(f"{option}: {spec}: no such PSD profile (a two-column table of Hz and level, or white:LEVEL)")
     try:
         frequency, level = read_columns(path, ("frequency Hz", "level", "frequencies"))
     except ColumnsError as exc:

@@ -74,13 +74,14 @@ def _read_fit(t: _Table) -> tuple[tuple[str, Any], ...]:
     return tuple(items)
 
 
-OPTIMIZE_KEYS = ("parameters", "minimize", "subject_to", "starts", "input")
+OPTIMIZE_KEYS = ("parameters", "minimize", "subject_to", "starts", "input", "input_psd", "psd_units")
 
 
 def _read_optimize(t: _Table) -> tuple[tuple[str, Any], ...]:
     """[optimize]'s keys, their types checked (`smd optimize` reads the paths, objectives and DOFs themselves, and
     names this file in its errors): parameters = { "path" = [lo, hi] }, minimize = "OBJECTIVE", subject_to = a
-    string or strings 'OBJECTIVE <= VALUE', starts = N, input = "DOF"."""
+    string or strings 'OBJECTIVE <= VALUE', starts = N, input = "DOF", input_psd = "FILE" or "white:LEVEL",
+    psd_units = "g" or "m/s^2"."""
     items = []
     for key in OPTIMIZE_KEYS:
         if not t.has(key):

@@ -86,6 +86,7 @@ def scenario_schema() -> dict:
                       bounds={"type": "object", "additionalProperties": {**NUMBERS, "minItems": 2, "maxItems": 2}},
                       weights={"type": "object", "additionalProperties": NUMBER}),
         "optimize": _table(OPTIMIZE_KEYS, minimize=STRING, subject_to={"anyOf": [STRING, STRINGS]}, input=STRING,
+                           input_psd=STRING, psd_units={"enum": ["g", "m/s^2"]},
                            starts={"type": "integer", "minimum": 1},
                            parameters={"type": "object",
                                        "additionalProperties": {**NUMBERS, "minItems": 2, "maxItems": 2}}),

@@ -16,6 +16,7 @@ import numpy as np
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import Model
 from smdcli.model.accuracy import modes_accuracy
+from smdcli.model.system import GROUND_DOF
 from smdcli.scenario import Scenario
 from smdcli.sweep.family import Family
 from smdcli.sweep.pool import default_workers, run_pool
@@ -53,9 +54,10 @@ class FrequencyResponse:
 
 
 def input_index(model: Model, name: str | None, source: str) -> int:
-    """The DOF a unit force acts on: the one named, else that of the first force, else the first DOF."""
+    """The DOF a unit force acts on: the one named, else that of the first force (not the ground's motion), else the
+    first DOF."""
     if name is None:
-        return model.force_dofs[0] if model.force_dofs else 0
+        return next((dof for dof in model.force_dofs if dof != GROUND_DOF), 0)
     if name not in model.dofs:
         hint = difflib.get_close_matches(name, model.dofs, n=1)
         raise UsageError(f"--input: unknown DOF {name!r} in {source}"
