@@ -588,3 +588,24 @@ def test_an_input_psd_is_read_as_smd_psd_reads_it_and_white_noise_of_a_force_on_
         ran = cli("optimize", *args, "--param", "damper[0].c=0.01:1", "-o", tmp_path / "refused")
         assert ran.exit_code == 2 and message in ran.output, ran.output
         assert len(ran.output.strip().splitlines()) == 1 and not (tmp_path / "refused").exists()
+
+
+@pytest.mark.parametrize("objective", ["peak_receptance:primary", "rms_acceleration:tmd", "peak_drift:tmd-primary"])
+def test_two_parameters_draw_the_objective_s_contours_from_its_own_values(objective):
+    """The contour plot's surface is the objective alone at each grid point: equal to the measure the search used
+    there (linear measures to 1e-12; a time-domain one from a plain exact run against the sensitivity run's own
+    located peak, to 1e-9), its minimum over the grid no lower than the optimum; the figure gains the contour axes."""
+    from smdcli.commands.optimize import _responses, _surface
+    from smdcli.plots.optimize import optimize_figure
+
+    run = smdcli.optimize(TMD, {"spring[1].k": (0.5, 2.0), "damper[0].c": (0.01, 1.0)}, objective, starts=2)
+    point = np.array([1.4, 0.3])
+    exact = smdcli.simulate if objective.startswith("peak_receptance") or objective.startswith("rms") else \
+        (lambda scene: smdcli.simulate(scene, method="exact"))
+    assert run.problem.value(point, exact) == pytest.approx(run.problem.evaluate(point)[0],
+                                                            rel=1e-9 if "drift" in objective else 1e-12)
+    first, second, values = _surface(run, budget_s=0.3)
+    assert values.shape == (len(second), len(first)) and np.isfinite(values).all()
+    assert values.min() >= run.value * (1 - 1e-9)
+    figure = optimize_figure(run, *_responses(run), surface=(first, second, values))
+    assert len(figure.axes) == 3  # the response, the contours, their colour bar

@@ -97,6 +97,7 @@ class Optimum:
     constraints: list = field(default_factory=list)  # (text, limit, value at the optimum, binds)
     records: list = field(default_factory=list)  # (record file, the measure under it at the optimum)
     over: str = "max"
+    problem: object = None  # the Problem it was found on: the measures at any point (a contour plot's)
 
     @property
     def in_frequency(self) -> bool:
@@ -189,6 +190,16 @@ class Problem:
         if self.records:
             return len(self.records) * each
         return len(self.sc.dof_names) + 1 if measure.kind in PEAKS else each
+
+    def value(self, values: np.ndarray, forward=None) -> float:
+        """The objective alone at values, no gradient (what a contour plot draws): a linear measure of the scene
+        there; a time-domain one from forward(scene), a solved run (Result), per record where there are records."""
+        scene = self.scene(values)
+        if self.objective.kind not in TIME_DOMAIN:
+            return Problem(scene, [], self.objective, self.input_dof, psd=self.psd).evaluate(np.zeros(0))[0]
+        scenes = [scenario_with(under, dict(zip(self.paths, map(float, values)))) for _, under in self.records]
+        each = [time_measure(_as_run(forward(s)), self.objective)[0] for s in scenes or [scene]]
+        return float(np.mean(each) if self.over == "mean" else np.max(each))
 
     def record_values(self, values: np.ndarray) -> list[float]:
         """The objective under each record at values."""
@@ -343,7 +354,25 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
         optima=optima, peaks_before=_peaks(detail_before, goal, problem),
         peaks=peaks, wall_time_s=time.perf_counter() - begin, sc=sc, input_dof=problem.input_dof, constraints=met,
         records=list(zip(map(str, (path for path, _ in problem.records)), problem.record_values(best)))
-        if problem.records else [], over=over)
+        if problem.records else [], over=over, problem=problem)
+
+
+def _as_run(result):
+    """A solved run (Result) as time_measure reads a sensitivity run: its histories, its events, no parameters."""
+    from types import SimpleNamespace
+
+    from smdcli.solvers.peaks import jump_times
+
+    N, n = result.displacement.shape
+    events = [t for t, _, _ in result.nonsmooth.events] if result.nonsmooth is not None else []
+    if result.origin is not None and N > 1:
+        events += list(jump_times(result.origin[1], result.time))
+    empty = np.zeros((0, N, n))
+    ground = None if result.ground is None else (result.ground.acceleration, np.zeros((0, N)))
+    return SimpleNamespace(time=result.time, displacement=result.displacement, velocity=result.velocity,
+                           acceleration=result.acceleration, event_times=np.array(events, dtype=float), parameter=(),
+                           d_displacement=empty, d_velocity=empty, d_acceleration=empty, exact_at=None,
+                           ground_acceleration=lambda: ground)
 
 
 def shaken(model, input_name: str | None) -> bool:

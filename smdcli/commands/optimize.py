@@ -61,7 +61,8 @@ def optimize_command(path: str | Path, params: list[str], objective: str | None,
             from smdcli.plots.optimize import optimize_figure
 
             png = out_dir / f"{path.stem}_optimize.png"
-            save_figure(optimize_figure(run, *_responses(run)), png)
+            surface = _surface(run) if len(run.parameter) == 2 else None
+            save_figure(optimize_figure(run, *_responses(run), surface=surface), png)
             run.outputs.append(png)
     return run
 
@@ -86,6 +87,27 @@ def _input_psd(sc, spec: str | None, units: str | None, input_name: str | None):
     factor = STANDARD_GRAVITY**2 if support and (units or "g") == "g" else 1.0
     profile, white = read_profile(spec, factor, "--input-psd")
     return white if profile is None else profile
+
+
+def _surface(run, budget_s: float = 3.0):
+    """The objective alone on a grid over two parameters' bounds, as many points a side (7 to 25) as about budget_s
+    of solving allows: (the first's values, the second's, the objective (second, first)); nan where the scene is
+    not valid or its run fails."""
+    import time
+
+    import smdcli
+    from smdcli.errors import ScenarioError, SolverFailed
+
+    def value(point):
+        try:
+            return run.problem.value(np.asarray(point, dtype=float), smdcli.simulate)
+        except (ScenarioError, SolverFailed):
+            return float("nan")
+    begin = time.perf_counter()
+    value(run.optimum)
+    side = int(np.clip(np.sqrt(budget_s / max(time.perf_counter() - begin, 1e-4)), 7, 25))
+    first, second = (np.linspace(lo, hi, side) for lo, hi in zip(run.lower, run.upper))
+    return first, second, np.array([[value((a, b)) for a in first] for b in second])
 
 
 def _responses(run):
