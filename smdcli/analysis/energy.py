@@ -343,7 +343,7 @@ def _jumps_on_grid(model: Model, result: Result, events) -> np.ndarray:
     return work
 
 
-def _hermite_slopes(points: np.ndarray) -> np.ndarray:
+def hermite_slopes(points: np.ndarray) -> np.ndarray:
     """d/ds of the quintic Hermite basis on s in [0, 1] for (x0, h v0, h^2 a0, x1, h v1, h^2 a1), (G, 6)."""
     coefficients = np.array([  # powers s^0 .. s^5
         [1, 0, 0, -10, 15, -6], [0, 1, 0, -6, 8, -3], [0, 0, 0.5, -1.5, 1.5, -0.5],
@@ -357,7 +357,7 @@ def _hermite_gauss(model: Model, result: Result) -> tuple[np.ndarray, np.ndarray
     """Cumulative dissipated and input energy by Gauss-Legendre on the quintic Hermite interpolant of each step."""
     nodes, weights = np.polynomial.legendre.leggauss(GAUSS_POINTS)
     s, w = 0.5 * (nodes + 1), 0.5 * weights
-    slope = _hermite_slopes(s)
+    slope = hermite_slopes(s)
     t, x, v, a = result.time, result.displacement, result.velocity, result.acceleration
     N, n = x.shape
     step = np.zeros((2, N))

@@ -44,11 +44,12 @@ from smdcli.scenario import Scenario
 from smdcli.sweep.family import parameter_value, scenario_with
 
 OBJECTIVES = ("peak_receptance", "peak_transmissibility", "rms", "rms_drift", "rms_acceleration", "peak_displacement",
-              "peak_drift", "peak_acceleration", "residual_displacement")
+              "peak_drift", "peak_acceleration", "residual_displacement", "dissipated")
 UNITS = {"peak_receptance": "m/N", "peak_transmissibility": "1", "rms": "m", "rms_drift": "m", "rms_acceleration": "m/s^2",
-         "peak_displacement": "m", "peak_drift": "m", "peak_acceleration": "m/s^2", "residual_displacement": "m"}
+         "peak_displacement": "m", "peak_drift": "m", "peak_acceleration": "m/s^2", "residual_displacement": "m",
+         "dissipated": "J"}
 RMS = ("rms", "rms_drift", "rms_acceleration")  # under an input PSD: white noise, or a profile
-TIME_DOMAIN = ("peak_displacement", "peak_drift", "peak_acceleration", "residual_displacement")
+TIME_DOMAIN = ("peak_displacement", "peak_drift", "peak_acceleration", "residual_displacement", "dissipated")
 TIME_PEAK_KINDS = ("peak_displacement", "peak_drift")  # the largest of a run's located peaks in time
 PEAKS = ("peak_receptance", "peak_transmissibility")  # minimized as the minimax over located peaks
 DISTINCT = 1e-3  # optima closer than this share of the bounds' widths are one
@@ -62,6 +63,7 @@ class Objective:
     dof: int
     text: str
     other: int = -1  # a drift's lower DOF (peak_drift:<a>-<b>: x_a - x_b), GROUND for <a>-ground
+    element: str = ""  # dissipated:<element>'s damper (damper[i])
 
 
 @dataclass
@@ -110,13 +112,19 @@ class Optimum:
         return ("frequency", "rad/s") if self.in_frequency else ("time", "s")
 
 
-def read_objective(text: str, dofs: tuple[str, ...], source: str) -> Objective:
-    """'kind:dof' read against the scene's DOFs; UsageError naming what is wrong."""
+def read_objective(text: str, dofs: tuple[str, ...], source: str, dampers: tuple[str, ...] = ()) -> Objective:
+    """'kind:dof' (or dissipated:<damper>) read against the scene's DOFs and dampers; UsageError naming what is
+    wrong."""
     kind, _, dof = text.partition(":")
     if kind not in OBJECTIVES:
         hint = difflib.get_close_matches(kind, OBJECTIVES, n=1)
         raise UsageError(f"--minimize {text}: unknown objective {kind!r} (" +
                          (f"did you mean {hint[0]!r}?" if hint else f"known: {', '.join(OBJECTIVES)}") + ")")
+    if kind == "dissipated":
+        if dof not in dampers:
+            raise UsageError(f"--minimize {text}: expected dissipated:<damper> of {source} (" +
+                             (f"its dampers are {', '.join(dampers)}" if dampers else "it has no damper") + ")")
+        return Objective(kind, 0, text, element=dof)
     if kind in ("peak_drift", "rms_drift"):
         pairs = [(dof[:i], dof[i + 1:]) for i, c in enumerate(dof) if c == "-"]
         pair = next(((a, b) for a, b in pairs if a in dofs and (b in dofs or b == "ground")), None)
@@ -131,7 +139,8 @@ def read_objective(text: str, dofs: tuple[str, ...], source: str) -> Objective:
     return Objective(kind, dofs.index(dof), text)
 
 
-def read_constraint(text: str, dofs: tuple[str, ...], source: str) -> tuple[Objective, float]:
+def read_constraint(text: str, dofs: tuple[str, ...], source: str,
+                    dampers: tuple[str, ...] = ()) -> tuple[Objective, float]:
     """'OBJECTIVE <= VALUE' as (the measure, its limit); UsageError naming what is wrong."""
     found = re.fullmatch(r"\s*(\S+)\s*<=\s*(\S+)\s*", text)
     if not found:
@@ -143,7 +152,7 @@ def read_constraint(text: str, dofs: tuple[str, ...], source: str) -> tuple[Obje
     if not (math.isfinite(limit) and limit > 0):
         raise UsageError(f"--subject-to {text}: expected a positive finite limit, found {limit:g}")
     try:
-        return read_objective(found.group(1), dofs, source), limit
+        return read_objective(found.group(1), dofs, source, dampers), limit
     except UsageError as exc:
         raise UsageError(f"--subject-to {text}: {exc.args[0].split(': ', 1)[1]}") from None
 
@@ -301,11 +310,12 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
     paths = [p for p, _, _ in bounds]
     check_once(paths)
     base = build(sc)
-    goal = read_objective(objective, tuple(base.dofs), str(sc.path))
+    dampers = tuple(e.name for e in base.elements if e.kind == "damper")
+    goal = read_objective(objective, tuple(base.dofs), str(sc.path), dampers)
     lower, upper = np.array([b[1] for b in bounds]), np.array([b[2] for b in bounds])
     doc = tomllib.loads(sc.text)
     initial = np.array([parameter_value(doc, p) for p in paths], dtype=float)
-    limits = tuple(read_constraint(text, tuple(base.dofs), str(sc.path)) for text in subject_to)
+    limits = tuple(read_constraint(text, tuple(base.dofs), str(sc.path), dampers) for text in subject_to)
     if psd is not None and not all(m.kind in RMS for m in (goal, *(m for m, _ in limits))):
         raise UsageError(f"--input-psd: only the RMS measures ({', '.join(RMS)}) are under an input PSD; "
                          f"{next(m.text for m in (goal, *(m for m, _ in limits)) if m.kind not in RMS)} is not")
@@ -372,7 +382,7 @@ def _as_run(result):
     return SimpleNamespace(time=result.time, displacement=result.displacement, velocity=result.velocity,
                            acceleration=result.acceleration, event_times=np.array(events, dtype=float), parameter=(),
                            d_displacement=empty, d_velocity=empty, d_acceleration=empty, exact_at=None,
-                           ground_acceleration=lambda: ground)
+                           ground_acceleration=lambda: ground, model=result.origin[1], derivatives=[])
 
 
 def shaken(model, input_name: str | None) -> bool:

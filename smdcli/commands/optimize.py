@@ -117,14 +117,19 @@ def _responses(run):
 
         return receptance_curve(run, np.clip(run.initial, run.lower, run.upper)), receptance_curve(run, run.optimum)
     import smdcli
-    from smdcli.analysis.optimize import read_objective
+    from smdcli.analysis.response_measures import dissipated_history
     from smdcli.sweep.family import scenario_with
 
-    measure = read_objective(run.objective, tuple(run.sc.dof_names), run.scenario)
+    measure = run.problem.objective
     out = []
     for values in (np.clip(run.initial, run.lower, run.upper), run.optimum):
         result = smdcli.simulate(scenario_with(run.sc, dict(zip(run.parameter, map(float, values)))))
-        if measure.kind == "peak_acceleration":  # absolute, as the objective: relative plus the ground's
+        if measure.kind == "dissipated":  # the damper's energy as it accumulates
+            model = result.origin[1]
+            element = next(e for e in model.elements if e.name == measure.element)
+            series = dissipated_history(element, result.time, result.displacement, result.velocity,
+                                        result.acceleration)
+        elif measure.kind == "peak_acceleration":  # absolute, as the objective: relative plus the ground's
             series = result.absolute("acceleration")[:, measure.dof]
         elif measure.kind == "peak_drift" and measure.other >= 0:
             series = result.displacement[:, measure.dof] - result.displacement[:, measure.other]

@@ -40,8 +40,8 @@ def optimize_figure(run, before, after, surface=None):
                     mfc="none")
         ax.set_xlabel("Time [s]")
         kind = run.objective.partition(":")[0]
-        ax.set_ylabel({"peak_acceleration": f"a_{dof} (absolute) [m/s^2]", "peak_drift": f"x_{dof.replace('-', ' - x_')} [m]"}
-                      .get(kind, f"x_{dof} [m]"))
+        ax.set_ylabel({"peak_acceleration": f"a_{dof} (absolute) [m/s^2]", "peak_drift": f"x_{dof.replace('-', ' - x_')} [m]",
+                       "dissipated": f"energy dissipated by {dof} [J]"}.get(kind, f"x_{dof} [m]"))
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8, loc="best")
     values = ", ".join(f"{p} = {v:.4g}" for p, v in zip(run.parameter, run.optimum))
