@@ -294,11 +294,12 @@ def augmented_model(base: Model, derivatives: list[Derivative]) -> tuple[Model, 
         for target, name in ((M, "M"), (C, "C"), (K, "K")):
             target[rows, :n] = scale * d.of(lambda m, name=name: getattr(m.dense(), name))
         x0[rows], v0[rows] = scale * d.of(lambda m: m.x0), scale * d.of(lambda m: m.v0)
-    signals, columns = [], []
+    signals, columns, grounds = [], [], []
     ones = np.ones(n)
     for j, signal in enumerate(base.signals):
-        column = np.zeros(size)
+        column, ground = np.zeros(size), np.zeros(size)
         if base.force_dofs[j] == GROUND_DOF:
+            ground[:n] = 1.0
             column[:n] = -base.M @ ones
             for i, (d, scale) in enumerate(zip(derivatives, scales)):
                 column[(i + 1) * n:(i + 2) * n] = -scale * d.of(lambda m: m.dense().M) @ ones
@@ -306,18 +307,21 @@ def augmented_model(base: Model, derivatives: list[Derivative]) -> tuple[Model, 
             column[base.force_dofs[j]] = 1.0
         signals.append(signal)
         columns.append(column)
+        grounds.append(ground)
         for i, (d, scale) in enumerate(zip(derivatives, scales)):
             derived = _signal_derivative(signal, d, j)
             if derived is None:
                 continue
-            column = np.zeros(size)
+            column, ground = np.zeros(size), np.zeros(size)
             on = slice((i + 1) * n, (i + 2) * n)
             if base.force_dofs[j] == GROUND_DOF:
                 column[on] = -scale * (base.M @ ones)
+                ground[on] = scale
             else:
                 column[(i + 1) * n + base.force_dofs[j]] = scale
             signals.append(derived)
             columns.append(column)
+            grounds.append(ground)
     jumps = []
     for k, (t, dx, dv) in enumerate(base.jumps):
         jx, jv = np.zeros(size), np.zeros(size)
@@ -335,6 +339,8 @@ def augmented_model(base: Model, derivatives: list[Derivative]) -> tuple[Model, 
     # set, not derived: a column may act on several blocks (the ground's -M 1 and its derivative -dM 1), which
     # force_dofs cannot say; and the modal path's test of classical damping does not apply to a non-symmetric M
     model.__dict__["B"] = np.array(columns).T.reshape(size, len(columns))
+    # what each input adds to the blocks' absolute accelerations: the ground's a_g (and its derivative) on every DOF
+    model.__dict__["ground_columns"] = np.array(grounds).T.reshape(size, len(grounds))
     model.__dict__["proportional_damping"] = False
     return model, scales
 

@@ -50,7 +50,7 @@ UNITS = {"peak_receptance": "m/N", "peak_transmissibility": "1", "rms": "m", "rm
          "dissipated": "J"}
 RMS = ("rms", "rms_drift", "rms_acceleration")  # under an input PSD: white noise, or a profile
 TIME_DOMAIN = ("peak_displacement", "peak_drift", "peak_acceleration", "residual_displacement", "dissipated")
-TIME_PEAK_KINDS = ("peak_displacement", "peak_drift")  # the largest of a run's located peaks in time
+TIME_PEAK_KINDS = ("peak_displacement", "peak_drift", "peak_acceleration")  # the largest of a run's peaks in time
 PEAKS = ("peak_receptance", "peak_transmissibility")  # minimized as the minimax over located peaks
 DISTINCT = 1e-3  # optima closer than this share of the bounds' widths are one
 

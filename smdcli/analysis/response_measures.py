@@ -189,7 +189,8 @@ def time_measure(s, measure) -> tuple[float, np.ndarray, np.ndarray | None]:
     peak: the located peak of |x| or of a drift |x_a - x_b| with rows (time, |peak|, d|peak|/dp...) of the run's
     TIME_PEAKS largest local peaks in time (each one's derivative at its own time, the envelope theorem: the
     largest is their maximum, minimized as such); the largest sampled |a| (absolute under support motion: relative
-    plus the ground's); |x| at the run's end."""
+    plus the ground's), located and in pieces the same way on a linear scene; |x| at the run's end; the energy a
+    damper dissipates."""
     from smdcli.solvers.peaks import local_peaks, quintic_at
 
     j, kind = measure.dof, measure.kind
@@ -197,12 +198,7 @@ def time_measure(s, measure) -> tuple[float, np.ndarray, np.ndarray | None]:
         x = float(s.displacement[-1, j])
         return abs(x), np.sign(x) * s.d_displacement[:, -1, j], None
     if kind == "peak_acceleration":
-        a, da = s.acceleration[:, j].copy(), s.d_acceleration[:, :, j].copy()
-        ground = s.ground_acceleration()
-        if ground is not None:
-            a, da = a + ground[0], da + ground[1]
-        k = int(np.argmax(np.abs(a)))
-        return float(abs(a[k])), np.sign(a[k]) * da[:, k], None
+        return _peak_acceleration(s, j)
     if kind == "dissipated":
         return (*dissipated(s, measure.element), None)
     k = measure.other if kind == "peak_drift" else GROUND
@@ -220,6 +216,83 @@ def time_measure(s, measure) -> tuple[float, np.ndarray, np.ndarray | None]:
                                for p in range(len(s.parameter))]).T.reshape(len(times), -1)
     rows = np.column_stack([times, values, signs[:, None] * derivative])
     return float(values[0]), rows[0, 2:].copy(), rows
+
+
+def _peak_acceleration(s, j: int) -> tuple[float, np.ndarray, np.ndarray]:
+    """The largest |absolute acceleration| of DOF j with its pieces (time_measure's rows): on a linear scene each of
+    the run's largest local peaks located between samples on the quintic Hermite of a, a', a'' (the model's own
+    equation differentiated, acceleration_rates) and its derivative on the sensitivities' same quintic; elsewhere
+    the samples' local maxima."""
+    from smdcli.solvers.peaks import local_peaks, quintic_at
+
+    rates = acceleration_rates(s)
+    if rates is None:
+        a, da = s.acceleration[:, j].copy(), s.d_acceleration[:, :, j].copy()
+        ground = s.ground_acceleration()
+        if ground is not None:
+            a, da = a + ground[0], da + ground[1]
+        values, times = local_peaks(s.time, a, None, None, count=TIME_PEAKS)
+        k = np.searchsorted(s.time, times)
+        derivative = (np.sign(a[k])[None] * da[:, k]).T
+    else:
+        a, right, snap, left, snap_left, kinks = rates
+        events = np.concatenate([s.event_times, kinks])
+        values, times = local_peaks(s.time, a[0, :, j], right[0, :, j], snap[0, :, j], events, TIME_PEAKS,
+                                    left[0, :, j], snap_left[0, :, j])
+        signs = np.sign(quintic_at(s.time, a[0, :, j], right[0, :, j], snap[0, :, j], times, left[0, :, j],
+                                   snap_left[0, :, j]))
+        derivative = np.array([signs * quintic_at(s.time, a[p, :, j], right[p, :, j], snap[p, :, j], times,
+                                                  left[p, :, j], snap_left[p, :, j])
+                               for p in range(1, len(a))]).T.reshape(len(times), -1)
+    rows = np.column_stack([times, values, derivative])
+    return float(values[0]), rows[0, 2:].copy(), rows
+
+
+def acceleration_rates(s):
+    """(a, a' right, a'' right, a' left, a'' left, kinks) of a linear scene's run s: the absolute acceleration and
+    its first two time derivatives, right and left limits at each sample, each (P + 1, N, n) for the scene and the
+    derivative in each parameter, from the model's equation differentiated in time on the scene and its
+    sensitivity systems together (a' = M^-1 (B u' - C a - K v), a'' = M^-1 (B u'' - C a' - K a), relative, plus
+    the ground's a_g' and a_g''); and the times inside a step where a force's slope jumps (its quintic does not
+    span them). None for a scene solved otherwise or a force with no derivative."""
+    from smdcli.analysis.model_derivative import augmented_model
+
+    model = s.model
+    if model is None or s.exact_at is not None or not model.is_linear or not len(s.time) > 2:
+        return None
+    stacked, scales = augmented_model(model, s.derivatives)
+    try:
+        first = [signal.derivative(float(s.time[0])) for signal in stacked.signals]
+        second = [None if f is None else f.derivative(float(s.time[0])) for f in first]
+    except NotImplementedError:
+        return None
+    N, n = s.displacement.shape
+    weights = np.concatenate([[1.0], scales])
+
+    def stack(nominal, derived):  # (N, n) and (P, N, n) -> (N, (P + 1) n), block i + 1 scaled
+        return np.concatenate([nominal[None], derived]).transpose(1, 0, 2).reshape(N, -1) * \
+            np.repeat(weights, n)[None]
+
+    def values(signals, left):  # (N, inputs)
+        return np.array([np.zeros(N) if f is None else np.broadcast_to(f.value_left(s.time) if left else
+                                                                        f.value(s.time), (N,))
+                         for f in signals]).T.reshape(N, len(signals))
+    x, v, a = (stack(q, dq) for q, dq in ((s.displacement, s.d_displacement), (s.velocity, s.d_velocity),
+                                          (s.acceleration, s.d_acceleration)))
+    Minv = np.linalg.inv(stacked.M)
+    B, C, K, G = stacked.B, stacked.C, stacked.K, stacked.__dict__["ground_columns"]
+    out = [a + values(stacked.signals, False) @ G.T]
+    for left in (False, True):
+        u1, u2 = values(first, left), values(second, left)
+        rate = (u1 @ B.T - a @ C.T - v @ K.T) @ Minv.T
+        curvature = (u2 @ B.T - rate @ C.T - a @ K.T) @ Minv.T
+        out += [rate + u1 @ G.T, curvature + u2 @ G.T]
+    unstacked = [q.reshape(N, len(weights), n).transpose(1, 0, 2) / weights[:, None, None] for q in out]
+    kinks = [t for f in first if f is not None for t in f.breakpoints(float(s.time[0]), float(s.time[-1]))
+             if f.value(t) != f.value_left(t)]
+    k = np.clip(np.searchsorted(s.time, kinks), 0, N - 1)
+    inside = [t for t, i in zip(kinks, k) if abs(s.time[i] - t) > 1e-9 * (s.time[1] - s.time[0])]
+    return (*unstacked, np.array(inside, dtype=float))
 
 
 def dissipated(s, name: str) -> tuple[float, np.ndarray]:

@@ -37,14 +37,17 @@ def _value(c, s, order=0):
     return total
 
 
-def quintic_at(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray, at: np.ndarray) -> np.ndarray:
+def quintic_at(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray, at: np.ndarray,
+               v_left: np.ndarray | None = None, a_left: np.ndarray | None = None) -> np.ndarray:
     """x (N,) read at the times `at` on the quintic Hermite interpolant of its samples x, v, a (exact for a
-    displacement whose acceleration is linear between samples, as a record's ground motion)."""
+    displacement whose acceleration is linear between samples, as a record's ground motion); v_left, a_left: the
+    left limits at each sample where they differ (an interval's end takes them)."""
     k = np.clip(np.searchsorted(time, at, side="right") - 1, 0, max(len(time) - 2, 0))
     if len(time) < 2:
         return np.full(len(at), float(x[0]) if len(x) else 0.0)
     h = time[k + 1] - time[k]
-    c = _quintics(x[k], v[k], a[k], x[k + 1], v[k + 1], a[k + 1], h)
+    v_end, a_end = (v if v_left is None else v_left), (a if a_left is None else a_left)
+    c = _quintics(x[k], v[k], a[k], x[k + 1], v_end[k + 1], a_end[k + 1], h)
     return _value(c, np.clip((at - time[k]) / h, 0.0, 1.0))
 
 
@@ -130,11 +133,13 @@ def row_peaks(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray,
     return done()
 
 
-def local_peaks(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray, events: np.ndarray = np.empty(0),
-                count: int = 8) -> tuple[np.ndarray, np.ndarray]:
+def local_peaks(time: np.ndarray, x: np.ndarray, v: np.ndarray | None, a: np.ndarray | None,
+                events: np.ndarray = np.empty(0), count: int = 8, v_left: np.ndarray | None = None,
+                a_left: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The count largest local maxima in time of |x| (one history, (N,) each), each located between its samples as
-    located_peaks locates the largest: (values, times), largest first. The pieces of a largest-peak objective, each
-    smooth in the parameters where the largest itself has a kink (two peaks in time trading places)."""
+    located_peaks locates the largest (v, a None: the samples' own); v_left, a_left the left limits where they
+    differ: (values, times), largest first. The pieces of a largest-peak objective, each smooth in the parameters
+    where the largest itself has a kink (two peaks in time trading places)."""
     magnitude = np.abs(np.nan_to_num(x))
     N = len(time)
     if N < 3:
@@ -154,14 +159,15 @@ def local_peaks(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray, e
     if len(events):
         usable[np.clip(np.searchsorted(time, events, side="right") - 1, 0, N - 2)] = False
         usable[np.clip(np.searchsorted(time, events, side="left") - 1, 0, N - 2)] = False
-    for side in (-1, 0):  # the interval before each sample, then the one after
+    v_end, a_end = (v if v_left is None else v_left), (a if a_left is None else a_left)
+    for side in (-1, 0) if v is not None else ():  # the interval before each sample, then the one after
         k = at + side
         inside = (k >= 0) & (k < N - 1)
         inside[inside] &= usable[k[inside]]
         if not inside.any():
             continue
         k = k[inside]
-        found, s = _interval_peaks(x[k], v[k], a[k], x[k + 1], v[k + 1], a[k + 1], time[k + 1] - time[k])
+        found, s = _interval_peaks(x[k], v[k], a[k], x[k + 1], v_end[k + 1], a_end[k + 1], time[k + 1] - time[k])
         better = np.nan_to_num(found, nan=-1.0) > values[inside]
         rows = np.flatnonzero(inside)[better]
         values[rows] = found[better]
