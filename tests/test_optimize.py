@@ -702,3 +702,19 @@ def test_a_peak_acceleration_is_located_between_samples_with_its_gradient(suppor
         at = {o: reference(*(values + o * h * np.eye(2)[i])) for o in (-2, -1, 1, 2)}
         slope = (8 * (at[1] - at[-1]) - (at[2] - at[-2])) / (12 * h)
         assert gradient[i] == pytest.approx(slope, rel=1e-6, abs=1e-6 * np.abs(gradient).max()), i
+
+
+def test_a_search_stopped_by_its_line_search_on_the_kink_is_converged_only_where_first_order_conditions_hold():
+    """SLSQP may end an equal-peak minimax with "positive directional derivative for linesearch" (no descent left at
+    rounding): the optimum is then converged by its first-order conditions (a convex combination of the active
+    peaks' gradients vanishing, to 1e-6 of the objective per bound width), which hold at the optimum of the
+    receptance and of the RMS and fail a thousandth of the bounds away from either."""
+    from smdcli.analysis.optimize_search import stationary
+
+    for objective in ("peak_receptance:primary", "rms:primary"):
+        run = smdcli.optimize(TMD, {"spring[1].k": (0.5, 2.0), "damper[0].c": (0.01, 1.0)}, objective, starts=2)
+        lower, width = run.lower, run.upper - run.lower
+        theta = (run.optimum - lower) / width
+        assert run.converged and stationary(run.problem, theta, lower, width), objective
+        for step in ((1e-3, 0.0), (0.0, 1e-3)):
+            assert not stationary(run.problem, theta + np.array(step), lower, width), (objective, step)

@@ -252,6 +252,12 @@ class ParameterDerivative(Signal):
         return np.concatenate([self.base.exo_state(t),
                                combined(self.weights, [s.exo_state(t) for s in self.points])])
 
+    def derivative(self, start):
+        base = self.base.derivative(start)
+        if base is None:
+            return None
+        return ParameterDerivative(base, [s.derivative(start) for s in self.points], self.weights)
+
 
 def _signal_derivative(base: Signal, d: Derivative, j: int) -> Signal | None:
     """du_j/dp as a signal, None where the force does not depend on p."""
@@ -352,10 +358,12 @@ def check_once(paths: list[str]) -> None:
         raise UsageError(f"--param {repeated[0]}: given more than once")
 
 
-def model_derivatives(sc: Scenario, base: Model, grid: np.ndarray, paths: list[str]) -> list[Derivative]:
-    """Each parameter's model derivative (paths as the sweep takes them); UsageError for a path given twice."""
+def model_derivatives(sc: Scenario, base: Model, grid: np.ndarray, paths: list[str],
+                      doc: dict | None = None) -> list[Derivative]:
+    """Each parameter's model derivative (paths as the sweep takes them; doc: the scenario's TOML document where the
+    caller has it); UsageError for a path given twice."""
     check_once(paths)
-    doc = tomllib.loads(sc.text)
+    doc = tomllib.loads(sc.text) if doc is None else doc
     return [derivative(sc, doc, base, grid, path) for path in paths]
 
 

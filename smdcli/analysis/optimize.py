@@ -34,14 +34,14 @@ from pathlib import Path
 import numpy as np
 
 from smdcli.analysis.model_derivative import check_once, model_derivatives
-from smdcli.analysis.optimize_search import FEASIBLE, local_search, violation
+from smdcli.analysis.optimize_search import FEASIBLE, local_search, stationary, violation
 from smdcli.analysis.response_measures import (GROUND, TIME_PEAKS, receptance_peaks, rms, time_measure,
                                                transmissibility_peaks)
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import build, time_grid
 from smdcli.model.system import GROUND_DOF
 from smdcli.scenario import Scenario
-from smdcli.sweep.family import parameter_value, scenario_with
+from smdcli.sweep.family import member_with, parameter_value, scenario_with
 
 OBJECTIVES = ("peak_receptance", "peak_transmissibility", "rms", "rms_drift", "rms_acceleration", "peak_displacement",
               "peak_drift", "peak_acceleration", "residual_displacement", "dissipated")
@@ -228,8 +228,9 @@ class Problem:
         point = self._cache.get(key)
         if point is None:
             self.solves += 1
-            point = self._cache[key] = {"scene": self.scene(values),
-                                        "values": dict(zip(self.paths, map(float, values)))}
+            named = dict(zip(self.paths, map(float, values)))
+            scene, doc, model = member_with(self.sc, named)
+            point = self._cache[key] = {"scene": scene, "doc": doc, "model": model, "values": named}
         if measure.text not in point:
             point[measure.text] = self._measure(point, measure)
         return point[measure.text]
@@ -258,12 +259,12 @@ class Problem:
                 pieces = pieces[np.argsort(-pieces[:, 1], kind="stable")]
             return float(values[worst]), each[worst][1].copy(), pieces
         if "linear" not in point:
-            model = build(sc)
+            model = point["model"]
             if not model.is_linear:
                 raise UsageError(f"{self.sc.path}: {kind} needs a linear scene (its receptance); a nonlinear one "
                                  "takes peak_displacement")
             model = model.dense()
-            derived = model_derivatives(sc, model, time_grid(sc.time), self.paths)
+            derived = model_derivatives(sc, model, time_grid(sc.time), self.paths, point["doc"])
             point["linear"] = (model, [(d.of(lambda m: m.dense().M), d.of(lambda m: m.dense().C),
                                         d.of(lambda m: m.dense().K)) for d in derived])
         model, derived = point["linear"]
@@ -347,7 +348,10 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
         if all(np.abs(theta - (o - lower) / width).max() > DISTINCT for o, _ in optima):
             optima.append((lower + theta * width, value))
     theta, value, result, history = runs[0]
-    converged = any(r[2].success for r in runs if np.abs(r[0] - theta).max() <= DISTINCT)
+    # converged: a search that ended here succeeded, or stopped where the first-order conditions hold (SLSQP's line
+    # search finding no descent at rounding, on the kink of a minimax)
+    converged = any(r[2].success for r in runs if np.abs(r[0] - theta).max() <= DISTINCT) or \
+        stationary(problem, theta, lower, width)
     best = lower + theta * width
     value, gradient, detail = problem.evaluate(best)
     on_bound = np.where(theta <= 1e-9, -1, np.where(theta >= 1 - 1e-9, 1, 0))

@@ -11,6 +11,8 @@ import numpy as np
 
 FEASIBLE = 1e-8  # a constraint's relative excess that still meets it
 TOLERANCE = 1e-15  # SLSQP's on the objective scaled to its start
+STATIONARY = 1e-6  # the first-order conditions' residual (per bound width), relative to the objective, at convergence
+ACTIVE = 1e-9  # pieces of a largest within this (relative) of it are active
 
 
 def violation(problem, values: np.ndarray) -> float:
@@ -131,3 +133,37 @@ def _polished(problem, theta: np.ndarray, lower: np.ndarray, width: np.ndarray, 
         theta, value, g = trial, trial_value, trial_g
         history.append((theta.copy(), value))
     return theta
+
+
+def stationary(problem, theta: np.ndarray, lower: np.ndarray, width: np.ndarray) -> bool:
+    """Whether the first-order conditions hold at theta (in [0, 1]^P) to STATIONARY: some convex combination of the
+    active pieces' gradients (the objective's own where it is smooth), plus non-negative multiples of the binding
+    constraints' and of the bounds' normals, vanishes. What SLSQP's "positive directional derivative in the line
+    search" means at an optimum it can no longer improve on at rounding, told from a stall elsewhere."""
+    from scipy.optimize import nnls
+
+    values = lower + theta * width
+    value, gradient, detail = problem.evaluate(values)
+    if problem.minimax and detail is not None:
+        pieces = detail[detail[:, 1] >= detail[:, 1].max() * (1 - ACTIVE), 2:] * width
+    else:
+        pieces = (gradient * width)[None]
+    binding = [problem.evaluate(values, m)[1] * width for m, limit in problem.constraints
+               if problem.evaluate(values, m)[0] >= limit * (1 - 1e-6)]
+    P = len(theta)
+    eye = np.eye(P)
+    normals = [-eye[j] for j in range(P) if theta[j] <= 1e-9] + [eye[j] for j in range(P) if theta[j] >= 1 - 1e-9]
+    # relative to the objective itself, or to the pieces' gradients where they are larger (per unit of each
+    # parameter's bound width)
+    scale = max(float(np.abs(pieces).max(initial=0.0)), abs(float(value)), 1e-300)
+    weight = 1e3 * scale  # the row holding the pieces' weights to a sum of one
+    A = np.zeros((P + 1, len(pieces) + len(binding) + len(normals)))
+    A[:P, :len(pieces)] = pieces.T
+    A[P, :len(pieces)] = weight
+    for i, column in enumerate([*binding, *normals]):
+        A[:P, len(pieces) + i] = column
+    b = np.zeros(P + 1)
+    b[P] = weight
+    multipliers, _ = nnls(A, b)
+    residual = A[:P] @ multipliers
+    return bool(np.abs(residual).max() <= STATIONARY * scale and abs(multipliers[:len(pieces)].sum() - 1) < 1e-6)

@@ -42,10 +42,6 @@ def frequency_peaks(M, C, K, dof: int, derived, input_dof: int | None) -> np.nda
     d|R|/dp...): each located as the zero of d|R|^2/dw between neighbours of a grid over the modes (w = 0 where |R|
     falls from it), its derivative at the peak's fixed frequency (the envelope theorem: dR/dp = Z^-1 (dr/dp -
     dZ/dp Y), Y = Z^-1 r)."""
-    from scipy.optimize import brentq
-
-    from smdcli.sweep.frequency import amplitude_slope  # the slope one frequency at a time, as the sweep locates
-
     n = len(M)
     support = input_dof is None
     ones = np.ones(n)
@@ -63,7 +59,7 @@ def frequency_peaks(M, C, K, dof: int, derived, input_dof: int | None) -> np.nda
             return (w**2 * (M @ ones)).astype(complex), 2 * w * (M @ ones)
         return np.broadcast_to(force, w.shape[:-1] + (n,)), np.zeros(w.shape[:-1] + (n,))
 
-    def slopes_at(ws):  # d|R_dof|^2 / dw at each of ws at once (amplitude_slope's, vectorized over the grid)
+    def slopes_at(ws):  # d|R_dof|^2 / dw at each of ws at once (sweep.frequency.amplitude_slope's, vectorized)
         W = np.asarray(ws, dtype=float)[:, None, None]
         Z = K[None] - W**2 * M[None] + 1j * W * C[None]
         r, dr = load(ws)
@@ -73,9 +69,9 @@ def frequency_peaks(M, C, K, dof: int, derived, input_dof: int | None) -> np.nda
 
     slopes = slopes_at(grid)  # every grid frequency at once
     located = [0.0] if slopes[1] < 0 else []
-    for i in np.flatnonzero((slopes[:-1] > 0) & (slopes[1:] <= 0)):
-        located.append(float(brentq(lambda w: amplitude_slope((M, C, K), w, dof, input_dof or 0, support)[0],
-                                    grid[i], grid[i + 1], xtol=1e-15 * top, rtol=4 * EPS, maxiter=200)))
+    falls = np.flatnonzero((slopes[:-1] > 0) & (slopes[1:] <= 0))
+    located += list(_falling_zeros(slopes_at, grid[falls], grid[falls + 1], slopes[falls], slopes[falls + 1],
+                                   1e-15 * top))
     if slopes[-1] > 0:  # still rising at 3 times the highest mode: a massless DOF or a rigid input; take the end
         located.append(float(grid[-1]))
     rows = []
@@ -91,6 +87,26 @@ def frequency_peaks(M, C, K, dof: int, derived, input_dof: int | None) -> np.nda
             row.append(float((np.conj(R) * dY[dof]).real) / size if size else 0.0)
         rows.append(row)
     return np.array(rows, dtype=float).reshape(len(rows), 2 + len(derived))
+
+
+def _falling_zeros(slope, low: np.ndarray, high: np.ndarray, f_low: np.ndarray, f_high: np.ndarray,
+                   xtol: float) -> np.ndarray:
+    """The zero of slope (vectorized over an array of points) in each bracket (low, high] where it falls from
+    f_low > 0 to f_high <= 0, all brackets at once: the Illinois method (regula falsi, the end that stays has its
+    value halved), to xtol plus 4 eps of the zero, as Brent's method to the same tolerance."""
+    a, b, fa, fb = (np.array(q, dtype=float) for q in (low, high, f_low, f_high))
+    done = fb == 0
+    for _ in range(200):
+        if done.all():
+            break
+        c = np.where(done, b, (a * fb - b * fa) / np.where(fb != fa, fb - fa, 1.0))
+        c = np.clip(c, np.minimum(a, b), np.maximum(a, b))
+        fc = np.where(done, 0.0, slope(c))
+        flip = np.sign(fc) != np.sign(fb)
+        a, fa = np.where(flip, b, a), np.where(flip, fb, fa * 0.5)
+        b, fb = c, fc
+        done |= (fc == 0) | (np.abs(b - a) <= xtol + 4 * EPS * np.abs(c))  # the bracket itself that small
+    return b
 
 
 def rms(M, C, K, input_dof: int | None, dof: int, derived, other: int | None = None, acceleration: bool = False,

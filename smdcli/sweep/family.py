@@ -11,7 +11,7 @@ import math
 import re
 import tomllib
 from dataclasses import dataclass, replace
-from functools import cached_property
+from functools import cached_property, lru_cache
 from typing import Any
 
 import numpy as np
@@ -245,22 +245,40 @@ def _set_initial_state(doc: dict, x0: np.ndarray, v0: np.ndarray) -> None:
 def scenario_with(sc: Scenario, values: dict[str, float]) -> Scenario:
     """The scenario with parameter paths set to values and validated again, as a member is (a fit's trial point, its
     fitted scene); a ScenarioError names the values."""
-    doc = tomllib.loads(sc.text)
+    return member_with(sc, values)[0]
+
+
+def member_with(sc: Scenario, values: dict[str, float]) -> tuple[Scenario, dict, Model]:
+    """scenario_with's scenario, with its TOML document and its model (built to validate it): what a search that
+    visits hundreds of points would otherwise parse and build again."""
+    doc = copy.deepcopy(_document(sc.text))
     for path, value in values.items():
         set_parameter(doc, path, float(value))
-    return _validated(doc, sc, ", ".join(f"{p} = {v:.6g}" for p, v in values.items()))
+    member, model = _validated_model(doc, sc, ", ".join(f"{p} = {v:.6g}" for p, v in values.items()))
+    return member, doc, model
+
+
+@lru_cache(maxsize=16)
+def _document(text: str) -> dict:
+    """A scenario's TOML decoded once (callers copy before they edit)."""
+    return tomllib.loads(text)
 
 
 def _validated(doc: dict, sc: Scenario, what: str) -> Scenario:
     """A member's document as a Scenario, validated; its text is the member's own TOML."""
+    return _validated_model(doc, sc, what)[0]
+
+
+def _validated_model(doc: dict, sc: Scenario, what: str) -> tuple[Scenario, Model]:
+    """_validated's scenario and the model it built."""
     import tomli_w
 
     try:
         member = scenario_mod.parse_document(doc, tomli_w.dumps(doc), sc.path)
-        build(member)
+        model = build(member)
     except ScenarioError as exc:
         raise ScenarioError(sc.path, exc.field, f"with {what}: {exc.message}") from None
-    return member
+    return member, model
 
 
 def _coefficients(model: Model, modal: bool = False) -> dict[str, np.ndarray]:
