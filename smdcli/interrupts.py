@@ -123,6 +123,8 @@ def deferred(raise_after: bool = True):
     if threading.current_thread() is not threading.main_thread():  # signals are only ever raised in the main one
         yield
         return
+    if _received is not None:  # waiting on other threads after an interrupt: first free what it may have left held
+        _release_import_lock()
     _deferring += 1
     try:
         yield
@@ -130,6 +132,21 @@ def deferred(raise_after: bool = True):
         _deferring -= 1
     if raise_after:
         raise_if_received()
+
+
+def _release_import_lock() -> None:
+    """Release the interpreter's import lock where this thread still holds it: a signal raised in the instant
+    between importlib's taking it and the `try` that gives it back (`_imp.acquire_lock()` then `try:`) leaves it
+    held, and a worker thread that then imports anything waits for it forever while this thread waits for the
+    worker (an interrupted sweep hung so under load, its solver thread in `_imp.acquire_lock`). smd's own code never
+    runs inside importlib's locked sections, so a lock this thread holds here is such a leftover."""
+    import _imp
+
+    while _imp.lock_held():
+        try:
+            _imp.release_lock()
+        except RuntimeError:  # another thread's, taken for its own import: its to give back
+            return
 
 
 SLICE = 0.1  # s: how long one deferred wait lasts before a received signal is raised

@@ -505,3 +505,30 @@ def test_a_finalizer_that_an_interrupt_cut_short_prints_no_traceback():
     ran = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert ran.returncode == 0, ran.stderr
     assert ran.stderr.count("half-built") == 1, ran.stderr
+
+
+def test_an_import_lock_an_interrupt_left_held_does_not_hang_the_wait_for_a_worker():
+    """A signal raised between importlib's taking the interpreter's import lock and the `try` that gives it back
+    leaves the main thread holding it; a solver thread that then imports waits on it forever while the main thread
+    waits for the thread (an interrupted sweep hung so under load: gdb showed the solver in `_imp.acquire_lock` and
+    the main thread joining). Here the leftover is made by hand: once a signal is received, the wait for the worker
+    gives the lock back first, and the worker's import completes (without that, this child hangs until killed)."""
+    code = ("import _imp, os, signal, threading\n"
+            "from concurrent.futures import ThreadPoolExecutor\n"
+            "from smdcli import interrupts\n"
+            "interrupts.install()\n"
+            "_imp.acquire_lock()  # what an interrupt inside importlib leaves behind\n"
+            "try:\n"
+            "    os.kill(os.getpid(), signal.SIGINT)\n"
+            "    for _ in range(10 ** 6):\n"
+            "        pass\n"
+            "except KeyboardInterrupt:\n"
+            "    pass\n"
+            "def worker():\n"
+            "    import xml.dom.minidom  # an import the worker does after the interrupt\n"
+            "    return 'imported'\n"
+            "pool = ThreadPoolExecutor(1)\n"
+            "future = pool.submit(worker)\n"
+            "with interrupts.deferred(raise_after=False):\n"
+            "    print(future.result(timeout=20), _imp.lock_held())\n")
+    assert _python_prints(code) == ["imported", "False"]
