@@ -384,6 +384,19 @@ class EventSensitivityRun(PiecewiseRun):
             rates_out[:len(grid)][at] = (Zs[at] @ big[s:].T + forcing[s:]).reshape(-1, P, s)
         return S_out, rates_out
 
+    def state_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(z, S) at time t on the exact flow, from the last checkpoint before it (S nan where the response has no
+        derivative): the state between samples, as the energy a damper dissipates across an event needs."""
+        times = [c[0] for c in self.checkpoints]
+        j = max(int(np.searchsorted(times, t, side="right")) - 1, 0)
+        t_c, z_c, S_c, _, _ = self.checkpoints[j]
+        Z = np.concatenate([z_c, S_c.ravel()]) if t == t_c else \
+            self.carry(np.concatenate([z_c, S_c.ravel()]), t_c, t, self.checkpoints[j])
+        S = Z[len(z_c):].reshape(self.P, len(z_c))
+        if self.undefined_from is not None and t >= self.undefined_from[0]:
+            S = np.full_like(S, np.nan)
+        return Z[:len(z_c)], S
+
     def at(self, t: float) -> np.ndarray:
         """S at time t (nan where the response has no derivative), from the last checkpoint before it."""
         if self.undefined_from is not None and t >= self.undefined_from[0]:

@@ -316,13 +316,13 @@ def dissipated(s, name: str) -> tuple[float, np.ndarray]:
     c w^2 (c |w|^3 for a quadratic damper; w its ends' relative velocity) by Gauss-Legendre on the quintic Hermite
     interpolant of each output step, as the energy balance integrates (energy.hermite_slopes); the gradient the
     same sum differentiated, dc w^2 + 2 c w dw (dc |w|^3 + 3 c |w| w dw), dw from the sensitivities' own quintics.
-    UsageError on a scene solved event to event, whose steps holding an event the quintic does not span."""
-    if len(s.event_times) and s.exact_at is not None:
-        raise UsageError(f"dissipated:{name}: a scene solved event to event (yielding, friction, stops) has no "
-                         "dissipated energy measure yet; its dampers' energy needs each event's step split")
+    On a scene solved event to event a step holding an event (where the quintic does not hold) is split at its
+    events, each piece's Gauss nodes read on the exact flow."""
     element = next(e for e in s.model.elements if e.name == name)
     w, quadrature = _element_rates(element, s.time, s.displacement, s.velocity, s.acceleration)
     dw, _ = _element_rates(element, s.time, s.d_displacement, s.d_velocity, s.d_acceleration)
+    if len(s.event_times) and s.exact_state_at is not None:
+        w, dw, quadrature = _across_events(s, element, w, dw, quadrature)
     c = element.coef
     dc = np.array([d.of(lambda m: next(e.coef for e in m.elements if e.name == name)) for d in s.derivatives])
     if element.law == "quadratic":
@@ -330,6 +330,41 @@ def dissipated(s, name: str) -> tuple[float, np.ndarray]:
         return c * unit, dc * unit + 3 * c * ((np.abs(w) * w)[None] * dw * quadrature).sum(axis=(1, 2))
     unit = float((w * w * quadrature).sum())
     return c * unit, dc * unit + 2 * c * (w[None] * dw * quadrature).sum(axis=(1, 2))
+
+
+def _across_events(s, element, w, dw, quadrature):
+    """w, dw and the weights with each output step that holds an event (or ends or starts at one) split at its
+    events: the pieces' Gauss nodes appended as steps of their own (the step's own zeroed), their states and
+    sensitivities read on the exact flow (s.exact_state_at)."""
+    from smdcli.analysis.energy import GAUSS_POINTS
+
+    time, n = s.time, s.displacement.shape[1]
+    events = np.asarray(s.event_times, dtype=float)
+    steps = np.unique(np.concatenate([np.searchsorted(time, events, side="right") - 1,
+                                      np.searchsorted(time, events, side="left") - 1]))
+    steps = steps[(steps >= 0) & (steps < len(time) - 1)]
+    nodes, weights = np.polynomial.legendre.leggauss(GAUSS_POINTS)
+
+    def rate(q):  # (..., 2n) -> (...,): the element's x_b' - x_a'
+        v = q[..., n:2 * n]
+        return (v[..., element.b] if element.b >= 0 else 0.0) - (v[..., element.a] if element.a >= 0 else 0.0)
+    extra_w, extra_dw, extra_q = [], [], []
+    for k in steps:
+        cuts = np.concatenate([[time[k]], events[(events > time[k]) & (events < time[k + 1])], [time[k + 1]]])
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            if b <= a:
+                continue
+            at = a + 0.5 * (nodes + 1) * (b - a)
+            states = [s.exact_state_at(float(t)) for t in at]
+            extra_w.append([rate(z) for z, _ in states])
+            extra_dw.append(np.array([rate(S) for _, S in states]).T)
+            extra_q.append(0.5 * weights * (b - a))
+    quadrature = quadrature.copy()
+    quadrature[steps] = 0.0
+    if not extra_w:
+        return w, dw, quadrature
+    return (np.concatenate([w, np.array(extra_w)]), np.concatenate([dw, np.stack(extra_dw, axis=1)], axis=1),
+            np.concatenate([quadrature, np.array(extra_q)]))
 
 
 def dissipated_history(element, time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:

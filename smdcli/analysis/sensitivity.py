@@ -75,6 +75,8 @@ class Sensitivity:
     derivatives: list = field(default_factory=list)  # model_derivative.Derivative per parameter
     event_times: np.ndarray = field(default_factory=lambda: np.zeros(0))  # where the solution is not smooth
     exact_at: Callable | None = None  # t -> (P, n) d_displacement at any time, on the exact flow (event runs)
+    # t -> ((2n,) x and v, (P, 2n) their derivatives) at any time, on the exact flow (event runs)
+    exact_state_at: Callable | None = None
 
     def ground_acceleration(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The support's acceleration on the grid (N,) and its derivative (P, N), or None without support motion:
@@ -203,6 +205,11 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
     found.event_times = events
     if run is not None:
         found.exact_at = lambda t: run.at(t)[:, :n] / scales[:, None]
+
+        def state_at(t):
+            z, S = run.state_at(t)
+            return z[:2 * n], S[:, :2 * n] / scales[:, None]
+        found.exact_state_at = state_at
     return found
 
 
