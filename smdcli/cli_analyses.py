@@ -203,8 +203,9 @@ def optimize(
                                            "one-sided PSD 1 N^2/Hz on the input, 1 (m/s^2)^2/Hz on a shaking support, "
                                            "or --input-psd), "
                                            "or of the scenario's own run peak_displacement:DOF, peak_drift:A-B, "
-                                           "peak_acceleration:DOF, residual_displacement:DOF, dissipated:DAMPER "
-                                           "(damper[0]: the energy it dissipates, J). Default: \\[optimize] "
+                                           "peak_acceleration:DOF, residual_displacement:DOF, dissipated:ELEMENT "
+                                           "(damper[0], friction[0]: the energy it dissipates, J). Default: "
+                                           "\\[optimize] "
                                            "minimize."),
     subject_to: Optional[List[str]] = typer.Option(None, "--subject-to", help="'OBJECTIVE <= VALUE' (repeat): a "
                                                    "constraint on another measure, as --minimize names it "

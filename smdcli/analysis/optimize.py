@@ -35,8 +35,8 @@ import numpy as np
 
 from smdcli.analysis.model_derivative import check_once, model_derivatives
 from smdcli.analysis.optimize_search import FEASIBLE, local_search, stationary, violation
-from smdcli.analysis.response_measures import (GROUND, TIME_PEAKS, receptance_peaks, rms, time_measure,
-                                               transmissibility_peaks)
+from smdcli.analysis.response_measures import (GROUND, TIME_PEAKS, dissipators, receptance_peaks, rms,
+                                               time_measure, transmissibility_peaks)
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import build, time_grid
 from smdcli.model.system import GROUND_DOF
@@ -63,7 +63,7 @@ class Objective:
     dof: int
     text: str
     other: int = -1  # a drift's lower DOF (peak_drift:<a>-<b>: x_a - x_b), GROUND for <a>-ground
-    element: str = ""  # dissipated:<element>'s damper (damper[i])
+    element: str = ""  # dissipated:<element>'s damper (damper[i]) or Coulomb contact (friction[i])
 
 
 @dataclass
@@ -122,8 +122,9 @@ def read_objective(text: str, dofs: tuple[str, ...], source: str, dampers: tuple
                          (f"did you mean {hint[0]!r}?" if hint else f"known: {', '.join(OBJECTIVES)}") + ")")
     if kind == "dissipated":
         if dof not in dampers:
-            raise UsageError(f"--minimize {text}: expected dissipated:<damper> of {source} (" +
-                             (f"its dampers are {', '.join(dampers)}" if dampers else "it has no damper") + ")")
+            raise UsageError(f"--minimize {text}: expected dissipated:<element> of {source}, a damper or a Coulomb "
+                             "friction contact (" + (f"it has {', '.join(dampers)}" if dampers else
+                                                     "it has none") + ")")
         return Objective(kind, 0, text, element=dof)
     if kind in ("peak_drift", "rms_drift"):
         pairs = [(dof[:i], dof[i + 1:]) for i, c in enumerate(dof) if c == "-"]
@@ -311,7 +312,7 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
     paths = [p for p, _, _ in bounds]
     check_once(paths)
     base = build(sc)
-    dampers = tuple(e.name for e in base.elements if e.kind == "damper")
+    dampers = dissipators(base)
     goal = read_objective(objective, tuple(base.dofs), str(sc.path), dampers)
     lower, upper = np.array([b[1] for b in bounds]), np.array([b[2] for b in bounds])
     doc = tomllib.loads(sc.text)

@@ -312,27 +312,55 @@ def acceleration_rates(s):
 
 
 def dissipated(s, name: str) -> tuple[float, np.ndarray]:
-    """The energy a damper dissipates over a run, J, and its gradient from the run's sensitivities s: the integral of
-    c w^2 (c |w|^3 for a quadratic damper; w its ends' relative velocity) by Gauss-Legendre on the quintic Hermite
+    """The energy a damper or a Coulomb friction contact dissipates over a run, J, and its gradient from the run's
+    sensitivities s: the integral of its power (a damper's c w^2, c |w|^3 if quadratic; a contact's F |w| + c_v w^2
+    while it slips, nothing while it sticks; w the rate across it) by Gauss-Legendre on the quintic Hermite
     interpolant of each output step, as the energy balance integrates (energy.hermite_slopes); the gradient the
-    same sum differentiated, dc w^2 + 2 c w dw (dc |w|^3 + 3 c |w| w dw), dw from the sensitivities' own quintics.
-    On a scene solved event to event a step holding an event (where the quintic does not hold) is split at its
-    events, each piece's Gauss nodes read on the exact flow."""
-    element = next(e for e in s.model.elements if e.name == name)
-    w, quadrature = _element_rates(element, s.time, s.displacement, s.velocity, s.acceleration)
-    dw, _ = _element_rates(element, s.time, s.d_displacement, s.d_velocity, s.d_acceleration)
+    same sum differentiated, the rate's derivative from the sensitivities' own quintics. On a scene solved event
+    to event a step holding an event (where the quintic does not hold) is split at its events, each piece's Gauss
+    nodes read on the exact flow."""
+    row, belt, coefficients = _dissipator(s.model, name)
+    dbelt = np.array([d.of(lambda m: _dissipator(m, name)[1]) for d in s.derivatives])
+    w, quadrature = _rates(row, s.time, s.displacement, s.velocity, s.acceleration)
+    dw, _ = _rates(row, s.time, s.d_displacement, s.d_velocity, s.d_acceleration)
     if len(s.event_times) and s.exact_state_at is not None:
-        w, dw, quadrature = _across_events(s, element, w, dw, quadrature)
-    c = element.coef
-    dc = np.array([d.of(lambda m: next(e.coef for e in m.elements if e.name == name)) for d in s.derivatives])
-    if element.law == "quadratic":
-        unit = float((np.abs(w) ** 3 * quadrature).sum())
-        return c * unit, dc * unit + 3 * c * ((np.abs(w) * w)[None] * dw * quadrature).sum(axis=(1, 2))
-    unit = float((w * w * quadrature).sum())
-    return c * unit, dc * unit + 2 * c * (w[None] * dw * quadrature).sum(axis=(1, 2))
+        w, dw, quadrature = _across_events(s, row, w, dw, quadrature)
+    w, dw = w + belt, dw + dbelt[:, None, None]
+    magnitude = np.abs(w)
+    # the power's parts, each a coefficient times a function of w: (coefficient, f(w), f'(w))
+    parts = {"linear": (w * w, 2 * w), "quadratic": (magnitude ** 3, 3 * magnitude * w),
+             "coulomb": (magnitude, np.sign(w))}
+    value, gradient = 0.0, np.zeros(len(s.derivatives))
+    for kind, coefficient in coefficients.items():
+        f, slope = parts[kind]
+        dc = np.array([d.of(lambda m, kind=kind: _dissipator(m, name)[2][kind]) for d in s.derivatives])
+        unit = float((f * quadrature).sum())
+        value += coefficient * unit
+        gradient += dc * unit + coefficient * (slope[None] * dw * quadrature).sum(axis=(1, 2))
+    return value, gradient
 
 
-def _across_events(s, element, w, dw, quadrature):
+def dissipators(model) -> tuple[str, ...]:
+    """The elements dissipated:<element> measures: every damper and every Coulomb friction contact."""
+    return tuple(e.name for e in model.elements if e.kind == "damper") + tuple(
+        e.path for e in model.nonsmooth if e.kind == "friction" and e.law.piecewise_linear)
+
+
+def _dissipator(model, name: str) -> tuple[np.ndarray, float, dict[str, float]]:
+    """(row, belt, {power's part: coefficient}) of a damper or a Coulomb contact: w = row . v + belt."""
+    for e in model.elements:
+        if e.name == name:
+            row = np.zeros(model.n)
+            if e.b >= 0:
+                row[e.b] += 1.0
+            if e.a >= 0:
+                row[e.a] -= 1.0
+            return row, 0.0, {"quadratic" if e.law == "quadratic" else "linear": e.coef}
+    e = next(e for e in model.nonsmooth if e.path == name)
+    return np.asarray(e.row, dtype=float), float(e.belt), {"coulomb": e.law.force, "linear": e.law.viscous}
+
+
+def _across_events(s, row, w, dw, quadrature):
     """w, dw and the weights with each output step that holds an event (or ends or starts at one) split at its
     events: the pieces' Gauss nodes appended as steps of their own (the step's own zeroed), their states and
     sensitivities read on the exact flow (s.exact_state_at)."""
@@ -344,10 +372,6 @@ def _across_events(s, element, w, dw, quadrature):
                                       np.searchsorted(time, events, side="left") - 1]))
     steps = steps[(steps >= 0) & (steps < len(time) - 1)]
     nodes, weights = np.polynomial.legendre.leggauss(GAUSS_POINTS)
-
-    def rate(q):  # (..., 2n) -> (...,): the element's x_b' - x_a'
-        v = q[..., n:2 * n]
-        return (v[..., element.b] if element.b >= 0 else 0.0) - (v[..., element.a] if element.a >= 0 else 0.0)
     extra_w, extra_dw, extra_q = [], [], []
     for k in steps:
         cuts = np.concatenate([[time[k]], events[(events > time[k]) & (events < time[k + 1])], [time[k + 1]]])
@@ -356,8 +380,8 @@ def _across_events(s, element, w, dw, quadrature):
                 continue
             at = a + 0.5 * (nodes + 1) * (b - a)
             states = [s.exact_state_at(float(t)) for t in at]
-            extra_w.append([rate(z) for z, _ in states])
-            extra_dw.append(np.array([rate(S) for _, S in states]).T)
+            extra_w.append([z[n:2 * n] @ row for z, _ in states])
+            extra_dw.append(np.array([S[:, n:2 * n] @ row for _, S in states]).T)
             extra_q.append(0.5 * weights * (b - a))
     quadrature = quadrature.copy()
     quadrature[steps] = 0.0
@@ -367,26 +391,26 @@ def _across_events(s, element, w, dw, quadrature):
             np.concatenate([quadrature, np.array(extra_q)]))
 
 
-def dissipated_history(element, time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
-    """The energy a damper (a model Element) has dissipated by each output time, J (N,): dissipated's sum, step by
-    step."""
-    w, quadrature = _element_rates(element, time, x, v, a)
-    power = np.abs(w) ** 3 if element.law == "quadratic" else w * w
-    return np.concatenate([[0.0], np.cumsum(element.coef * (power * quadrature).sum(axis=1))])
+def dissipated_history(model, name: str, time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """The energy a damper or a Coulomb contact (dissipated's) has dissipated by each output time, J (N,), step by
+    step on the run's own samples (a figure's: the quintic across events too)."""
+    row, belt, coefficients = _dissipator(model, name)
+    w, quadrature = _rates(row, time, x, v, a)
+    w = w + belt
+    power = sum(c * {"linear": w * w, "quadratic": np.abs(w) ** 3, "coulomb": np.abs(w)}[kind]
+                for kind, c in coefficients.items())
+    return np.concatenate([[0.0], np.cumsum((power * quadrature).sum(axis=1))])
 
 
-def _element_rates(element, time, x, v, a) -> tuple[np.ndarray, np.ndarray]:
-    """The element's ends' relative velocity x_b' - x_a' (the ground 0) at each output step's Gauss nodes, from
-    the quintic Hermite of x, v, a (..., N, n) -> (..., N - 1, G); and the nodes' weights times the step."""
+def _rates(row: np.ndarray, time, x, v, a) -> tuple[np.ndarray, np.ndarray]:
+    """row . x' at each output step's Gauss nodes, from the quintic Hermite of x, v, a (..., N, n) ->
+    (..., N - 1, G); and the nodes' weights times the step."""
     from smdcli.analysis.energy import GAUSS_POINTS, hermite_slopes
 
     nodes, weights = np.polynomial.legendre.leggauss(GAUSS_POINTS)
     slope = hermite_slopes(0.5 * (nodes + 1))
     h = np.diff(time)[:, None]
-
-    def of(q):
-        return (q[..., element.b] if element.b >= 0 else 0.0) - (q[..., element.a] if element.a >= 0 else 0.0)
-    d, r, q = of(x), of(v), of(a)
+    d, r, q = x @ row, v @ row, a @ row
     ends = np.stack([d[..., :-1], h[:, 0] * r[..., :-1], h[:, 0] ** 2 * q[..., :-1], d[..., 1:], h[:, 0] * r[..., 1:],
                      h[:, 0] ** 2 * q[..., 1:]], axis=-1)
     return ends @ slope.T / h, 0.5 * weights[None, :] * h

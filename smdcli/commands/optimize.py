@@ -124,11 +124,9 @@ def _responses(run):
     out = []
     for values in (np.clip(run.initial, run.lower, run.upper), run.optimum):
         result = smdcli.simulate(scenario_with(run.sc, dict(zip(run.parameter, map(float, values)))))
-        if measure.kind == "dissipated":  # the damper's energy as it accumulates
-            model = result.origin[1]
-            element = next(e for e in model.elements if e.name == measure.element)
-            series = dissipated_history(element, result.time, result.displacement, result.velocity,
-                                        result.acceleration)
+        if measure.kind == "dissipated":  # the element's energy as it accumulates
+            series = dissipated_history(result.origin[1], measure.element, result.time, result.displacement,
+                                        result.velocity, result.acceleration)
         elif measure.kind == "peak_acceleration":  # absolute, as the objective: relative plus the ground's
             series = result.absolute("acceleration")[:, measure.dof]
         elif measure.kind == "peak_drift" and measure.other >= 0:
