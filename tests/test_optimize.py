@@ -685,6 +685,9 @@ def test_a_damper_s_energy_across_yield_and_slip_events(scene, tmp_path):
         h = 1e-4 * c
         at = {o: problem.evaluate(np.array([c + o * h]))[0] for o in (-2, -1, 1, 2)}
         assert gradient[0] == pytest.approx((8 * (at[1] - at[-1]) - (at[2] - at[-2])) / (12 * h), rel=1e-6)
+
+
+@pytest.mark.parametrize("support", [False, True])
 def test_a_peak_acceleration_is_located_between_samples_with_its_gradient(support, tmp_path):
     """peak_acceleration:primary, absolute, on the TMD forced by its resonant sine or shaken by a sine of its
     support: located on the quintic Hermite of a, a', a'' (the model's equation differentiated in time) against
