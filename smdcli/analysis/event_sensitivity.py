@@ -399,15 +399,7 @@ class EventSensitivityRun(PiecewiseRun):
 
     def at(self, t: float) -> np.ndarray:
         """S at time t (nan where the response has no derivative), from the last checkpoint before it."""
-        if self.undefined_from is not None and t >= self.undefined_from[0]:
-            return np.full((self.P, self.scene.size), np.nan)
-        times = [c[0] for c in self.checkpoints]
-        j = int(np.searchsorted(times, t, side="right")) - 1
-        t_c, z_c, S_c, states_c, dq_c = self.checkpoints[max(j, 0)]
-        if t == t_c:
-            return S_c
-        Z = self.carry(np.concatenate([z_c, S_c.ravel()]), t_c, t, self.checkpoints[max(j, 0)])
-        return Z[len(z_c):].reshape(self.P, len(z_c))
+        return self.state_at(t)[1]
 
 
 def _values(state: State) -> list[float]:
