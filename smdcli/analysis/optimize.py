@@ -112,18 +112,18 @@ class Optimum:
         return ("frequency", "rad/s") if self.in_frequency else ("time", "s")
 
 
-def read_objective(text: str, dofs: tuple[str, ...], source: str, dampers: tuple[str, ...] = ()) -> Objective:
-    """'kind:dof' (or dissipated:<damper>) read against the scene's DOFs and dampers; UsageError naming what is
-    wrong."""
+def read_objective(text: str, dofs: tuple[str, ...], source: str, elements: tuple[str, ...] = ()) -> Objective:
+    """'kind:dof' (or dissipated:<element>) read against the scene's DOFs and the elements a dissipated energy is
+    measured of (response_measures.dissipators); UsageError naming what is wrong."""
     kind, _, dof = text.partition(":")
     if kind not in OBJECTIVES:
         hint = difflib.get_close_matches(kind, OBJECTIVES, n=1)
         raise UsageError(f"--minimize {text}: unknown objective {kind!r} (" +
                          (f"did you mean {hint[0]!r}?" if hint else f"known: {', '.join(OBJECTIVES)}") + ")")
     if kind == "dissipated":
-        if dof not in dampers:
+        if dof not in elements:
             raise UsageError(f"--minimize {text}: expected dissipated:<element> of {source}, a damper or a Coulomb "
-                             "friction contact (" + (f"it has {', '.join(dampers)}" if dampers else
+                             "friction contact (" + (f"it has {', '.join(elements)}" if elements else
                                                      "it has none") + ")")
         return Objective(kind, 0, text, element=dof)
     if kind in ("peak_drift", "rms_drift"):
@@ -141,7 +141,7 @@ def read_objective(text: str, dofs: tuple[str, ...], source: str, dampers: tuple
 
 
 def read_constraint(text: str, dofs: tuple[str, ...], source: str,
-                    dampers: tuple[str, ...] = ()) -> tuple[Objective, float]:
+                    elements: tuple[str, ...] = ()) -> tuple[Objective, float]:
     """'OBJECTIVE <= VALUE' as (the measure, its limit); UsageError naming what is wrong."""
     found = re.fullmatch(r"\s*(\S+)\s*<=\s*(\S+)\s*", text)
     if not found:
@@ -153,7 +153,7 @@ def read_constraint(text: str, dofs: tuple[str, ...], source: str,
     if not (math.isfinite(limit) and limit > 0):
         raise UsageError(f"--subject-to {text}: expected a positive finite limit, found {limit:g}")
     try:
-        return read_objective(found.group(1), dofs, source, dampers), limit
+        return read_objective(found.group(1), dofs, source, elements), limit
     except UsageError as exc:
         raise UsageError(f"--subject-to {text}: {exc.args[0].split(': ', 1)[1]}") from None
 
@@ -312,12 +312,12 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
     paths = [p for p, _, _ in bounds]
     check_once(paths)
     base = build(sc)
-    dampers = dissipators(base)
-    goal = read_objective(objective, tuple(base.dofs), str(sc.path), dampers)
+    elements = dissipators(base)
+    goal = read_objective(objective, tuple(base.dofs), str(sc.path), elements)
     lower, upper = np.array([b[1] for b in bounds]), np.array([b[2] for b in bounds])
     doc = tomllib.loads(sc.text)
     initial = np.array([parameter_value(doc, p) for p in paths], dtype=float)
-    limits = tuple(read_constraint(text, tuple(base.dofs), str(sc.path), dampers) for text in subject_to)
+    limits = tuple(read_constraint(text, tuple(base.dofs), str(sc.path), elements) for text in subject_to)
     if psd is not None and not all(m.kind in RMS for m in (goal, *(m for m, _ in limits))):
         raise UsageError(f"--input-psd: only the RMS measures ({', '.join(RMS)}) are under an input PSD; "
                          f"{next(m.text for m in (goal, *(m for m, _ in limits)) if m.kind not in RMS)} is not")
