@@ -13,6 +13,7 @@ FEASIBLE = 1e-8  # a constraint's relative excess that still meets it
 TOLERANCE = 1e-15  # SLSQP's on the objective scaled to its start
 STATIONARY = 1e-6  # the first-order conditions' residual (per bound width), relative to the objective, at convergence
 ACTIVE = 1e-9  # pieces of a largest within this (relative) of it are active
+ROUNDING = 1e-12  # an objective's relative change below this is its rounding: neither better nor worse
 
 
 def violation(problem, values: np.ndarray) -> float:
@@ -45,9 +46,12 @@ def local_search(problem, start: np.ndarray, lower: np.ndarray, width: np.ndarra
             return value / scale, gradient * width / scale
         result = minimize(fun, start, jac=True, method="SLSQP", bounds=box, constraints=limits, options=options)
         theta = np.clip(result.x, 0.0, 1.0)
-        if not limits or violation(problem, lower + theta * width) == 0 and all(
-                problem.evaluate(lower + theta * width, m)[0] < limit * (1 - 1e-6) for m, limit in problem.constraints):
+        binding = [(m, limit) for m, limit in problem.constraints
+                   if problem.evaluate(lower + theta * width, m)[0] >= limit * (1 - 1e-6)]
+        if not binding:
             theta = _polished(problem, theta, lower, width, history)  # no constraint binds: a smooth optimum
+        elif violation(problem, lower + theta * width) <= FEASIBLE:
+            theta = _polished_on(problem, theta, lower, width, history, binding)
         return _best_seen(problem, theta, lower, width, history), result, history
 
     def constraints(y):
@@ -74,7 +78,7 @@ def _best_seen(problem, theta: np.ndarray, lower: np.ndarray, width: np.ndarray,
     better (SLSQP may stop on a failed line search past a better point: a nonsmooth time-domain peak)."""
     value = problem.evaluate(lower + theta * width)[0]
     for seen, seen_value in history:
-        if seen_value < value * (1 - 1e-12) and violation(problem, lower + seen * width) == 0:  # strictly met
+        if seen_value < value * (1 - ROUNDING) and violation(problem, lower + seen * width) == 0:  # strictly met
             theta, value = seen, seen_value
     return theta, value
 
@@ -103,7 +107,7 @@ def _polished(problem, theta: np.ndarray, lower: np.ndarray, width: np.ndarray, 
     """A smooth objective's optimum refined by Newton's method on its exact gradient in the parameters off their
     bounds (the Hessian from central differences of the gradient): SLSQP stops where the objective stops changing,
     a flat optimum's parameters then known only to the square root of rounding (rms's damping to 4e-8). A step is
-    kept only where the gradient shrinks and the objective does not grow."""
+    kept only where the gradient shrinks and the objective does not grow beyond its rounding."""
     free = (theta > 1e-9) & (theta < 1 - 1e-9)
     if not free.any():
         return theta
@@ -128,7 +132,8 @@ def _polished(problem, theta: np.ndarray, lower: np.ndarray, width: np.ndarray, 
         trial[free] = np.clip(theta[free] + step, 0.0, 1.0)
         trial_value, trial_gradient, _ = problem.evaluate(lower + trial * width)
         trial_g = (trial_gradient * width)[free]
-        if not (np.abs(trial_g).max() < np.abs(g).max() and trial_value <= value * (1 + 1e-14)):
+        # the objective's own rounding (a Lyapunov solution's, 1e-14 of it on another CPU's BLAS) is no growth
+        if not (np.abs(trial_g).max() < np.abs(g).max() and trial_value <= value * (1 + ROUNDING)):
             break
         theta, value, g = trial, trial_value, trial_g
         history.append((theta.copy(), value))
@@ -167,3 +172,57 @@ def stationary(problem, theta: np.ndarray, lower: np.ndarray, width: np.ndarray)
     multipliers, _ = nnls(A, b)
     residual = A[:P] @ multipliers
     return bool(np.abs(residual).max() <= STATIONARY * scale and abs(multipliers[:len(pieces)].sum() - 1) < 1e-6)
+
+
+def _polished_on(problem, theta: np.ndarray, lower: np.ndarray, width: np.ndarray, history: list, binding: list,
+                 steps: int = 4, h: float = 1e-5) -> np.ndarray:
+    """A smooth optimum on binding constraints (measure = limit) refined by Newton's method on its first-order
+    conditions, grad f + sum lambda_i grad c_i = 0 and c_i = limit_i, in the parameters off their bounds (the
+    Lagrangian's Hessian from central differences of its gradient, the multipliers by least squares to start):
+    SLSQP leaves such an optimum known to the square root of rounding, as it leaves an unconstrained one. A step is
+    kept only where the conditions' residual shrinks."""
+    free = (theta > 1e-9) & (theta < 1 - 1e-9)
+    if not free.any() or len(binding) >= free.sum():
+        return theta
+
+    def conditions(t, multipliers=None):  # (gradient of f, the constraints' gradient rows, their residuals), free
+        values = lower + t * width
+        g = (problem.evaluate(values)[1] * width)[free]
+        rows = np.array([(problem.evaluate(values, m)[1] * width)[free] / limit for m, limit in binding])
+        residual = np.array([problem.evaluate(values, m)[0] / limit - 1 for m, limit in binding])
+        return g, rows, residual
+
+    g, rows, residual = conditions(theta)
+    multipliers = np.linalg.lstsq(rows.T, -g, rcond=None)[0]
+    scale = max(float(np.abs(g).max()), 1e-300)
+
+    def size(g, rows, residual, multipliers):
+        return max(float(np.abs(g + rows.T @ multipliers).max()) / scale, float(np.abs(residual).max(initial=0.0)))
+    current = size(g, rows, residual, multipliers)
+    for _ in range(steps):
+        columns = []
+        for j in np.flatnonzero(free):
+            shifted = [theta.copy(), theta.copy()]
+            shifted[0][j] += h
+            shifted[1][j] -= h
+            up, down = (conditions(t) for t in shifted)
+            columns.append(((up[0] + up[1].T @ multipliers) - (down[0] + down[1].T @ multipliers)) / (2 * h))
+        hessian = np.array(columns).T
+        hessian = 0.5 * (hessian + hessian.T)
+        m = len(binding)
+        system = np.block([[hessian, rows.T], [rows, np.zeros((m, m))]])
+        try:
+            step = np.linalg.solve(system, -np.concatenate([g + rows.T @ multipliers, residual]))
+        except np.linalg.LinAlgError:
+            break
+        trial = theta.copy()
+        trial[free] = np.clip(theta[free] + step[:free.sum()], 0.0, 1.0)
+        trial_multipliers = multipliers + step[free.sum():]
+        trial_conditions = conditions(trial)
+        trial_size = size(*trial_conditions, trial_multipliers)
+        if not trial_size < current:
+            break
+        theta, multipliers, current = trial, trial_multipliers, trial_size
+        g, rows, residual = trial_conditions
+        history.append((theta.copy(), problem.evaluate(lower + theta * width)[0]))
+    return theta
