@@ -88,6 +88,16 @@ def chain_files(folder: Path, n: int, suffix: str = ".mtx", *, end: float = 1.0,
     return scene
 
 
+def five_point(f, values, i: int, relative: float = 1e-4) -> float:
+    """d f / d values[i] by five-point central differences over a step of `relative` of values[i]."""
+    import numpy as np
+
+    values = np.asarray(values, dtype=float)
+    h = relative * (abs(values[i]) or 1.0)
+    at = {o: f(values + o * h * np.eye(len(values))[i]) for o in (-2, -1, 1, 2)}
+    return (8 * (at[1] - at[-1]) - (at[2] - at[-2])) / (12 * h)
+
+
 def force_block(kind: str, on: str = "m", **fields) -> str:
     """A [[force]] table in TOML text; lists and numbers written as TOML reads them."""
     lines = ["[[force]]", f'on = "{on}"', f'type = "{kind}"']
