@@ -445,7 +445,8 @@ def test_time_domain_measures_and_their_gradients_match_differences_of_exact_run
     """The absorber's stroke (a drift located between samples) and the absorber's final displacement under the
     bundled resonant sine, with their gradients in the absorber's k and c,
     against five-point differences of the same measures taken from exact runs, to 1e-6 of the largest."""
-    from smdcli.analysis.optimize import Problem, read_objective
+    from smdcli.analysis.objectives import read_objective
+    from smdcli.analysis.optimize import Problem
     from smdcli.solvers.peaks import located_peaks
 
     sc = smdcli.load(TMD)
@@ -519,7 +520,8 @@ def test_an_absorber_s_rms_stroke_and_its_gradient_match_the_integral_and_differ
     central differences of that integral's own Lyapunov value, to 1e-6."""
     from scipy.integrate import quad
 
-    from smdcli.analysis.optimize import Problem, read_objective
+    from smdcli.analysis.objectives import read_objective
+    from smdcli.analysis.optimize import Problem
 
     sc = smdcli.load(TMD)
     paths = ["spring[1].k", "damper[0].c"]
@@ -591,7 +593,8 @@ def test_rms_measures_under_white_noise_or_a_profile_on_a_force_or_the_support(o
     its support (which, without a force, is the input: 1 (m/s^2)^2/Hz), under white noise (Lyapunov) or a log-log
     PSD profile (quadrature): the value against the integral of |q|^2 S written out here, to 1e-8, and the gradient
     in the absorber's k and c against five-point differences of that integral, to 1e-6."""
-    from smdcli.analysis.optimize import Problem, read_objective, shaken
+    from smdcli.analysis.objectives import read_objective
+    from smdcli.analysis.optimize import Problem, shaken
     from smdcli.analysis.random_vibration import Profile
     from smdcli.model import build
 
@@ -671,7 +674,8 @@ def test_the_energy_a_damper_dissipates_and_its_gradient_match_an_independent_in
     smooth sensitivities' own DOP853 at 1e-9)."""
     from scipy.integrate import solve_ivp
 
-    from smdcli.analysis.optimize import Problem, read_objective
+    from smdcli.analysis.objectives import read_objective
+    from smdcli.analysis.optimize import Problem
 
     path = tmp_path / "tmd.toml"
     path.write_text(TMD.read_text().replace("c = 0.1\n", f"c = 0.1\nlaw = \"{law}\"\n", 1))
@@ -714,7 +718,8 @@ def test_a_damper_s_energy_across_yield_and_slip_events(scene, tmp_path):
     the measure itself, to 1e-6."""
     from scipy.integrate import simpson
 
-    from smdcli.analysis.optimize import Problem, read_objective
+    from smdcli.analysis.objectives import read_objective
+    from smdcli.analysis.optimize import Problem
 
     if scene == "yielding":
         text, step, fine, c = YIELDING_TMD, "0.01", "5e-05", 0.3
@@ -748,7 +753,8 @@ def test_a_peak_acceleration_is_located_between_samples_with_its_gradient(suppor
     from scipy.integrate import solve_ivp
     from scipy.optimize import minimize_scalar
 
-    from smdcli.analysis.optimize import Problem, read_objective
+    from smdcli.analysis.objectives import read_objective
+    from smdcli.analysis.optimize import Problem
 
     path = tmp_path / "scene.toml"
     path.write_text(SHAKEN_TMD if support else TMD.read_text())
@@ -804,7 +810,8 @@ def test_a_friction_contact_s_energy_and_its_gradient(tmp_path):
     under the record: against the friction energy DOP853 at rtol 1e-12 books along its own solution, to 1e-9
     (measured 6.7e-13), and its gradient in the slip force and in a storey damper's c against five-point
     differences of the measure itself, to 1e-6 (measured 5e-11 and 1e-10)."""
-    from smdcli.analysis.optimize import Problem, read_objective
+    from smdcli.analysis.objectives import read_objective
+    from smdcli.analysis.optimize import Problem
 
     path = tmp_path / "isolated.toml"
     path.write_text((SCENARIOS / "friction_isolated_building.toml").read_text().replace(
@@ -819,3 +826,35 @@ def test_a_friction_contact_s_energy_and_its_gradient(tmp_path):
     for i in range(2):
         assert gradient[i] == pytest.approx(five_point(lambda point: problem.evaluate(point)[0], values, i),
                                             rel=1e-6), i
+
+
+@pytest.mark.parametrize("objective,rayleigh", [("peak_transmissibility:roof", False), ("rms:roof", True),
+                                                ("rms_drift:roof-floor4", False)])
+def test_a_linear_measure_on_matrices_spanned_by_the_corners_is_the_built_scene_s(objective, rayleigh, tmp_path):
+    """Linear measures are solved on matrices interpolated between the box's validated corners (no scene built per
+    point): at points across the box, the value and gradient agree with a scene built there and differentiated by
+    model_derivative's stencil, to 1e-10 (rounding of the receptance's located peak, or the Lyapunov solution); a
+    box with a corner that is no scene falls back to building each point."""
+    from smdcli.analysis.objectives import read_objective
+    from smdcli.analysis.optimize import Problem
+
+    text = (SCENARIOS / "five_storey_tmd.toml").read_text().replace("../records/", f"{ROOT}/records/")
+    if rayleigh:
+        text += "\n[damping]\nalpha = 0.05\nbeta = 0.002\n"
+    path = tmp_path / "scene.toml"
+    path.write_text(text)
+    sc = smdcli.load(path)
+    paths = ["spring[5].k", "damper[0].c", "mass.tmd.m"]
+    lower, upper = np.array([2e4, 1e3, 2e3]), np.array([8e4, 6e3, 6e3])
+    goal = read_objective(objective, tuple(sc.dof_names), "scene")
+    spanned, built = Problem(sc, paths, goal, None), Problem(sc, paths, goal, None)
+    spanned.interpolate(lower, upper)
+    assert spanned._span is not None and built._span is None
+    for point in np.random.default_rng(3).uniform(lower, upper, (4, 3)):
+        value, gradient, _ = spanned.evaluate(point)
+        want, slope, _ = built.evaluate(point)
+        assert value == pytest.approx(want, rel=1e-10)
+        assert gradient == pytest.approx(slope, rel=1e-8, abs=1e-10 * np.abs(slope).max())
+    invalid = Problem(sc, paths, goal, None)
+    invalid.interpolate(np.array([-1e4, 1e3, 2e3]), upper)  # a negative stiffness at the low corner
+    assert invalid._span is None

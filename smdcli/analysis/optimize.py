@@ -23,9 +23,7 @@ Must not import: io, plots, commands, cli.
 
 from __future__ import annotations
 
-import difflib
 import math
-import re
 import time
 import tomllib
 from dataclasses import dataclass, field
@@ -34,36 +32,19 @@ from pathlib import Path
 import numpy as np
 
 from smdcli.analysis.model_derivative import check_once, model_derivatives
+from smdcli.analysis.objectives import (PEAKS, RMS, TIME_DOMAIN, TIME_PEAK_KINDS, UNITS, Objective, read_constraint,
+                                        read_objective)
 from smdcli.analysis.optimize_search import FEASIBLE, local_search, stationary, violation
-from smdcli.analysis.response_measures import (GROUND, TIME_PEAKS, dissipators, receptance_peaks, rms,
+from smdcli.analysis.response_measures import (TIME_PEAKS, dissipators, receptance_peaks, rms,
                                                time_measure, transmissibility_peaks)
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import build, time_grid
 from smdcli.model.system import GROUND_DOF
 from smdcli.scenario import Scenario
-from smdcli.sweep.family import member_with, parameter_value, scenario_with
+from smdcli.sweep.family import corner_span, member_with, parameter_value, scenario_with, structural
 
-OBJECTIVES = ("peak_receptance", "peak_transmissibility", "rms", "rms_drift", "rms_acceleration", "peak_displacement",
-              "peak_drift", "peak_acceleration", "residual_displacement", "dissipated")
-UNITS = {"peak_receptance": "m/N", "peak_transmissibility": "1", "rms": "m", "rms_drift": "m", "rms_acceleration": "m/s^2",
-         "peak_displacement": "m", "peak_drift": "m", "peak_acceleration": "m/s^2", "residual_displacement": "m",
-         "dissipated": "J"}
-RMS = ("rms", "rms_drift", "rms_acceleration")  # under an input PSD: white noise, or a profile
-TIME_DOMAIN = ("peak_displacement", "peak_drift", "peak_acceleration", "residual_displacement", "dissipated")
-TIME_PEAK_KINDS = ("peak_displacement", "peak_drift", "peak_acceleration")  # the largest of a run's peaks in time
-PEAKS = ("peak_receptance", "peak_transmissibility")  # minimized as the minimax over located peaks
 DISTINCT = 1e-3  # optima closer than this share of the bounds' widths are one
-
-
-@dataclass(frozen=True)
-class Objective:
-    """What is minimized: a kind of OBJECTIVES at one DOF."""
-
-    kind: str
-    dof: int
-    text: str
-    other: int = -1  # a drift's lower DOF (peak_drift:<a>-<b>: x_a - x_b), GROUND for <a>-ground
-    element: str = ""  # dissipated:<element>'s damper (damper[i]) or Coulomb contact (friction[i])
+CORNERS = 6  # the most parameters whose box's 2^P corners are built to interpolate a linear measure's matrices
 
 
 @dataclass
@@ -112,67 +93,6 @@ class Optimum:
         return ("frequency", "rad/s") if self.in_frequency else ("time", "s")
 
 
-def read_objective(text: str, dofs: tuple[str, ...], source: str, elements: tuple[str, ...] = ()) -> Objective:
-    """'kind:dof' (or dissipated:<element>) read against the scene's DOFs and the elements a dissipated energy is
-    measured of (response_measures.dissipators); UsageError naming what is wrong."""
-    kind, _, dof = text.partition(":")
-    if kind not in OBJECTIVES:
-        hint = difflib.get_close_matches(kind, OBJECTIVES, n=1)
-        raise UsageError(f"--minimize {text}: unknown objective {kind!r} (" +
-                         (f"did you mean {hint[0]!r}?" if hint else f"known: {', '.join(OBJECTIVES)}") + ")")
-    if kind == "dissipated":
-        if dof not in elements:
-            raise UsageError(f"--minimize {text}: expected dissipated:<element> of {source}, a damper or a Coulomb "
-                             "friction contact (" + (f"it has {', '.join(elements)}" if elements else
-                                                     "it has none") + ")")
-        return Objective(kind, 0, text, element=dof)
-    if kind in ("peak_drift", "rms_drift"):
-        pairs = [(dof[:i], dof[i + 1:]) for i, c in enumerate(dof) if c == "-"]
-        pair = next(((a, b) for a, b in pairs if a in dofs and (b in dofs or b == "ground")), None)
-        if pair is None:
-            raise UsageError(f"--minimize {text}: expected {kind}:<dof>-<dof> of two DOFs of {source}, or "
-                             f"<dof>-ground (DOFs are {', '.join(dofs)})")
-        return Objective(kind, dofs.index(pair[0]), text, GROUND if pair[1] == "ground" else dofs.index(pair[1]))
-    if dof not in dofs:
-        hint = difflib.get_close_matches(dof, dofs, n=1)
-        raise UsageError(f"--minimize {text}: no DOF {dof!r} in {source} (" +
-                         (f"did you mean {hint[0]!r}?" if hint else f"DOFs are {', '.join(dofs)}") + ")")
-    return Objective(kind, dofs.index(dof), text)
-
-
-def read_constraint(text: str, dofs: tuple[str, ...], source: str,
-                    elements: tuple[str, ...] = ()) -> tuple[Objective, float]:
-    """'OBJECTIVE <= VALUE' as (the measure, its limit); UsageError naming what is wrong."""
-    found = re.fullmatch(r"\s*(\S+)\s*<=\s*(\S+)\s*", text)
-    if not found:
-        raise UsageError(f"--subject-to {text}: expected OBJECTIVE <= VALUE (rms:tmd <= 0.05)")
-    try:
-        limit = float(found.group(2))
-    except ValueError:
-        raise UsageError(f"--subject-to {text}: expected a number after <=, found {found.group(2)!r}") from None
-    if not (math.isfinite(limit) and limit > 0):
-        raise UsageError(f"--subject-to {text}: expected a positive finite limit, found {limit:g}")
-    try:
-        return read_objective(found.group(1), dofs, source, elements), limit
-    except UsageError as exc:
-        raise UsageError(f"--subject-to {text}: {exc.args[0].split(': ', 1)[1]}") from None
-
-
-def read_bounds(text: str) -> tuple[str, float, float]:
-    """'PATH=LO:HI' as (path, lo, hi); UsageError unless LO < HI are numbers."""
-    found = re.fullmatch(r"\s*([^=\s]+)\s*=\s*([^:]+):(.+)", text)
-    if not found:
-        raise UsageError(f"--param {text}: expected PATH=LO:HI (spring[1].k=10:100), every parameter bounded")
-    path, lo, hi = found.groups()
-    try:
-        low, high = float(lo), float(hi)
-    except ValueError:
-        raise UsageError(f"--param {text}: expected numbers LO:HI, found {lo!r}:{hi!r}") from None
-    if not (math.isfinite(low) and math.isfinite(high) and low < high):
-        raise UsageError(f"--param {text}: expected finite bounds with LO < HI, found {low:g}:{high:g}")
-    return path, low, high
-
-
 class Problem:
     """The objective and the constraints' measures, each with its exact gradient, at any parameter values within
     the bounds; a scene solved once per point (its model's derivatives, or its sensitivities, serve every measure)."""
@@ -185,6 +105,33 @@ class Problem:
         self.records, self.over = records, over  # (path, the scenario under that record) pairs
         self.solves = 0
         self._cache: dict[bytes, dict] = {}
+        self._span = None  # (base, lower, width, coefficients at lower, each parameter's change over its width)
+
+    def interpolate(self, lower: np.ndarray, upper: np.ndarray) -> None:
+        """Solve the linear measures on matrices interpolated between the box's validated corners (the sweep's
+        structural members) rather than on a scene built at every point, where every path enters M, C and K
+        affinely: the same numbers to rounding, and the model's derivatives exact and constant."""
+        base = build(self.sc).dense()
+        kinds = [m.kind for m in (self.objective, *(m for m, _ in self.constraints))]
+        if (len(self.paths) > CORNERS or any(k in TIME_DOMAIN for k in kinds) or not base.is_linear
+                or "zeta" in self.paths or (self.sc.damping is not None and self.sc.damping.modal)
+                or not structural(base, self.paths)):
+            return
+        try:
+            origin, changes = corner_span(self.sc, lambda v: scenario_with(self.sc, dict(zip(self.paths, v))),
+                                          lower, upper)
+        except ScenarioError:
+            return  # a corner is not a scene: each point is built, and judged, on its own
+        self._span = (base, lower, upper - lower, origin, changes)
+
+    def _interpolated(self, values: np.ndarray) -> tuple:
+        """The dense model at values and each parameter's (dM, dC, dK), from the corners' span."""
+        base, lower, width, origin, changes = self._span
+        weights = (values - lower) / width
+        matrices = {name: origin[name] + sum(w * change[name] for w, change in zip(weights, changes))
+                    for name in "MCK"}
+        return (base.with_matrices(**matrices),
+                [tuple(change[name] / w for name in "MCK") for change, w in zip(changes, width)])
 
     @property
     def minimax(self) -> bool:
@@ -204,6 +151,8 @@ class Problem:
     def value(self, values: np.ndarray, forward=None) -> float:
         """The objective alone at values, no gradient (what a contour plot draws): a linear measure of the scene
         there; a time-domain one from forward(scene), a solved run (Result), per record where there are records."""
+        if self._span is not None:
+            return self.evaluate(values)[0]
         scene = self.scene(values)
         if self.objective.kind not in TIME_DOMAIN:
             return Problem(scene, [], self.objective, self.input_dof, psd=self.psd).evaluate(np.zeros(0))[0]
@@ -230,15 +179,19 @@ class Problem:
         if point is None:
             self.solves += 1
             named = dict(zip(self.paths, map(float, values)))
-            scene, doc, model = member_with(self.sc, named)
-            point = self._cache[key] = {"scene": scene, "doc": doc, "model": model, "values": named}
+            if self._span is not None:
+                point = self._cache[key] = {"values": named, "linear": self._interpolated(np.asarray(values, float))}
+            else:
+                scene, doc, model = member_with(self.sc, named)
+                point = self._cache[key] = {"scene": scene, "doc": doc, "model": model, "values": named}
         if measure.text not in point:
             point[measure.text] = self._measure(point, measure)
         return point[measure.text]
 
     def _measure(self, point: dict, measure: Objective) -> tuple:
-        sc, kind = point["scene"], measure.kind
+        kind = measure.kind
         if kind in TIME_DOMAIN:
+            sc = point["scene"]
             from smdcli.analysis.sensitivity import sensitivity
 
             if not self.records:
@@ -264,7 +217,7 @@ class Problem:
             if not model.is_linear:
                 raise UsageError(f"{self.sc.path}: {kind} needs a linear scene (its receptance); a nonlinear one "
                                  "takes peak_displacement")
-            model = model.dense()
+            model, sc = model.dense(), point["scene"]
             derived = model_derivatives(sc, model, time_grid(sc.time), self.paths, point["doc"])
             point["linear"] = (model, [(d.of(lambda m: m.dense().M), d.of(lambda m: m.dense().C),
                                         d.of(lambda m: m.dense().K)) for d in derived])
@@ -325,6 +278,7 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
                       limits,
                       _under_records(sc, records, goal, over), over, psd)
     _check_bounds(problem, initial, lower, upper)
+    problem.interpolate(lower, upper)
     width = upper - lower
     inside = np.clip((initial - lower) / width, 0.0, 1.0)
     points = [inside] + list(qmc.LatinHypercube(d=len(paths), seed=0).random(starts - 1))

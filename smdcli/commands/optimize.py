@@ -20,7 +20,8 @@ def optimize_command(path: str | Path, params: list[str], objective: str | None,
     """Read the scene and the bounds (the flags, else its [optimize] table), optimize, write OUT/<stem>_optimize.h5,
     OUT/<stem>_optimized.toml and OUT/<stem>_optimize.png (nothing where the input is refused); a bar over the
     starts on a terminal."""
-    from smdcli.analysis.optimize import optimize, read_bounds
+    from smdcli.analysis.objectives import read_bounds
+    from smdcli.analysis.optimize import optimize
     from smdcli.errors import UsageError
     from smdcli.io.atomic import atomic_path, together
     from smdcli.io.optimize_hdf5 import optimized_toml, write_optimize

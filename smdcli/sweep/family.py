@@ -293,6 +293,33 @@ def _coefficients(model: Model, modal: bool = False) -> dict[str, np.ndarray]:
     return arrays
 
 
+def structural(base: Model, paths) -> bool:
+    """Whether members that differ in these paths are the base's model with other numbers, each affine in its path:
+    the matrices, the initial state and a nonlinear scene's element coefficients. A hysteretic spring's k, a friction
+    contact's or a stop's numbers live in its law, not in K: such a member is a scene of its own (its K interpolated
+    alone left the law at the base's k, a sweep of a bilinear storey's k 300 times softer peaking at 0.0084 m where
+    simulate gives 0.10 m)."""
+    pattern = STRUCTURAL if base.is_linear else STRUCTURAL_NONLINEAR
+    in_a_law = {element.path for element in base.nonsmooth}
+    return all(pattern.match(p) and p.split(".")[0] not in in_a_law for p in paths)
+
+
+def corner_span(sc: Scenario, member, low: np.ndarray, high: np.ndarray) -> tuple[dict, list[dict]]:
+    """A structural box's coefficients (_coefficients) at its low corner and each parameter's change from its low to
+    its high end, from members built at every corner (member(values) -> Scenario, validated): every check on a value
+    is an interval, so the corners vouch for the box. ScenarioError from the corner that is not valid."""
+    corners = {}
+    for pick in np.ndindex(*(2,) * len(low)):
+        corners[pick] = build(member(np.where(np.array(pick) == 1, high, low))).dense()
+    modal = _modal(sc)
+    origin = _coefficients(corners[(0,) * len(low)], modal)
+    changes = []
+    for i in range(len(low)):
+        far = _coefficients(corners[tuple(1 if j == i else 0 for j in range(len(low)))], modal)
+        changes.append({name: far[name] - origin[name] for name in origin})
+    return origin, changes
+
+
 def _modal(sc: Scenario) -> bool:
     """Whether [damping] is modal ratios: its C a function of the modes, not affine in M and K."""
     return sc.damping is not None and bool(sc.damping.modal)
@@ -371,32 +398,20 @@ def build_family(sc: Scenario, spec: SweepSpec) -> Family:
         _apply(doc, base, spec.parameters, combo)
         return _validated(doc, sc, ", ".join(f"{p} = {v:g}" for p, v in zip(spec.parameters, combo)))
 
-    structural = STRUCTURAL if base.is_linear else STRUCTURAL_NONLINEAR
-    # a hysteretic spring's k, a friction contact's or a stop's numbers live in its law, not in K: such a member is a
-    # scene of its own (its K interpolated alone left the law at the base's k, a sweep of a bilinear storey's k
-    # 300 times softer peaking at 0.0084 m where simulate gives 0.10 m)
-    in_a_law = {element.path for element in base.nonsmooth}
-    if not all(structural.match(p) and p.split(".")[0] not in in_a_law for p in spec.parameters):
+    if not structural(base, spec.parameters):
         scenarios = [member(combo) for combo in combos]
         return Family(sc, spec, labels, combos, shape, base, **_stack([build(m).dense() for m in scenarios]),
                       scenarios=scenarios)
     low = np.array([v.min() for v in spec.values])
     high = np.array([v.max() for v in spec.values])
-    corners = {}
-    for pick in np.ndindex(*(2,) * len(low)):
-        corner = np.where(np.array(pick) == 1, high, low)
-        corners[pick] = build(member(corner)).dense()
-    modal = _modal(sc)
-    origin = _coefficients(corners[(0,) * len(low)], modal)
+    origin, changes = corner_span(sc, member, low, high)
     stacks = {name: np.broadcast_to(value, (len(combos),) + value.shape).copy() for name, value in origin.items()}
-    for i in range(len(low)):
+    for i, change in enumerate(changes):
         if high[i] == low[i]:
             continue
-        far = _coefficients(corners[tuple(1 if j == i else 0 for j in range(len(low)))], modal)
         weight = (combos[:, i] - low[i]) / (high[i] - low[i])
         for name in stacks:
-            delta = far[name] - origin[name]
-            stacks[name] += weight.reshape((-1,) + (1,) * delta.ndim) * delta
-    if modal:
+            stacks[name] += weight.reshape((-1,) + (1,) * change[name].ndim) * change[name]
+    if _modal(sc):
         _modal_damped(sc, base, stacks)
     return Family(sc, spec, labels, combos, shape, base, **stacks)
