@@ -858,3 +858,47 @@ def test_a_linear_measure_on_matrices_spanned_by_the_corners_is_the_built_scene_
     invalid = Problem(sc, paths, goal, None)
     invalid.interpolate(np.array([-1e4, 1e3, 2e3]), upper)  # a negative stiffness at the low corner
     assert invalid._span is None
+
+
+@pytest.mark.parametrize("scene", ["elastoplastic", "bilinear"])
+def test_a_yielding_spring_s_plastic_work_and_its_gradient(scene, tmp_path):
+    """dissipated:<spring> of a yielding spring: its core's yield force times the total variation of its plastic
+    deformation, summed exactly over the event run's checkpoints. Against the hysteretic energy DOP853 at rtol 1e-12
+    books along its own solution (fy |d'| while yielding), to 1e-8: the elastoplastic absorber's primary alone
+    (measured 7e-14), the bilinear frame's three storeys summed (1.2e-12; each storey's share is smd's own). The
+    gradient in a stiffness, a yield force and a damping against five-point differences of the measure itself, to
+    1e-6 (measured 2e-12 to 1.2e-7)."""
+    import tomllib
+
+    from smdcli.analysis.objectives import read_objective
+    from smdcli.analysis.optimize import Problem
+    from smdcli.analysis.dissipation import dissipated_history, dissipators
+    from smdcli.model import build
+    from smdcli.sweep.family import parameter_value
+
+    if scene == "elastoplastic":
+        text, springs, paths = YIELDING_TMD, ["spring[0]"], ["spring[0].k", "spring[0].fy", "damper[0].c"]
+    else:
+        text = (SCENARIOS / "shear_frame_bilinear.toml").read_text().replace('"../records/', f'"{ROOT}/records/')
+        springs, paths = ["spring[0]", "spring[1]", "spring[2]"], ["spring[1].k", "spring[1].fy", "damping.zeta"]
+    path = tmp_path / "scene.toml"
+    path.write_text(text)
+    sc = smdcli.load(path)
+    values = np.array([parameter_value(tomllib.loads(text), p) for p in paths])
+    assert set(springs) <= set(dissipators(build(sc)))
+    forward = smdcli.simulate(sc)
+    total = 0.0
+    for spring in springs:
+        problem = Problem(sc, paths, read_objective(f"dissipated:{spring}", tuple(sc.dof_names), "scene",
+                                                    dissipators(build(sc))), 0)
+        value, gradient, _ = problem.evaluate(values)
+        total += value
+        assert dissipated_history(forward, spring)[-1] == pytest.approx(value, rel=1e-9)  # the figure's, on samples
+        if spring == springs[-1] or scene == "elastoplastic":
+            for i in range(len(paths)):
+                assert gradient[i] == pytest.approx(five_point(lambda point: problem.evaluate(point)[0], values, i),
+                                                    rel=1e-6, abs=1e-6 * np.abs(gradient * values).max() / values[i]), i
+    run = smdcli.simulate(sc, method="DOP853", rtol=1e-12, atol=1e-14)
+    assert len(run.nonsmooth.events) > 5
+    assert total == pytest.approx(run.nonsmooth.energy["hysteretic"][-1], rel=1e-8)
+

@@ -32,7 +32,7 @@ class Objective:
     dof: int
     text: str
     other: int = -1  # a drift's lower DOF (peak_drift:<a>-<b>: x_a - x_b), GROUND for <a>-ground
-    element: str = ""  # dissipated:<element>'s damper (damper[i]) or Coulomb contact (friction[i])
+    element: str = ""  # dissipated:<element>'s damper, Coulomb contact or yielding spring (spring[i])
 
 
 def read_objective(text: str, dofs: tuple[str, ...], source: str, elements: tuple[str, ...] = ()) -> Objective:
@@ -45,8 +45,8 @@ def read_objective(text: str, dofs: tuple[str, ...], source: str, elements: tupl
                          (f"did you mean {hint[0]!r}?" if hint else f"known: {', '.join(OBJECTIVES)}") + ")")
     if kind == "dissipated":
         if dof not in elements:
-            raise UsageError(f"--minimize {text}: expected dissipated:<element> of {source}, a damper or a Coulomb "
-                             "friction contact (" + (f"it has {', '.join(elements)}" if elements else
+            raise UsageError(f"--minimize {text}: expected dissipated:<element> of {source}, a damper, a Coulomb "
+                             "friction contact or a yielding spring (" + (f"it has {', '.join(elements)}" if elements else
                                                      "it has none") + ")")
         return Objective(kind, 0, text, element=dof)
     if kind in ("peak_drift", "rms_drift"):

@@ -31,12 +31,12 @@ from pathlib import Path
 
 import numpy as np
 
+from smdcli.analysis.dissipation import dissipators
 from smdcli.analysis.model_derivative import check_once, model_derivatives
 from smdcli.analysis.objectives import (PEAKS, RMS, TIME_DOMAIN, TIME_PEAK_KINDS, UNITS, Objective, read_constraint,
                                         read_objective)
 from smdcli.analysis.optimize_search import FEASIBLE, local_search, stationary, violation
-from smdcli.analysis.response_measures import (TIME_PEAKS, dissipators, receptance_peaks, rms,
-                                               time_measure, transmissibility_peaks)
+from smdcli.analysis.response_measures import TIME_PEAKS, receptance_peaks, rms, time_measure, transmissibility_peaks
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import build, time_grid
 from smdcli.model.system import GROUND_DOF

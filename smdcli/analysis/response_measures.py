@@ -1,7 +1,7 @@
 """The measures `smd optimize` minimizes, each with its exact gradient in the parameters: of a linear scene a
 receptance's or a transmissibility's located peaks (the H-infinity norm) and the RMS under white noise (the H2
-norm, by Lyapunov); of any scene's run its peaks, drifts, accelerations and residual displacement (from its
-sensitivities).
+norm, by Lyapunov); of any scene's run its peaks, drifts, accelerations, residual displacement and the
+energy an element dissipates (analysis/dissipation) (from its sensitivities).
 
 derived: per parameter (dM, dC, dK), the model's derivatives (model_derivative's). Must not import: io, plots,
 commands, cli.
@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from smdcli.analysis.dissipation import dissipated
 from smdcli.errors import ScenarioError, UsageError
 
 GRID_POINTS = 400  # frequencies a receptance is first sampled at: its peaks then located to rounding between them
@@ -309,108 +310,3 @@ def acceleration_rates(s):
     k = np.clip(np.searchsorted(s.time, kinks), 0, N - 1)
     inside = [t for t, i in zip(kinks, k) if abs(s.time[i] - t) > 1e-9 * (s.time[1] - s.time[0])]
     return (*unstacked, np.array(inside, dtype=float))
-
-
-def dissipated(s, name: str) -> tuple[float, np.ndarray]:
-    """The energy a damper or a Coulomb friction contact dissipates over a run, J, and its gradient from the run's
-    sensitivities s: the integral of its power (a damper's c w^2, c |w|^3 if quadratic; a contact's F |w| + c_v w^2
-    while it slips, nothing while it sticks; w the rate across it) by Gauss-Legendre on the quintic Hermite
-    interpolant of each output step, as the energy balance integrates (energy.hermite_slopes); the gradient the
-    same sum differentiated, the rate's derivative from the sensitivities' own quintics. On a scene solved event
-    to event a step holding an event (where the quintic does not hold) is split at its events, each piece's Gauss
-    nodes read on the exact flow."""
-    row, belt, coefficients = _dissipator(s.model, name)
-    dbelt = np.array([d.of(lambda m: _dissipator(m, name)[1]) for d in s.derivatives])
-    w, quadrature = _rates(row, s.time, s.displacement, s.velocity, s.acceleration)
-    dw, _ = _rates(row, s.time, s.d_displacement, s.d_velocity, s.d_acceleration)
-    if len(s.event_times) and s.exact_state_at is not None:
-        w, dw, quadrature = _across_events(s, row, w, dw, quadrature)
-    w, dw = w + belt, dw + dbelt[:, None, None]
-    magnitude = np.abs(w)
-    # the power's parts, each a coefficient times a function of w: (coefficient, f(w), f'(w))
-    parts = {"linear": (w * w, 2 * w), "quadratic": (magnitude ** 3, 3 * magnitude * w),
-             "coulomb": (magnitude, np.sign(w))}
-    value, gradient = 0.0, np.zeros(len(s.derivatives))
-    for kind, coefficient in coefficients.items():
-        f, slope = parts[kind]
-        dc = np.array([d.of(lambda m, kind=kind: _dissipator(m, name)[2][kind]) for d in s.derivatives])
-        unit = float((f * quadrature).sum())
-        value += coefficient * unit
-        gradient += dc * unit + coefficient * (slope[None] * dw * quadrature).sum(axis=(1, 2))
-    return value, gradient
-
-
-def dissipators(model) -> tuple[str, ...]:
-    """The elements dissipated:<element> measures: every damper and every Coulomb friction contact."""
-    return tuple(e.name for e in model.elements if e.kind == "damper") + tuple(
-        e.path for e in model.nonsmooth if e.kind == "friction" and e.law.piecewise_linear)
-
-
-def _dissipator(model, name: str) -> tuple[np.ndarray, float, dict[str, float]]:
-    """(row, belt, {power's part: coefficient}) of a damper or a Coulomb contact: w = row . v + belt."""
-    for e in model.elements:
-        if e.name == name:
-            row = np.zeros(model.n)
-            if e.b >= 0:
-                row[e.b] += 1.0
-            if e.a >= 0:
-                row[e.a] -= 1.0
-            return row, 0.0, {"quadratic" if e.law == "quadratic" else "linear": e.coef}
-    e = next(e for e in model.nonsmooth if e.path == name)
-    return np.asarray(e.row, dtype=float), float(e.belt), {"coulomb": e.law.force, "linear": e.law.viscous}
-
-
-def _across_events(s, row, w, dw, quadrature):
-    """w, dw and the weights with each output step that holds an event (or ends or starts at one) split at its
-    events: the pieces' Gauss nodes appended as steps of their own (the step's own zeroed), their states and
-    sensitivities read on the exact flow (s.exact_state_at)."""
-    from smdcli.analysis.energy import GAUSS_POINTS
-
-    time, n = s.time, s.displacement.shape[1]
-    events = np.asarray(s.event_times, dtype=float)
-    steps = np.unique(np.concatenate([np.searchsorted(time, events, side="right") - 1,
-                                      np.searchsorted(time, events, side="left") - 1]))
-    steps = steps[(steps >= 0) & (steps < len(time) - 1)]
-    nodes, weights = np.polynomial.legendre.leggauss(GAUSS_POINTS)
-    extra_w, extra_dw, extra_q = [], [], []
-    for k in steps:
-        cuts = np.concatenate([[time[k]], events[(events > time[k]) & (events < time[k + 1])], [time[k + 1]]])
-        for a, b in zip(cuts[:-1], cuts[1:]):
-            if b <= a:
-                continue
-            at = a + 0.5 * (nodes + 1) * (b - a)
-            states = [s.exact_state_at(float(t)) for t in at]
-            extra_w.append([z[n:2 * n] @ row for z, _ in states])
-            extra_dw.append(np.array([S[:, n:2 * n] @ row for _, S in states]).T)
-            extra_q.append(0.5 * weights * (b - a))
-    quadrature = quadrature.copy()
-    quadrature[steps] = 0.0
-    if not extra_w:
-        return w, dw, quadrature
-    return (np.concatenate([w, np.array(extra_w)]), np.concatenate([dw, np.stack(extra_dw, axis=1)], axis=1),
-            np.concatenate([quadrature, np.array(extra_q)]))
-
-
-def dissipated_history(model, name: str, time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
-    """The energy a damper or a Coulomb contact (dissipated's) has dissipated by each output time, J (N,), step by
-    step on the run's own samples (a figure's: the quintic across events too)."""
-    row, belt, coefficients = _dissipator(model, name)
-    w, quadrature = _rates(row, time, x, v, a)
-    w = w + belt
-    power = sum(c * {"linear": w * w, "quadratic": np.abs(w) ** 3, "coulomb": np.abs(w)}[kind]
-                for kind, c in coefficients.items())
-    return np.concatenate([[0.0], np.cumsum((power * quadrature).sum(axis=1))])
-
-
-def _rates(row: np.ndarray, time, x, v, a) -> tuple[np.ndarray, np.ndarray]:
-    """row . x' at each output step's Gauss nodes, from the quintic Hermite of x, v, a (..., N, n) ->
-    (..., N - 1, G); and the nodes' weights times the step."""
-    from smdcli.analysis.energy import GAUSS_POINTS, hermite_slopes
-
-    nodes, weights = np.polynomial.legendre.leggauss(GAUSS_POINTS)
-    slope = hermite_slopes(0.5 * (nodes + 1))
-    h = np.diff(time)[:, None]
-    d, r, q = x @ row, v @ row, a @ row
-    ends = np.stack([d[..., :-1], h[:, 0] * r[..., :-1], h[:, 0] ** 2 * q[..., :-1], d[..., 1:], h[:, 0] * r[..., 1:],
-                     h[:, 0] ** 2 * q[..., 1:]], axis=-1)
-    return ends @ slope.T / h, 0.5 * weights[None, :] * h

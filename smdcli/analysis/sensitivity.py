@@ -77,6 +77,9 @@ class Sensitivity:
     exact_at: Callable | None = None  # t -> (P, n) d_displacement at any time, on the exact flow (event runs)
     # t -> ((2n,) x and v, (P, 2n) their derivatives) at any time, on the exact flow (event runs)
     exact_state_at: Callable | None = None
+    # an event run's checkpoints (its start, each event and each break): (t, the nonsmooth elements' states, each
+    # element's internal variables' derivatives {name: (P,)}, per unit of each parameter)
+    law_states: list = field(default_factory=list)
 
     def ground_acceleration(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The support's acceleration on the grid (N,) and its derivative (P, N), or None without support motion:
@@ -210,6 +213,8 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
             z, S = run.state_at(t)
             return z[:2 * n], S[:, :2 * n] / scales[:, None]
         found.exact_state_at = state_at
+        found.law_states = [(t, states, [{name: value / scales for name, value in d.items()} for d in dq])
+                            for t, _, _, states, dq in run.checkpoints]
     return found
 
 

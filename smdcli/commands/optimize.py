@@ -118,7 +118,7 @@ def _responses(run):
 
         return receptance_curve(run, np.clip(run.initial, run.lower, run.upper)), receptance_curve(run, run.optimum)
     import smdcli
-    from smdcli.analysis.response_measures import dissipated_history
+    from smdcli.analysis.dissipation import dissipated_history
     from smdcli.sweep.family import scenario_with
 
     measure = run.problem.objective
@@ -126,8 +126,7 @@ def _responses(run):
     for values in (np.clip(run.initial, run.lower, run.upper), run.optimum):
         result = smdcli.simulate(scenario_with(run.sc, dict(zip(run.parameter, map(float, values)))))
         if measure.kind == "dissipated":  # the element's energy as it accumulates
-            series = dissipated_history(result.origin[1], measure.element, result.time, result.displacement,
-                                        result.velocity, result.acceleration)
+            series = dissipated_history(result, measure.element)
         elif measure.kind == "peak_acceleration":  # absolute, as the objective: relative plus the ground's
             series = result.absolute("acceleration")[:, measure.dof]
         elif measure.kind == "peak_drift" and measure.other >= 0:
