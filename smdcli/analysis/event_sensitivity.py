@@ -76,6 +76,7 @@ class EventSensitivityRun(PiecewiseRun):
         self.dq = [{} for _ in self.scene.elements]  # internal variable -> its (P,) scaled sensitivities
         self.h_out = float(grid[1] - grid[0]) if len(grid) > 1 else 0.0
         self.checkpoints: list[tuple] = []  # (t, z, S, states, dq) at the start, each event and each break
+        self.moves: dict[float, np.ndarray] = {}  # each event's time -> its scaled derivatives scale_i dt*/dp_i
         self.undefined_from: tuple[float, str] | None = None
         self._augmented: dict = {}
         self._seeds: dict[float, tuple] = {}  # (sensitivities', state's) generators reseeded at a break, by its time
@@ -291,6 +292,7 @@ class EventSensitivityRun(PiecewiseRun):
                     _, _, r, const = scene.mode(self.shifted(states, i, c)).guards[index]
                     return r @ z + const
                 dt[i] = -(float(row @ S[i]) + float(self.total(i, guard))) / crossing
+        self.moves.setdefault(t, dt)
         moved = S + dt[:, None] * rate_of_z[None]  # the event point's total derivative
         before = len(self.events)
         after, z_after = super().apply(states, z, t, element, kind)
@@ -396,6 +398,25 @@ class EventSensitivityRun(PiecewiseRun):
         if self.undefined_from is not None and t >= self.undefined_from[0]:
             S = np.full_like(S, np.nan)
         return Z[:len(z_c)], S
+
+    def rates_at(self, t: float, left: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(Z, Z', Z'') at time t on the exact flow, Z = [z; S] stacked (S nan where the response has no
+        derivative): right limits, or (left) the limits before an event at t, from the last checkpoint before it.
+        Within a mode Z' = A Z + b with b constant, so Z'' = A Z'."""
+        times = [c[0] for c in self.checkpoints]
+        j = max(int(np.searchsorted(times, t, side="left" if left else "right")) - 1, 0)
+        t_c, z_c, S_c, states_c, dq_c = self.checkpoints[j]
+        augmented = self.augmented(states_c, dq_c)
+        Z = np.concatenate([z_c, S_c.ravel()])
+        if t != t_c:
+            Z = self.carry(Z, t_c, t, self.checkpoints[j], augmented)
+        _, forcing, big = augmented
+        rate = big @ Z + forcing
+        out = (Z, rate, big @ rate)
+        if self.undefined_from is not None and t >= self.undefined_from[0]:
+            for q in out:
+                q[len(z_c):] = np.nan
+        return out
 
     def at(self, t: float) -> np.ndarray:
         """S at time t (nan where the response has no derivative), from the last checkpoint before it."""

@@ -242,6 +242,10 @@ def _peak_acceleration(s, j: int) -> tuple[float, np.ndarray, np.ndarray]:
     the samples' local maxima."""
     from smdcli.solvers.peaks import local_peaks, quintic_at
 
+    if s.exact_rates_at is not None:
+        located = _peaks_on_flow(s, j)
+        if located is not None:
+            return float(located[0, 1]), located[0, 2:].copy(), located
     rates = acceleration_rates(s)
     if rates is None:
         a, da = s.acceleration[:, j].copy(), s.d_acceleration[:, :, j].copy()
@@ -263,6 +267,55 @@ def _peak_acceleration(s, j: int) -> tuple[float, np.ndarray, np.ndarray]:
                                for p in range(1, len(a))]).T.reshape(len(times), -1)
     rows = np.column_stack([times, values, derivative])
     return float(values[0]), rows[0, 2:].copy(), rows
+
+
+def _peaks_on_flow(s, j: int) -> np.ndarray | None:
+    """An event run's largest local peaks of DOF j's |absolute acceleration| located on its exact flow, as
+    time_measure's rows: around each of the samples' largest local maxima, each output step split at its events is
+    searched for a zero of d|a|/dt falling (Brent's method on a' from the flow: an interior peak, its derivative the
+    sensitivity's at that fixed time) and for a larger one-sided limit at an event, where the acceleration jumps
+    (its derivative then moves with the event's time: S_a + a' dt*/dp). None where the support's motion has no
+    rate."""
+    from scipy.optimize import brentq
+
+    from smdcli.solvers.peaks import local_peaks
+
+    ground = s.ground_acceleration()
+    if ground is not None and s.ground_acceleration(s.time[:1], rate=True) is None:
+        return None
+    events = np.array(sorted(s.event_moves), dtype=float)
+    P = len(s.parameter)
+
+    def at(t: float, left: bool = False):  # (a, a', da/dp, da'/dp) of DOF j, absolute
+        a, rate, da, drate = (q[..., j] for q in s.exact_rates_at(t, left))
+        if ground is not None:
+            base, dbase = s.ground_acceleration([t])
+            slope, dslope = s.ground_acceleration([t], rate=True)
+            a, rate, da, drate = a + base[0], rate + slope[0], da + dbase[:, 0], drate + dslope[:, 0]
+        return float(a), float(rate), da, drate
+
+    sampled = s.acceleration[:, j] + (ground[0] if ground is not None else 0.0)
+    _, near = local_peaks(s.time, sampled, None, None, count=2 * TIME_PEAKS)
+    found = {}
+    for k in np.unique(np.searchsorted(s.time, near)):
+        lo, hi = s.time[max(k - 1, 0)], s.time[min(k + 1, len(s.time) - 1)]
+        cuts = np.concatenate([[lo], events[(events > lo) & (events < hi)], [hi]])
+        for start, end in zip(cuts[:-1], cuts[1:]):
+            first, last = at(float(start)), at(float(end), left=True)
+            best = [(abs(first[0]), start, first, start in s.event_moves), (abs(last[0]), end, last, end in s.event_moves)]
+            sign = np.sign(first[0] if abs(first[0]) >= abs(last[0]) else last[0])
+            if sign * first[1] > 0 > sign * last[1]:  # |a| rises, then falls: an interior peak
+                t = brentq(lambda time: at(time)[1], float(start), float(end), xtol=1e-14 * max(abs(end), 1.0),
+                           rtol=4 * EPS)
+                inside = at(t)
+                best.append((abs(inside[0]), t, inside, False))
+            value, t, (a, rate, da, drate), moving = max(best, key=lambda item: item[0])
+            derivative = np.sign(a) * (da + rate * s.event_moves[t] if moving else da)
+            key = round(float(t), 12)
+            if key not in found or found[key][1] < value:
+                found[key] = np.concatenate([[t, value], derivative.reshape(P)])
+    rows = np.array(sorted(found.values(), key=lambda row: -row[1])[:TIME_PEAKS])
+    return rows if len(rows) else None
 
 
 def acceleration_rates(s):

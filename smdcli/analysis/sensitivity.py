@@ -80,19 +80,33 @@ class Sensitivity:
     # an event run's checkpoints (its start, each event and each break): (t, the nonsmooth elements' states, each
     # element's internal variables' derivatives {name: (P,)}, per unit of each parameter)
     law_states: list = field(default_factory=list)
+    # (t, left) -> (a, a', d a/dp, d a'/dp): the relative acceleration and its rate (n,), their derivatives (P, n),
+    # at any time on the exact flow (event runs), right limits or (left) before an event at t
+    exact_rates_at: Callable | None = None
+    event_moves: dict = field(default_factory=dict)  # each event's time -> (P,) dt*/dp: how it moves (event runs)
 
-    def ground_acceleration(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """The support's acceleration on the grid (N,) and its derivative (P, N), or None without support motion:
-        what turns the relative acceleration into the absolute one an accelerometer reads."""
+    def ground_acceleration(self, times=None, rate: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
+        """The support's acceleration at times (the grid by default) (N,) and its derivative (P, N), or None without
+        support motion: what turns the relative acceleration into the absolute one an accelerometer reads. With
+        rate, its time derivative (right limits; None where the motion has none)."""
         if self.model is None or self.model.ground is None:
             return None
         from smdcli.model.system import GROUND_DOF
 
         ground = [j for j, dof in enumerate(self.model.force_dofs) if dof == GROUND_DOF]
+        at = self.time if times is None else np.asarray(times, dtype=float)
 
         def of(model):
-            return sum(model.signals[j].value(self.time) for j in ground)
-        return of(self.model), np.array([d.of(of) for d in self.derivatives]).reshape(len(self.derivatives), -1)
+            signals = [model.signals[j] for j in ground]
+            if rate:
+                signals = [signal.derivative(float(self.time[0])) for signal in signals]
+                if any(signal is None for signal in signals):
+                    raise NotImplementedError
+            return sum(np.broadcast_to(signal.value(at), at.shape) for signal in signals)
+        try:
+            return of(self.model), np.array([d.of(of) for d in self.derivatives]).reshape(len(self.derivatives), -1)
+        except NotImplementedError:
+            return None
 
     def element_tension(self, path: str) -> tuple[np.ndarray, np.ndarray]:
         """A linear spring's or damper's tension on the grid (N,) and its derivative (P, N)."""
@@ -213,6 +227,13 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
             z, S = run.state_at(t)
             return z[:2 * n], S[:, :2 * n] / scales[:, None]
         found.exact_state_at = state_at
+        def rates_at(t, left=False):
+            Z, rate, curvature = run.rates_at(t, left)
+            size = run.scene.size
+            return (rate[n:2 * n], curvature[n:2 * n],
+                    *(q[size:].reshape(len(scales), size)[:, n:2 * n] / scales[:, None] for q in (rate, curvature)))
+        found.exact_rates_at = rates_at
+        found.event_moves = {t: dt / scales for t, dt in run.moves.items()}
         found.law_states = [(t, states, [{name: value / scales for name, value in d.items()} for d in dq])
                             for t, _, _, states, dq in run.checkpoints]
     return found
