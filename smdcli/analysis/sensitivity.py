@@ -83,6 +83,9 @@ class Sensitivity:
     # (t, left) -> (a, a', d a/dp, d a'/dp): the relative acceleration and its rate (n,), their derivatives (P, n),
     # at any time on the exact flow (event runs), right limits or (left) before an event at t
     exact_rates_at: Callable | None = None
+    # (t, left) -> (a, d a/dp): the relative acceleration (n,) and its derivatives (P, n) at any time on a smooth
+    # run's dense output; its attribute breaks: where the integration restarted (a kink, a force's break)
+    dense_acceleration_at: Callable | None = None
     event_moves: dict = field(default_factory=dict)  # each event's time -> (P,) dt*/dp: how it moves (event runs)
 
     def ground_acceleration(self, times=None, rate: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
@@ -165,7 +168,7 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
     derivatives = model_derivatives(sc, base, grid, list(params))
     n, P = base.n, len(derivatives)
     tol = Tolerances()
-    run = None
+    run = dense = None
     if base.is_linear:
         blocks, stated = _linear(sc, base, derivatives, grid, tol)
         method = METHOD
@@ -173,7 +176,7 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
         blocks, stated, run = _events(base, derivatives, grid)
         method = EVENT_METHOD
     else:
-        blocks, stated = _smooth(sc, base, derivatives, grid, advance)
+        blocks, stated, dense = _smooth(sc, base, derivatives, grid, advance)
         method = SMOOTH_METHOD
     wall = time.perf_counter() - start
     forward = _forward_time(base, grid, tol) if timed else float("nan")
@@ -220,6 +223,7 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
     found = _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_peaks, accuracy, wall,
                     forward, tuple(notes), method)
     found.event_times = events
+    found.dense_acceleration_at = dense
     if run is not None:
         found.exact_at = lambda t: run.at(t)[:, :n] / scales[:, None]
 
@@ -293,7 +297,7 @@ def _smooth(sc: Scenario, base, derivatives: list, grid: np.ndarray, advance=Non
 
     rtol = min(RTOL, sc.solver.rtol)
     scales = np.array([relative_size(d.value) for d in derivatives])
-    y, S, rates, d_rates = smooth_sensitivities(base, derivatives, scales, grid, rtol, advance)
+    y, S, rates, d_rates, rates_at = smooth_sensitivities(base, derivatives, scales, grid, rtol, advance)
     n, N = base.n, len(grid)
 
     def stacked(nominal, derived):  # (N, n) and (N, n, P) -> (N, P + 1, n)
@@ -301,7 +305,12 @@ def _smooth(sc: Scenario, base, derivatives: list, grid: np.ndarray, advance=Non
     blocks = {"displacement": stacked(y[:, :n], S[:, :n]), "velocity": stacked(y[:, n:2 * n], S[:, n:2 * n]),
               "acceleration": stacked(rates[:, n:2 * n], d_rates[:, n:2 * n])}
     del N
-    return blocks, SMOOTH_ERROR * rtol
+
+    def acceleration_at(t: float, left: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        rate, d_rate = rates_at(t, left)
+        return rate[n:2 * n], d_rate[n:2 * n].T / scales[:, None]
+    acceleration_at.breaks = rates_at.breaks
+    return blocks, SMOOTH_ERROR * rtol, acceleration_at
 
 
 def _forward_time(base, grid: np.ndarray, tol: Tolerances) -> float:

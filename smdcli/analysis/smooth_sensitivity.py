@@ -145,7 +145,9 @@ class _Flow:
 def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, grid: np.ndarray, rtol: float,
                          advance=None):
     """(y, dy/dp * scale, y', dy'/dp * scale) on the grid: (N, s), (N, s, P), (N, s), (N, s, P), for a scene
-    smooth_refusal takes; advance(count) is called as output times are filled (a progress bar's)."""
+    smooth_refusal takes, and rates_at(t, left=False) -> (y', dy'/dp * scale) at any time on the integrator's dense
+    output (each piece's own: a kink or a force's break ends one; left: the piece that ends at t); advance(count) is called as output times are filled
+    (a progress bar's)."""
     from scipy.integrate import solve_ivp
 
     flow = _Flow(model)
@@ -186,6 +188,7 @@ def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gr
     Y = np.empty((len(grid), size * (1 + P)))
     state = np.concatenate([y0, s0.ravel()])
     filled = 0
+    pieces = []  # (start, end, dense output) of each run
     for ta, tb in zip(cuts[:-1], cuts[1:]):
         t, fired = float(ta), None
         while t < tb:
@@ -198,6 +201,9 @@ def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gr
             if run.status < 0:
                 raise SolverFailed(f"{model.source}: the sensitivity equations failed at t = {run.t[-1] if len(run.t) else t:.6g}"
                                    f" s: {run.message}")
+            end = float(run.t_events[next(i for i, e in enumerate(run.t_events) if len(e))][0]) \
+                if run.status == 1 else float(tb)
+            pieces.append((t, end, run.sol))
             if len(run.t):
                 Y[filled:filled + len(run.t)] = np.asarray(run.y).T
                 filled += len(run.t)
@@ -214,7 +220,15 @@ def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gr
     S = Y[:, size:].reshape(len(grid), size, P)
     rates = np.array([flow.f(t, row) for t, row in zip(grid, y)])
     d_rates = np.array([flow.jacobian(t, row) @ s + parameter_rates(t, row) for t, row, s in zip(grid, y, S)])
-    return y, S, rates, d_rates
+    starts = np.array([a for a, _, _ in pieces])
+
+    def rates_at(t: float, left: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        _, _, sol = pieces[max(int(np.searchsorted(starts, t, side="left" if left else "right")) - 1, 0)]
+        Y_t = sol(t)
+        y_t, S_t = Y_t[:size], Y_t[size:].reshape(size, P)
+        return flow.f(t, y_t), flow.jacobian(t, y_t) @ S_t + parameter_rates(t, y_t)
+    rates_at.breaks = np.array([b for _, b, _ in pieces[:-1]], dtype=float)  # where one piece ends, the next starts
+    return y, S, rates, d_rates, rates_at
 
 
 def _kink_event(row: np.ndarray, constant: float, start: float, state: np.ndarray, flow: _Flow, fired: bool):
