@@ -122,7 +122,7 @@ def _psd(given):
 
 # name -> (module, attribute): the analyses and the pieces they take, imported on first use
 ANALYSES = {
-    "read_record": ("smdcli.scenario.records", "read_record"),
+    "read_record": ("smdcli.scenario.record_files", "read_record"),
     "build": ("smdcli.model", "build"),
     "read_matrix": ("smdcli.io.hdf5", "read_matrix"),
     "response_spectrum": ("smdcli.analysis.spectrum", "response_spectrum"),

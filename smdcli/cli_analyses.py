@@ -15,9 +15,21 @@ from smdcli.cli_support import _carried_out
 from smdcli.progress import wanted as progress_wanted
 
 
+# How a record file is read, as smd spectrum and smd record both take it
+RECORD_UNITS = typer.Option(None, "--units", help="The record's units: g (default), m/s^2, cm/s^2, mm/s^2, gal "
+                            "(cm/s^2), in/s^2 or ft/s^2; an AT2 or COSMOS file's own.")
+RECORD_FORMAT = typer.Option(None, "--format", help="at2, cosmos, csv (two columns) or one_column (default: by "
+                             "extension, .AT2, .V2, .V2c; one_column with --dt).")
+RECORD_CHANNEL = typer.Option(None, "--channel", help="A COSMOS file's acceleration series, 1-based (default 1).")
+RECORD_DT = typer.Option(None, "--dt", help="A one-column file's sampling interval, s.")
+RECORD_SCALE = typer.Option(1.0, "--scale", help="Multiply the record's values by this.")
+RECORD_SHIFT = typer.Option(0.0, "--shift", help="Then add this (in the record's units).")
+
+
 def spectrum(
     record: Path = typer.Argument(..., help="Ground acceleration record: two columns (time s, acceleration), "
-                                  "CSV or whitespace, header optional."),
+                                  "CSV or whitespace, header optional; a PEER .AT2, a COSMOS .V2; one column "
+                                  "with --dt; or a scenario."),
     kind: str = typer.Option("pseudo", "--kind", help="pseudo: Sd, Sv, Sa over period; srs: shock response "
                              "spectrum, peak absolute acceleration over natural frequency."),
     periods: Optional[str] = typer.Option(None, "--periods", help="pseudo: periods in s, a, b, c | start:stop:step "
@@ -35,10 +47,12 @@ def spectrum(
     law: Optional[str] = typer.Option(None, "--law", help="Inelastic spectra: elastoplastic (default) or bilinear."),
     hardening: Optional[float] = typer.Option(None, "--hardening", help="Bilinear: post-yield stiffness ratio b, "
                                               "0 <= b < 1."),
-    units: str = typer.Option("g", "--units", help="The record's units: g, m/s^2, cm/s^2, mm/s^2, gal (cm/s^2), "
-                              "in/s^2 or ft/s^2."),
-    scale: float = typer.Option(1.0, "--scale", help="Multiply the record's values by this."),
-    shift: float = typer.Option(0.0, "--shift", help="Then add this (in the record's units)."),
+    units: Optional[str] = RECORD_UNITS,
+    file_format: Optional[str] = RECORD_FORMAT,
+    channel: Optional[int] = RECORD_CHANNEL,
+    dt: Optional[float] = RECORD_DT,
+    scale: float = RECORD_SCALE,
+    shift: float = RECORD_SHIFT,
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
     no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
@@ -55,22 +69,26 @@ def spectrum(
     _carried_out(lambda: run_spectrum(record, out, periods, damping, units, scale, shift, plots=not no_plots,
                                       progress=progress_wanted(quiet, as_json), kind=kind, q=q,
                                       frequencies=frequencies, ductility=ductility, strength=strength, law=law,
-                                      hardening=hardening),
+                                      hardening=hardening,
+                                      reading={"format": file_format, "channel": channel, "dt": dt}),
                  {"record": str(record)}, as_json, quiet, spectrum_summary, lambda _, data: format_spectrum(data))
 
 
 def record(
     record_file: Path = typer.Argument(..., metavar="RECORD", help="Ground acceleration record: two columns (time s, "
-                                       "acceleration), CSV or whitespace, header optional; or a scenario."),
+                                       "acceleration), CSV or whitespace, header optional; a PEER .AT2, a COSMOS "
+                                       ".V2; one column with --dt; or a scenario."),
     baseline: str = typer.Option("none", "--baseline", help="none, linear or quadratic: the least-squares "
                                  "polynomial of the acceleration subtracted."),
     band: Optional[str] = typer.Option(None, "--filter", help="LOW,HIGH in Hz: zero-phase Butterworth band-pass "
                                        "(0 for an open end: 0,25 low-pass, 0.1,0 high-pass)."),
     order: int = typer.Option(4, "--order", help="The Butterworth filter's order (applied forwards and backwards)."),
-    units: str = typer.Option("g", "--units", help="The record's units: g, m/s^2, cm/s^2, mm/s^2, gal (cm/s^2), "
-                              "in/s^2 or ft/s^2."),
-    scale: float = typer.Option(1.0, "--scale", help="Multiply the record's values by this."),
-    shift: float = typer.Option(0.0, "--shift", help="Then add this (in the record's units)."),
+    units: Optional[str] = RECORD_UNITS,
+    file_format: Optional[str] = RECORD_FORMAT,
+    channel: Optional[int] = RECORD_CHANNEL,
+    dt: Optional[float] = RECORD_DT,
+    scale: float = RECORD_SCALE,
+    shift: float = RECORD_SHIFT,
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
     no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
@@ -83,7 +101,8 @@ def record(
     from smdcli.commands.record import format_record, record_command, record_summary
 
     _carried_out(lambda: record_command(record_file, out, baseline, band, order, units, scale, shift,
-                                        plots=not no_plots),
+                                        plots=not no_plots,
+                                        reading={"format": file_format, "channel": channel, "dt": dt}),
                  {"record": str(record_file)}, as_json, quiet, record_summary, lambda _, data: format_record(data))
 
 
@@ -247,3 +266,21 @@ def optimize(
                        lambda _, d: format_optimize(d))
     if not run.converged:
         raise typer.Exit(1)
+
+
+def fragility(
+    data: Path = typer.Argument(..., metavar="DATA", help="An smd ida result (RESULT_ida.h5: its collapse "
+                                "intensities), or multiple-stripe counts: a CSV with columns im,runs,collapses."),
+    out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
+    no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
+    as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+):
+    """Fit a lognormal fragility curve by maximum likelihood, with profile-likelihood intervals.
+
+    From collapse intensities (a lognormal sample) or from multiple-stripe counts (Baker's binomial likelihood);
+    writes OUT/<input stem>_fragility.h5 and OUT/<input stem>_fragility.png."""
+    from smdcli.commands.fragility import format_fragility, fragility_command, fragility_summary
+
+    _carried_out(lambda: fragility_command(data, out, plots=not no_plots), {"data": str(data)}, as_json, quiet,
+                 fragility_summary, lambda _, summary: format_fragility(summary))

@@ -90,7 +90,7 @@ def test_a_spectrum_labels_guide_lines_where_its_curve_is(periods, tmp_path):
 
     from smdcli.analysis.spectrum import response_spectrum
     from smdcli.plots.spectrum import spectrum_figure
-    from smdcli.scenario.records import read_record
+    from smdcli.scenario.record_files import read_record
     from smdcli.scenario.spec import STANDARD_GRAVITY as G
     from smdcli.sweep.spec import parse_values
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.signal import lsim
 
-from smdcli.scenario.records import read_record
+from smdcli.scenario.record_files import read_record
 from smdcli.scenario.spec import STANDARD_GRAVITY
 from smdcli.analysis.spectrum import response_spectrum
 

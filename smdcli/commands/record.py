@@ -56,14 +56,15 @@ def check_processing(baseline: str, order: int, where: str = "") -> None:
 
 
 def record_command(path: str | Path, out: str | Path, baseline: str = "none", band: str | None = None,
-                   order: int = 4, units: str = "g", scale: float = 1.0, shift: float = 0.0,
-                   plots: bool = True) -> RecordRun:
-    """Read, process and measure the record; write OUT/<stem>_record.h5 and .png."""
+                   order: int = 4, units: str | None = None, scale: float = 1.0, shift: float = 0.0,
+                   plots: bool = True, reading: dict | None = None) -> RecordRun:
+    """Read (reading: read_record's format, channel and dt), process and measure the record; write
+    OUT/<stem>_record.h5 and .png."""
     from smdcli.commands.spectrum import _record
 
     path = Path(path)
     check_processing(baseline, order)
-    record = _record(path, units, scale, shift)
+    record = _record(path, units, scale, shift, reading)
     if len(record.time) < 3 * (2 * order + 1) and band is not None:
         raise UsageError(f"{record.path}: {len(record.time)} samples are too few to filter at order {order}")
     with np.errstate(over="ignore", invalid="ignore"):
@@ -101,7 +102,8 @@ def record_summary(run: RecordRun) -> dict:
     """The facts of a record run as plain data (SI units)."""
     m, p, r = run.processed.measures, run.processed, run.record
     return {"record": r.path, "status": "ok", "exit_code": 0, "samples": len(r.time), "step_s": r.step,
-            "duration_s": float(r.time[-1] - r.time[0]), "units_in_file": r.units, "baseline": p.baseline,
+            "duration_s": float(r.time[-1] - r.time[0]), "units_in_file": r.units, "format": r.format,
+            "channel": r.channel, "baseline": p.baseline,
             "filter_hz": list(p.band) if p.band else None, "order": p.order if p.band else None,
             "pga_m_s2": m.pga, "pga_g": m.pga / STANDARD_GRAVITY, "pgv_m_s": m.pgv, "pgd_m": m.pgd,
             "arias_intensity_m_s": m.arias, "d5_95_s": m.d5_95, "d5_75_s": m.d5_75,
@@ -114,8 +116,9 @@ def format_record(d: dict) -> str:
     """Terminal text for a record run."""
     band = f", band-pass {d['filter_hz'][0]:g}..{d['filter_hz'][1]:g} Hz (order {d['order']}, zero phase)" \
         if d["filter_hz"] else ""
-    lines = [f"{d['record']}: {d['samples']} samples every {d['step_s']:g} s ({d['duration_s']:g} s); baseline "
-             f"{d['baseline']}{band}",
+    channel = f", channel {d['channel']}" if d.get("channel") else ""
+    lines = [f"{d['record']}: {d['format']}{channel} in {d['units_in_file']}, {d['samples']} samples every "
+             f"{d['step_s']:g} s ({d['duration_s']:g} s); baseline {d['baseline']}{band}",
              f"  PGA {d['pga_g']:.4g} g ({d['pga_m_s2']:.4g} m/s^2), PGV {d['pgv_m_s']:.4g} m/s, PGD {d['pgd_m']:.4g} m",
              f"  Arias intensity {d['arias_intensity_m_s']:.4g} m/s; significant duration D5-95 {d['d5_95_s']:.4g} s "
              f"({d['t5_s']:.4g} to {d['t95_s']:.4g} s), D5-75 {d['d5_75_s']:.4g} s",

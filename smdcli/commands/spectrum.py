@@ -13,7 +13,8 @@ import numpy as np
 
 from smdcli.errors import UsageError
 from smdcli.io.folders import output_folder
-from smdcli.scenario.records import Record, read_record
+from smdcli.scenario.record_files import read_record
+from smdcli.scenario.records import Record
 from smdcli.scenario.spec import STANDARD_GRAVITY
 from smdcli.analysis.inelastic import InelasticSpectrum
 from smdcli.analysis.shock import ShockSpectrum
@@ -50,12 +51,13 @@ def _numbers(option: str, spec: str) -> np.ndarray:
 
 
 def spectrum(path: str | Path, out: str | Path, periods: str | None = None, damping: str | None = None,
-             units: str = "g", scale: float = 1.0, shift: float = 0.0, plots: bool = True,
+             units: str | None = None, scale: float = 1.0, shift: float = 0.0, plots: bool = True,
              progress: bool = False, kind: str = "pseudo", q: str | None = None,
              frequencies: str | None = None, ductility: str | None = None, strength: str | None = None,
-             law: str | None = None, hardening: float | None = None) -> SpectrumRun:
+             law: str | None = None, hardening: float | None = None, reading: dict | None = None) -> SpectrumRun:
     """Read the record, compute Sd, Sv, Sa for every damping ratio and period, write OUT/<stem>_spectrum.*; or with
-    kind "srs" the shock response spectrum over natural frequency per Q, OUT/<stem>_srs.*."""
+    kind "srs" the shock response spectrum over natural frequency per Q, OUT/<stem>_srs.*. reading: how the file is
+    read (format, channel, dt: read_record's)."""
     import time
 
     path = Path(path)
@@ -68,7 +70,7 @@ def spectrum(path: str | Path, out: str | Path, periods: str | None = None, damp
         if periods is not None or damping is not None:
             raise UsageError("--periods and --damping belong to --kind pseudo; a shock spectrum takes "
                              "--frequencies (Hz) and --q")
-        return _shock(path, out, units, scale, shift, plots, q or DEFAULT_Q, frequencies)
+        return _shock(path, out, units, scale, shift, plots, q or DEFAULT_Q, frequencies, reading)
     if q is not None or frequencies is not None:
         raise UsageError("--q and --frequencies belong to --kind srs; a pseudo spectrum takes --periods and --damping")
     periods = periods or DEFAULT_PERIODS
@@ -82,7 +84,7 @@ def spectrum(path: str | Path, out: str | Path, periods: str | None = None, damp
     if len(T) * len(zeta) > MAX_OSCILLATORS:
         raise UsageError(f"--periods x --damping: expected at most {MAX_OSCILLATORS} oscillators, found "
                          f"{len(T)} x {len(zeta)}")
-    record = _record(path, units, scale, shift)
+    record = _record(path, units, scale, shift, reading)
     _check_cost(record, T, len(zeta))
     out_dir = output_folder(out)
     from smdcli.progress import bar
@@ -166,14 +168,16 @@ def _inelastic_options(ductility: str | None, strength: str | None, law: str | N
     return "strength", targets, b
 
 
-def _record(path: Path, units: str, scale: float, shift: float) -> Record:
-    """The record of a record file, or of a scenario's [ground_motion]."""
+def _record(path: Path, units: str | None, scale: float, shift: float, reading: dict | None = None) -> Record:
+    """The record of a record file (reading: read_record's format, channel and dt), or of a scenario's
+    [ground_motion]."""
+    reading = {key: value for key, value in (reading or {}).items() if value is not None}
     if path.suffix.lower() == ".toml":
-        if (units, scale, shift) != ("g", 1.0, 0.0):
-            raise UsageError(f"{path}: --units, --scale and --shift apply to a record file; a scenario's record "
-                             "takes them from its [ground_motion] table")
+        if units is not None or (scale, shift) != (1.0, 0.0) or reading:
+            raise UsageError(f"{path}: --units, --scale, --shift, --format, --channel and --dt apply to a record file; "
+                             "a scenario's record takes them from its [ground_motion] table")
         return scenario_record(path)
-    return read_record(path, units, scale, shift)
+    return read_record(path, units, scale, shift, **reading)
 
 
 def default_frequencies(step: float) -> np.ndarray:
@@ -185,8 +189,8 @@ def default_frequencies(step: float) -> np.ndarray:
     return bottom * 2.0 ** (np.arange(bands + 1) / 12)
 
 
-def _shock(path: Path, out, units: str, scale: float, shift: float, plots: bool, q: str,
-           frequencies: str | None) -> SpectrumRun:
+def _shock(path: Path, out, units: str | None, scale: float, shift: float, plots: bool, q: str,
+           frequencies: str | None, reading: dict | None = None) -> SpectrumRun:
     """The shock response spectrum run: OUT/<stem>_srs.h5 and .png."""
     import time
 
@@ -201,7 +205,7 @@ def _shock(path: Path, out, units: str, scale: float, shift: float, plots: bool,
     if F is not None and len(F) * len(Q) > MAX_OSCILLATORS:
         raise UsageError(f"--frequencies x --q: expected at most {MAX_OSCILLATORS} oscillators, found "
                          f"{len(F)} x {len(Q)}")
-    record = _record(path, units, scale, shift)
+    record = _record(path, units, scale, shift, reading)
     F = default_frequencies(record.step) if F is None else F
     pieces = np.maximum(1.0, np.ceil(8 * record.step * F)).sum() * len(Q) * len(record.time)
     if pieces > MAX_PIECES:

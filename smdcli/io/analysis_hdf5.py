@@ -162,9 +162,7 @@ def _write_record(f, record) -> None:
     time.attrs["units"] = "s"
     acc = with_scales(group.create_dataset("acceleration", data=record.acceleration), time)
     acc.attrs["units"] = "m/s^2"
-    group.attrs["units_in_file"] = record.units
-    group.attrs["file_text"] = record.text
-    group.attrs["sha256"] = hashlib.sha256(record.text.encode()).hexdigest()
+    _record_source(group, record)
 
 
 def write_record(path: Path, record, processed) -> None:
@@ -200,10 +198,18 @@ def write_record(path: Path, record, processed) -> None:
             ds = with_scales(f.create_dataset(name, data=data), time)
             ds.attrs["units"] = units
             ds.attrs["description"] = meaning
-        group = f.create_group("source")
-        group.attrs["units_in_file"] = record.units
-        group.attrs["file_text"] = record.text
-        group.attrs["sha256"] = hashlib.sha256(record.text.encode()).hexdigest()
+        _record_source(f.create_group("source"), record)
+
+
+def _record_source(group, record) -> None:
+    """What a record file was: its text, hash, how it was read (format, a COSMOS channel), its sampling and unit."""
+    group.attrs["units_in_file"] = record.units
+    group.attrs["format"] = record.format
+    if record.channel is not None:
+        group.attrs["channel"] = record.channel
+    group.attrs["step_s"] = record.step
+    group.attrs["file_text"] = record.text
+    group.attrs["sha256"] = hashlib.sha256(record.text.encode()).hexdigest()
 
 
 def write_psd(path: Path, run) -> None:

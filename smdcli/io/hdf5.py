@@ -38,6 +38,9 @@ def write_header(f, scenario: Scenario, kind: str) -> None:
         for force in tables:
             ds = group.create_dataset(force.path, data=force.file_text)
             ds.attrs["file"] = force.file
+            ds.attrs["format"] = force.file_format or "csv"
+            if force.file_units:
+                ds.attrs["units_in_file"] = force.file_units
             ds.attrs["sha256"] = hashlib.sha256(force.file_text.encode()).hexdigest()
     if scenario.system is not None and scenario.system.files:  # the matrices are /model's; where they came from
         group = f.create_group("provenance/matrix_files")
@@ -207,6 +210,8 @@ def _write_ground(f, scenario: Scenario, model: Model, result: Result, time, dof
     if spec.shape.file:
         file = group.create_dataset("file_text", data=spec.shape.file_text)
         file.attrs["file"] = spec.shape.file
+        file.attrs["format"] = spec.shape.file_format or "csv"
+        file.attrs["units_in_file"] = spec.units
         file.attrs["sha256"] = hashlib.sha256(spec.shape.file_text.encode()).hexdigest()
 
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from smdcli.scenario.reader import _Table
 from smdcli.scenario.records import (BASELINES, ColumnsError, band_passed, baseline_corrected, check_scaled, read_text,
-                                     slope_problem, two_columns)
+                                     slope_problem)
 from smdcli.scenario.spec import FORCE_TYPES, GROUND, GROUND_QUANTITIES, GROUND_UNITS, ForceSpec, GroundMotionSpec
 from smdcli.shapes.registry import SHAPES
 
@@ -80,6 +80,14 @@ def _read_ground_motion(t: _Table) -> GroundMotionSpec:
     if order > 10:
         raise t.fail("filter_order", f"expected a Butterworth order from 1 to 10, found {order}")
     shape = _read_shape(t, 0, GROUND, ("quantity", "units", "scale", "shift", "hold") + PROCESSING_KEYS)
+    if shape.file_units is not None:  # an AT2 or COSMOS record names its own unit
+        if quantity != "acceleration":
+            raise t.fail("quantity", f"{shape.file}: an {shape.file_format.upper()} file holds an acceleration; "
+                                     f"expected quantity = \"acceleration\", found {quantity!r}")
+        if t.has("units") and allowed[units] != allowed[shape.file_units]:
+            raise t.fail("units", f"{shape.file} gives its values in {shape.file_units}; units = {units!r} disagrees "
+                                  "(leave units out: the file's are used)")
+        units = shape.file_units
     factor = allowed[units]
     if shape.type == "table":
         shape = replace(shape, values=tuple((v * scale + shift) * factor for v in shape.values))
@@ -129,8 +137,11 @@ def _read_table_force(t: _Table) -> dict[str, Any]:
     if t.has("file"):
         if t.has("t") or t.has("values"):
             raise t.fail("file", "give either file or t and values, not both")
-        times, values, file, file_text = _read_csv(t, t.string("file"))
+        times, values, file, file_text, read_as, file_units = _read_file(t, t.string("file"))
     else:
+        for key in ("format", "channel", "dt"):
+            if t.has(key):
+                raise t.fail(key, "describes a record file: expected it with file = ...")
         times = t.numbers("t")
         values = t.numbers("values")
         if len(values) != len(times):
@@ -145,17 +156,30 @@ def _read_table_force(t: _Table) -> dict[str, Any]:
         raise t.fail(f"values[{problem[0]}]", problem[1])
     spec = {"t": times, "values": values, "interpolation": interpolation}
     if t.has("file"):
-        spec.update(file=file, file_text=file_text)
+        spec.update(file=file, file_text=file_text, file_format=read_as, file_units=file_units)
     return spec
 
 
-def _read_csv(t: _Table, name: str) -> tuple[tuple[float, ...], tuple[float, ...], str, str]:
-    csv_path = Path(name)
-    if not csv_path.is_absolute():
-        csv_path = Path(t.file).parent / csv_path
+def _read_file(t: _Table, name: str) -> tuple[tuple[float, ...], tuple[float, ...], str, str, str, str | None]:
+    """(times, values, path, text, format, the unit the file names) of a table's file: two-column text, or a record
+    file as `format`, its extension or `dt` say (record_files); values in the file's unit (a COSMOS file's mg as
+    g)."""
+    from smdcli.scenario.record_files import FORMATS, read_samples
+
+    path = Path(name)
+    if not path.is_absolute():
+        path = Path(t.file).parent / path
+    read_as = t.string("format", choices=FORMATS) if t.has("format") else None
+    channel = t.integer("channel", 1, minimum=1) if t.has("channel") else None
+    dt = t.number("dt", positive=True) if t.has("dt") else None
     try:
-        text = read_text(csv_path)
-        times, values = two_columns(text)
+        text = read_text(path)
+        samples = read_samples(path, text, read_as, channel, dt)
     except ColumnsError as exc:
-        raise t.fail("file", f"{csv_path}: {exc}") from None
-    return times, values, str(csv_path), text
+        key = str(exc).split(":", 1)[0]
+        raise t.fail(key if key in ("format", "channel", "dt") else "file", f"{path}: {exc}") from None
+    if samples.units is not None and t.path != "ground_motion":
+        raise t.fail("file", f"{path}: an {samples.format.upper()} file holds a ground acceleration; a force's table "
+                             "takes two-column or one-column text")
+    values = samples.values * samples.factor
+    return (tuple(samples.times.tolist()), tuple(values.tolist()), str(path), text, samples.format, samples.units)

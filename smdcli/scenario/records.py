@@ -1,6 +1,7 @@
-"""Two-column text files: table forces and ground-motion records (time, value; CSV or whitespace; header optional).
+"""Two-column text files: table forces and ground-motion records (time, value; CSV or whitespace; header optional);
+record files of other formats (AT2, COSMOS, one-column) and read_record are record_files'.
 
-A record is a ground acceleration sampled in time: read, converted to m/s^2 (`units` "g" or "m/s^2", then
+A record is a ground acceleration sampled in time: read, converted to m/s^2 (its file's unit or `units`, then
 `scale` and `shift`), and checked: strictly increasing times, finite numbers, two columns on every row.
 
 Must not import: model, solvers, sweep, io, plots, commands, cli.
@@ -213,6 +214,8 @@ class Record:
     acceleration: np.ndarray
     units: str  # as the file gave it: "g" or "m/s^2"
     text: str  # the file as read, kept in result files for provenance
+    format: str = "csv"  # how it was read (record_files.FORMATS)
+    channel: int | None = None  # a COSMOS file's acceleration series read (1-based)
 
     @property
     def step(self) -> float:
@@ -244,29 +247,6 @@ def velocity_drift(where: str, velocity: np.ndarray, displacement: np.ndarray | 
     return None
 
 
-def read_record(path: str | Path, units: str = "g", scale: float = 1.0, shift: float = 0.0,
-                field: str | None = None) -> Record:
-    """The record in a two-column file, in m/s^2: (value * scale + shift) * units. Input errors name the file and,
-    within a scenario, the field."""
-    path = Path(path)
-    where = str(path) if field is None else field
-    if units not in UNITS:
-        raise ScenarioError(str(path), f"{field}.units" if field else "units",
-                            f"expected one of {', '.join(repr(u) for u in UNITS)}, found {units!r}")
-    for name, value in (("scale", scale), ("shift", shift)):
-        if not math.isfinite(value):
-            raise ScenarioError(str(path), f"{field}.{name}" if field else name, f"expected a finite number, found {value}")
-    try:
-        text = read_text(path)
-        times, values = two_columns(text)
-    except ColumnsError as exc:
-        raise ScenarioError(where, None if field is None else "file", f"{path}: {exc}" if field else str(exc)) from None
-    with np.errstate(all="ignore"):
-        acceleration = (np.asarray(values) * scale + shift) * UNITS[units]
-    check_scaled(str(path), field, times, acceleration, "m/s^2")
-    return sampled_record(where, None, str(path), times, acceleration, units, text)
-
-
 def check_scaled(file: str, field: str | None, times, values, units: str) -> None:
     """Samples after scale, shift and unit conversion: finite, with finite slopes between them (ScenarioError)."""
     values = np.asarray(values, dtype=float)
@@ -291,7 +271,8 @@ def sampled_record(file: str, field: str | None, path: str, times, acceleration,
     if steps.max() - steps.min() > 1e-6 * steps.mean():
         raise ScenarioError(file, field, f"expected uniformly sampled times, found steps from {steps.min():.6g} to "
                                          f"{steps.max():.6g} s")
-    t = t[0] + steps.mean() * np.arange(len(t))  # the sampling interval the file's rounding of times meant
+    if not np.array_equal(t, t[0] + (t[1] - t[0]) * np.arange(len(t))):  # a file that gives its dt is exact already
+        t = t[0] + steps.mean() * np.arange(len(t))  # the sampling interval the file's rounding of times meant
     return Record(path, t, np.asarray(acceleration, dtype=float), units, text)
 
 

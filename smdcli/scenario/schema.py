@@ -14,6 +14,7 @@ from smdcli.elements.registry import SPRING_LAWS, TABLES
 from smdcli.scenario.forces import _ANY_FORCE_KEYS, GROUND_KEYS
 from smdcli.scenario.options import EXPECT_KEYS, FIT_KEYS, OPTIMIZE_KEYS, SOLVER_KEYS, SWEEP_KEYS
 from smdcli.scenario.reader import _MASS_KEYS, _SYSTEM_KEYS, _TIME_KEYS, _TOP_KEYS
+from smdcli.scenario.record_files import FORMATS
 from smdcli.scenario.spec import EXPECT_QUANTITIES, FORCE_TYPES, GROUND_QUANTITIES, GROUND_UNITS
 from smdcli.scenario.structure import DAMPING_KEYS
 from smdcli.shapes.registry import SHAPES
@@ -42,7 +43,8 @@ SPECIAL = {
     "omega": {"anyOf": [NUMBER, NUMBERS]}, "modal": {"anyOf": [NUMBER, NUMBERS]},
     "units": {"enum": sorted({u for units in GROUND_UNITS.values() for u in units} | {"g"})},
     "dof": STRING, "baseline": {"enum": ["none", "linear", "quadratic"]}, "filter": {**NUMBERS, "minItems": 2, "maxItems": 2},
-    "filter_order": INTEGER, "hold": BOOLEAN,
+    "filter_order": INTEGER, "hold": BOOLEAN, "format": {"enum": list(FORMATS)},
+    "channel": INTEGER,
 } | {key: schema for shape in SHAPES.values() for key, schema in shape.schema.items()}
 
 

@@ -104,6 +104,8 @@ class ForceSpec:
     expr: str | None = None
     file: str | None = None  # a table force's file, as resolved, and its text: the result keeps a copy
     file_text: str | None = None
+    file_format: str | None = None  # how the file was read (record_files.FORMATS)
+    file_units: str | None = None  # the unit the file names for its values (an AT2 or COSMOS record), else None
 
     @property
     def path(self) -> str:

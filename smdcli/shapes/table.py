@@ -18,7 +18,7 @@ class Table(Signal):
     is its value there, the jump to zero its right limit, as exo_state gives it)."""
 
     types = ("table",)
-    fields = ("t", "values", "file", "interpolation")
+    fields = ("t", "values", "file", "interpolation", "format", "channel", "dt")
     kinds = (TABLE_LINEAR, TABLE_PREVIOUS)
 
     def __init__(self, times, values, interpolation: str, ended: bool = False):
