@@ -233,6 +233,7 @@ class Result:
     # ((array, (min, max)), ...): extremes a solver found as it wrote the arrays (extremes_of), so that the checks
     # after a run need not pass over them again
     found_extremes: tuple = field(default=(), repr=False, compare=False)
+    storeys: Any = None  # analysis.storeys.Storeys of a successful run of a scene with [building]
 
     def changed(self, **changes) -> Result:
         """This result with some fields changed, as dataclasses.replace, without computing a field not yet read

@@ -90,7 +90,8 @@ def _float_sets(path):
 
 @pytest.mark.parametrize("stem, kind", [("three_dof_forced", "simulate"), ("three_dof_matrix_forced", "simulate"),
                                         ("quarter_car_bump", "simulate"), ("one_dof_nonlinear_stiff", "simulate"),
-                                        ("shear_frame_record", "simulate"), ("one_dof_regimes_sweep", "sweep"),
+                                        ("shear_frame_record", "simulate"), ("shear_frame_bilinear", "simulate"),
+                                        ("one_dof_regimes_sweep", "sweep"),
                                         ("ic_underdamped", "sweep"), ("transmissibility_1dof", "sweep"),
                                         ("duffing_frequency_response", "sweep")])
 def test_every_number_written_states_its_accuracy(stem, kind, tmp_path, cli):

@@ -66,7 +66,12 @@ def solve_run(sc: Scenario, model: Model, grid: np.ndarray, options: Options = O
 
             result = result.changed(stats=replace(result.stats, suspect="; ".join(reasons)),
                                     notes=(*result.notes, *(f"warning: suspect: {reason}" for reason in reasons)))
-    return result.changed(origin=(sc, model))
+    result = result.changed(origin=(sc, model))
+    if result.success and sc.building is not None:
+        from smdcli.analysis.storeys import storeys
+
+        result = result.changed(storeys=storeys(result, sc.building))
+    return result
 
 
 def simulate(path: str | Path, out: str | Path, options: Options = Options()) -> Run:
@@ -135,6 +140,7 @@ def summary(run: Run) -> dict:
         "success": s.success, "message": s.message,
         "peak_displacement_m": dict(zip(run.result.dofs, map(float, result_peaks(run.result, absolute=False)))),
         "energy_residual": None if run.result.energy is None else run.result.energy.max_relative_residual,
+        **_storey_summary(run.result.storeys),
         "notes": list(run.result.notes),
         "expect": [check.as_dict() for check in run.checks],
         "outputs": [str(p) for p in run.outputs],
@@ -150,6 +156,17 @@ def _events(history) -> dict:
         counts[kind] = counts.get(kind, 0) + 1
     return {"event_counts": counts,
             "events": [{"time": t, "element": element, "kind": kind} for t, element, kind in history.events]}
+
+
+def _storey_summary(storeys) -> dict:
+    """A [building]'s storeys in the summary: each storey's peak drift ratio and drift, residual drift, peak shear."""
+    if storeys is None:
+        return {}
+    return {"storeys": [{"storey": name, "peak_drift_ratio": float(ratio), "peak_drift_m": float(drift),
+                         "residual_drift_m": float(residual), "peak_shear_n": float(shear)}
+                        for name, ratio, drift, residual, shear in zip(storeys.names, storeys.peak_drift_ratio,
+                                                                       storeys.peak_drift, storeys.residual_drift,
+                                                                       storeys.peak_shear)]}
 
 
 def failed_summary(path: str | Path, message: str | None, exit_code: int | None) -> dict:
@@ -193,6 +210,10 @@ def format_summary(data: dict) -> str:
         lines.append(f"  events   {sum(counts.values())}" + (f" ({told})" if told else "")
                      + (f"; the last at t = {data['events'][-1]['time']:.6g} s ({data['events'][-1]['element']} "
                         f"{data['events'][-1]['kind']})" if data["events"] else ""))
+    if data.get("storeys"):
+        shown = data["storeys"][:SHOWN]
+        lines.append("  drift    peak ratio " + ", ".join(f"{s['storey']} {s['peak_drift_ratio']:.4g}" for s in shown)
+                     + (" ..." if len(data["storeys"]) > SHOWN else "") + " (storey drift over height)")
     if data.get("energy_residual") is not None:
         lines.append(f"  energy   balance residual {data['energy_residual']:.2g} of the largest energy "
                      "(the run's physical accuracy check)")

@@ -131,6 +131,8 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
                 stated(f["elements/added_damping_force"], result.stats.stated_accuracy * (model.n + 2))
         if result.nonsmooth is not None:
             _write_events(f, result.nonsmooth)
+        if result.storeys is not None:
+            _write_storeys(f, result.storeys, time, result, derived_accuracy(model, result))
         if checks:
             _write_expect(f, checks)
 
@@ -293,6 +295,55 @@ def _write_elements(f, elements, time, dof) -> None:
         ds = with_scales(group.create_dataset("added_damping_force", data=elements.added_damping), time, dof)
         ds.attrs["units"] = "N"
         ds.attrs["description"] = "-C_damping x' on each DOF: the force of the [damping] table, not an element's"
+
+
+def _write_storeys(f, storeys, time, result, derived: dict) -> None:
+    """/storeys: drift, drift ratio and shear histories (time x storey), their located peaks, the residual drift; each
+    stated as accurate as the displacements (twice, a difference of two) and the element forces it sums."""
+    group = f.create_group("storeys")
+    names = _strings(group, "storey", storeys.names)
+    names.make_scale("storey")
+    height = group.create_dataset("height", data=storeys.heights)
+    height.attrs["units"] = "m"
+    stated(height, 0.0)
+    largest = float(np.abs(result.displacement).max(initial=0.0))
+    drift = (2 * result.stats.stated_accuracy, largest)
+    ratio = (drift[0], largest / float(storeys.heights.min()))
+    # a storey sums at most every element: each kind's stated error (relative to its largest force) times that
+    # force times how many there are, in N
+    forces = [derived[f"{kind}_force"] * float(np.abs(values).max(initial=0.0)) * values.shape[1]
+              for kind, values in (("spring", result.elements.spring), ("damper", result.elements.damper),
+                                   ("friction", result.elements.friction), ("stop", result.elements.stop))
+              if values is not None and values.size and f"{kind}_force" in derived]
+    shear = (sum(forces), 1.0)
+    for name, data, units, meaning, accuracy in (
+            ("drift", storeys.drift, "m", "the storey's mass less the one below (the ground's 0)", drift),
+            ("drift_ratio", storeys.drift_ratio, "1", "drift over the storey's height", ratio),
+            ("shear", storeys.shear, "N", "tension of the elements joining the storey's levels, positive pulling "
+                                          "the upper mass down", shear)):
+        ds = with_scales(group.create_dataset(name, data=data), time, names)
+        ds.attrs["units"], ds.attrs["description"] = units, meaning
+        stated(ds, *accuracy)
+    # a located peak is vouched for no closer than what locating it moved it from the largest sample
+    moved_drift = float(np.max(storeys.peak_drift - np.abs(storeys.drift).max(axis=0), initial=0.0)) / largest \
+        if largest > 0 else 0.0
+    moved_shear = float(np.max(storeys.peak_shear - np.abs(storeys.shear).max(axis=0), initial=0.0))
+    for name, data, units, meaning, accuracy in (
+            ("peak_drift", storeys.peak_drift, "m", "largest |drift|, located between samples",
+             (drift[0] + moved_drift, drift[1])),
+            ("peak_drift_ratio", storeys.peak_drift_ratio, "1", "largest |drift| over the height, located",
+             (ratio[0] + moved_drift, ratio[1])),
+            ("peak_shear", storeys.peak_shear, "N", "largest |shear|: located where the storey's elements are "
+                                                     "linear springs and dampers, else the samples' (see located)",
+             (shear[0] + moved_shear, 1.0)),
+            ("residual_drift", storeys.residual_drift, "m", "the drift at the run's end", drift)):
+        ds = group.create_dataset(name, data=data)
+        ds.dims[0].attach_scale(names)
+        ds.attrs["units"], ds.attrs["description"] = units, meaning
+        stated(ds, *accuracy)
+    group["peak_drift"].attrs["time"] = storeys.peak_drift_time
+    group["peak_shear"].attrs["time"] = storeys.peak_shear_time
+    group["peak_shear"].attrs["located"] = storeys.shear_located
 
 
 def _write_energy(f, energy, time) -> None:

@@ -12,7 +12,7 @@ import numpy as np
 from smdcli.io.atomic import atomic_path
 from smdcli.io.hdf5 import TIME_ACCURACY, _strings, with_scales, axis, stated, write_header, write_matrices
 from smdcli.model.accuracy import EPS, evaluation_accuracy
-from smdcli.sweep.spec import METRIC_UNITS, SETTLING_BAND, parameter_units
+from smdcli.sweep.spec import METRIC_UNITS, SETTLING_BAND, STOREY_METRICS, parameter_units
 
 
 def write_sweep(path: Path, family, response, run: dict | None = None) -> None:
@@ -137,6 +137,8 @@ class SweepFile:
             group = f.create_group("metrics")
             group.attrs["settling_band"] = SETTLING_BAND
             for name, units in METRIC_UNITS.items():
+                if name in STOREY_METRICS and family.scenario.building is None:
+                    continue  # a storey's measure: only a scene with [building] has storeys
                 ds = _growing(group, name, (n,), float, compressed=True)
                 ds.attrs["units"] = units
                 with_scales(ds, member, dof)

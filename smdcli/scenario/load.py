@@ -17,8 +17,8 @@ from smdcli.scenario.reader import (_SYSTEM_KEYS, _TIME_KEYS, _TOP_KEYS, MAX_SCE
                                     read_regular_file)
 from smdcli.scenario.spec import MAX_SAMPLES, Scenario, SolverSpec, TimeSpec
 from smdcli.shapes.registry import SHAPES
-from smdcli.scenario.structure import (DAMPING_KEYS, _read_damping, _read_elements, _read_masses, _read_system,
-                                      _read_time, read_law_elements)
+from smdcli.scenario.structure import (BUILDING_KEYS, DAMPING_KEYS, _read_building, _read_damping, _read_elements,
+                                      _read_masses, _read_system, _read_time, read_law_elements)
 
 
 def load(path: str | Path) -> Scenario:
@@ -110,6 +110,11 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
     fit = _read_fit(_Table(file, "fit", top.raw("fit"), FIT_KEYS)) if top.has("fit") else ()
     optimize = _read_optimize(_Table(file, "optimize", top.raw("optimize"), OPTIMIZE_KEYS)) \
         if top.has("optimize") else ()
+    if top.has("building") and system is not None:
+        raise ScenarioError(file, "building", "needs the element form (springs and dampers joining the floors, whose "
+                                              "tensions are the storey shears); [system] has no elements")
+    building = _read_building(_Table(file, "building", top.raw("building"), BUILDING_KEYS), dofs) \
+        if top.has("building") else None
     top.finish(_TOP_KEYS)
 
     _check_size(file, len(dofs), system is not None)
@@ -135,6 +140,7 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
         sweep=sweep, damping=damping, ground_motion=ground_motion, expect=expect, frictions=frictions, stops=stops,
         fit=fit,
         optimize=optimize,
+        building=building,
     )
 
 

@@ -16,7 +16,7 @@ from smdcli.scenario.options import EXPECT_KEYS, FIT_KEYS, OPTIMIZE_KEYS, SOLVER
 from smdcli.scenario.reader import _MASS_KEYS, _SYSTEM_KEYS, _TIME_KEYS, _TOP_KEYS
 from smdcli.scenario.record_files import FORMATS
 from smdcli.scenario.spec import EXPECT_QUANTITIES, FORCE_TYPES, GROUND_QUANTITIES, GROUND_UNITS
-from smdcli.scenario.structure import DAMPING_KEYS
+from smdcli.scenario.structure import BUILDING_KEYS, DAMPING_KEYS
 from smdcli.shapes.registry import SHAPES
 
 NUMBER = {"type": "number"}
@@ -87,6 +87,7 @@ def scenario_schema() -> dict:
         "fit": _table(FIT_KEYS, data=STRING, parameters={"anyOf": [STRING, STRINGS]}, channels=STRINGS,
                       bounds={"type": "object", "additionalProperties": {**NUMBERS, "minItems": 2, "maxItems": 2}},
                       weights={"type": "object", "additionalProperties": NUMBER}),
+        "building": _table(BUILDING_KEYS, ("storey_heights",), storey_heights=NUMBERS, masses=STRINGS),
         "optimize": _table(OPTIMIZE_KEYS, minimize=STRING, subject_to={"anyOf": [STRING, STRINGS]}, input=STRING,
                            input_psd=STRING, psd_units={"enum": ["g", "m/s^2"]},
                            starts={"type": "integer", "minimum": 1},

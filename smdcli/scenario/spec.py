@@ -184,6 +184,14 @@ class ExpectSpec:
 
 
 @dataclass(frozen=True)
+class BuildingSpec:
+    """[building]: the storeys of a chain of masses from the ground up, each mass's storey the one below it."""
+
+    storey_heights: tuple[float, ...]  # m, one per mass of the chain
+    masses: tuple[str, ...]  # the chain's masses, ground up (all masses in file order unless named)
+
+
+@dataclass(frozen=True)
 class Scenario:
     """A validated scenario file, frozen; variants are made with dataclasses.replace."""
 
@@ -206,6 +214,7 @@ class Scenario:
     stops: tuple[ElementSpec, ...] = ()
     fit: tuple[tuple[str, Any], ...] = ()  # [fit]'s keys, read by `smd fit`
     optimize: tuple[tuple[str, Any], ...] = ()  # [optimize]'s keys, read by `smd optimize`
+    building: BuildingSpec | None = None  # [building]: storey heights, for drifts, drift ratios and shears
 
     @property
     def stem(self) -> str:

@@ -11,7 +11,8 @@ import numpy as np
 
 from smdcli.errors import ScenarioError
 from smdcli.scenario.reader import _MASS_KEYS, _SYSTEM_KEYS, _TIME_KEYS, _kind, _Table
-from smdcli.scenario.spec import DEFAULT_POINTS, GROUND, DampingSpec, ElementSpec, MassSpec, MatrixSystem, TimeSpec
+from smdcli.scenario.spec import (DEFAULT_POINTS, GROUND, BuildingSpec, DampingSpec, ElementSpec, MassSpec,
+                                  MatrixSystem, TimeSpec)
 
 
 def _read_time(table: _Table | None, file: str) -> TimeSpec:
@@ -293,3 +294,35 @@ def _read_damping(t: _Table, n: int) -> DampingSpec:
     beta = t.number("beta", 0.0)
     t.finish(DAMPING_KEYS)
     return DampingSpec(alpha=alpha, beta=beta, given="alpha" if t.has("alpha") else "beta")
+
+
+BUILDING_KEYS = ("storey_heights", "masses")
+
+
+def _read_building(t: _Table, dofs: tuple[str, ...]) -> BuildingSpec:
+    """[building]: storey_heights (m, one per mass of the chain), masses (the chain ground up; default every mass)."""
+    if not t.has("storey_heights"):
+        raise t.missing("storey_heights", "one storey height in m per mass of the chain, from the ground up")
+    heights = t.numbers("storey_heights")
+    if t.has("masses"):
+        names = t.raw("masses")
+        if not (isinstance(names, list) and names and all(isinstance(n, str) for n in names)):
+            raise t.fail("masses", f"expected a list of mass names, the chain from the ground up, found {names!r}")
+        for name in names:
+            if name not in dofs:
+                hint = difflib.get_close_matches(name, dofs, n=1)
+                raise t.fail("masses", f"unknown mass {name!r}" + (f" (did you mean {hint[0]!r}?)" if hint else
+                                                                   f"; masses are {', '.join(dofs)}"))
+        if len(set(names)) != len(names):
+            raise t.fail("masses", "expected each mass once")
+        chain = tuple(names)
+    else:
+        chain = tuple(dofs)
+    if len(heights) != len(chain):
+        raise t.fail("storey_heights", f"expected {len(chain)} heights, one per mass of the chain "
+                                       f"({', '.join(chain)}), found {len(heights)}")
+    for i, h in enumerate(heights):
+        if not h > 0:
+            raise t.fail(f"storey_heights[{i}]", f"expected a positive height in m, found {h:g}")
+    t.finish(BUILDING_KEYS)
+    return BuildingSpec(tuple(float(h) for h in heights), chain)

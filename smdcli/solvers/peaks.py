@@ -28,6 +28,13 @@ def _quintics(x0, v0, a0, x1, v1, a1, h):
                     axis=-1)
 
 
+def quintic_coefficients(x0, v0, a0, x1, v1, a1, h) -> np.ndarray:
+    """The quintic Hermite interpolant's coefficients (lowest first) in s = (t - t0) / h of one step: the
+    polynomial whose values, slopes and second derivatives at both ends are these."""
+    return _quintics(np.float64(x0), np.float64(v0), np.float64(a0), np.float64(x1), np.float64(v1), np.float64(a1),
+                     np.float64(h))
+
+
 def _value(c, s, order=0):
     """The quintics c (intervals, 6) or a derivative of them at s (intervals,), by Horner's rule."""
     factors = {0: (1, 1, 1, 1, 1, 1), 1: (0, 1, 2, 3, 4, 5), 2: (0, 0, 2, 6, 12, 20)}[order]

@@ -19,7 +19,7 @@ from smdcli.solvers.registry import EXACT_NAMES
 from smdcli.sweep.batched import batched_exact, shared_signal_recurrence
 from smdcli.sweep.family import Family
 from smdcli.sweep.pool import default_workers, run_pool, run_threads
-from smdcli.sweep.spec import MAX_STACKED, METRICS, QUANTITIES, SETTLING_BAND
+from smdcli.sweep.spec import MAX_STACKED, METRICS, QUANTITIES, SETTLING_BAND, STOREY_METRICS
 
 # --------------------------------------------------------------- families
 
@@ -229,7 +229,35 @@ def metrics(family: Family, result: FamilyResult, errors: dict | None = None) ->
     settling_error = measured.pop("settling_time_error")
     if errors is not None:
         errors["settling_time"] = settling_error
+    building = family.scenario.building
+    if building is None:
+        for name in STOREY_METRICS:
+            measured.pop(name)
+    else:
+        measured.update(_storey_metrics(family, result, building, jumps if locate else None))
     return measured
+
+
+def _storey_metrics(family: Family, result: FamilyResult, building, events) -> dict[str, np.ndarray]:
+    """peak_drift_ratio and residual_drift (S, n): at each chain mass, its storey's (the mass less the one below,
+    the ground's 0; the peak located between samples where the others are, over the storey's height); NaN at a mass
+    not in the chain."""
+    S, N, n = result.displacement.shape
+    index = {name: i for i, name in enumerate(family.base.dofs)}
+    chain = [index[name] for name in building.masses]
+    below = [None] + chain[:-1]
+    out = {name: np.full((S, n), np.nan) for name in STOREY_METRICS}
+    count = np.isfinite(result.time).sum(axis=-1) if result.time.ndim == 2 else np.full(S, N)
+    for j, lower, height in zip(chain, below, building.storey_heights):
+        drift = [q[:, :, j] - (q[:, :, lower] if lower is not None else 0.0)
+                 for q in (result.displacement, result.velocity, result.acceleration)]
+        with np.errstate(all="ignore"):
+            peak = _peak(drift[0])
+        if events is not None:
+            peak = np.fmax(peak, row_peaks(result.time, *drift, events=events))
+        out["peak_drift_ratio"][:, j] = peak / height
+        out["residual_drift"][:, j] = drift[0][np.arange(S), count - 1]
+    return out
 
 
 def _located(t: np.ndarray, result: FamilyResult, members: slice, jumps: np.ndarray) -> np.ndarray:

@@ -20,7 +20,9 @@ MAX_MEMBERS = 100_000  # values of one parameter
 MAX_GRID_MEMBERS = 10_000_000  # members of a two-parameter grid (memory is checked too: see family.py)
 _trapezoid = getattr(np, "trapezoid", None) or np.trapz
 MAX_STACKED = 40_000_000  # samples per stacked data set (members x time points x DOFs)
-METRICS = ("peak_displacement", "rms_displacement", "settling_time", "peak_ground_force")
+METRICS = ("peak_displacement", "rms_displacement", "settling_time", "peak_ground_force", "peak_drift_ratio",
+           "residual_drift")
+STOREY_METRICS = ("peak_drift_ratio", "residual_drift")  # of a scene with [building]: each chain mass's storey below it
 _FIELD_UNITS = {"k": "N/m", "k3": "N/m^3", "c": "N s/m", "m": "kg", "x0": "m", "v0": "m/s", "omega": "rad/s",
                 "frequency": "Hz", "amplitude": "N", "t0": "s", "duration": "s", "period": "s", "t1": "s", "f0": "Hz",
                 "f1": "Hz", "phase": "rad", "duty": "1", "end": "s", "start": "s", "step": "s", "zeta": "1",
@@ -58,7 +60,8 @@ def parameter_label(path: str, scenario: Scenario | None = None) -> str:
     return f"{shown} [{units}]" if units and units != "1" else shown
 
 
-METRIC_UNITS = {"peak_displacement": "m", "rms_displacement": "m", "settling_time": "s", "peak_ground_force": "N"}
+METRIC_UNITS = {"peak_displacement": "m", "rms_displacement": "m", "settling_time": "s", "peak_ground_force": "N",
+                "peak_drift_ratio": "1", "residual_drift": "m"}
 QUANTITIES = ("displacement", "velocity", "acceleration", "force")
 DIRECTIONS = ("up", "down", "both")
 SETTLING_BAND = 0.02  # settling time: the last time the response leaves 2 % of its largest excursion
@@ -226,6 +229,8 @@ def read_spec(sc: Scenario, cli: dict[str, Any]) -> SweepSpec:
     metric = pick("metric", "peak_displacement")
     for key, value, choices in (("direction", direction, DIRECTIONS), ("quantity", quantity, QUANTITIES),
                                 ("metric", metric, METRICS)):
+        if key == "metric" and value in STOREY_METRICS and sc.building is None:
+            raise fail("metric", f"{value} is a storey's: it needs a [building] table (storey_heights)")
         if value not in choices:
             hint = difflib.get_close_matches(value, choices, n=1)
             raise fail(key, f"expected one of {', '.join(choices)}, found {value!r}"
