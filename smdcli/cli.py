@@ -13,7 +13,7 @@ from typing import List, Optional
 import typer
 
 from smdcli import __version__, interrupts
-from smdcli.cli_analyses import fit, fragility, optimize, psd, record, rsa, sensitivity, spectrum
+from smdcli.cli_analyses import fit, fragility, ida, optimize, psd, record, rsa, sensitivity, spectrum
 from smdcli.cli_files import diff_files, export
 from smdcli.cli_support import _carried_out, _fail, _interrupted, _message, _print_json, _report, plain_coercion, plain_help
 from smdcli.progress import wanted as progress_wanted
@@ -232,6 +232,7 @@ app.command()(sensitivity)
 app.command()(fit)
 app.command()(optimize)
 app.command()(fragility)
+app.command()(ida)
 
 
 @app.command()

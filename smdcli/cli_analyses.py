@@ -284,3 +284,39 @@ def fragility(
 
     _carried_out(lambda: fragility_command(data, out, plots=not no_plots), {"data": str(data)}, as_json, quiet,
                  fragility_summary, lambda _, summary: format_fragility(summary))
+
+
+def ida(
+    scenario: Path = typer.Argument(..., help="Scenario TOML file shaken by a \\[ground_motion] record."),
+    records: Optional[list[str]] = typer.Option(None, "--records", help="A folder of records or a record file "
+                                                "(repeatable): .AT2, .V2, .V2c, .csv."),
+    im: Optional[str] = typer.Option(None, "--im", help="sa (5 %, first mode; default), sa:T=<s>[,zeta=<ratio>], "
+                                     "pga or pgv."),
+    edp: Optional[str] = typer.Option(None, "--edp", help="max_drift_ratio (default with \\[building]), "
+                                      "residual_drift, peak_displacement:<dof> or peak_acceleration:<dof>."),
+    collapse: Optional[str] = typer.Option(None, "--collapse", help="drift=<ratio> or displacement=<m> (dynamic "
+                                           "instability and the slope rule always count)."),
+    runs: Optional[int] = typer.Option(None, "--runs", help="Runs filling each curve after the bisection (12)."),
+    im_tolerance: Optional[float] = typer.Option(None, "--im-tolerance", help="The bisection's relative bracket "
+                                                 "(1e-3)."),
+    tail: Optional[float] = typer.Option(None, "--tail", help="Free vibration after each record, s (5)."),
+    workers: Optional[int] = typer.Option(None, "--workers", help="Processes, a record each (default: the CPUs)."),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="A Dask scheduler's address, or local."),
+    resume: bool = typer.Option(False, "--resume", help="Keep the records an interrupted campaign finished."),
+    out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
+    no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 file only."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
+    as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+):
+    """Incremental dynamic analysis: each record scaled up to collapse, fractiles and a fragility curve.
+
+    Hunt (doubling), bisection and fill per record (Vamvatsikos and Cornell 2002); writes OUT/<stem>_ida.h5,
+    OUT/<stem>_ida.png and OUT/<stem>_fragility.png."""
+    import os
+
+    from smdcli.commands.ida import format_ida, ida_command, ida_summary
+
+    _carried_out(lambda: ida_command(scenario, out, records, im, edp, collapse, runs, im_tolerance, tail,
+                                     workers if workers is not None else os.cpu_count(), scheduler, resume,
+                                     plots=not no_plots, progress=progress_wanted(quiet, as_json)),
+                 {"scenario": str(scenario)}, as_json, quiet, ida_summary, lambda _, data: format_ida(data))

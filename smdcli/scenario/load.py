@@ -11,8 +11,8 @@ from pathlib import Path
 
 from smdcli.errors import ScenarioError
 from smdcli.scenario.forces import _ANY_FORCE_KEYS, GROUND_KEYS, _read_force, _read_ground_motion
-from smdcli.scenario.options import (EXPECT_KEYS, FIT_KEYS, OPTIMIZE_KEYS, SWEEP_KEYS, _read_expect, _read_fit,
-                                     _read_optimize, _read_solver, _read_sweep)
+from smdcli.scenario.options import (EXPECT_KEYS, FIT_KEYS, IDA_KEYS, OPTIMIZE_KEYS, SWEEP_KEYS, _read_expect,
+                                     _read_fit, _read_ida, _read_optimize, _read_solver, _read_sweep)
 from smdcli.scenario.reader import (_SYSTEM_KEYS, _TIME_KEYS, _TOP_KEYS, MAX_SCENARIO_BYTES, _NotRegular, _Table,
                                     read_regular_file)
 from smdcli.scenario.spec import MAX_SAMPLES, Scenario, SolverSpec, TimeSpec
@@ -113,6 +113,7 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
     if top.has("building") and system is not None:
         raise ScenarioError(file, "building", "needs the element form (springs and dampers joining the floors, whose "
                                               "tensions are the storey shears); [system] has no elements")
+    ida = _read_ida(_Table(file, "ida", top.raw("ida"), IDA_KEYS)) if top.has("ida") else ()
     building = _read_building(_Table(file, "building", top.raw("building"), BUILDING_KEYS), dofs) \
         if top.has("building") else None
     top.finish(_TOP_KEYS)
@@ -141,6 +142,7 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
         fit=fit,
         optimize=optimize,
         building=building,
+        ida=ida,
     )
 
 

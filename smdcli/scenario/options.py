@@ -226,3 +226,33 @@ def _golden_problem(file: str) -> str | None:
     except Exception as exc:  # h5py raises OSError, KeyError or RuntimeError for damaged files
         return f"it cannot be read as HDF5 ({str(exc).split('(')[0].strip() or type(exc).__name__})"
     return None
+
+
+IDA_KEYS = ("records", "im", "edp", "collapse", "runs", "im_tolerance", "tail")
+
+
+def _read_ida(t: _Table) -> tuple[tuple[str, Any], ...]:
+    """[ida]'s keys, their types checked (`smd ida` reads the records, IM, EDP and collapse rule itself): records =
+    a folder, file or list of them (relative to the scenario), im, edp, collapse strings, runs a whole number,
+    im_tolerance and tail numbers."""
+    items = []
+    for key in IDA_KEYS:
+        if not t.has(key):
+            continue
+        value = t.raw(key)
+        if key == "records":
+            value = [value] if isinstance(value, str) else value
+            if not isinstance(value, list) or not value or not all(isinstance(v, str) for v in value):
+                raise t.fail(key, f"expected a folder or file, or an array of them, found {_kind(value)}")
+            base = Path(t.file).parent
+            value = tuple(str(v if Path(v).is_absolute() else base / v) for v in value)
+        elif key in ("im", "edp", "collapse"):
+            if not isinstance(value, str):
+                raise t.fail(key, f"expected a string, found {_kind(value)}")
+        elif key == "runs":
+            value = t.integer(key, minimum=0)
+        else:
+            value = t.number(key, positive=True)
+        items.append((key, value))
+    t.finish(IDA_KEYS)
+    return tuple(items)

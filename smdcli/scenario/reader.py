@@ -196,7 +196,7 @@ _SYNONYMS = {"stiffness": "k", "spring_constant": "k", "spring_rate": "k", "damp
 
 
 _TOP_KEYS = ("title", "description", "time", "mass", "spring", "damper", "friction", "stop", "system",
-             "force", "solver", "sweep", "damping", "ground_motion", "expect", "fit", "optimize", "building")
+             "force", "solver", "sweep", "damping", "ground_motion", "expect", "fit", "optimize", "building", "ida")
 _TIME_KEYS = ("start", "end", "step", "points")
 _MASS_KEYS = ("name", "m", "x0", "v0")
 _SYSTEM_KEYS = ("dofs", "M", "C", "K", "x0", "v0")

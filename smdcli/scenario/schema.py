@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from smdcli.elements.registry import SPRING_LAWS, TABLES
 from smdcli.scenario.forces import _ANY_FORCE_KEYS, GROUND_KEYS
-from smdcli.scenario.options import EXPECT_KEYS, FIT_KEYS, OPTIMIZE_KEYS, SOLVER_KEYS, SWEEP_KEYS
+from smdcli.scenario.options import EXPECT_KEYS, FIT_KEYS, IDA_KEYS, OPTIMIZE_KEYS, SOLVER_KEYS, SWEEP_KEYS
 from smdcli.scenario.reader import _MASS_KEYS, _SYSTEM_KEYS, _TIME_KEYS, _TOP_KEYS
 from smdcli.scenario.record_files import FORMATS
 from smdcli.scenario.spec import EXPECT_QUANTITIES, FORCE_TYPES, GROUND_QUANTITIES, GROUND_UNITS
@@ -87,6 +87,8 @@ def scenario_schema() -> dict:
         "fit": _table(FIT_KEYS, data=STRING, parameters={"anyOf": [STRING, STRINGS]}, channels=STRINGS,
                       bounds={"type": "object", "additionalProperties": {**NUMBERS, "minItems": 2, "maxItems": 2}},
                       weights={"type": "object", "additionalProperties": NUMBER}),
+        "ida": _table(IDA_KEYS, records={"anyOf": [STRING, STRINGS]}, im=STRING, edp=STRING, collapse=STRING,
+                      runs={"type": "integer", "minimum": 0}),
         "building": _table(BUILDING_KEYS, ("storey_heights",), storey_heights=NUMBERS, masses=STRINGS),
         "optimize": _table(OPTIMIZE_KEYS, minimize=STRING, subject_to={"anyOf": [STRING, STRINGS]}, input=STRING,
                            input_psd=STRING, psd_units={"enum": ["g", "m/s^2"]},

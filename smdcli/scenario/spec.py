@@ -215,6 +215,7 @@ class Scenario:
     fit: tuple[tuple[str, Any], ...] = ()  # [fit]'s keys, read by `smd fit`
     optimize: tuple[tuple[str, Any], ...] = ()  # [optimize]'s keys, read by `smd optimize`
     building: BuildingSpec | None = None  # [building]: storey heights, for drifts, drift ratios and shears
+    ida: tuple[tuple[str, Any], ...] = ()  # [ida]'s keys, read by `smd ida`
 
     @property
     def stem(self) -> str:
