@@ -360,6 +360,9 @@ def run(args: list[str]) -> int:
     no_args = getattr(exceptions, "NoArgsIsHelpError", ())
 
     provenance.set_command_line(shlex.join(["smd", *args]))
+    import smdcli.cli_support as support
+
+    support._announced = False  # each command reports its own interrupt (a notebook or a test runs several)
     import os
     import warnings
 

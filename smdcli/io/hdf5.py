@@ -304,6 +304,7 @@ def _write_storeys(f, storeys, time, result, derived: dict) -> None:
     names = _strings(group, "storey", storeys.names)
     names.make_scale("storey")
     height = group.create_dataset("height", data=storeys.heights)
+    height.dims[0].attach_scale(names)
     height.attrs["units"] = "m"
     stated(height, 0.0)
     largest = float(np.abs(result.displacement).max(initial=0.0))
