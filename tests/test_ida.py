@@ -197,3 +197,42 @@ def test_a_dask_campaign_gives_the_process_pool_s_numbers(cli, tmp_path):
     with h5py.File(local) as a, h5py.File(dask) as b:
         for name in ("runs/im", "runs/edp", "runs/collapse", "collapse_im"):
             assert np.array_equal(a[name][()], b[name][()], equal_nan=True), name
+
+
+def test_a_dask_worker_killed_mid_campaign_changes_no_number(cli, tmp_path):
+    """A campaign on a two-worker Dask cluster whose busy worker is killed (SIGKILL) as soon as it holds a record's
+    task: Dask reruns the lost task elsewhere (a task is a pure function of its record and options), and the file
+    equals the in-process campaign's."""
+    import os
+    import signal
+    import threading
+    import time
+
+    pytest.importorskip("dask.distributed")
+    from dask.distributed import Client, LocalCluster
+
+    scene = tmp_path / "linear.toml"
+    scene.write_text(LINEAR.format(record=RECORDS[2].as_posix()))
+    args = (*[a for r in RECORDS for a in ("--records", str(r))], "--im", "pga", "--collapse", "drift=0.01",
+            "--runs", "1")
+    _, local = campaign(cli, scene, tmp_path / "local", *args)
+    killed = []
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+            Client(cluster) as client:
+        def kill_the_first_busy_worker():
+            deadline = time.monotonic() + 60
+            while time.monotonic() < deadline and not killed:
+                busy = [worker for worker, tasks in client.processing().items() if tasks]
+                if busy:
+                    pid = client.run(os.getpid, workers=[busy[0]])[busy[0]]
+                    os.kill(pid, signal.SIGKILL)
+                    killed.append(busy[0])
+                time.sleep(0.02)
+        killer = threading.Thread(target=kill_the_first_busy_worker)
+        killer.start()
+        _, survived = campaign(cli, scene, tmp_path / "dask", *args, "--scheduler", cluster.scheduler_address)
+        killer.join()
+    assert killed, "no worker was busy to kill"
+    with h5py.File(local) as a, h5py.File(survived) as b:
+        for name in ("runs/im", "runs/edp", "runs/collapse", "collapse_im", "fractiles/im_50", "fragility/theta"):
+            assert np.array_equal(a[name][()], b[name][()], equal_nan=True), name
