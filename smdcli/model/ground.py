@@ -66,9 +66,20 @@ def ground_motion(spec: GroundMotionSpec, start: float, end: float, source: str 
     except TooManyJumps as exc:
         raise ScenarioError(source, "ground_motion", f"the ground's displacement or velocity jumps {exc.count:.3g} "
                             f"times or more in the run (limit {MAX_JUMPS}); each is a restart") from None
+    except InfiniteJump as exc:
+        raise ScenarioError(source, "ground_motion", f"the ground's {spec.quantity} or its derivative jumps by an "
+                            f"amount that is not a finite number at t = {exc.time:g} s (infinite on a side); "
+                            "expected finite values on both sides of each jump") from None
     except ExpressionError as exc:
         raise ScenarioError(source, "ground_motion.expr", f"{exc}; a {spec.quantity} is differentiated to the "
                             "ground's acceleration") from None
+
+
+class InfiniteJump(ValueError):
+    """A ground motion whose jump at `time` is not a finite number (its value on a side is infinite)."""
+
+    def __init__(self, time: float):
+        self.time = time
 
 
 class TooManyJumps(ValueError):
@@ -113,7 +124,11 @@ def derivative(signal: Signal, start: float, end: float) -> tuple[Signal | None,
     if not count <= MAX_JUMPS:
         raise TooManyJumps(count)
     edges = signal.breakpoints(start, end)
-    jumps = [(float(t), float(signal.value(t) - signal.value_left(t))) for t in edges]
+    with np.errstate(all="ignore"):  # a jump between infinities is not a number: refused below, not warned
+        jumps = [(float(t), float(signal.value(t) - signal.value_left(t))) for t in edges]
+    for t, size in jumps:
+        if not np.isfinite(size):
+            raise InfiniteJump(t)
     jumps = [(t, size) for t, size in jumps if size != 0.0]
     return signal.derivative(start), jumps
 
