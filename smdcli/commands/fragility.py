@@ -30,7 +30,7 @@ class FragilityRun:
 def read_counts(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(im, runs, collapses) of a counts file: a header naming im, runs and collapses (any order, any separator),
     one stripe a line; ScenarioError naming the line that is wrong."""
-    from smdcli.scenario.records import ColumnsError, read_text
+    from smdcli.scenario.records import ColumnsError, _cells, read_text
 
     try:
         text = read_text(path)
@@ -40,16 +40,14 @@ def read_counts(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
              if line.strip() and not line.strip().startswith("#")]
     if not lines:
         raise ScenarioError(str(path), None, "expected a header im,runs,collapses and a line per stripe, found no lines")
-    import re
-
-    header = [cell.lower() for cell in re.split(r"\s*[,;\t]\s*|\s+", lines[0][1])]
+    header = [cell.lower() for cell in _cells(lines[0][1])]
     if sorted(header) != sorted(COLUMNS):
         raise ScenarioError(str(path), None, f"line {lines[0][0]}: expected the header im,runs,collapses, found "
                                              f"{lines[0][1][:40]!r}")
     order = [header.index(name) for name in COLUMNS]
     rows = []
     for number, line in lines[1:]:
-        cells = re.split(r"\s*[,;\t]\s*|\s+", line)
+        cells = _cells(line)
         try:
             values = [float(cells[i]) for i in order] if len(cells) == 3 else None
         except ValueError:

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from smdcli.errors import ScenarioError
-from smdcli.scenario.records import (MAX_ROWS, UNITS, ColumnsError, Record, _is_header, check_scaled, read_text,
+from smdcli.scenario.records import (MAX_ROWS, UNITS, ColumnsError, Record, _cells, _is_header, check_scaled, read_text,
                                      sampled_record, slope_problem, two_columns)
 
 FORMATS = ("at2", "cosmos", "csv", "one_column")
@@ -295,7 +295,7 @@ def _one_column(text: str, dt: float) -> Samples:
         stripped = line.strip()
         if not stripped or stripped.startswith("#") or (not values and _is_header(stripped)):
             continue
-        cells = re.split(r"\s*[,;\t]\s*|\s+", stripped)
+        cells = _cells(stripped)
         if len(cells) != 1:
             raise ColumnsError(f"line {number}: expected one value a line, found {len(cells)} (two-column text: "
                                "no dt)")
