@@ -145,11 +145,11 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
 
     start = clock.perf_counter()
     first = tomllib.loads(tests[0].scenario.text)
-    initial = np.array([parameter_value(first, p) for p in params])
+    initial = np.array([parameter_value(first, p, tests[0].scenario) for p in params])
     for test in tests[1:]:  # every scene must hold every parameter (read now: a missing path is named before work)
         doc = tomllib.loads(test.scenario.text)
         for p in params:
-            parameter_value(doc, p)
+            parameter_value(doc, p, test.scenario)
     bounds = dict(bounds or {})
     unknown = [p for p in bounds if p not in params]
     if unknown:

@@ -115,7 +115,7 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
     if path.startswith(_REFUSED) or path == "zeta":
         raise UsageError(f"--param {path}: not a parameter of the scene (the run's span, its solver and its "
                          "sweep are not differentiated; for zeta give the damper's c)")
-    value = parameter_value(doc, path)
+    value = parameter_value(doc, path, sc)
     scale = relative_size(value)
     structure = _structure(base, grid)
     t_end = float(grid[-1])

@@ -269,7 +269,7 @@ def optimize(sc: Scenario, bounds: list[tuple[str, float, float]], objective: st
     goal = read_objective(objective, tuple(base.dofs), str(sc.path), elements)
     lower, upper = np.array([b[1] for b in bounds]), np.array([b[2] for b in bounds])
     doc = tomllib.loads(sc.text)
-    initial = np.array([parameter_value(doc, p) for p in paths], dtype=float)
+    initial = np.array([parameter_value(doc, p, sc) for p in paths], dtype=float)
     limits = tuple(read_constraint(text, tuple(base.dofs), str(sc.path), elements) for text in subject_to)
     if psd is not None and not all(m.kind in RMS for m in (goal, *(m for m, _ in limits))):
         raise UsageError(f"--input-psd: only the RMS measures ({', '.join(RMS)}) are under an input PSD; "

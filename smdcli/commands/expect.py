@@ -17,11 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from smdcli.result import Result
-from smdcli.scenario.spec import ExpectSpec
+from smdcli.scenario.spec import EXPECT_UNITS as UNITS, ExpectSpec
 
 GOLDEN_DATASETS = ("displacement", "velocity", "acceleration", "force")
-UNITS = {"peak_displacement": "m", "rms_displacement": "m", "settling_time": "s", "natural_frequency": "rad/s",
-         "energy_residual": "1", "golden": "1"}
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,7 @@ def fit_command(paths: list[Path], data: list[Path], params: list[str], bounds: 
     from smdcli.analysis.fit_data import read_measured
     from smdcli.analysis.model_derivative import check_once
     from smdcli.solvers.run import load
+    from smdcli.sweep.spec import table_bounds
 
     scenarios = [load(p) for p in paths]
     tables = [dict(sc.fit) for sc in scenarios]
@@ -49,7 +50,8 @@ def fit_command(paths: list[Path], data: list[Path], params: list[str], bounds: 
     if not params:
         raise UsageError(f"{scenarios[0].path}: no parameter to fit: give --param PATH or [fit] parameters = [...]")
     check_once(params)
-    chosen = dict(tables[0].get("bounds", ()))
+    chosen = {name: table_bounds(scenarios[0], f"fit.bounds.{name}", name, pair)
+              for name, pair in tables[0].get("bounds", ())}
     chosen.update(read_bound(b) for b in bounds)
     if max_iterations < 1:
         raise UsageError(f"--max-iterations: expected a positive number, found {max_iterations}")

@@ -27,12 +27,14 @@ def optimize_command(path: str | Path, params: list[str], objective: str | None,
     from smdcli.io.optimize_hdf5 import optimized_toml, write_optimize
     from smdcli.progress import bar
     from smdcli.solvers.run import load
+    from smdcli.sweep.spec import table_bounds
 
     path = Path(path)
     sc = load(path)
     table = dict(sc.optimize)
     bounds = [read_bounds(text) for text in params] if params else \
-        [(name, lo, hi) for name, (lo, hi) in table.get("parameters", ())]
+        [(name, *table_bounds(sc, f"optimize.parameters.{name}", name, pair))
+         for name, pair in table.get("parameters", ())]
     objective = objective or table.get("minimize")
     if not bounds:
         raise UsageError(f"{path}: nothing to optimize: give --param PATH=LO:HI or [optimize] parameters = {{...}}")

@@ -63,7 +63,7 @@ class BoucWen(Law):
         n = t.number("n", 1.0)
         if n < 1.0:
             raise t.fail("n", f"expected n >= 1 (the sharpness of the yield), found {n:g}")
-        beta, gamma = t.number("beta"), t.number("gamma")
+        beta, gamma = (t.number(key, unit=f"1/m^{n:g}") for key in ("beta", "gamma"))  # z is a displacement
         A = t.number("A", 1.0, positive=True)
         if beta - gamma < 0 and beta + gamma < 0:
             raise t.fail("beta", f"expected beta + gamma > 0 or beta - gamma >= 0 (z grows without bound on loading "

@@ -28,6 +28,7 @@ def _read_force(t: _Table, index: int, dofs: tuple[str, ...]) -> ForceSpec:
         hint = difflib.get_close_matches(on, dofs, n=1)
         extra = f" (did you mean {hint[0]!r}?)" if hint else f"; DOFs are {', '.join(dofs)}"
         raise t.fail("on", f"unknown DOF {on!r}{extra}")
+    t.units.update(amplitude="N", values="N")
     return _read_shape(t, index, on, ("on",))
 
 
@@ -58,6 +59,8 @@ def _read_ground_motion(t: _Table) -> GroundMotionSpec:
     quantity = t.string("quantity", choices=GROUND_QUANTITIES)
     allowed = GROUND_UNITS[quantity]
     units = t.string("units", next(u for u in allowed if u != "g"), choices=tuple(allowed), suggest=False)
+    si_units = next(u for u, f in allowed.items() if f == 1.0)
+    t.units.update(amplitude=si_units, values=si_units, shift=si_units)
     table = t.data.get("type") == "table"
     if t.has("hold") and not (table and quantity == "acceleration"):
         raise t.fail("hold", 'only a recorded ground acceleration (quantity = "acceleration", type = "table") ends '
@@ -88,7 +91,13 @@ def _read_ground_motion(t: _Table) -> GroundMotionSpec:
             raise t.fail("units", f"{shape.file} gives its values in {shape.file_units}; units = {units!r} disagrees "
                                   "(leave units out: the file's are used)")
         units = shape.file_units
-    factor = allowed[units]
+    with_units = sorted(t.unit_strings & {"amplitude", "values"})
+    if with_units and t.has("units"):
+        raise t.fail("units", f"{with_units[0]} carries its own unit; leave units out, or give {with_units[0]} as "
+                              f"plain numbers in {units}")
+    factor = 1.0 if with_units else allowed[units]
+    if "shift" in t.unit_strings:  # a shift with its unit is in SI; the record's values are in the file's unit
+        shift /= factor
     if shape.type == "table":
         shape = replace(shape, values=tuple((v * scale + shift) * factor for v in shape.values))
         if baseline != "none" or band is not None:
@@ -98,7 +107,6 @@ def _read_ground_motion(t: _Table) -> GroundMotionSpec:
             shape = replace(shape, expr=f"({shape.expr}) * {factor!r}")
     else:
         shape = replace(shape, amplitude=shape.amplitude * factor)
-    si_units = next(u for u, f in allowed.items() if f == 1.0)
     if shape.type == "table":
         check_scaled(t.file, t.path, shape.t, shape.values, si_units)
     elif not math.isfinite(shape.amplitude):

@@ -11,7 +11,7 @@ from typing import Any
 from smdcli.errors import ScenarioError
 from smdcli.scenario.reader import _kind, _Table
 
-from smdcli.scenario.spec import EXPECT_QUANTITIES, ExpectSpec, SolverSpec
+from smdcli.scenario.spec import EXPECT_QUANTITIES, EXPECT_UNITS, ExpectSpec, SolverSpec
 SOLVER_KEYS = ("method", "rtol", "atol", "dt")  # and a method's own options, which the registry knows
 
 
@@ -32,8 +32,23 @@ def _read_solver(t: _Table) -> SolverSpec:
         value = t.raw(key)
         if isinstance(value, bool) or not isinstance(value, (int, float, str)):
             raise t.fail(key, f"expected a number or a string, found {_kind(value)}")
+        if isinstance(value, str) and value.strip()[:1] in tuple("0123456789+-."):  # a number as a string ("25 %")
+            value = t._check_number(key, value, None, False, "1")  # a method's own options are ratios
         options.append((key, value))
     return SolverSpec(method=method, rtol=rtol, atol=atol, dt=dt, options=tuple(options))
+
+
+def _bounds_pair(entry: Any) -> bool:
+    """[lower, upper]: numbers with lower < upper, or unit strings (the command converts them with the parameter's unit
+    and checks their order)."""
+    if not (isinstance(entry, list) and len(entry) == 2 and all(
+            isinstance(v, (int, float, str)) and not isinstance(v, bool) for v in entry)):
+        return False
+    return any(isinstance(v, str) for v in entry) or entry[0] < entry[1]
+
+
+def _number_or_text(value: Any) -> float | str:
+    return value if isinstance(value, str) else float(value)
 
 
 FIT_KEYS = ("data", "parameters", "bounds", "channels", "weights")
@@ -60,14 +75,13 @@ def _read_fit(t: _Table) -> tuple[tuple[str, Any], ...]:
                 raise t.fail(key, f"expected a table, found {_kind(value)}")
             for name, entry in value.items():
                 pair = key == "bounds"
-                good = (isinstance(entry, list) and len(entry) == 2 and all(
-                    isinstance(v, (int, float)) and not isinstance(v, bool) for v in entry) and entry[0] < entry[1]) \
-                    if pair else (isinstance(entry, (int, float)) and not isinstance(entry, bool) and entry > 0)
+                good = _bounds_pair(entry) if pair else (isinstance(entry, (int, float)) and not isinstance(entry, bool)
+                                                         and entry > 0)
                 if not good:
                     raise ScenarioError(t.file, f"fit.{key}.{name}", ("expected [lower, upper] with lower < upper"
                                                                         if pair else "expected a number > 0")
                                         + f", found {entry!r}")
-            value = tuple((name, tuple(float(v) for v in entry) if key == "bounds" else float(entry))
+            value = tuple((name, tuple(_number_or_text(v) for v in entry) if key == "bounds" else float(entry))
                           for name, entry in value.items())
         items.append((key, value))
     t.finish(FIT_KEYS)
@@ -91,11 +105,10 @@ def _read_optimize(t: _Table) -> tuple[tuple[str, Any], ...]:
             if not isinstance(value, dict) or not value:
                 raise t.fail(key, f"expected a table of path = [lower, upper], found {_kind(value)}")
             for name, entry in value.items():
-                if not (isinstance(entry, list) and len(entry) == 2 and all(
-                        isinstance(v, (int, float)) and not isinstance(v, bool) for v in entry) and entry[0] < entry[1]):
+                if not _bounds_pair(entry):
                     raise ScenarioError(t.file, f"optimize.parameters.{name}",
                                         f"expected [lower, upper] with lower < upper, found {entry!r}")
-            value = tuple((name, (float(entry[0]), float(entry[1]))) for name, entry in value.items())
+            value = tuple((name, tuple(_number_or_text(v) for v in entry)) for name, entry in value.items())
         elif key == "subject_to":
             value = [value] if isinstance(value, str) else value
             if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
@@ -135,7 +148,7 @@ def _read_sweep(t: _Table) -> tuple[tuple[str, Any], ...]:
             value = _sweep_values(t, value)
         elif key == "frequency":
             if isinstance(value, list):
-                value = t.numbers(key)
+                value = t.numbers(key, unit="rad/s")
             elif not isinstance(value, str):
                 raise t.fail(key, f"expected an array of numbers or a range string, found {_kind(value)}")
         elif not isinstance(value, str):
@@ -146,12 +159,14 @@ def _read_sweep(t: _Table) -> tuple[tuple[str, Any], ...]:
 
 
 def _sweep_values(t: _Table, value: Any) -> tuple:
-    """One value spec (a range string or an array of numbers), or an array of such specs (one per parameter)."""
+    """One value spec (a range string or an array of numbers and unit strings), or an array of such specs (one per
+    parameter); unit strings stay strings: the sweep converts them with its parameter's unit."""
     def one(v, where):
         if isinstance(v, str):
             return v
-        if isinstance(v, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
-            return tuple(t._check_number(f"{where}[{i}]", x, None, False) for i, x in enumerate(v))
+        if isinstance(v, list) and all(isinstance(x, (int, float, str)) and not isinstance(x, bool) for x in v):
+            return tuple(x if isinstance(x, str) else t._check_number(f"{where}[{i}]", x, None, False, "1")
+                         for i, x in enumerate(v))
         raise t.fail(where, f"expected an array of numbers or a range string, found {_kind(v)}")
 
     if isinstance(value, list) and value and all(isinstance(v, (list, str)) for v in value):
@@ -178,7 +193,7 @@ def _read_expect(t: _Table, index: int, dofs: tuple[str, ...], scenario_file: st
     mode = t.integer("mode", 1, minimum=1) if quantity == "natural_frequency" else 1
     if mode > len(dofs):
         raise t.fail("mode", f"expected a mode from 1 to {len(dofs)}, found {mode}")
-    low, high = t.number("min", None), t.number("max", None)
+    low, high = (t.number(key, None, unit=EXPECT_UNITS[quantity]) for key in ("min", "max"))
     if quantity != "golden" and low is None and high is None:
         raise t.fail(None, "expected min, max or both")
     if low is not None and high is not None and low > high:
@@ -193,7 +208,7 @@ def _read_expect(t: _Table, index: int, dofs: tuple[str, ...], scenario_file: st
         if problem:
             raise t.fail("file", f"expected a result file of `smd simulate` as golden, found {file!r}: {problem}")
     rtol = t.number("rtol", 1e-9, minimum=0.0) if quantity == "golden" else 1e-9
-    atol = t.number("atol", 0.0, minimum=0.0) if quantity == "golden" else 0.0
+    atol = t.number("atol", 0.0, minimum=0.0, unit="1") if quantity == "golden" else 0.0
     t.finish(EXPECT_KEYS)
     return ExpectSpec(index, quantity, dof, mode, low, high, file, rtol, atol)
 

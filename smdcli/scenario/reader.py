@@ -51,6 +51,8 @@ class _Table:
             raise ScenarioError(file, path, f"expected a table, found {_kind(data)}")
         self.file, self.path, self.data = file, path, data
         self.used: set[str] = set()
+        self.unit_strings: set[str] = set()  # keys given as "<number> <unit>" strings (already converted to SI)
+        self.units: dict[str, str] = {}  # SI units of keys whose meaning the table's context sets (a force's amplitude)
         if allowed is not None:  # a misspelt key is named first, before any message about what it left missing
             for key in data:
                 if key not in allowed:
@@ -95,15 +97,33 @@ class _Table:
         self.used.add(key)
         return self.data[key]
 
-    def number(self, key: str, default: Any = ..., *, minimum: float | None = None,
+    def number(self, key: str, default: Any = ..., *, unit: str | None = None, minimum: float | None = None,
                positive: bool = False) -> float:
-        """A finite real number; `minimum` inclusive, `positive` strict."""
+        """A finite real number in SI, or a "<number> <unit>" string converted to `unit` (the field's SI unit; by
+        default the one smdcli.scenario.units.FIELD_UNITS gives its key); `minimum` inclusive, `positive` strict."""
+        unit = self._unit(key, unit)
         if not self._given(key, default, "a number"):
             return default
         value = self.raw(key)
-        return self._check_number(key, value, minimum, positive)
+        return self._check_number(key, value, minimum, positive, unit)
 
-    def _check_number(self, key, value, minimum, positive) -> float:
+    def _unit(self, key: str, unit: str | None) -> str:
+        """The field's SI unit: given, set for this table, or its key's (a missing entry is a reader's bug, raised
+        for every value, numbers included)."""
+        from smdcli.scenario.units import FIELD_UNITS
+
+        base = key.split("[")[0]
+        return unit if unit is not None else self.units[base] if base in self.units else FIELD_UNITS[base]
+
+    def _check_number(self, key, value, minimum, positive, unit: str) -> float:
+        if isinstance(value, str):
+            from smdcli.scenario.units import UnitError, to_si
+
+            try:
+                value = to_si(value, unit)
+            except UnitError as exc:
+                raise self.fail(key, str(exc)) from None
+            self.unit_strings.add(key.split("[")[0])
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise self.fail(key, f"expected a number, found {_kind(value)}")
         try:
@@ -155,9 +175,11 @@ class _Table:
             raise self.fail(key, f"expected one of {', '.join(choices)}, found {value!r}{extra}")
         return value
 
-    def numbers(self, key: str, default: Any = ..., *, length: int | None = None,
+    def numbers(self, key: str, default: Any = ..., *, unit: str | None = None, length: int | None = None,
                 minimum: float | None = None) -> tuple[float, ...]:
-        """An array of finite numbers, optionally of a given length."""
+        """An array of finite numbers (each a number in SI or a unit string, as `number` reads), optionally of a given
+        length."""
+        unit = self._unit(key, unit)
         if not self._given(key, default, "an array of numbers"):
             return default
         value = self.raw(key)
@@ -165,7 +187,7 @@ class _Table:
             raise self.fail(key, f"expected an array of numbers, found {_kind(value)}")
         if length is not None and len(value) != length:
             raise self.fail(key, f"expected {length} numbers, found {len(value)}")
-        return tuple(self._check_number(f"{key}[{i}]", v, minimum, False) for i, v in enumerate(value))
+        return tuple(self._check_number(f"{key}[{i}]", v, minimum, False, unit) for i, v in enumerate(value))
 
     def tables(self, key: str) -> list[Any]:
         """An array of tables (possibly empty)."""

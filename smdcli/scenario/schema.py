@@ -19,7 +19,11 @@ from smdcli.scenario.spec import EXPECT_QUANTITIES, FORCE_TYPES, GROUND_QUANTITI
 from smdcli.scenario.structure import BUILDING_KEYS, DAMPING_KEYS
 from smdcli.shapes.registry import SHAPES
 
-NUMBER = {"type": "number"}
+PLAIN_NUMBER = {"type": "number"}
+# a measured field: a number in SI or "<number> <unit>" (smd converts it with pint and checks its dimension)
+NUMBER = {"anyOf": [PLAIN_NUMBER, {"type": "string", "pattern": r"^\s*[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?(\s*\S.*)?$",
+                                   "description": 'a number with its unit, e.g. "25 N/mm", "3 t", "0.35 g", "2 Hz", '
+                                                  '"5 %"'}]}
 INTEGER = {"type": "integer"}
 STRING = {"type": "string"}
 BOOLEAN = {"type": "boolean"}
@@ -86,7 +90,7 @@ def scenario_schema() -> dict:
         "expect": _array_of(_table(EXPECT_KEYS, ["quantity"], quantity={"enum": list(EXPECT_QUANTITIES)})),
         "fit": _table(FIT_KEYS, data=STRING, parameters={"anyOf": [STRING, STRINGS]}, channels=STRINGS,
                       bounds={"type": "object", "additionalProperties": {**NUMBERS, "minItems": 2, "maxItems": 2}},
-                      weights={"type": "object", "additionalProperties": NUMBER}),
+                      weights={"type": "object", "additionalProperties": PLAIN_NUMBER}),
         "ida": _table(IDA_KEYS, records={"anyOf": [STRING, STRINGS]}, im=STRING, edp=STRING, collapse=STRING,
                       runs={"type": "integer", "minimum": 0}),
         "building": _table(BUILDING_KEYS, ("storey_heights",), storey_heights=NUMBERS, masses=STRINGS),

@@ -161,6 +161,8 @@ class SolverSpec:
 
 EXPECT_QUANTITIES = ("peak_displacement", "rms_displacement", "settling_time", "natural_frequency",
                      "energy_residual", "golden")
+EXPECT_UNITS = {"peak_displacement": "m", "rms_displacement": "m", "settling_time": "s", "natural_frequency": "rad/s",
+                "energy_residual": "1", "golden": "1"}
 
 
 @dataclass(frozen=True)

@@ -72,12 +72,13 @@ def _read_elements(top: _Table, file: str, kind: str, dofs: tuple[str, ...]) -> 
         if law in SPRING_LAWS:  # a hysteretic spring: its law reads and checks its own keys
             cls = SPRING_LAWS[law]
             _refuse_other_keys(t, law, ("connects", "law") + cls.keys)
+            t.units.update(cls.units)
             model = cls.read(t)
             t.finish(("connects", "law") + cls.keys)
             elements.append(ElementSpec(kind=kind, index=i, connects=connects, coef=model.elastic_stiffness, law=law,
                                         nonsmooth=model))
             continue
-        coef = t.number(coef_key, minimum=0.0)
+        coef = t.number(coef_key, minimum=0.0, unit="N s^2/m^2" if law == "quadratic" else None)
         k3 = 0.0
         allowed = ("connects", coef_key, "law")
         if kind == "spring":
@@ -113,6 +114,7 @@ def read_law_elements(top: _Table, file: str, table: str, dofs: tuple[str, ...])
     for i, item in enumerate(top.tables(table)):
         t = _Table(file, f"{table}[{i}]", item, ("connects",) + cls.keys)
         connects = _read_connects(t, dofs, known)
+        t.units.update(cls.units)
         model = cls.read(t)
         if table == "friction" and model.belt_velocity and GROUND not in connects:
             raise t.fail("belt_velocity", f"a belt is the ground moving under a mass; this contact connects "
@@ -151,7 +153,7 @@ def _read_matrix(t: _Table, key: str, n: int) -> tuple[tuple[float, ...], ...]:
     for i, row in enumerate(value):
         if len(row) != n:
             raise t.fail(f"{key}[{i}]", f"expected {n} numbers (a square matrix), found {len(row)}")
-        rows.append(tuple(t._check_number(f"{key}[{i}][{j}]", v, None, False) for j, v in enumerate(row)))
+        rows.append(tuple(t._check_number(f"{key}[{i}][{j}]", v, None, False, t._unit(key, None)) for j, v in enumerate(row)))
     matrix = tuple(rows)
     for i in range(n):
         for j in range(i + 1, n):
@@ -290,8 +292,8 @@ def _read_damping(t: _Table, n: int) -> DampingSpec:
             raise t.fail("zeta", f"Rayleigh coefficients alpha = {alpha:.3g} 1/s and beta = {beta:.3g} s overflow "
                                  f"double precision for zeta = {zeta:g} at omega = [{w1:g}, {w2:g}] rad/s")
         return DampingSpec(alpha=alpha, beta=beta, given="zeta")
-    alpha = t.number("alpha", 0.0)
-    beta = t.number("beta", 0.0)
+    alpha = t.number("alpha", 0.0, unit="1/s")  # C = alpha M + beta K
+    beta = t.number("beta", 0.0, unit="s")
     t.finish(DAMPING_KEYS)
     return DampingSpec(alpha=alpha, beta=beta, given="alpha" if t.has("alpha") else "beta")
 

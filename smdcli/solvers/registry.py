@@ -196,11 +196,12 @@ def get_solver(name: str, **kwargs) -> Any:
 
 def solver_options_schema() -> dict:
     """The JSON Schema of the [solver] table: the method names and each option's range or choices."""
-    properties: dict[str, Any] = {"method": {"enum": list(NAMES)}, "rtol": {"type": "number"},
-                                  "atol": {"type": "number"}, "dt": {"type": "number"}}
+    from smdcli.scenario.schema import NUMBER  # a number in SI or a unit string
+
+    properties: dict[str, Any] = {"method": {"enum": list(NAMES)}, "rtol": NUMBER, "atol": NUMBER, "dt": NUMBER}
     for key in OPTION_KEYS:
         option = next(o for m in METHODS for o in m.options if o.key == key)
         properties[key] = {"enum": list(option.choices)} if option.choices else \
-            {"type": "number", "minimum": option.low, "maximum": option.high}
+            {"anyOf": [{"type": "number", "minimum": option.low, "maximum": option.high}, NUMBER["anyOf"][1]]}
     return {"type": "object", "additionalProperties": False, "required": [], "properties": properties}
 

@@ -20,7 +20,7 @@ from smdcli import scenario as scenario_mod
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import Model, build, time_grid
 from smdcli.scenario import GROUND, Scenario
-from smdcli.sweep.spec import SweepSpec, parameter_units, parse_ic
+from smdcli.sweep.spec import SweepSpec, parameter_number, parameter_units, parse_ic
 
 # ------------------------------------------------------------ parameters
 
@@ -52,15 +52,25 @@ def set_parameter(doc: dict, path: str, value: float) -> None:
         doc["system"][steps[1]][steps[3]][steps[2]] = float(value)  # keep M, C, K symmetric
 
 
-def parameter_value(doc: dict, path: str) -> float:
+def parameter_value(doc: dict, path: str, scenario: Scenario | None = None) -> float:
     """The number a decoded scenario document holds at a parameter path (an absent optional field's default: 1 for a
-    scale, else 0; a force's omega, frequency or period from whichever of the three it gives)."""
+    scale, else 0; a force's omega, frequency or period from whichever of the three it gives; a unit string
+    converted with the scenario's units, as `parameter_number` does)."""
     node, last, current = _located(doc, path)
+    if isinstance(current, str):
+        from smdcli.scenario.units import UnitError
+
+        try:
+            return parameter_number(current, path, scenario)
+        except UnitError as exc:
+            raise UsageError(f"--param {path}: {exc}") from None
     if last == "scale" and last not in node:
         return 1.0
     if isinstance(last, str) and last in _OMEGA_KEYS and last not in node:
         for given in _OMEGA_KEYS:
             value = node.get(given)
+            if isinstance(value, str):
+                value = parameter_number(value, f"{path.rpartition('.')[0]}.{given}", scenario)
             if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0:
                 omega = value if given == "omega" else 2 * math.pi * value if given == "frequency" else \
                     2 * math.pi / value
@@ -91,7 +101,8 @@ def _located(doc: dict, path: str) -> tuple[Any, str | int, float]:
         if not isinstance(node, dict):
             raise UsageError(f"--param {path}: {walked or 'the file'} is not a table")
         current = node.get(last, 0.0)  # an absent optional field (x0, t0, ...); validation refuses unknown ones
-    if isinstance(current, bool) or not isinstance(current, (int, float)):
+    if isinstance(current, bool) or not isinstance(current, (int, float, str)) or \
+            isinstance(current, str) and not current.strip()[:1] in tuple("0123456789+-."):
         raise UsageError(f"--param {path}: is not a number in the scenario (found {type(current).__name__})")
     return node, last, current
 

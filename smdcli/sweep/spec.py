@@ -8,12 +8,14 @@ import difflib
 import math
 import re
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.scenario import Scenario
+from smdcli.scenario.spec import GROUND_UNITS
+from smdcli.scenario.units import FIELD_UNITS, UnitError, to_si
 from smdcli.solvers.registry import method_problem
 
 MAX_MEMBERS = 100_000  # values of one parameter
@@ -23,10 +25,8 @@ MAX_STACKED = 40_000_000  # samples per stacked data set (members x time points 
 METRICS = ("peak_displacement", "rms_displacement", "settling_time", "peak_ground_force", "peak_drift_ratio",
            "residual_drift")
 STOREY_METRICS = ("peak_drift_ratio", "residual_drift")  # of a scene with [building]: each chain mass's storey below it
-_FIELD_UNITS = {"k": "N/m", "k3": "N/m^3", "c": "N s/m", "m": "kg", "x0": "m", "v0": "m/s", "omega": "rad/s",
-                "frequency": "Hz", "amplitude": "N", "t0": "s", "duration": "s", "period": "s", "t1": "s", "f0": "Hz",
-                "f1": "Hz", "phase": "rad", "duty": "1", "end": "s", "start": "s", "step": "s", "zeta": "1",
-                "M": "kg", "C": "N s/m", "K": "N/m"}
+# a path's last field as the scenario reads it; a force's amplitude in N, Rayleigh's alpha and beta (damping.alpha)
+_FIELD_UNITS = {**FIELD_UNITS, "amplitude": "N", "values": "N", "alpha": "1/s", "beta": "s"}
 
 
 def parameter_units(path: str, scenario: Scenario | None = None) -> str:
@@ -50,7 +50,38 @@ def parameter_units(path: str, scenario: Scenario | None = None) -> str:
         units = {k: unit for law in laws for k, unit in law.units.items()}
         if key in units and key not in _FIELD_UNITS:
             return units[key]
+    ground = getattr(scenario, "ground_motion", None)
+    if path.startswith("ground_motion.") and field in ("amplitude", "values", "shift") and ground is not None:
+        return ground.units  # the table's own (units = "g"): the numbers the field holds are in it
     return _FIELD_UNITS.get(field, "")
+
+
+def parameter_number(value: float | str, path: str, scenario: Scenario | None = None) -> float:
+    """A parameter's value as its field holds it: a number as given; a unit string converted to the field's unit
+    (SI, or a ground motion's `units`: "0.3 g" is 0.3 where the table says units = "g"). UnitError for a unit of
+    another dimension."""
+    if not isinstance(value, str):
+        return float(value)
+    ground = getattr(scenario, "ground_motion", None)
+    unit = parameter_units(path, scenario) or "1"
+    if ground is not None and unit == ground.units:
+        sizes = GROUND_UNITS[ground.quantity]
+        return to_si(value, next(u for u, f in sizes.items() if f == 1.0)) / sizes[unit]
+    return to_si(value, unit)
+
+
+def table_bounds(sc: Scenario, where: str, path: str, pair: tuple) -> tuple[float, float]:
+    """[lower, upper] of a parameter as a scenario table gives them (numbers in SI or unit strings in the parameter's
+    unit), in SI; a ScenarioError at `where` for a unit of another dimension or lower >= upper."""
+    unit = parameter_units(path, sc) or "1"
+    try:
+        low, high = (parameter_number(v, path, sc) for v in pair)
+    except UnitError as exc:
+        raise ScenarioError(sc.path, where, str(exc)) from None
+    if not low < high:
+        raise ScenarioError(sc.path, where, f"expected [lower, upper] with lower < upper, found [{low:g}, {high:g}] "
+                                            f"{unit}")
+    return low, high
 
 
 def parameter_label(path: str, scenario: Scenario | None = None) -> str:
@@ -70,12 +101,28 @@ SETTLING_BAND = 0.02  # settling time: the last time the response leaves 2 % of 
 # ------------------------------------------------------------------ specs
 
 
-def parse_values(spec: Any) -> np.ndarray:
-    """Numbers from an array, "a, b, c", "start:stop:step" (stop included), "linspace(a, b, n)" or "logspace(a, b, n)"."""
+_UNIT_AFTER = re.compile(r"(.*?[\d.)])(?:\s+([^\W\d][^,:()]*|%)|\s*(%))")  # "linspace(20, 30, 5) N/mm", "1:5 %"
+
+
+def parse_values(spec: Any, convert: Callable[[str], float] | None = None) -> np.ndarray:
+    """Numbers from an array, "a, b, c", "start:stop:step" (stop included), "linspace(a, b, n)" or "logspace(a, b, n)".
+    With `convert` (a unit string to the number the field holds), the array may hold unit strings ("20 N/mm") and a
+    string may end in a unit that applies to every value ("linspace(20, 30, 5) N/mm")."""
     if isinstance(spec, (list, tuple)):
-        values = np.array(spec, dtype=float)
+        try:
+            values = np.array([convert(v) if isinstance(v, str) and convert is not None else v for v in spec],
+                              dtype=float)
+        except UnitError as exc:
+            raise ValueError(str(exc)) from None
     else:
         text = str(spec).strip()
+        written = _UNIT_AFTER.fullmatch(text) if convert is not None else None
+        if written and (written.group(2) or written.group(3)):
+            try:
+                factor = convert(f"1 {written.group(2) or written.group(3)}")
+            except UnitError as exc:
+                raise ValueError(str(exc)) from None
+            return parse_values(written.group(1), None) * factor
         call = re.fullmatch(r"(linspace|logspace)\s*\((.*)\)", text)
         try:
             if call:
@@ -201,6 +248,9 @@ def read_spec(sc: Scenario, cli: dict[str, Any]) -> SweepSpec:
 
     parameters = tuple(pick("parameter", ()))
     raw_values = tuple(pick("values", ()))
+    if cli.get("values") in (None, (), []) and len(parameters) == 1 and len(raw_values) > 1 \
+            and all(isinstance(v, str) for v in raw_values):
+        raw_values = (raw_values,)  # values = ["20 N/mm", "25 N/mm"]: one parameter's values, each with its unit
     if len(parameters) != len(raw_values):
         raise fail("values", f"expected one value spec per parameter ({len(parameters)}), found {len(raw_values)}")
     if len(parameters) > 2:
@@ -208,7 +258,8 @@ def read_spec(sc: Scenario, cli: dict[str, Any]) -> SweepSpec:
     values = []
     for raw in raw_values:
         try:
-            values.append(parse_values(raw))
+            path = parameters[len(values)]
+            values.append(parse_values(raw, lambda text: parameter_number(text, path, sc)))
         except ValueError as exc:
             raise fail("values", str(exc)) from None
     members = math.prod(len(v) for v in values)
