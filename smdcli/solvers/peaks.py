@@ -213,3 +213,28 @@ def result_peaks(result, absolute: bool = False) -> np.ndarray:
                                                t_event)[:, None]
             peaks = np.fmax(peaks, np.abs(x_event).max(axis=0))
     return peaks
+
+
+def drifts(q: np.ndarray, chain: list[int]) -> np.ndarray:
+    """(N, S) storey drifts of (N, n) histories: each chain mass less the one below (the ground's zero)."""
+    upper = q[:, chain]
+    lower = np.concatenate([np.zeros((len(q), 1)), upper[:, :-1]], axis=1)
+    return upper - lower
+
+
+def located_drifts(result, model, chain: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(peak |drift| (S,), when, the events and jumps the interpolant stops at) of a solved run: located between
+    samples on the quintic, and at the events' own states (a yielding storey's peak is at its unloading)."""
+    d, v, a = (drifts(q, chain) for q in (result.displacement, result.velocity, result.acceleration))
+    events = [t for t, _, _ in result.nonsmooth.events] if result.nonsmooth is not None else []
+    events = np.concatenate([np.asarray(events, dtype=float), jump_times(model, result.time)])
+    peak, at = located_peaks(result.time, d, v, a, events, with_times=True)
+    if result.nonsmooth is not None:
+        t_event, x_event, _, _ = result.nonsmooth.event_state()
+        if len(t_event):
+            at_events = np.abs(drifts(x_event, chain))
+            best = np.argmax(at_events, axis=0)
+            largest = at_events[best, np.arange(len(chain))]
+            at = np.where(largest > peak, t_event[best], at)
+            peak = np.fmax(peak, largest)
+    return peak, at, events

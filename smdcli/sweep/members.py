@@ -14,7 +14,7 @@ import numpy as np
 from smdcli.errors import UsageError
 from smdcli.model import build, mass_solve, time_grid
 from smdcli.scenario import Scenario
-from smdcli.solvers.peaks import jump_times, result_peaks, row_peaks
+from smdcli.solvers.peaks import jump_times, located_drifts, result_peaks, row_peaks
 from smdcli.solvers.registry import EXACT_NAMES
 from smdcli.sweep.batched import batched_exact, shared_signal_recurrence
 from smdcli.sweep.family import Family
@@ -41,6 +41,7 @@ class FamilyResult:
     wall_time_s: float
     stated_accuracy: np.ndarray | None = None  # (S,) each member's vouched error relative to its peaks
     located_peak: np.ndarray | None = None  # (S, n) each member's peak |x| located by its own run (events too)
+    located_drift: np.ndarray | None = None  # (S, n) and its storey's peak drift at each chain mass (NaN elsewhere)
 
     @property
     def acceleration(self) -> np.ndarray:
@@ -55,11 +56,16 @@ def _histories(result) -> tuple:
     return result.time, (result.displacement, result.velocity, result.acceleration, result.force)
 
 
-def _status(result) -> tuple:
-    """A member's success, message (with the failure time), method, stated accuracy and peak |x| per DOF located
-    between samples and at its events (solvers.peaks.result_peaks: a stop's contact point, a yield's corner)."""
+def _status(result, sc: Scenario, model) -> tuple:
+    """A member's success, message (with the failure time), method, stated accuracy, peak |x| per DOF located
+    between samples and at its events (solvers.peaks.result_peaks: a stop's contact point, a yield's corner), and
+    of a scene with [building] each chain mass's storey drift peak located as well (NaN elsewhere)."""
     message = "ok" if result.success else f"{result.stats.message} (t = {result.t_failed:g} s)"
-    return result.success, message, result.stats.method, result.stats.stated_accuracy, result_peaks(result)
+    drift = np.full(len(result.dofs), np.nan)
+    if sc.building is not None and result.success and len(result.time) > 1:
+        chain = [result.dofs.index(name) for name in sc.building.masses]
+        drift[chain] = located_drifts(result, model, chain)[0]
+    return result.success, message, result.stats.method, result.stats.stated_accuracy, result_peaks(result), drift
 
 
 def _solve_member(args: tuple[Scenario, str | None]) -> tuple:
@@ -67,8 +73,9 @@ def _solve_member(args: tuple[Scenario, str | None]) -> tuple:
     from smdcli.solvers.run import solve_scenario
 
     sc, method = args
-    result = solve_scenario(sc, build(sc), time_grid(sc.time), method)
-    return _histories(result), _status(result)
+    model = build(sc)
+    result = solve_scenario(sc, model, time_grid(sc.time), method)
+    return _histories(result), _status(result, sc, model)
 
 
 def _solve_model(args: tuple[Family, int, np.ndarray, str | None, dict[str, np.ndarray]]) -> tuple:
@@ -77,10 +84,11 @@ def _solve_model(args: tuple[Family, int, np.ndarray, str | None, dict[str, np.n
     from smdcli.solvers.run import solve_scenario
 
     family, s, grid, method, stacks = args
-    result = solve_scenario(family.scenario, family.model(s), grid, method)
+    model = family.model(s)
+    result = solve_scenario(family.scenario, model, grid, method)
     for name, data in zip(QUANTITIES, _histories(result)[1]):
         stacks[name][s] = data
-    return _status(result)
+    return _status(result, family.scenario, model)
 
 
 def solve_family(family: Family, method: str | None = None, workers: int | None = None,
@@ -147,13 +155,14 @@ def solve_family(family: Family, method: str | None = None, workers: int | None 
             for name, data in zip(QUANTITIES, histories):
                 stacks[name][s, :len(t)] = data
         statuses = [status for _, status in outcomes]
-    success, messages, methods, stated, peaks = zip(*statuses)
+    success, messages, methods, stated, peaks, drift = zip(*statuses)
     pool = "threads" if threaded else "process pool"
     how = f"{pool} of {min(workers, S)} workers" if workers > 1 and S > 1 else "one process"
     return FamilyResult(grid if same_grid else times, family.base.dofs, stacks["displacement"],
                         stacks["velocity"], stacks["acceleration"], stacks["force"],
                         np.array(success), list(messages), list(methods), how, time.perf_counter() - start,
-                        np.array(stated), located_peak=np.array(peaks, dtype=float).reshape(S, n))
+                        np.array(stated), located_peak=np.array(peaks, dtype=float).reshape(S, n),
+                        located_drift=np.array(drift, dtype=float).reshape(S, n))
 
 
 def _batched_stated(family: Family, grid: np.ndarray) -> np.ndarray:
@@ -255,6 +264,8 @@ def _storey_metrics(family: Family, result: FamilyResult, building, events) -> d
             peak = _peak(drift[0])
         if events is not None:
             peak = np.fmax(peak, row_peaks(result.time, *drift, events=events))
+        if result.located_drift is not None:  # members solved one by one located their own, at their events too
+            peak = np.fmax(peak, result.located_drift[:, j])
         out["peak_drift_ratio"][:, j] = peak / height
         out["residual_drift"][:, j] = drift[0][np.arange(S), count - 1]
     return out
