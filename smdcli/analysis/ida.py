@@ -155,6 +155,35 @@ def record_intensity(times: np.ndarray, acceleration: np.ndarray, im: Intensity,
     return peak
 
 
+def solved(sc, edp: Demand):
+    """One run of a record at a scale: a yielding frame's on the compiled exact kernel (solvers.events.yielding: the
+    same events and states as the general exact solver, 20-40 times faster, no energy balance), which serves every
+    EDP but the absolute acceleration (that one needs the ground's history); any other scene as `smd simulate`
+    solves it. SolverFailed where the run fails (a diverging, collapsing frame)."""
+    import smdcli
+
+    if edp.kind != "peak_acceleration" and sc.solver.method in ("auto", "exact"):
+        from smdcli.model import build, time_grid
+        from smdcli.solvers.events.yielding import solve_yielding
+        from smdcli.solvers.run import failure_message
+
+        model = build(sc)
+        result = solve_yielding(model, time_grid(sc.time))
+        if result is not None:
+            if not result.success:
+                raise SolverFailed(failure_message(sc, model, result), result=result)
+            from smdcli.analysis.forces import element_forces
+
+            result = result.changed(origin=(sc, model), elements=element_forces(
+                model, result.displacement, result.velocity, result.nonsmooth))
+            if sc.building is not None:
+                from smdcli.analysis.storeys import storeys
+
+                result = result.changed(storeys=storeys(result, sc.building))
+            return result
+    return smdcli.simulate(sc)
+
+
 def demand(result, edp: Demand) -> float:
     """The EDP of a solved run: peaks located on the solution between samples (an absolute acceleration at the
     samples)."""

@@ -6,8 +6,8 @@ drift at the run's end.
 
 A drift's peak is located on the quintic Hermite of the drift, its velocity and acceleration (as a displacement's
 peak is), and at the events' own states: a yielding storey's peak drift is where it unloads, an event the samples
-cut the corner of (a 20 ms grid read a bilinear frame's third storey 0.9 % short); a shear's where the storey's elements are linear springs and dampers, on k d(t) + c d'(t) of that same
-quintic; a storey holding a nonlinear element, or a step holding an event, keeps its samples' shear.
+cut the corner of (a grid of 0.02 s read a bilinear frame's third storey 0.9 % short); a shear's where the
+storey's elements are linear springs and dampers, on k d(t) + c d'(t) of that same quintic; a storey holding a nonlinear element, or a step holding an event, keeps its samples' shear.
 
 Must not import: io, plots, commands, cli.
 """

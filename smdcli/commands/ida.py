@@ -68,7 +68,8 @@ def member_document(doc: dict, record: Path, scale: float, end: float) -> dict:
 
 def run_record(task: dict) -> dict:
     """One record's trace, as plain data (a task a process pool or a Dask worker runs)."""
-    from smdcli.analysis.ida import Collapse, Demand, Intensity, demand, over_limit, record_intensity, trace
+    from smdcli.analysis.ida import (Collapse, Demand, Intensity, demand, over_limit, record_intensity, solved,
+                                     trace)
 
     record = Path(task["record"])
     im, edp, rule = Intensity(**task["im"]), Demand(**task["edp"]), Collapse(**task["collapse"])
@@ -83,9 +84,7 @@ def run_record(task: dict) -> dict:
     end = float(times[-1]) + task["tail"]
 
     def run(scale: float):
-        import smdcli
-
-        result = smdcli.simulate(scene(scale, end))
+        result = solved(scene(scale, end), edp)
         return demand(result, edp), over_limit(result, rule)
     return asdict(trace(str(record), own, run, rule, task["tolerance"], task["runs"]))
 

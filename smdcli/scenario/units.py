@@ -27,7 +27,8 @@ _MEASURES = {"N/m": "a stiffness (force/length)", "N s/m": "a damping coefficien
              "N s^2/m^2": "a quadratic damping coefficient (force/velocity^2)",
              "N/m^3": "a cubic stiffness (force/length^3)", "kg": "a mass", "m": "a length", "m/s": "a velocity",
              "m/s^2": "an acceleration", "N": "a force", "s": "a time", "Hz": "a frequency",
-             "rad/s": "an angular frequency", "rad": "an angle", "1": "a ratio (dimensionless)", "1/s": "a rate (1/time)",
+             "rad/s": "an angular frequency", "rad": "an angle", "1": "a ratio (dimensionless)",
+             "1/s": "a rate (1/time)",
              "J": "an energy", "Pa": "a pressure (force/area)", "m^2": "an area", "m^3": "a volume", "W": "a power",
              "kg m^2": "a moment of inertia", "N m": "a moment (force x length)", "K": "a temperature"}
 

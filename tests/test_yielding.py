@@ -1,0 +1,139 @@
+"""The compiled exact kernel of a yielding frame's runs (smdcli.kernels.yielding, what `smd ida` runs records with)
+against the general exact event-driven solver (solvers/events/piecewise.py: Van Loan exponentials, Brent's method on
+the flow): the same events in the same order at the same times, and the same states, tensions and plastic
+deformations on the grid, to rounding. And the campaigns `smd ida` runs with it equal the ones it runs without."""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+import tomli_w
+
+import smdcli
+from smdcli.model import build, time_grid
+from smdcli.solvers.events.yielding import applies, solve_yielding
+from tests.conftest import ROOT
+
+FRAME = ROOT / "scenarios" / "ida_frame.toml"
+SUITE = ROOT / "records" / "suite"
+
+
+def frame_under(record: Path, scale: float):
+    """scenarios/ida_frame.toml under one bundled record at a scale, 5 s of free vibration after it."""
+    from smdcli.commands.ida import member_document
+    from smdcli.scenario.load import parse_document
+
+    doc = tomllib.loads(FRAME.read_text())
+    member = member_document(doc, record, scale, 25.0)
+    return parse_document(member, tomli_w.dumps(member), str(FRAME))
+
+
+def assert_same_run(sc, events_at_least: int = 0) -> None:
+    """The kernel's run against smd simulate's exact run of the same scene."""
+    model, grid = build(sc), time_grid(sc.time)
+    fast = solve_yielding(model, grid)
+    general = smdcli.simulate(sc, method="exact")
+    assert fast is not None and fast.success
+    ours, theirs = fast.nonsmooth, general.nonsmooth
+    assert [(p, k) for _, p, k in ours.events] == [(p, k) for _, p, k in theirs.events]
+    assert len(ours.events) >= events_at_least
+    span = float(grid[-1] - grid[0])
+    times = np.array([t for t, _, _ in ours.events]) - np.array([t for t, _, _ in theirs.events])
+    assert np.abs(times).max(initial=0.0) <= 1e-11 * span  # measured 5e-14 s over 25 s
+    for name in ("displacement", "velocity", "acceleration"):
+        a, b = getattr(fast, name), getattr(general, name)
+        assert np.abs(a - b).max() <= 1e-11 * np.abs(b).max(), name  # measured 1e-13
+    size = np.abs(theirs.tension).max()
+    assert np.abs(ours.tension - theirs.tension).max() <= 1e-11 * size
+    for key, values in theirs.internal.items():
+        assert np.abs(ours.internal[key] - values).max() <= 1e-11 * max(np.abs(values).max(), 1e-3)
+    if len(theirs.events):
+        size = np.abs(general.displacement).max()
+        np.testing.assert_allclose(ours.event_x, theirs.event_x, rtol=0, atol=1e-11 * size)
+
+
+@pytest.mark.parametrize("record", ["record_03.AT2", "record_06.V2", "record_09.csv"])
+@pytest.mark.parametrize("scale", [0.5, 2.0, 4.0])
+def test_the_frame_under_the_bundled_records_is_the_general_solvers_run(record, scale):
+    """Elastic (few events) to deep yielding (200 events) under an AT2, a COSMOS and a CSV record."""
+    assert_same_run(frame_under(SUITE / record, scale))
+
+
+ONE_DOF = """
+[time]
+end = 6.0
+step = 0.01
+[[mass]]
+name = "m"
+m = 1000.0
+x0 = {x0}
+[[spring]]
+connects = ["ground", "m"]
+law = "{law}"
+k = 1.0e5
+fy = 3000.0
+{hardening}
+[[damper]]
+connects = ["ground", "m"]
+c = 2000.0
+[[force]]
+on = "m"
+type = "table"
+t = [0.0, 0.5, 1.0, 1.7, 2.5, 3.0]
+values = [0.0, 8000.0, -9000.0, 6000.0, -2000.0, 0.0]
+[[force]]
+on = "m"
+type = "step"
+amplitude = 500.0
+t0 = 3.3
+"""
+
+
+@pytest.mark.parametrize("law, hardening, x0", [("elastoplastic", "", 0.0), ("elastoplastic", "", 0.05),
+                                                ("bilinear", "hardening = 0.1", 0.0),
+                                                ("bilinear", "hardening = -0.05", 0.0)])
+def test_a_one_dof_of_each_law_under_a_table_and_a_step(law, hardening, x0):
+    """Elastoplastic (a plastic mode with no stiffness: an eigenvalue 0), bilinear hardening and softening, a start
+    past yield (on the yield surface at once), a force linear between samples and a step."""
+    sc = smdcli.scenario.parse(ONE_DOF.format(law=law, hardening=hardening, x0=x0))
+    assert applies(build(sc))
+    assert_same_run(sc, events_at_least=4)
+
+
+def test_it_leaves_to_the_general_solver_what_it_does_not_solve():
+    """Friction, a sine force, an undamped elastoplastic mass (a defective plastic mode) are not its scenes."""
+    base = ONE_DOF.format(law="elastoplastic", hardening="", x0=0.0)
+    friction = base + '[[friction]]\nconnects = ["ground", "m"]\nforce = 100.0\n'
+    sine = base + '[[force]]\non = "m"\ntype = "sine"\namplitude = 1.0\nomega = 3.0\n'
+    for text in (friction, sine):
+        assert not applies(build(smdcli.scenario.parse(text)))
+    undamped = smdcli.scenario.parse(base.replace("c = 2000.0", "c = 0.0"))
+    model = build(undamped)
+    assert applies(model) and solve_yielding(model, time_grid(undamped.time)) is None
+
+
+def test_a_campaign_is_the_one_the_general_solver_gives(cli, tmp_path, monkeypatch):
+    """smd ida of the bundled frame under two records: every run's IM, EDP and collapse, and each record's collapse
+    intensity, as with the kernel switched off (every run on smd simulate's exact solver) to 1e-9."""
+    import h5py
+
+    import smdcli.solvers.events.yielding as yielding
+
+    def campaign(out):
+        ran = cli("ida", FRAME, "--records", SUITE / "record_03.AT2", "--records", SUITE / "record_09.csv",
+                  "--runs", "2", "--no-plots", "--workers", "1", "-q", "-o", out)
+        assert ran.exit_code == 0, ran.output
+        with h5py.File(out / "ida_frame_ida.h5") as f:
+            return {name: f[name][()] for name in ("runs/im", "runs/edp", "runs/collapse", "collapse_im")}
+
+    fast = campaign(tmp_path / "fast")
+    monkeypatch.setattr(yielding, "solve_yielding", lambda model, grid: None)
+    general = campaign(tmp_path / "general")
+    for name, values in general.items():
+        if values.dtype == bool:
+            assert np.array_equal(fast[name], values), name
+        else:
+            np.testing.assert_allclose(fast[name], values, rtol=1e-9, atol=0, err_msg=name)
