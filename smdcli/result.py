@@ -234,6 +234,9 @@ class Result:
     # after a run need not pass over them again
     found_extremes: tuple = field(default=(), repr=False, compare=False)
     storeys: Any = None  # analysis.storeys.Storeys of a successful run of a scene with [building]
+    # (n,) each DOF's largest |absolute acceleration| located on the solution, where the solver located it (the
+    # compiled kernel of a yielding frame's runs), else None: read at the samples
+    located_acceleration: np.ndarray | None = None
 
     def changed(self, **changes) -> Result:
         """This result with some fields changed, as dataclasses.replace, without computing a field not yet read

@@ -9,8 +9,8 @@ w = V^-1 z moves as
 
     w(s) = e^(lam s) w(0) + s phi1(lam s) beta0 + s^2 phi2(lam s) beta1,
 
-beta0 + beta1 s = V^-1 [0; M^-1 (g + f)], phi1(x) = (e^x - 1) / x, phi2(x) = (e^x - 1 - x) / x^2: exact, and w
-is carried from step to step (z = Re V w where it is read). A core's guards are rows of z: yield where its
+beta0 + beta1 s = V^-1 [0; M^-1 (g + f)], phi1(x) = (e^x - 1) / x, phi2(x) = (e^x - 1 - x) / x^2: exact
+(modal_flow.py), and w is carried from step to step (z = Re V w where it is read). A core's guards are rows of z: yield where its
 elastic force reaches +-fy (d - dp = +-fy / kc), unload where a yielding core's deformation rate turns. They are
 looked at on steps of at most an eighth of the fastest mode's period (pi/4 over the largest |lam|), a crossing
 bracketed by a change of sign and a touch by the change of sign of the guard's slope, and located by bisection
@@ -27,65 +27,13 @@ import math
 import numpy as np
 
 from smdcli.kernels.compiler import inlined, kernel
+from smdcli.kernels.modal_flow import acceleration_peaks, advance, dot_real, phis, rate_dot, real_into
 
 OK, TOO_MANY_EVENTS, ILL_CONDITIONED, NOT_FINITE, CHATTER = 0, 1, 2, 3, 4
 YIELD, UNLOAD = 0, 1
 MAX_AT_ONE_TIME = 200
 CONDITION_LIMIT = 1e8  # eigenvectors worse than this (a nearly defective mode): the general solver's matrix exponential
 EPS = 2.220446049250313e-16
-
-
-@inlined
-def _phis(x):
-    """(e^x, phi1(x), phi2(x)) of a complex x: the series near 0, where the closed forms cancel."""
-    if abs(x) < 0.5:
-        p1 = 0.0j
-        p2 = 0.0j
-        term = 1.0 + 0.0j  # x^k / (k + 1)!
-        for k in range(20):
-            p1 += term
-            p2 += term / (k + 2)
-            term = term * x / (k + 2)
-        return 1.0 + x * p1, p1, p2
-    e = np.exp(x)
-    return e, (e - 1.0) / x, (e - 1.0 - x) / (x * x)
-
-
-@inlined
-def _advance(lam, w0, beta0, beta1, s, out):
-    """w(s) into out."""
-    for i in range(len(lam)):
-        e, p1, p2 = _phis(lam[i] * s)
-        out[i] = e * w0[i] + s * p1 * beta0[i] + s * s * p2 * beta1[i]
-
-
-@inlined
-def _dot(c, w):
-    """Re(c . w)."""
-    total = 0.0
-    for i in range(len(c)):
-        total += c[i].real * w[i].real - c[i].imag * w[i].imag
-    return total
-
-
-@inlined
-def _rate_dot(c, lam, w, beta0, beta1, s):
-    """Re(c . w'(s)), w' = lam w + beta0 + beta1 s."""
-    total = 0.0
-    for i in range(len(c)):
-        q = lam[i] * w[i] + beta0[i] + beta1[i] * s
-        total += c[i].real * q.real - c[i].imag * q.imag
-    return total
-
-
-@inlined
-def _real(V, w, out):
-    """Re(V w) into out."""
-    for i in range(len(out)):
-        total = 0.0
-        for j in range(len(w)):
-            total += V[i, j].real * w[j].real - V[i, j].imag * w[j].imag
-        out[i] = total
 
 
 @kernel
@@ -121,8 +69,8 @@ def _guard(e, side, mode, dp, kc, fyc, cD, cR, lam, w, beta0, beta1, s):
     """(G, G') of one of element e's guards at w = w(s), signed so that its event is G rising through 0: an elastic
     core's yield on `side` (G = side (d - dp) - fy / kc), a yielding core's unloading (G = -side d')."""
     if mode[e] == 0:
-        return side * (_dot(cD[e], w) - dp[e]) - fyc[e] / kc[e], side * _dot(cR[e], w)
-    return -side * _dot(cR[e], w), -side * _rate_dot(cR[e], lam, w, beta0, beta1, s)
+        return side * (dot_real(cD[e], w) - dp[e]) - fyc[e] / kc[e], side * dot_real(cR[e], w)
+    return -side * dot_real(cR[e], w), -side * rate_dot(cR[e], lam, w, beta0, beta1, s)
 
 
 @inlined
@@ -142,7 +90,7 @@ def _may_reach(e, side, mode, dp, kc, fyc, cD, cR, lam, w, beta0, beta1, h, G0, 
     """Whether a hump of the guard in the step could reach its level: its top lies in the half where the slope
     turns (the slope at the middle says which), and rises above that half's start by at most its slope there
     times the half (twice that is the bound: room for the slope's own curvature over an eighth of a period)."""
-    _advance(lam, w, beta0, beta1, 0.5 * h, probe)
+    advance(lam, w, beta0, beta1, 0.5 * h, probe)
     Gm, Sm = _guard(e, side, mode, dp, kc, fyc, cD, cR, lam, probe, beta0, beta1, 0.5 * h)
     if Gm >= level:
         return True
@@ -170,12 +118,12 @@ def _crossing(e, side, mode, dp, kc, fyc, cD, cR, lam, w, w1, beta0, beta1, h, p
             mid = 0.5 * (lo + top)
             if mid <= lo or mid >= top:
                 break
-            _advance(lam, w, beta0, beta1, mid, probe)
+            advance(lam, w, beta0, beta1, mid, probe)
             if _guard(e, side, mode, dp, kc, fyc, cD, cR, lam, probe, beta0, beta1, mid)[1] > 0.0:
                 lo = mid
             else:
                 top = mid
-        _advance(lam, w, beta0, beta1, top, probe)
+        advance(lam, w, beta0, beta1, top, probe)
         if _guard(e, side, mode, dp, kc, fyc, cD, cR, lam, probe, beta0, beta1, top)[0] >= level:
             hi = top
     if hi < 0.0:
@@ -185,7 +133,7 @@ def _crossing(e, side, mode, dp, kc, fyc, cD, cR, lam, w, w1, beta0, beta1, h, p
         mid = 0.5 * (lo + hi)
         if mid <= lo or mid >= hi:
             break
-        _advance(lam, w, beta0, beta1, mid, probe)
+        advance(lam, w, beta0, beta1, mid, probe)
         if _guard(e, side, mode, dp, kc, fyc, cD, cR, lam, probe, beta0, beta1, mid)[0] >= level:
             hi = mid
         else:
@@ -195,11 +143,12 @@ def _crossing(e, side, mode, dp, kc, fyc, cD, cR, lam, w, w1, beta0, beta1, h, p
 
 @kernel
 def run(Minv, K, C, R, kc, fyc, klin, bt, F0, F1, x0, v0, mode0, dp0, grid, max_events,
-        X, Vout, Aout, T, DP, ev_t, ev_e, ev_kind, ev_x, ev_v, ev_T):
+        X, Vout, Aout, T, DP, ev_t, ev_e, ev_kind, ev_x, ev_v, ev_T, G0, G1, peak, peak_t):
     """Advance from (x0, v0) with the cores in mode0 (0 elastic, +1, -1 yielding) and plastic deformations dp0 over
-    the grid; the force f(t) = F0[i] + F1[i] (t - bt[i]) on [bt[i], bt[i + 1]) (bt ends with inf). Fills the outputs
-    (x, v, a relative; the elements' whole tensions and plastic deformations) and the events; returns (status,
-    events, the time reached)."""
+    the grid; the force f(t) = F0[i] + F1[i] (t - bt[i]) on [bt[i], bt[i + 1]) (bt ends with inf), the ground's
+    acceleration on each DOF G0[i] + G1[i] (t - bt[i]). Fills the outputs (x, v, a relative; the elements' whole
+    tensions and plastic deformations), the events, and where peak has n entries each DOF's largest |absolute
+    acceleration| located on the solution and when; returns (status, events, the time reached)."""
     n = len(x0)
     E = len(kc)
     N = len(grid)
@@ -296,7 +245,7 @@ def run(Minv, K, C, R, kc, fyc, klin, bt, F0, F1, x0, v0, mode0, dp0, grid, max_
         # step's length is not known anyway): the coefficients of that length are reused
         if abs(h - cached_h) > 4 * EPS * (abs(t) + h) or cached_pattern != pattern_count:
             for i in range(m):
-                e_h[i], p1_h[i], p2_h[i] = _phis(lam[i] * h)
+                e_h[i], p1_h[i], p2_h[i] = phis(lam[i] * h)
             cached_h, cached_pattern = h, pattern_count
         for i in range(m):
             w1[i] = e_h[i] * w[i] + h * p1_h[i] * beta0[i] + h * h * p2_h[i] * beta1[i]
@@ -315,16 +264,18 @@ def run(Minv, K, C, R, kc, fyc, klin, bt, F0, F1, x0, v0, mode0, dp0, grid, max_
         step = h if which < 0 else first
         while k < N and grid[k] < t + step:  # outputs inside the step, before its event
             s = grid[k] - t
-            _advance(lam, w, beta0, beta1, s, probe)
-            _real(V, probe, zk)
+            advance(lam, w, beta0, beta1, s, probe)
+            real_into(V, probe, zk)
             _store(k, zk, n, Minv, Kt, C, g, f_now + F1[seg] * s, R, klin, kc, fyc, mode, dp, X, Vout, Aout, T, DP)
             k += 1
-        if which < 0:
-            for i in range(m):
-                w[i] = w1[i]
-        else:
-            _advance(lam, w, beta0, beta1, step, w)
-        _real(V, w, z)
+        if which >= 0:
+            advance(lam, w, beta0, beta1, step, w1)
+        if len(peak) == n:
+            acceleration_peaks(n, V, lam, w, w1, beta0, beta1, step, t, G0[seg], G1[seg], t - bt[seg], peak, peak_t,
+                                probe)
+        for i in range(m):
+            w[i] = w1[i]
+        real_into(V, w, z)
         for i in range(m):
             if not math.isfinite(z[i]):
                 return NOT_FINITE, events, t

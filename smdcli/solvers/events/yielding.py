@@ -40,21 +40,29 @@ def applies(model: Model) -> bool:
     return True
 
 
-def _forcing(model: Model, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(breakpoints from t0 ending with inf, the force at each (right limit), its slope after it)."""
+def _forcing(model: Model, t0: float, t1: float) -> tuple[np.ndarray, ...]:
+    """(breakpoints from t0 ending with inf, the force at each (right limit) and its slope after it, the ground's
+    acceleration on every DOF there and its slope)."""
+    from smdcli.model.system import GROUND_DOF
+
     inner = np.asarray(model.breakpoints(t0, t1), dtype=float)
     bt = np.unique(np.concatenate([[t0], inner[(inner > t0) & (inner < t1)]]))
-    F0, F1 = np.zeros((len(bt), model.n)), np.zeros((len(bt), model.n))
-    for column, signal in zip(model.B.T, model.signals):
+    F0, F1, G0, G1 = (np.zeros((len(bt), model.n)) for _ in range(4))
+    for column, signal, dof in zip(model.B.T, model.signals, model.force_dofs):
         exo = signal.exo()
         states = signal.exo_states(bt)  # right limits: u = g w, u' = g S w
-        F0 += np.outer(states @ exo.g, column)
-        F1 += np.outer(states @ (exo.S.T @ exo.g), column)
-    return np.append(bt, np.inf), F0, F1
+        value, slope = states @ exo.g, states @ (exo.S.T @ exo.g)
+        F0 += np.outer(value, column)
+        F1 += np.outer(slope, column)
+        if dof == GROUND_DOF:  # the ground's acceleration, under every DOF: the absolute one adds it
+            G0 += value[:, None]
+            G1 += slope[:, None]
+    return np.append(bt, np.inf), F0, F1, G0, G1
 
 
-def solve_yielding(model: Model, grid: np.ndarray) -> Result | None:
-    """The exact run on the compiled kernel, or None where it does not apply (the general solver's then)."""
+def solve_yielding(model: Model, grid: np.ndarray, locate_acceleration: bool = False) -> Result | None:
+    """The exact run on the compiled kernel, or None where it does not apply (the general solver's then); with
+    locate_acceleration, each DOF's peak |absolute acceleration| located on the solution (Result.located_acceleration)."""
     from smdcli.elements.elastoplastic import MINUS, PLUS
     from smdcli.kernels.yielding import NOT_FINITE, OK, run
 
@@ -70,7 +78,7 @@ def solve_yielding(model: Model, grid: np.ndarray) -> Result | None:
     states = [e.law.start(float(e.row @ x0), float(e.row @ v0)) for e in elements]
     mode0 = np.array([1 if s.mode == PLUS else -1 if s.mode == MINUS else 0 for s in states], dtype=np.int64)
     dp0 = np.array([s.internal["dp"] for s in states], dtype=float)
-    bt, F0, F1 = _forcing(model, float(grid[0]), float(grid[-1]))
+    bt, F0, F1, G0, G1 = _forcing(model, float(grid[0]), float(grid[-1]))
     N, n, E = len(grid), model.n, len(elements)
     X, V, A = np.empty((N, n)), np.empty((N, n)), np.empty((N, n))
     T, DP = np.empty((N, E)), np.empty((N, E))
@@ -78,9 +86,10 @@ def solve_yielding(model: Model, grid: np.ndarray) -> Result | None:
     ev_e, ev_kind = np.empty(MAX_EVENTS, dtype=np.int64), np.empty(MAX_EVENTS, dtype=np.int64)
     ev_x, ev_v, ev_T = np.empty((MAX_EVENTS, n)), np.empty((MAX_EVENTS, n)), np.empty((MAX_EVENTS, E))
     Minv, K, C = (np.ascontiguousarray(q, dtype=float) for q in (model.Minv, model.K, model.C))
+    peak, peak_t = np.zeros(n if locate_acceleration else 0), np.zeros(n if locate_acceleration else 0)
     status, count, reached = run(Minv, K, C, R, kc, fyc, klin, bt, F0, F1, x0, v0,
                                  mode0, dp0, np.asarray(grid, dtype=float), MAX_EVENTS, X, V, A, T, DP, ev_t, ev_e,
-                                 ev_kind, ev_x, ev_v, ev_T)
+                                 ev_kind, ev_x, ev_v, ev_T, G0, G1, peak, peak_t)
     if status == NOT_FINITE:
         stats = SolverStats(method="exact", requested_method="exact", reason="", success=False,
                             message=f"failed: the motion is not finite at t = {reached:.6g} s: it diverged",
@@ -102,4 +111,5 @@ def solve_yielding(model: Model, grid: np.ndarray) -> Result | None:
     stats = SolverStats(method="exact", requested_method="exact", reason="a yielding frame, event to event (compiled)",
                         steps_accepted=N - 1, wall_time_s=time.perf_counter() - begin, stated_accuracy=stated,
                         message=f"ok: event to event, {count} events ({told}), compiled")
-    return make_result(model, grid, X, V, stats, acceleration=A, nonsmooth=history)
+    result = make_result(model, grid, X, V, stats, acceleration=A, nonsmooth=history)
+    return result.changed(located_acceleration=peak) if locate_acceleration else result
