@@ -157,7 +157,12 @@ def check_scene(text: str, tmp_path) -> None:
     # its own physics, checked again here on the exact run: nothing suspect
     assert suspicions(model, exact) == ()
     if exact.energy is not None:
+        # a law whose booked dissipation may fall (a softened backbone past zero force gives energy back; Bouc-Wen
+        # with beta < |gamma|) says so: its hysteretic term is held to the balance, not to growing
+        giving_back = not all(e.law.dissipation_never_decreases for e in model.nonsmooth)
         for name in ("dissipated", "hysteretic", "friction", "impact"):
+            if name == "hysteretic" and giving_back:
+                continue
             series = getattr(exact.energy, name)
             if series is not None:
                 assert np.diff(series).min(initial=0.0) >= -1e-9 * max(exact.energy.largest, 1e-300), name
@@ -291,6 +296,37 @@ type = "sine"
 amplitude = 1.0
 omega = 2.0
 """)  # held still the whole run: DOP853's 2.7e-14 m at atol 1e-13 was judged against a peak of zero
+@example("""[time]
+end = 1.0
+step = 0.01
+[[mass]]
+name = "m0"
+m = 1.0
+[[mass]]
+name = "m1"
+m = 1.0
+[[mass]]
+name = "m2"
+m = 1.0
+[[spring]]
+connects = ["ground", "m0"]
+law = "clough"
+k = 50.0
+fy = 0.5
+hardening = -0.03
+[[spring]]
+connects = ["m0", "m1"]
+k = 50.0
+[[spring]]
+connects = ["m1", "m2"]
+k = 50.0
+[ground_motion]
+quantity = "acceleration"
+type = "table"
+t = [0.0, 0.2, 0.4, 0.6]
+values = [0.0, 6.0, -6.0, 3.0]
+""")  # the 10x run: a softened Clough backbone driven past zero force gives energy back (-3e-7 of the largest), as
+# its law says (dissipation_never_decreases false); the test held it to growing all the same
 def test_exact_and_integrators_agree_or_say_why(text):
     import tempfile
     from pathlib import Path
