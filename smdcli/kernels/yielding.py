@@ -37,14 +37,21 @@ EPS = 2.220446049250313e-16
 
 
 @kernel
-def _pattern(Minv, K, C, R, kc, mode, n):
-    """(A, Kt) of the cores' elastic pattern."""
+def _stiffness(K, R, kc, mode, n):
+    """Kt: K with each elastic core's stiffness."""
     Kt = K.copy()
     for e in range(len(kc)):
         if mode[e] == 0:
             for i in range(n):
                 for j in range(n):
                     Kt[i, j] += kc[e] * R[e, i] * R[e, j]
+    return Kt
+
+
+@kernel
+def _pattern(Minv, K, C, R, kc, mode, n):
+    """(A, Kt) of the cores' elastic pattern."""
+    Kt = _stiffness(K, R, kc, mode, n)
     A = np.zeros((2 * n, 2 * n))
     for i in range(n):
         A[i, n + i] = 1.0
@@ -335,7 +342,7 @@ def run(Minv, K, C, R, kc, fyc, klin, bt, F0, F1, x0, v0, mode0, dp0, grid, max_
                 ev_T[events, j] = klin[j] * dj + (kc[j] * (dj - dp[j]) if mode[j] == 0 else mode[j] * fyc[j])
             events += 1
             # a yielding core at zero rate whose acceleration now points back unloads at once
-            _, Kt_now = _pattern(Minv, K, C, R, kc, mode, n)
+            Kt_now = _stiffness(K, R, kc, mode, n)
             g_now = _constant(R, kc, fyc, mode, dp, n)
             acc = Minv @ (g_now + F0[seg] + F1[seg] * (t - bt[seg]) - Kt_now @ z[:n] - C @ z[n:])
             speed = 64 * EPS * np.abs(z[n:]).max()

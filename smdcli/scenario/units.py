@@ -39,11 +39,7 @@ _GRAVITY_WORDS = {"g": "g_0", "mg": "smd_milli_g", "gal": "Gal"}
 
 def measure(unit: str) -> str:
     """What an SI unit measures, in words: 'N/m' -> 'a stiffness (force/length)'."""
-    if unit in _MEASURES:
-        return _MEASURES[unit]
-    if unit.startswith("1/m^"):
-        return f"a quantity in {unit}"
-    return f"a quantity in {unit}"
+    return _MEASURES.get(unit, f"a quantity in {unit}")
 
 
 _EXAMPLES = {"N/m": "25 N/mm", "kg": "3 t", "m/s^2": "0.35 g", "rad/s": "2 Hz", "Hz": "2 Hz", "1": "5 %", "N": "10 kN",

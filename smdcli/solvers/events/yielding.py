@@ -29,9 +29,9 @@ def applies(model: Model) -> bool:
     """Whether the compiled kernel solves this scene: elastoplastic cores, linear elsewhere, piecewise-linear forces."""
     from smdcli.elements.elastoplastic import Elastoplastic
 
-    if not model.nonsmooth or model.cubic is not None or model.quadratic is not None or model.is_sparse:
+    if not model.is_piecewise_linear or model.is_sparse or model.jumps:
         return False
-    if model.jumps or not all(isinstance(e.law, Elastoplastic) and e.belt == 0.0 for e in model.nonsmooth):
+    if not all(isinstance(e.law, Elastoplastic) and e.belt == 0.0 for e in model.nonsmooth):
         return False
     for signal in model.signals:  # linear between breakpoints: a generator whose S^2 is 0 (tables, steps, constants)
         exo = signal.exo()
@@ -73,7 +73,7 @@ def solve_yielding(model: Model, grid: np.ndarray, locate_acceleration: bool = F
     R = np.array([e.row for e in elements], dtype=float).reshape(len(elements), model.n)
     kc = np.array([e.law.core.k for e in elements], dtype=float)
     fyc = np.array([e.law.core.fy for e in elements], dtype=float)
-    klin = np.array([getattr(e.law, "linear_stiffness", 0.0) for e in elements], dtype=float)
+    klin = np.array([e.law.linear_stiffness for e in elements], dtype=float)
     x0, v0 = np.asarray(model.x0, dtype=float), np.asarray(model.v0, dtype=float)
     states = [e.law.start(float(e.row @ x0), float(e.row @ v0)) for e in elements]
     mode0 = np.array([1 if s.mode == PLUS else -1 if s.mode == MINUS else 0 for s in states], dtype=np.int64)
