@@ -5,6 +5,7 @@ Imports nothing of smd (the bottom layer)."""
 from __future__ import annotations
 
 import os
+from contextlib import contextmanager
 
 ASSUMED_MEMORY = 8 * 2**30  # where the platform does not say: what a laptop has
 
@@ -21,3 +22,27 @@ def fits(needed: float) -> bool:
     """Whether an allocation of `needed` bytes fits in half of physical memory (the rest is for the system,
     the interpreter and working copies)."""
     return needed <= physical_memory() / 2
+
+
+# Above this many state variables BLAS threads pay for themselves; below, a product's work is microseconds and the
+# threads' wake-ups cost more: worse, numpy and scipy each carry an OpenBLAS with its own pool, and on two cores the
+# two pools' spinning workers take turns at scheduler slices (a 3-storey frame's fit: 0.37 s, 0.15 s single-threaded)
+SMALL_BLAS = 256
+_controller = None
+
+
+@contextmanager
+def small_blas(size: int):
+    """Run the block with BLAS on one thread where the problem has at most SMALL_BLAS state variables (threads as
+    they were otherwise); the previous limits are restored on leaving."""
+    if size > SMALL_BLAS:
+        yield
+        return
+    global _controller
+    import scipy.linalg  # noqa: F401  scipy's own BLAS is loaded before the controller looks for libraries
+    from threadpoolctl import ThreadpoolController
+
+    if _controller is None:
+        _controller = ThreadpoolController()
+    with _controller.limit(limits=1, user_api="blas"):
+        yield

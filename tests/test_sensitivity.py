@@ -376,3 +376,22 @@ def test_a_nonlinear_scene_shows_its_progress_on_a_terminal_and_none_when_piped(
     piped = subprocess.run([*SMD, "sensitivity", "bw.toml", "--param", "spring[0].k", "--no-plots", "-o", "piped"],
                            cwd=tmp_path, capture_output=True, text=True)
     assert piped.returncode == 0 and piped.stderr == "", piped.stderr
+
+
+def test_a_small_scene_runs_blas_on_one_thread_and_gives_the_threads_back():
+    """numpy's and scipy's OpenBLAS pools contend on small products (a fit 2.4x slower on two cores): a small scene's
+    sensitivities and fits run them on one thread, and the limits are as they were after; a large one is left alone."""
+    from threadpoolctl import threadpool_info
+
+    from smdcli.resources import SMALL_BLAS, small_blas
+
+    def blas_threads():
+        return [pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"]
+
+    before = blas_threads()
+    with small_blas(SMALL_BLAS):
+        inside = blas_threads()
+    assert inside and set(inside) == {1}
+    assert blas_threads() == before
+    with small_blas(SMALL_BLAS + 1):
+        assert blas_threads() == before

@@ -24,8 +24,9 @@ import numpy as np
 from smdcli.analysis.fit_data import Measured, quantity_of
 from smdcli.analysis.sensitivity import sensitivity
 from smdcli.errors import UsageError
+from smdcli.resources import small_blas
 from smdcli.scenario import Scenario
-from smdcli.sweep.family import scenario_with
+from smdcli.sweep.family import member_with
 
 TOLERANCE = 1e-12  # relative reduction of the cost and relative step below which the fit has converged
 IDENTIFIABLE = 1e7  # condition number of the column-normalized Jacobian above which a direction is undetermined
@@ -115,9 +116,10 @@ def make_test(sc: Scenario, measured: Measured, channels: tuple[str, ...] | None
     return Test(sc, measured, chosen, np.array([given.get(c, default[c]) for c in chosen]), grid, rows)
 
 
-def _model_channels(test: Test, sc: Scenario, params: list[str]) -> tuple[dict, dict]:
-    """Each channel of a test at the scene sc: its values (N,) and derivatives (P, N) at the data's times."""
-    s = sensitivity(sc, params, grid=test.grid, peaks=False)
+def _model_channels(test: Test, sc: Scenario, params: list[str], built: tuple | None = None) -> tuple[dict, dict]:
+    """Each channel of a test at the scene sc (built: its TOML document and model, where the caller has them): its
+    values (N,) and derivatives (P, N) at the data's times."""
+    s = sensitivity(sc, params, grid=test.grid, peaks=False, built=built)
     dofs = {name: j for j, name in enumerate(s.dof)}
     ground = s.ground_acceleration()
     values, derivatives = {}, {}
@@ -176,8 +178,8 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
             p = theta * scale
             residuals, columns, fitted = [], [], []
             for test in tests:
-                sc = scenario_with(test.scenario, dict(zip(params, p)))
-                values, derivatives = _model_channels(test, sc, params)
+                sc, doc, model = member_with(test.scenario, dict(zip(params, p)))
+                values, derivatives = _model_channels(test, sc, params, (doc, model))
                 fitted.append(values)
                 for w, channel in zip(test.weights, test.channels):
                     residuals.append(w * (values[channel] - test.measured.channels[channel]))
@@ -199,7 +201,8 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
         return J * scale
 
     theta0 = initial / scale
-    with np.errstate(all="ignore"):
+    size = max(2 * (len(params) + 1) * len(t.scenario.dof_names) for t in tests)
+    with np.errstate(all="ignore"), small_blas(size):
         found = least_squares(residual, theta0, jac=jacobian, bounds=(lower / scale, upper / scale), method="trf",
                               ftol=TOLERANCE, xtol=TOLERANCE, gtol=TOLERANCE, max_nfev=max_iterations,
                               x_scale=1.0)

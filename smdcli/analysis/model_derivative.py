@@ -109,9 +109,11 @@ def _structure(model: Model, grid: np.ndarray) -> tuple:
             tuple(model.breakpoints(t0, t1)), tuple(t for t, _, _ in model.jumps), sizes, tables, model.is_linear)
 
 
-def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str) -> Derivative:
-    """The model's derivative with respect to one parameter path; UsageError where the path is not a number of
-    the scene, or moves what has no derivative (a force's discontinuity in time, the model's structure)."""
+def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str,
+               base_arrays: list[np.ndarray] | None = None) -> Derivative:
+    """The model's derivative with respect to one parameter path (base_arrays: _model_arrays of base at the grid's
+    end, where the caller has them); UsageError where the path is not a number of the scene, or moves what has no
+    derivative (a force's discontinuity in time, the model's structure)."""
     if path.startswith(_REFUSED) or path == "zeta":
         raise UsageError(f"--param {path}: not a parameter of the scene (the run's span, its solver and its "
                          "sweep are not differentiated; for zeta give the damper's c)")
@@ -119,8 +121,15 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
     scale = relative_size(value)
     structure = _structure(base, grid)
     t_end = float(grid[-1])
+    arrays = {id(base): (base, base_arrays or _model_arrays(base, t_end))}  # the model held: its id stays its own
+
+    def arrays_of(model: Model) -> list[np.ndarray]:
+        if id(model) not in arrays:
+            arrays[id(model)] = (model, _model_arrays(model, t_end))
+        return arrays[id(model)][1]
+
     if affine(sc, base, path):
-        return _affine_derivative(sc, doc, base, grid, path, value, scale, structure)
+        return _affine_derivative(sc, doc, base, grid, path, value, scale, structure, arrays_of)
     best = None
     for relative in STEPS:
         delta = relative * scale
@@ -138,8 +147,8 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
             _same_structure(m, structure, grid, path)
         weights = stencil_weights(offsets) / delta
         wide = stencil_weights(tuple(2 * o for o in offsets)) / delta
-        near = [combined(weights, parts) for parts in zip(*(_model_arrays(models[o], t_end) for o in offsets))]
-        far = [combined(wide, parts) for parts in zip(*(_model_arrays(models[2 * o], t_end) for o in offsets))]
+        near = [combined(weights, parts) for parts in zip(*(arrays_of(models[o]) for o in offsets))]
+        far = [combined(wide, parts) for parts in zip(*(arrays_of(models[2 * o]) for o in offsets))]
         largest = max((float(np.abs(a).max(initial=0.0)) for a in near), default=0.0)
         if largest == 0:
             error, rounding = 0.0, 0.0
@@ -147,7 +156,7 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
             # R(2 delta) - R(delta) is 15 times the error of R(delta) (both O(delta^4)); rounding: eps |f| sum |w| of
             # each array that changes with p (one that does not is the same number at every point: no rounding)
             error = max(float(np.abs(a - b).max(initial=0.0)) for a, b in zip(near, far)) / 15 / largest
-            rounding = _rounding([models[o] for o in doubled], weights, t_end, largest)
+            rounding = _rounding([arrays_of(models[o]) for o in doubled], weights, largest)
         found = Derivative(path, value, delta, [models[o] for o in offsets], weights, error + rounding, offsets)
         if best is None or found.error < best.error:
             best = found
@@ -175,10 +184,10 @@ def _same_structure(model: Model, structure: tuple, grid: np.ndarray, path: str)
                          "a response sensitivity smd can give")
 
 
-def _rounding(models: list[Model], weights: np.ndarray, t_end: float, largest: float) -> float:
-    """The stencil's rounding relative to the largest derivative: eps |f| sum |w| of each array that changes with
-    p (one that does not is the same number at every point: no rounding)."""
-    values = list(zip(*(_model_arrays(m, t_end) for m in models)))
+def _rounding(arrays: list[list[np.ndarray]], weights: np.ndarray, largest: float) -> float:
+    """The stencil's rounding relative to the largest derivative, from each model's _model_arrays: eps |f| sum |w| of
+    each array that changes with p (one that does not is the same number at every point: no rounding)."""
+    values = list(zip(*arrays))
     changed = [max(float(np.abs(v).max(initial=0.0)) for v in parts) for parts in values
                if any(not np.array_equal(parts[0], v) for v in parts[1:])]
     return ROUNDING * EPS * max(changed, default=0.0) * float(np.abs(weights).sum()) / largest
@@ -198,7 +207,7 @@ def affine(sc: Scenario, base: Model, path: str) -> bool:
 
 
 def _affine_derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str, value: float,
-                       scale: float, structure: tuple) -> Derivative:
+                       scale: float, structure: tuple, arrays_of) -> Derivative:
     """An affine parameter's derivative: one difference over a step of AFFINE_STEP of it, exact up to rounding."""
     for sign in (1.0, -1.0):
         delta = sign * AFFINE_STEP * scale
@@ -212,10 +221,9 @@ def _affine_derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, p
         raise _unbuildable(path, value, AFFINE_STEP * scale, refused)
     _same_structure(other, structure, grid, path)
     weights = np.array([-1.0, 1.0]) / delta
-    largest = max((float(np.abs(b - a).max(initial=0.0)) for a, b in
-                   zip(_model_arrays(base, float(grid[-1])), _model_arrays(other, float(grid[-1])))),
-                  default=0.0) / abs(delta)
-    error = _rounding([base, other], weights, float(grid[-1]), largest) if largest > 0 else 0.0
+    pair = [arrays_of(base), arrays_of(other)]
+    largest = max((float(np.abs(b - a).max(initial=0.0)) for a, b in zip(*pair)), default=0.0) / abs(delta)
+    error = _rounding(pair, weights, largest) if largest > 0 else 0.0
     return Derivative(path, value, delta, [base, other], weights, error, (0.0, 1.0))
 
 
@@ -364,7 +372,8 @@ def model_derivatives(sc: Scenario, base: Model, grid: np.ndarray, paths: list[s
     caller has it); UsageError for a path given twice."""
     check_once(paths)
     doc = tomllib.loads(sc.text) if doc is None else doc
-    return [derivative(sc, doc, base, grid, path) for path in paths]
+    base_arrays = _model_arrays(base, float(grid[-1]))
+    return [derivative(sc, doc, base, grid, path, base_arrays) for path in paths]
 
 
 def relative_size(value: float) -> float:

@@ -21,8 +21,9 @@ import numpy as np
 
 from smdcli.analysis.model_derivative import augmented_model, model_derivatives, relative_size
 from smdcli.errors import SolverFailed, UsageError
-from smdcli.model import build, time_grid
+from smdcli.model import Model, build, time_grid
 from smdcli.scenario import Scenario
+from smdcli.resources import small_blas
 from smdcli.solvers.base import Tolerances
 from smdcli.solvers.ground import across_jumps
 from smdcli.solvers.peaks import jump_times, located_peaks, quintic_at
@@ -68,7 +69,7 @@ class Sensitivity:
     method: str = METHOD
     model_error: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (P,) the stencil's estimated error
     wall_time_s: float = 0.0
-    forward_time_s: float = 0.0  # one forward exact solve of the scene, for the cost's comparison
+    forward_time_s: float = 0.0  # one forward run of the scene (built and solved), for the cost's comparison
     notes: tuple[str, ...] = ()
     outputs: list[Path] = field(default_factory=list)
     model: object = None  # the scene's Model
@@ -140,17 +141,31 @@ def derivative_units(of: str, parameter: str) -> str:
 
 
 def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None, timed: bool = False,
-                peaks: bool = True, advance=None) -> Sensitivity:
+                peaks: bool = True, advance=None, built: tuple[dict, Model] | None = None) -> Sensitivity:
     """The sensitivities of a linear, piecewise-linear (yielding, friction, stops) or smooth nonlinear scene's response
     to each parameter path (the sweep's paths), on the
     scenario's output grid or on `grid` (any increasing times from the scenario's start); `timed`: one forward
     solve of the scene alone is timed beside it (forward_time_s), for the cost's comparison; without `peaks` the
     peaks and their derivatives are left out (nan: a fit reads the histories only); advance(count): a progress
-    bar's, over the output times of a smooth scene's integration."""
+    bar's, over the output times of a smooth scene's integration; built: the scenario's TOML document and model, where
+    the caller has them (a fit's trial point)."""
+    import scipy.linalg  # noqa: F401  the solvers' own imports, before the clock: a process pays them once, and
+    import scipy.sparse  # noqa: F401  forward_time_s, timed after, would not
+
+    with small_blas(2 * (len(params) + 1) * len(sc.dof_names)):
+        start = time.perf_counter()
+        found = _sensitivity(sc, params, grid, peaks, advance, built)
+        found.wall_time_s = time.perf_counter() - start  # all of it: derivatives, solve, peaks and the result
+        if timed:
+            found.forward_time_s = _forward_time(sc, found.time)
+    return found
+
+
+def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks: bool, advance,
+                 built: tuple[dict, Model] | None) -> Sensitivity:
     if not params:
         raise UsageError("smd sensitivity: give at least one --param PATH (spring[0].k, mass.m1.m, ...)")
-    start = time.perf_counter()
-    base = build(sc)
+    doc, base = built if built is not None else (None, build(sc))
     piecewise = _piecewise(base)
     if piecewise:
         from smdcli.analysis.event_sensitivity import EVENT_ERROR
@@ -165,7 +180,7 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
         raise UsageError(f"{sc.path}: {len(params)} parameters of a {base.n}-DOF scene stack {(len(params) + 1) * base.n} "
                          f"DOFs; smd sensitivity takes at most {MAX_SIZE}")
     grid = time_grid(sc.time) if grid is None else np.asarray(grid, dtype=float)
-    derivatives = model_derivatives(sc, base, grid, list(params))
+    derivatives = model_derivatives(sc, base, grid, list(params), doc)
     n, P = base.n, len(derivatives)
     tol = Tolerances()
     run = dense = None
@@ -178,28 +193,30 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
     else:
         blocks, stated, dense = _smooth(sc, base, derivatives, grid, advance)
         method = SMOOTH_METHOD
-    wall = time.perf_counter() - start
-    forward = _forward_time(base, grid, tol) if timed else float("nan")
     scales = np.array([relative_size(d.value) for d in derivatives])
     nominal = {q: np.ascontiguousarray(b[:, 0]) for q, b in blocks.items()}
-    derived = {q: np.ascontiguousarray(np.moveaxis(b[:, 1:], 1, 0) / scales[:, None, None])
+    derived = {q: np.divide(np.moveaxis(b[:, 1:], 1, 0), scales[:, None, None],  # one pass into (P, N, n)
+                            out=np.empty((b.shape[1] - 1, b.shape[0], b.shape[2])))
                for q, b in blocks.items()}
     accuracy = {}
     for q, b in blocks.items():
-        largest = np.abs(np.nan_to_num(b[:, 1:])).max(axis=(0, 2))  # nan: where no derivative exists
+        # each block's peak over time and DOFs (over time first: the contiguous axis' reduction, not a strided one);
+        # fmax passes over nan, written where no derivative exists
+        block_peaks = np.nan_to_num(np.fmax.reduce(np.abs(b), axis=0)).max(axis=1, initial=0.0)  # (P + 1,)
+        largest = block_peaks[1:]
         if base.is_linear:  # the run's error is relative to the stacked state's peak (every block a displacement)
-            absolute = stated * float(np.abs(b).max(initial=0.0))
+            absolute = stated * float(block_peaks.max())
         elif piecewise:
-            absolute = max(stated, EVENT_ERROR) * float(np.abs(np.nan_to_num(b)).max(initial=0.0))
+            absolute = max(stated, EVENT_ERROR) * float(block_peaks.max())
         else:  # the integrator's: rtol of each component, atol a thousandth of rtol of the state's peak
-            absolute = stated * (largest + 1e-3 * float(np.abs(b[:, 0]).max(initial=0.0)))
+            absolute = stated * (largest + 1e-3 * float(block_peaks[0]))
         accuracy[f"d_{q}"] = np.maximum(np.where(largest > 0, absolute / np.where(largest > 0, largest, 1.0), 0.0),
                                         [d.error for d in derivatives])
         accuracy[q] = np.full(1, stated)
     if not peaks:
         nan = np.full(n, np.nan)
         return _result(sc, params, derivatives, grid, base, nominal, derived, nan, nan, np.full((P, n), np.nan),
-                       accuracy, wall, forward, (), method)
+                       accuracy, (), method)
     notes = []
     if run is not None and run.undefined_from is not None:
         when, why = run.undefined_from
@@ -220,8 +237,8 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
         for p in range(P):
             d_peaks[p, i] = sign * quintic_at(grid, derived["displacement"][p, :, i], derived["velocity"][p, :, i],
                                               derived["acceleration"][p, :, i], np.array([at[i]]))[0]
-    found = _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_peaks, accuracy, wall,
-                    forward, tuple(notes), method)
+    found = _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_peaks, accuracy,
+                    tuple(notes), method)
     found.event_times = events
     found.dense_acceleration_at = dense
     if run is not None:
@@ -243,8 +260,8 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
     return found
 
 
-def _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_peaks, accuracy, wall, forward,
-            notes, method) -> Sensitivity:
+def _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_peaks, accuracy, notes,
+            method) -> Sensitivity:
     from smdcli.sweep.spec import parameter_units
 
     return Sensitivity(
@@ -253,7 +270,7 @@ def _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_
         displacement=nominal["displacement"], velocity=nominal["velocity"], acceleration=nominal["acceleration"],
         d_displacement=derived["displacement"], d_velocity=derived["velocity"], d_acceleration=derived["acceleration"],
         peak_displacement=peaks, peak_time=at, d_peak_displacement=d_peaks, accuracy=accuracy,
-        model_error=np.array([d.error for d in derivatives]), wall_time_s=wall, forward_time_s=forward,
+        model_error=np.array([d.error for d in derivatives]), forward_time_s=float("nan"),
         notes=notes, model=base, derivatives=derivatives, method=method)
 
 
@@ -313,15 +330,17 @@ def _smooth(sc: Scenario, base, derivatives: list, grid: np.ndarray, advance=Non
     return blocks, SMOOTH_ERROR * rtol, acceleration_at
 
 
-def _forward_time(base, grid: np.ndarray, tol: Tolerances) -> float:
-    """Seconds of one forward solve of the scene alone (exact, or auto's for a nonlinear scene): what the P
-    sensitivities are measured against."""
+def _forward_time(sc: Scenario, grid: np.ndarray) -> float:
+    """Seconds of one forward run of the scene alone, as each of a finite difference's P + 1 runs takes it: the scene
+    built (at a moved parameter it is another scene) and solved on the grid (exact, or auto's for a nonlinear
+    scene), both with their results; what the P sensitivities are measured against."""
     from smdcli.solvers.dispatch import solve
 
     start = time.perf_counter()
+    base = build(sc)
     if base.is_linear:
         exact = get_solver("exact")
-        across_jumps(lambda piece, times: exact.solve(piece, times, tol), base.dense(), grid)
+        across_jumps(lambda piece, times: exact.solve(piece, times, Tolerances()), base.dense(), grid)
     else:
-        solve(base, grid, "auto", tol)
+        solve(base, grid, "auto", Tolerances())
     return time.perf_counter() - start

@@ -165,20 +165,24 @@ def _refuse_control_characters(file: str, node, path: str) -> None:
     escape or a NUL in a scenario is refused, whatever table it is in; `description` may hold line breaks."""
     if isinstance(node, dict):
         for key, value in node.items():
-            _refuse_control_characters(file, value, f"{path}.{key}" if path else key)
+            if isinstance(value, _TEXT_HOLDERS):  # a number holds no text: no path built for it
+                _refuse_control_characters(file, value, f"{path}.{key}" if path else key)
     elif isinstance(node, list):
         for i, value in enumerate(node):
-            _refuse_control_characters(file, value, f"{path}[{i}]")
+            if isinstance(value, _TEXT_HOLDERS):
+                _refuse_control_characters(file, value, f"{path}[{i}]")
     elif isinstance(node, str):
         control = _control_character(node, multiline=path == "description")
         if control is not None:
             raise ScenarioError(file, path, f"expected printable text, found the control character {control!r}")
 
 
+_TEXT_HOLDERS = (dict, list, str)
+_CONTROL = re.compile("[\x00-\x08\x0a-\x1f\x7f-\x9f]")  # C0 but the tab, DEL, C1
+_CONTROL_MULTILINE = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f]")  # line breaks allowed too
+
+
 def _control_character(text: str, multiline: bool) -> str | None:
     """The first control character of `text` (terminal escapes, NUL...), or None."""
-    allowed = "\t\n\r" if multiline else "\t"
-    for char in text:
-        if (ord(char) < 32 or 127 <= ord(char) < 160) and char not in allowed:
-            return char
-    return None
+    found = (_CONTROL_MULTILINE if multiline else _CONTROL).search(text)
+    return None if found is None else found.group()

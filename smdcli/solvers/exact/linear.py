@@ -240,7 +240,8 @@ def solve_dense(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray,
             while k < stop:
                 reseed(z, t_cur)
                 j = min(J, stop - k)
-                out[k:k + j] = powers[:j] @ z
+                # one product of the stacked powers (j size x size) with z: not j small ones
+                out[k:k + j] = (powers[:j].reshape(j * size, size) @ z).reshape(j, size)
                 k += j
                 z = out[k - 1].copy()
                 t_cur = grid[k - 1]
