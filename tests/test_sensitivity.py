@@ -395,3 +395,39 @@ def test_a_small_scene_runs_blas_on_one_thread_and_gives_the_threads_back():
     assert blas_threads() == before
     with small_blas(SMALL_BLAS + 1):
         assert blas_threads() == before
+
+
+def test_a_kink_on_a_step_start_takes_the_run_again_up_to_it(monkeypatch):
+    """scipy's solve_ivp refuses its own dense output (`ts` must be strictly increasing) where a terminal event's
+    root falls on a step's start (the Bouc-Wen benchmark's multisine met one at t = 1.679 s: a traceback after
+    100 s). The run is then taken again up to the kink: the same kink time, state and samples as a run that met
+    no such root, to DOP853's tolerance."""
+    import scipy.integrate
+
+    from smdcli.analysis.smooth_sensitivity import _until_kink
+
+    def rhs(t, y):  # a damped oscillator: its velocity's first zero is the kink
+        return np.array([y[1], -100.0 * y[0] - 0.4 * y[1]])
+
+    def kink(t, y):
+        return y[1]
+    kink.terminal = True
+    wanted = np.linspace(0.0, 0.5, 51)
+    start, atol = np.array([0.0, 1.0]), np.full(2, 1e-14)
+    plain = _until_kink(rhs, 0.0, 0.5, start, 1e-10, atol, wanted, [kink])
+    real = scipy.integrate.solve_ivp
+    dense_calls = []
+
+    def refusing(*args, **kwargs):
+        if kwargs.get("dense_output") and kwargs.get("events"):
+            dense_calls.append(args[1])
+            raise ValueError("`ts` must be strictly increasing or decreasing.")
+        return real(*args, **kwargs)
+    monkeypatch.setattr(scipy.integrate, "solve_ivp", refusing)
+    again = _until_kink(rhs, 0.0, 0.5, start, 1e-10, atol, wanted, [kink])
+    assert dense_calls and plain.status == again.status == 1
+    damped = np.sqrt(100.0 - 0.04)  # v = e^(-0.2 t) (cos wd t - 0.2 / wd sin wd t): first zero at atan(wd / 0.2) / wd
+    first_zero = np.arctan(damped / 0.2) / damped
+    assert abs(plain.t_events[0][0] - first_zero) <= 1e-8 and abs(again.t_events[0][0] - first_zero) <= 1e-8
+    assert np.array_equal(plain.t, again.t) and np.abs(plain.y - again.y).max() <= 1e-9
+    assert abs(again.sol(again.t_events[0][0])[1]) <= 1e-9  # its dense output reaches the kink

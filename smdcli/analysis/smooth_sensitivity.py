@@ -196,8 +196,7 @@ def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gr
             if filled and wanted.size and wanted[0] <= grid[filled - 1]:
                 wanted = wanted[1:]  # the point a restart stands on is filled already
             events = [_kink_event(row, c, t, state, flow, i == fired) for i, (row, c) in enumerate(kinks)]
-            run = solve_ivp(rhs, (t, float(tb)), state, method="DOP853", rtol=rtol, atol=atol, t_eval=wanted,
-                            events=events or None, dense_output=True)
+            run = _until_kink(rhs, t, float(tb), state, rtol, atol, wanted, events)
             if run.status < 0:
                 raise SolverFailed(f"{model.source}: the sensitivity equations failed at t = {run.t[-1] if len(run.t) else t:.6g}"
                                    f" s: {run.message}")
@@ -229,6 +228,30 @@ def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gr
         return flow.f(t, y_t), flow.jacobian(t, y_t) @ S_t + parameter_rates(t, y_t)
     rates_at.breaks = np.array([b for _, b, _ in pieces[:-1]], dtype=float)  # where one piece ends, the next starts
     return y, S, rates, d_rates, rates_at
+
+
+def _until_kink(rhs, t: float, end: float, state: np.ndarray, rtol: float, atol: np.ndarray, wanted: np.ndarray,
+                events: list):
+    """solve_ivp's DOP853 from (t, state) to end or to the first kink, with its dense output. A kink whose root
+    falls on a step's start (its value there zero to rounding) makes scipy's dense output hold that time twice and
+    refuse it (ValueError: `ts` must be strictly increasing): then the kink's time is found by a run without dense
+    output, and the run to it taken again without the event, its last step landing on the kink."""
+    from scipy.integrate import solve_ivp
+
+    options = dict(method="DOP853", rtol=rtol, atol=atol)
+    try:
+        return solve_ivp(rhs, (t, end), state, t_eval=wanted, events=events or None, dense_output=True, **options)
+    except ValueError as exc:
+        if "strictly increasing" not in str(exc):
+            raise
+    found = solve_ivp(rhs, (t, end), state, t_eval=wanted, events=events, **options)
+    if found.status != 1:
+        return found
+    kink = float(next(e[0] for e in found.t_events if len(e)))
+    run = solve_ivp(rhs, (t, kink), state, t_eval=wanted[wanted <= kink], dense_output=True, **options)
+    if run.status == 0:
+        run.status, run.t_events, run.y_events = 1, found.t_events, found.y_events
+    return run
 
 
 def _kink_event(row: np.ndarray, constant: float, start: float, state: np.ndarray, flow: _Flow, fired: bool):
