@@ -431,3 +431,29 @@ def test_a_kink_on_a_step_start_takes_the_run_again_up_to_it(monkeypatch):
     assert abs(plain.t_events[0][0] - first_zero) <= 1e-8 and abs(again.t_events[0][0] - first_zero) <= 1e-8
     assert np.array_equal(plain.t, again.t) and np.abs(plain.y - again.y).max() <= 1e-9
     assert abs(again.sol(again.t_events[0][0])[1]) <= 1e-9  # its dense output reaches the kink
+
+
+def test_a_law_s_affine_keys_are_affine_in_its_right_hand_side():
+    """What a law declares affine (Bouc-Wen's k, alpha, A, beta, gamma, z0) gets one difference instead of a stencil:
+    the scene's right-hand side and start at p, p + h and p + 2 h have no second difference beyond rounding, at
+    states of either sign; n, not declared, has one (the check can fail)."""
+    from smdcli.analysis.smooth_sensitivity import _Flow
+    from smdcli.elements.bouc_wen import BoucWen
+    from smdcli.model import build
+
+    sc, _, _ = model_of(BOUC_WEN.replace("n = 1.0", "n = 1.5"), "bouc_wen.toml")
+    rng = np.random.default_rng(3)
+    states = [np.array([d, r, z]) * rng.uniform(0.5, 2.0) for d, r, z in
+              [(1e-3, 0.2, 5e-4), (-2e-3, 0.1, -1e-3), (5e-4, -0.3, 2e-3)]]
+    values = {"k": 1.0e5, "alpha": 0.5, "A": 1.0, "beta": 800.0, "gamma": -1100.0, "z0": 0.0, "n": 1.5}
+    for key, value in values.items():
+        step = 0.1 * max(abs(value), 1e-3)
+        flows = [_Flow(build(scenario_with(sc, {f"spring[0].{key}": value + i * step}))) for i in range(3)]
+        for y in states:
+            f = [flow.f(0.01, y) for flow in flows] + [flow.initial() for flow in flows]
+            second = max(float(np.abs(f[0] - 2 * f[1] + f[2]).max()), float(np.abs(f[3] - 2 * f[4] + f[5]).max()))
+            size = max(float(np.abs(g).max()) for g in f)
+            if key in BoucWen.affine_keys:
+                assert second <= 1e-12 * size, (key, second, size)
+            else:
+                assert second > 1e-6 * size, (key, second, size)

@@ -195,12 +195,15 @@ def _rounding(arrays: list[list[np.ndarray]], weights: np.ndarray, largest: floa
 
 def affine(sc: Scenario, base: Model, path: str) -> bool:
     """Whether every number of the model is affine in the parameter: a mass, stiffness, damper, [system] entry,
-    initial state, Rayleigh coefficient, force amplitude or record scale (not with modal damping, whose C follows
-    the modes, nor a mass where the ground jumps, whose jump holds M^-1 C)."""
+    initial state, Rayleigh coefficient, force amplitude, record scale or a smooth law's affine key (not with modal
+    damping, whose C follows the modes, nor a mass where the ground jumps, whose jump holds M^-1 C)."""
     from smdcli.sweep.family import STRUCTURAL
 
     if any(e.law.piecewise_linear for e in base.nonsmooth):
         return False  # a mode's numbers multiply the parameter by internal variables that move with it (k d_p)
+    owner, _, key = path.rpartition(".")
+    if any(e.path == owner and key in e.law.affine_keys for e in base.nonsmooth):
+        return True
     if STRUCTURAL.match(path):
         return not (sc.damping is not None and sc.damping.modal) and not (base.jumps and ".m" in path)
     return bool(re.fullmatch(r"damping\.(alpha|beta)|force\[\d+\]\.amplitude|ground_motion\.scale", path))

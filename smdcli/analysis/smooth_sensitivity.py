@@ -151,7 +151,7 @@ def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gr
     from scipy.integrate import solve_ivp
 
     flow = _Flow(model)
-    points = [[_Flow(m) for m in d.models] for d in derivatives]
+    points = [[flow if m is model else _Flow(m) for m in d.models] for d in derivatives]  # an affine one's: base, other
     weights = [d.weights * s for d, s in zip(derivatives, scales)]
     size, P = 2 * model.n + flow.q, len(derivatives)
     y0 = flow.initial()
@@ -166,7 +166,7 @@ def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gr
         rates = flow.f(t, y)
         columns = []
         for ws, fs, dM in zip(weights, points, masses):
-            values = [f.f(t, y) for f in fs]
+            values = [rates if f is flow else f.f(t, y) for f in fs]  # the scene's own rates once, not per parameter
             forces = combined(ws, [f.model.M @ v[n:2 * n] for f, v in zip(fs, values)])
             column = combined(ws, values)
             column[:n] = 0.0

@@ -90,6 +90,9 @@ class Law:
     internal_names: ClassVar[tuple[str, ...]] = ()  # what /elements writes per step (plastic_deformation, z)
     stiff: ClassVar[bool] = False  # its smooth tension can make a scene stiff: auto steps it implicitly
     units: ClassVar[dict[str, str]] = {}  # its keys' units, for sweeps' axes
+    # keys its tension, internal rates and start are affine in (a smooth law's): one difference is their exact
+    # derivative, where a sensitivity otherwise takes a five-point stencil of models
+    affine_keys: ClassVar[tuple[str, ...]] = ()
     holds_impulse: ClassVar[bool] = True  # held, it carries an impact's impulse (a bounded force cannot: friction)
     capacity: ClassVar[float | None] = None  # the most force it holds (a stuck contact's breakaway); None: unbounded
 

@@ -50,6 +50,8 @@ class BoucWen(Law):
     piecewise_linear: ClassVar[bool] = False
     stiff: ClassVar[bool] = True  # pinned at its saturation, z is stiff
     units: ClassVar[dict[str, str]] = {"k": "N/m", "alpha": "1", "A": "1", "n": "1", "z0": "m"}  # beta, gamma: unit_of
+    # alpha k d + (1 - alpha) k z; z' = A d' - beta |d'| |z|^(n-1) z - gamma d' |z|^n, z(0) = z0: all but n
+    affine_keys: ClassVar[tuple[str, ...]] = ("k", "alpha", "A", "beta", "gamma", "z0")
     ode_states: ClassVar[tuple[str, ...]] = ("z",)
     internal_names: ClassVar[tuple[str, ...]] = ("z",)
 
