@@ -198,3 +198,22 @@ def test_a_sliding_base_building_under_the_record_has_its_derivative_after_every
     text = (SCENARIOS / "friction_isolated_building.toml").read_text().replace("end = 20.0", "end = 6.0")
     sc, _, _ = model_of(text, str(SCENARIOS / "isolated.toml"))
     check_against_dop853(sc, ["friction[0].force", "spring[0].k"])
+
+
+def test_a_kinetic_force_just_below_its_static_one_is_differentiated_one_sided():
+    """friction[0].force = 2.9995 N under a static 3 N: the central stencil's points above 3 N are no scene (nor the
+    forward one's), so the backward stencil takes it (it used to refuse, exit 2). Against backward five-point
+    differences of exact runs at steps of 1e-5 N, on samples away from the events: to 1e-8 of the largest (measured
+    7e-10, the differences' own error: 3e-10 at twice the step)."""
+    text = (SCENARIOS / "stick_slip_belt.toml").read_text().replace("end = 10.0", "end = 2.0") \
+        .replace("force = 2.0", "force = 2.9995")
+    sc, _, _ = model_of(text, "belt.toml")
+    s = smdcli.sensitivity(sc, ["friction[0].force"])
+    h = 1e-5
+    runs = [smdcli.simulate(scenario_with(sc, {"friction[0].force": 2.9995 - i * h}), method="exact").displacement[:, 0]
+            for i in range(5)]
+    want = (25 * runs[0] - 48 * runs[1] + 36 * runs[2] - 16 * runs[3] + 3 * runs[4]) / (12 * h)
+    events = np.array([t for t, _, _ in smdcli.simulate(sc, method="exact").nonsmooth.events])
+    away = np.array([np.abs(events - t).min() > 0.01 for t in s.time])
+    scale = np.abs(want[away]).max()
+    assert scale > 0 and np.abs(s.d_displacement[0, away, 0] - want[away]).max() <= 1e-8 * scale

@@ -23,13 +23,16 @@ import numpy as np
 
 from smdcli.analysis.fit_data import Measured, quantity_of
 from smdcli.analysis.sensitivity import sensitivity
-from smdcli.errors import UsageError
+from smdcli.errors import ScenarioError, UsageError
 from smdcli.resources import small_blas
 from smdcli.scenario import Scenario
 from smdcli.sweep.family import member_with
 
 TOLERANCE = 1e-12  # relative reduction of the cost and relative step below which the fit has converged
 IDENTIFIABLE = 1e7  # condition number of the column-normalized Jacobian above which a direction is undetermined
+# the fraction of the data's weighted RMS a fitted scene may leave unexplained before the fit says it does not explain
+# them (a local minimum, or a model that cannot make the data): measurement noise leaves a few percent
+UNEXPLAINED = 0.3
 JACOBIAN = "exact sensitivities: the scene and its sensitivity equations solved together (smd sensitivity)"
 
 
@@ -75,6 +78,8 @@ class FitResult:
     jacobian: str = JACOBIAN
     wall_time_s: float = 0.0
     outputs: list[Path] = field(default_factory=list)
+    unexplained: float = math.nan  # |weighted residual| / |weighted data|: what the fitted scene leaves unexplained
+    warning: str = ""  # where it leaves more than UNEXPLAINED of the data: why the intervals may not be trusted
 
 
 def make_test(sc: Scenario, measured: Measured, channels: tuple[str, ...] | None = None,
@@ -168,6 +173,7 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
     scale = np.where(initial != 0, np.abs(initial), 1.0)
     cache: dict[bytes, tuple] = {}
     history: list[tuple[float, np.ndarray]] = []
+    refused: list[str] = []  # trial points that are no scene (a kinetic friction force above its breakaway one)
     solves = 0
 
     def evaluate(theta: np.ndarray) -> tuple:
@@ -178,7 +184,17 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
             p = theta * scale
             residuals, columns, fitted = [], [], []
             for test in tests:
-                sc, doc, model = member_with(test.scenario, dict(zip(params, p)))
+                try:
+                    sc, doc, model = member_with(test.scenario, dict(zip(params, p)))
+                except ScenarioError as exc:
+                    if solves == 1:
+                        raise  # the start itself
+                    # a step past what the scene allows: an infinite cost, from which least_squares' trust region
+                    # steps back (it shrinks the step where the residuals are not finite)
+                    refused.append(f"{exc.field}: {exc.message}")
+                    cache.clear()
+                    cache[key] = (np.full(samples, np.inf), None, None)
+                    return cache[key]
                 values, derivatives = _model_channels(test, sc, params, (doc, model))
                 fitted.append(values)
                 for w, channel in zip(test.weights, test.channels):
@@ -235,9 +251,18 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
     message = found.message if converged else (f"stopped after {max_iterations} evaluations (--max-iterations) "
                                                 f"without meeting the tolerance {TOLERANCE:g}; the best point is "
                                                 "written")
+    if refused:
+        message += (f"; {len(refused)} trial point{'s' if len(refused) > 1 else ''} outside what the scene allows "
+                    f"stepped back from (the first: {refused[0]})")
     if not history or not np.array_equal(history[-1][1], estimate):
         history.append((0.5 * float(r @ r), estimate))
     units = tuple(parameter_units(p, tests[0].scenario) or "1" for p in params)
+    data = np.concatenate([w * test.measured.channels[c] for test in tests for w, c in zip(test.weights, test.channels)])
+    unexplained = float(np.linalg.norm(r) / max(float(np.linalg.norm(data)), 1e-300))
+    warning = "" if unexplained <= UNEXPLAINED else (
+        f"the fitted scene leaves {100 * unexplained:.0f} % of the data's weighted RMS unexplained: a local minimum "
+        "(start nearer the answer, or bound the parameters) or a model that cannot make these data; the standard "
+        "errors and intervals assume the model is right")
     return FitResult(
         parameter=tuple(params), units=units, initial=initial, estimate=estimate, lower=lower, upper=upper,
         standard_error=standard_error, covariance=covariance, correlation=correlation, confidence_95=confidence,
@@ -245,4 +270,4 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
         solves=solves, converged=converged, message=message, identifiable=identifiable, condition=condition,
         null_direction=null_direction, history_cost=np.array([c for c, _ in history]),
         history_estimate=np.array([e for _, e in history]), tests=tests, fitted=fitted,
-        wall_time_s=clock.perf_counter() - start)
+        wall_time_s=clock.perf_counter() - start, unexplained=unexplained, warning=warning)

@@ -40,6 +40,7 @@ from smdcli.sweep.family import parameter_value, set_parameter
 
 CENTRAL = (-2.0, -1.0, 1.0, 2.0)  # offsets in units of delta: exact for polynomials of degree 4 (its symmetry)
 FORWARD = (0.0, 1.0, 2.0, 3.0, 4.0)  # where p - delta is not a valid scene (a damper at c = 0): degree 4 too
+BACKWARD = (0.0, -1.0, -2.0, -3.0, -4.0)  # where p + delta is not (a kinetic friction force just below its static one)
 STEPS = (1e-3, 1e-4, 2e-5)  # relative deltas tried, largest first, until the stencil's error is rounding's
 AFFINE_STEP = 1e-2  # relative step of an affine parameter's one difference: exact for any step; larger, less rounding
 EPS = np.finfo(float).eps
@@ -130,19 +131,19 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
 
     if affine(sc, base, path):
         return _affine_derivative(sc, doc, base, grid, path, value, scale, structure, arrays_of)
-    best = None
+    best = refused = None
     for relative in STEPS:
         delta = relative * scale
-        for offsets in (CENTRAL, FORWARD):
+        for offsets in (CENTRAL, FORWARD, BACKWARD):
             doubled = offsets + tuple(2 * o for o in offsets if 2 * o not in offsets)
             try:
                 models = {o: base if o == 0 else _scene_at(sc, doc, path, value + o * delta) for o in doubled}
             except ScenarioError as exc:
                 refused = exc
-                continue  # p - delta is not a scene: the one-sided stencil
+                continue  # p - delta or p + delta is not a scene: a one-sided stencil
             break
         else:
-            raise _unbuildable(path, value, 4 * delta, refused)
+            continue  # no stencil of this step fits between the scene's limits: a smaller one may
         for m in models.values():
             _same_structure(m, structure, grid, path)
         weights = stencil_weights(offsets) / delta
@@ -162,6 +163,8 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
             best = found
         if error <= rounding:
             break
+    if best is None:
+        raise _unbuildable(path, value, 8 * STEPS[-1] * scale, refused)
     return best
 
 

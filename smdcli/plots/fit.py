@@ -42,7 +42,9 @@ def fit_figure(run):
     estimates = ", ".join(f"{p} = {v:.5g}" for p, v in zip(run.parameter[:4], run.estimate[:4]))
     more = f" (+{len(run.parameter) - 4} more)" if len(run.parameter) > 4 else ""
     fig.suptitle(_wrap(f"Fit: {estimates}{more}; RMS weighted residual {run.rms_residual:.3g}"
-                       + ("" if run.converged else " (NOT CONVERGED)"), 100), fontsize=10)
+                       + ("" if run.converged else " (NOT CONVERGED)")
+                       + (f" (leaves {100 * run.unexplained:.0f} % of the data unexplained)" if run.warning else ""),
+                       100), fontsize=10)
     height = 1.2 + 2.6 * len(shown)
     fig.subplots_adjust(left=0.14, right=0.97, top=1 - 0.7 / height, bottom=0.5 / height, hspace=0.35)
     return fig
