@@ -226,3 +226,20 @@ def test_a_fit_steps_back_from_points_that_are_no_scene_and_says_when_it_explain
                ["friction[0].force", "spring[0].k"])
     assert near.converged and abs(near.estimate[0] / 2.0 - 1) <= 1e-6 and abs(near.estimate[1] / 100.0 - 1) <= 1e-6
     assert near.unexplained < 1e-6 and not near.warning
+
+
+def test_data_at_unequal_times_starting_after_the_scene_s_start_fit_the_truth():
+    """120 samples at random times from t = 0.05 s (not uniform, after the scene's start, not on its own 0.03 s
+    grid), read from an exact run on a 1 ms grid: the 1-DOF's k, c and force amplitude from a start 30 % off, to
+    1e-6. The runs from each sample to the next used to lose the sensitivity system's inputs (the amplitude's
+    derivative force acting on the scene itself): a fit to wrong model values."""
+    fine_sc, _, _ = model_of(one_dof(1.6, k=400.0, x0=0.05, end=3.0, step=0.001,
+                                     extra=force_block("sine", amplitude=5.0, omega=14.0)), "fine.toml")
+    truth = smdcli.simulate(fine_sc, method="exact")
+    rows = np.sort(np.random.default_rng(5).choice(np.arange(50, 3001), 120, replace=False))
+    data = Measured("unequal", truth.time[rows], {"m.displacement": truth.displacement[rows, 0]}, {})
+    start_sc, _, _ = model_of(one_dof_scene(k=520.0, c=1.12).replace("amplitude = 5.0", "amplitude = 6.5"),
+                              "start.toml")
+    run = fit([make_test(start_sc, data, None, None)], ["spring[0].k", "damper[0].c", "force[0].amplitude"])
+    assert run.converged, run.message
+    assert np.abs(run.estimate / [400.0, 1.6, 5.0] - 1).max() <= 1e-6

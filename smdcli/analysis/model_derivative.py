@@ -355,13 +355,12 @@ def augmented_model(base: Model, derivatives: list[Derivative]) -> tuple[Model, 
         base, dofs=names, M=M, C=C, K=K, x0=x0, v0=v0, signals=tuple(signals),
         force_dofs=tuple(0 for _ in signals), force_paths=tuple(f"input[{j}]" for j in range(len(signals))),
         force_types=tuple(type(s).__name__ for s in signals), cubic=None, quadratic=None, element_form=False,
-        ground=None, jumps=tuple(jumps), elements=(), added_damping=None, nonsmooth=())
-    # set, not derived: a column may act on several blocks (the ground's -M 1 and its derivative -dM 1), which
-    # force_dofs cannot say; and the modal path's test of classical damping does not apply to a non-symmetric M
-    model.__dict__["B"] = np.array(columns).T.reshape(size, len(columns))
-    # what each input adds to the blocks' absolute accelerations: the ground's a_g (and its derivative) on every DOF
-    model.__dict__["ground_columns"] = np.array(grounds).T.reshape(size, len(grounds))
-    model.__dict__["proportional_damping"] = False
+        ground=None, jumps=tuple(jumps), elements=(), added_damping=None, nonsmooth=(),
+        # given, not derived: a column may act on several blocks (the ground's -M 1 and its derivative -dM 1), which
+        # force_dofs cannot say; and what each input adds to the blocks' absolute accelerations (the ground's a_g and
+        # its derivative on every DOF)
+        inputs=np.array(columns).T.reshape(size, len(columns)),
+        ground_inputs=np.array(grounds).T.reshape(size, len(grounds)))
     return model, scales
 
 

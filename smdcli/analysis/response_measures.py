@@ -398,7 +398,7 @@ def acceleration_rates(s):
     x, v, a = (stack(q, dq) for q, dq in ((s.displacement, s.d_displacement), (s.velocity, s.d_velocity),
                                           (s.acceleration, s.d_acceleration)))
     Minv = np.linalg.inv(stacked.M)
-    B, C, K, G = stacked.B, stacked.C, stacked.K, stacked.__dict__["ground_columns"]
+    B, C, K, G = stacked.B, stacked.C, stacked.K, stacked.ground_inputs
     out = [a + values(stacked.signals, False) @ G.T]
     for left in (False, True):
         u1, u2 = values(first, left), values(second, left)

@@ -64,6 +64,11 @@ class Model:
     elements: tuple[Element, ...] = ()  # the springs and dampers (none in a [system] scene)
     added_damping: np.ndarray | None = None  # [damping]'s part of C
     nonsmooth: tuple[NonsmoothElement, ...] = ()  # hysteretic springs, friction contacts, stops (their laws)
+    # B given whole, where an input acts on several DOFs (a sensitivity system's: the ground's -M 1 and its
+    # derivative), and what each input adds to the DOFs' absolute accelerations: fields, not cached values, so that
+    # a model made from it by dataclasses.replace (a run from a later state, the harmonics split off) keeps them
+    inputs: np.ndarray | None = None
+    ground_inputs: np.ndarray | None = None
 
     def with_matrices(self, **changes) -> Model:
         """This model with other matrices (M, C, K, x0, v0...), its ground jumps made from the new M and C."""
@@ -136,6 +141,8 @@ class Model:
     @cached_property
     def B(self) -> np.ndarray:
         """Input matrix: column j puts force j on its DOF; the ground's acceleration is the effective force -M 1 a_g."""
+        if self.inputs is not None:
+            return self.inputs
         B = np.zeros((self.n, len(self.signals)))
         for j, dof in enumerate(self.force_dofs):
             if dof == GROUND_DOF:
@@ -295,8 +302,11 @@ class Model:
 
     @cached_property
     def proportional_damping(self) -> bool:
-        """C M^-1 K = K M^-1 C (Caughey's condition): the undamped modes decouple the damped system too."""
+        """C M^-1 K = K M^-1 C (Caughey's condition) with M and K symmetric: the undamped modes decouple the damped
+        system too (a sensitivity system's block-triangular M and K have no such modes)."""
         K = self.initial_K
+        if not (_symmetric(self.M) and _symmetric(K)):
+            return False
         C, _, Minv = self.sparse
         CK = C @ (Minv @ cheapest(K))  # dense or CSR alike
         scale = np.abs(self.C).max(initial=0.0) * np.abs(self.Minv).max(initial=0.0) * np.abs(K).max(initial=0.0)
@@ -332,6 +342,11 @@ def _plus_weighted(A, D: np.ndarray, w: np.ndarray):
 
     rows = csr_matrix(D)
     return A + rows.T @ diags(w) @ rows
+
+
+def _symmetric(A) -> bool:
+    """A equals its transpose to rounding (dense or CSR)."""
+    return bool(abs(A - A.T).max() <= 1e-13 * abs(A).max())
 
 
 def _state_matrix(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> np.ndarray:

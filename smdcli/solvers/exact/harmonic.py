@@ -79,7 +79,9 @@ def split(model: Model) -> tuple[Model, Particular] | None:
     keep = [j for j in range(len(model.signals)) if j not in chosen]
     reduced = dataclasses.replace(
         model, signals=tuple(model.signals[j] for j in keep), force_dofs=tuple(model.force_dofs[j] for j in keep),
-        force_paths=tuple(model.force_paths[j] for j in keep), force_types=tuple(model.force_types[j] for j in keep))
+        force_paths=tuple(model.force_paths[j] for j in keep), force_types=tuple(model.force_types[j] for j in keep),
+        inputs=None if model.inputs is None else model.inputs[:, keep],
+        ground_inputs=None if model.ground_inputs is None else model.ground_inputs[:, keep])
     return reduced, particular
 
 
