@@ -42,6 +42,11 @@ def rows_times(q: np.ndarray, A) -> np.ndarray:
     return np.asarray(A.T @ flat.T).T.reshape(q.shape[:-1] + (A.shape[1],))
 
 
+def symmetric(A) -> bool:
+    """A equals its transpose to rounding (dense or CSR)."""
+    return bool(abs(A - A.T).max() <= 1e-13 * abs(A).max())
+
+
 SPARSE_MODES = 20  # a sparse scene's modes: the lowest this many
 
 

@@ -28,7 +28,7 @@ from smdcli.model.mass import mass_solve
 from smdcli.model.modes import RIGID_BODY, Modes, modal_eigenvalues, regime, signed
 from smdcli.model.nonsmooth import NonsmoothElement, check_initial_state, initial_stiffness, nonsmooth_elements
 from smdcli.model.sparse import (assembled, cheapest, dense_file_matrices, gershgorin_omega, is_sparse_scene,
-                                 lowest_modes, rows_times)
+                                 lowest_modes, rows_times, symmetric)
 from smdcli.scenario import Scenario
 
 # A linear model whose decaying eigenvalues spread wider than this is stiff.
@@ -64,9 +64,8 @@ class Model:
     elements: tuple[Element, ...] = ()  # the springs and dampers (none in a [system] scene)
     added_damping: np.ndarray | None = None  # [damping]'s part of C
     nonsmooth: tuple[NonsmoothElement, ...] = ()  # hysteretic springs, friction contacts, stops (their laws)
-    # B given whole, where an input acts on several DOFs (a sensitivity system's: the ground's -M 1 and its
-    # derivative), and what each input adds to the DOFs' absolute accelerations: fields, not cached values, so that
-    # a model made from it by dataclasses.replace (a run from a later state, the harmonics split off) keeps them
+    # B given whole where an input acts on several DOFs (a sensitivity system's), and what each input adds to the
+    # absolute accelerations: fields, not cached values, so that every dataclasses.replace of the model keeps them
     inputs: np.ndarray | None = None
     ground_inputs: np.ndarray | None = None
 
@@ -305,7 +304,7 @@ class Model:
         """C M^-1 K = K M^-1 C (Caughey's condition) with M and K symmetric: the undamped modes decouple the damped
         system too (a sensitivity system's block-triangular M and K have no such modes)."""
         K = self.initial_K
-        if not (_symmetric(self.M) and _symmetric(K)):
+        if not (symmetric(self.M) and symmetric(K)):
             return False
         C, _, Minv = self.sparse
         CK = C @ (Minv @ cheapest(K))  # dense or CSR alike
@@ -342,11 +341,6 @@ def _plus_weighted(A, D: np.ndarray, w: np.ndarray):
 
     rows = csr_matrix(D)
     return A + rows.T @ diags(w) @ rows
-
-
-def _symmetric(A) -> bool:
-    """A equals its transpose to rounding (dense or CSR)."""
-    return bool(abs(A - A.T).max() <= 1e-13 * abs(A).max())
 
 
 def _state_matrix(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> np.ndarray:

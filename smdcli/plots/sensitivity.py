@@ -28,6 +28,7 @@ def sensitivity_figure(s):
     axes[-1].set_xlabel("Time [s]")
     fig.suptitle(f"Sensitivities of {s.scenario.rsplit('/', 1)[-1]}: p dx/dp (the change of x per 100 % of p)"
                  + note, fontsize=10)
-    fig.subplots_adjust(left=0.12, top=1 - 0.5 / (1.0 + 2.0 * len(picked)), hspace=0.15)
+    height = 1.0 + 2.0 * len(picked)  # inches: half an inch above for the title, 0.45 below for the time axis
+    fig.subplots_adjust(left=0.12, top=1 - 0.5 / height, bottom=0.45 / height, hspace=0.15)
     legend_beside(fig, axes[0], fontsize=8)
     return fig
