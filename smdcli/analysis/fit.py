@@ -258,7 +258,8 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
     if not history or not np.array_equal(history[-1][1], estimate):
         history.append((0.5 * float(r @ r), estimate))
     units = tuple(parameter_units(p, tests[0].scenario) or "1" for p in params)
-    data = np.concatenate([w * test.measured.channels[c] for test in tests for w, c in zip(test.weights, test.channels)])
+    data = np.concatenate([w * test.measured.channels[c] for test in tests
+                           for w, c in zip(test.weights, test.channels)])
     unexplained = float(np.linalg.norm(r) / max(float(np.linalg.norm(data)), 1e-300))
     warning = "" if unexplained <= UNEXPLAINED else (
         f"the fitted scene leaves {100 * unexplained:.0f} % of the data's weighted RMS unexplained: a local minimum "

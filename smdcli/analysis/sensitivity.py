@@ -145,7 +145,7 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
     """The sensitivities of a linear, piecewise-linear (yielding, friction, stops) or smooth nonlinear scene's response
     to each parameter path (the sweep's paths), on the
     scenario's output grid or on `grid` (any increasing times from the scenario's start); `timed`: one forward
-    solve of the scene alone is timed beside it (forward_time_s), for the cost's comparison; without `peaks` the
+    run of the scene alone (built and solved) is timed after it (forward_time_s), for the cost's comparison; without `peaks` the
     peaks and their derivatives are left out (nan: a fit reads the histories only); advance(count): a progress
     bar's, over the output times of a smooth scene's integration; built: the scenario's TOML document and model, where
     the caller has them (a fit's trial point)."""
