@@ -24,7 +24,6 @@ import copy
 import dataclasses
 import math
 import re
-import tomllib
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,11 +31,12 @@ import numpy as np
 from smdcli import scenario as scenario_mod
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import Model, build
+from smdcli.model.moved import moved
 from smdcli.model.system import GROUND_DOF
 from smdcli.scenario import Scenario
 from smdcli.shapes.base import Exo, Signal
 from smdcli.shapes.table import Table
-from smdcli.sweep.family import parameter_value, set_parameter
+from smdcli.sweep.family import decoded, parameter_value, set_parameter
 
 CENTRAL = (-2.0, -1.0, 1.0, 2.0)  # offsets in units of delta: exact for polynomials of degree 4 (its symmetry)
 FORWARD = (0.0, 1.0, 2.0, 3.0, 4.0)  # where p - delta is not a valid scene (a damper at c = 0): degree 4 too
@@ -77,7 +77,11 @@ class Derivative:
         return sum(w * (np.asarray(read(m), dtype=float) - first) for w, m in zip(self.weights[1:], self.models[1:]))
 
 
-def _scene_at(sc: Scenario, doc: dict, path: str, value: float) -> Model:
+def _scene_at(sc: Scenario, doc: dict, base: Model, path: str, value: float) -> Model:
+    """The scene's model with the parameter at value: the base's moved where it can be, else built again."""
+    shortcut = moved(base, sc, path, value)
+    if shortcut is not None:
+        return shortcut
     member = copy.deepcopy(doc)
     set_parameter(member, path, value)
     return build(scenario_mod.parse_document(member, sc.text, sc.path))  # the text only names the scenario's source
@@ -111,16 +115,16 @@ def _structure(model: Model, grid: np.ndarray) -> tuple:
 
 
 def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str,
-               base_arrays: list[np.ndarray] | None = None) -> Derivative:
+               base_arrays: list[np.ndarray] | None = None, structure: tuple | None = None) -> Derivative:
     """The model's derivative with respect to one parameter path (base_arrays: _model_arrays of base at the grid's
-    end, where the caller has them); UsageError where the path is not a number of the scene, or moves what has no
-    derivative (a force's discontinuity in time, the model's structure)."""
+    end, structure: _structure of base, where the caller has them); UsageError where the path is not a number of the
+    scene, or moves what has no derivative (a force's discontinuity in time, the model's structure)."""
     if path.startswith(_REFUSED) or path == "zeta":
         raise UsageError(f"--param {path}: not a parameter of the scene (the run's span, its solver and its "
                          "sweep are not differentiated; for zeta give the damper's c)")
     value = parameter_value(doc, path, sc)
     scale = relative_size(value)
-    structure = _structure(base, grid)
+    structure = _structure(base, grid) if structure is None else structure
     t_end = float(grid[-1])
     arrays = {id(base): (base, base_arrays or _model_arrays(base, t_end))}  # the model held: its id stays its own
 
@@ -137,7 +141,7 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
         for offsets in (CENTRAL, FORWARD, BACKWARD):
             doubled = offsets + tuple(2 * o for o in offsets if 2 * o not in offsets)
             try:
-                models = {o: base if o == 0 else _scene_at(sc, doc, path, value + o * delta) for o in doubled}
+                models = {o: base if o == 0 else _scene_at(sc, doc, base, path, value + o * delta) for o in doubled}
             except ScenarioError as exc:
                 refused = exc
                 continue  # p - delta or p + delta is not a scene: a one-sided stencil
@@ -145,7 +149,7 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
         else:
             continue  # no stencil of this step fits between the scene's limits: a smaller one may
         for m in models.values():
-            _same_structure(m, structure, grid, path)
+            _same_structure(m, base, structure, grid, path)
         weights = stencil_weights(offsets) / delta
         wide = stencil_weights(tuple(2 * o for o in offsets)) / delta
         near = [combined(weights, parts) for parts in zip(*(arrays_of(models[o]) for o in offsets))]
@@ -180,7 +184,11 @@ def _unbuildable(path: str, value: float, step: float, refused: ScenarioError) -
                          f"{step:.3g}: no derivative can be taken there)")
 
 
-def _same_structure(model: Model, structure: tuple, grid: np.ndarray, path: str) -> None:
+def _same_structure(model: Model, base: Model, structure: tuple, grid: np.ndarray, path: str) -> None:
+    """UsageError where the model at a stencil point is not the base's structure with other numbers."""
+    if all(getattr(model, name) is getattr(base, name) for name in ("dofs", "signals", "force_dofs", "ground",
+                                                                       "cubic", "quadratic", "nonsmooth")):
+        return  # the base moved (model/moved.py): its numbers alone changed
     if _structure(model, grid) != structure:
         raise UsageError(f"--param {path}: changes the scene's structure, not only its numbers (a force's "
                          "discontinuity moves in time, or the model changes its form): its derivative is not "
@@ -218,14 +226,14 @@ def _affine_derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, p
     for sign in (1.0, -1.0):
         delta = sign * AFFINE_STEP * scale
         try:
-            other = _scene_at(sc, doc, path, value + delta)
+            other = _scene_at(sc, doc, base, path, value + delta)
         except ScenarioError as exc:
             refused = exc
             continue
         break
     else:
         raise _unbuildable(path, value, AFFINE_STEP * scale, refused)
-    _same_structure(other, structure, grid, path)
+    _same_structure(other, base, structure, grid, path)
     weights = np.array([-1.0, 1.0]) / delta
     pair = [arrays_of(base), arrays_of(other)]
     largest = max((float(np.abs(b - a).max(initial=0.0)) for a, b in zip(*pair)), default=0.0) / abs(delta)
@@ -376,9 +384,9 @@ def model_derivatives(sc: Scenario, base: Model, grid: np.ndarray, paths: list[s
     """Each parameter's model derivative (paths as the sweep takes them; doc: the scenario's TOML document where the
     caller has it); UsageError for a path given twice."""
     check_once(paths)
-    doc = tomllib.loads(sc.text) if doc is None else doc
-    base_arrays = _model_arrays(base, float(grid[-1]))
-    return [derivative(sc, doc, base, grid, path, base_arrays) for path in paths]
+    doc = decoded(sc.text) if doc is None else doc  # decoded once per text; _scene_at copies before it edits
+    base_arrays, structure = _model_arrays(base, float(grid[-1])), _structure(base, grid)
+    return [derivative(sc, doc, base, grid, path, base_arrays, structure) for path in paths]
 
 
 def relative_size(value: float) -> float:

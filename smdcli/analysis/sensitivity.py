@@ -26,7 +26,7 @@ from smdcli.scenario import Scenario
 from smdcli.resources import small_blas
 from smdcli.solvers.base import Tolerances
 from smdcli.solvers.ground import across_jumps
-from smdcli.solvers.peaks import jump_times, located_peaks, quintic_at
+from smdcli.solvers.peaks import jump_times, located_peaks, quintic_each
 from smdcli.solvers.registry import get_solver
 
 QUANTITIES = {"displacement": "m", "velocity": "m/s", "acceleration": "m/s^2"}
@@ -224,19 +224,14 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
     events = jump_times(base, grid) if run is None else np.array([e[0] for e in run.events], dtype=float)
     peaks, at = located_peaks(grid, nominal["displacement"], nominal["velocity"], nominal["acceleration"], events,
                               with_times=True)
-    d_peaks = np.full((P, n), np.nan)
-    for i in range(n):
-        if peaks[i] == 0:
-            notes.append(f"{base.dofs[i]} does not move: its peak |x| has no derivative (written as nan)")
-            continue
-        sign = np.sign(quintic_at(grid, nominal["displacement"][:, i], nominal["velocity"][:, i],
-                                  nominal["acceleration"][:, i], np.array([at[i]]))[0])
-        if run is not None:  # on the exact flow at the peak's time
-            d_peaks[:, i] = sign * run.at(float(at[i]))[:, i] / scales
-            continue
-        for p in range(P):
-            d_peaks[p, i] = sign * quintic_at(grid, derived["displacement"][p, :, i], derived["velocity"][p, :, i],
-                                              derived["acceleration"][p, :, i], np.array([at[i]]))[0]
+    sign = np.sign(quintic_each(grid, nominal["displacement"], nominal["velocity"], nominal["acceleration"], at))
+    if run is None:  # on each DOF's quintic at its peak's time
+        d_peaks = sign * quintic_each(grid, derived["displacement"], derived["velocity"], derived["acceleration"], at)
+    else:  # on the exact flow at the peak's time
+        d_peaks = sign * np.stack([run.at(float(at[i]))[:, i] for i in range(n)], axis=1) / scales[:, None]
+    for i in np.flatnonzero(peaks == 0):
+        notes.append(f"{base.dofs[i]} does not move: its peak |x| has no derivative (written as nan)")
+        d_peaks[:, i] = np.nan
     found = _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_peaks, accuracy,
                     tuple(notes), method)
     found.event_times = events

@@ -58,6 +58,23 @@ def quintic_at(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray, at
     return _value(c, np.clip((at - time[k]) / h, 0.0, 1.0))
 
 
+def quintic_each(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Each column read at its own time: x, v, a (..., N, n) and at (n,) give the (..., n) values of column i at
+    at[i] on the quintic Hermite interpolant of its samples (quintic_at's, for many histories at once)."""
+    if len(time) < 2:
+        return np.asarray(x[..., 0, :], dtype=float)
+    k = np.clip(np.searchsorted(time, at, side="right") - 1, 0, len(time) - 2)
+    columns = np.arange(len(at))
+    h = time[k + 1] - time[k]
+    c = _quintics(x[..., k, columns], v[..., k, columns], a[..., k, columns],
+                  x[..., k + 1, columns], v[..., k + 1, columns], a[..., k + 1, columns], h)
+    s = np.clip((at - time[k]) / h, 0.0, 1.0)
+    total = c[..., 5]
+    for power in range(4, -1, -1):
+        total = total * s + c[..., power]
+    return total
+
+
 def _interval_peaks(x0, v0, a0, x1, v1, a1, h) -> tuple[np.ndarray, np.ndarray]:
     """The largest |x| on each interval of the quintic Hermite interpolant, nan where the quintic and the cubic (x, v
     only) disagree by more than what locating the peak could gain (the interpolant not good there), and where in

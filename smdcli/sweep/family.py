@@ -262,7 +262,7 @@ def scenario_with(sc: Scenario, values: dict[str, float]) -> Scenario:
 def member_with(sc: Scenario, values: dict[str, float]) -> tuple[Scenario, dict, Model]:
     """scenario_with's scenario, with its TOML document and its model (built to validate it): what a search that
     visits hundreds of points would otherwise parse and build again."""
-    doc = copy.deepcopy(_document(sc.text))
+    doc = copy.deepcopy(decoded(sc.text))
     for path, value in values.items():
         set_parameter(doc, path, float(value))
     member, model = _validated_model(doc, sc, ", ".join(f"{p} = {v:.6g}" for p, v in values.items()))
@@ -270,7 +270,7 @@ def member_with(sc: Scenario, values: dict[str, float]) -> tuple[Scenario, dict,
 
 
 @lru_cache(maxsize=16)
-def _document(text: str) -> dict:
+def decoded(text: str) -> dict:
     """A scenario's TOML decoded once (callers copy before they edit)."""
     return tomllib.loads(text)
 

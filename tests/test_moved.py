@@ -1,0 +1,70 @@
+"""model/moved.py: a linear scene's model with one structural number moved is the model build makes of the
+scenario with that number, on every bundled scene it applies to (plain, Rayleigh, modal damping, ground jumps)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import bundled, model_of, one_dof
+from smdcli.model import build
+from smdcli.model.moved import moved
+from smdcli.sweep.family import scenario_with
+
+SCENES = ["two_dof_forced", "three_dof_forced", "three_storey_shaker", "five_storey_building", "shear_frame_record",
+          "quarter_car_bump", "five_storey_tmd"]
+
+
+def _paths(sc, model) -> list[str]:
+    """Every path moved() takes in the scene: each mass by name and by index, each linear spring's k and damper's c."""
+    paths = []
+    for i, name in enumerate(model.dofs):
+        paths += [f"mass.{name}.m", f"mass[{i}].m", f"mass.{name}.x0", f"mass[{i}].v0"]
+    paths += [f"{e.name}.{'k' if e.kind == 'spring' else 'c'}" for e in model.elements if e.law == "linear"]
+    return paths
+
+
+def _now(model, path: str) -> float:
+    """The model's number at a mass's m, a spring's k or a damper's c path."""
+    owner = path.rpartition(".")[0]
+    if owner.startswith("mass"):
+        i = int(owner[5:-1]) if owner.startswith("mass[") else model.dofs.index(owner[5:])
+        return float(model.M[i, i])
+    return next(e.coef for e in model.elements if e.name == owner)
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> float:
+    """The largest difference relative to the larger array's largest entry."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    return float(np.abs(a - b).max(initial=0.0)) / max(float(np.abs(a).max(initial=0.0)),
+                                                        float(np.abs(b).max(initial=0.0)), 1e-300)
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_a_moved_model_is_the_model_built_with_the_number(name):
+    sc, base, _ = bundled(name)
+    for path in _paths(sc, base):
+        value = 1.3 * _now(base, path) if path.endswith((".m", ".k", ".c")) else 0.37
+        fast = moved(base, sc, path, value)
+        built = build(scenario_with(sc, {path: value}))
+        assert fast is not None, path
+        for array in ("M", "C", "K", "x0", "v0"):
+            assert _same(getattr(fast, array), getattr(built, array)) < 1e-13, (path, array)
+        if built.added_damping is not None:
+            assert _same(fast.added_damping, built.added_damping) < 1e-13, path
+        assert len(fast.jumps) == len(built.jumps)
+        for (t, dx, dv), (u, ex, ev) in zip(fast.jumps, built.jumps):
+            assert t == u and _same(dx, ex) < 1e-13 and _same(dv, ev) < 1e-13, path
+        assert [e.coef for e in fast.elements] == pytest.approx([e.coef for e in built.elements], rel=1e-15)
+
+
+def test_a_scene_only_build_can_make_is_left_to_it():
+    sc, base, _ = model_of(one_dof(0.5, law="quadratic"))
+    assert moved(base, sc, "spring[0].k", 30.0) is None  # nonlinear: its numbers live beside K
+    sc, base, _ = model_of(one_dof(0.5))
+    assert moved(base, sc, "mass.nobody.m", 2.0) is None
+    assert moved(base, sc, "mass[3].m", 2.0) is None
+    assert moved(base, sc, "spring[0].k", -1.0) is None  # not a scene: build's refusal turns the stencil one-sided
+    assert moved(base, sc, "mass.m.m", 0.0) is None
+    assert moved(base, sc, "force[0].amplitude", 2.0) is None
+    assert moved(base, sc, "spring[0].k", 30.0).K[0, 0] == pytest.approx(30.0, rel=1e-15)
