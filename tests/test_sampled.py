@@ -221,3 +221,24 @@ units = "g"
     reference = np.array(reference)
     error = np.abs(result.displacement - reference).max() / np.abs(reference).max()
     assert error <= 1e-13 and error <= result.stats.stated_accuracy, error
+
+
+@pytest.mark.parametrize("systems", [1, 3])
+@pytest.mark.parametrize("shared", [True, False])
+def test_the_blocked_recurrence_is_the_step_by_step_one(systems, shared, monkeypatch):
+    # y_(k+1) = E y_k + f_k taken one step at a time, against the blocks: chunks of a few blocks (the chunk's end
+    # carried to the next), every step wanted and only some, E one for all systems or one each
+    monkeypatch.setattr(sampled, "CHUNK_ENTRIES", 3 * 64 * 4 * systems)
+    rng = np.random.default_rng(7)
+    E = rng.normal(size=(1 if shared else systems, 4, 4)) * 0.45
+    steps = 1024  # whole blocks: the last output is the last block's end, not one of its steps
+    forced, start = rng.normal(size=(steps, systems, 4)), rng.normal(size=(systems, 4))
+    y, want = start.copy(), [start.copy()]
+    for k in range(steps):
+        y = np.einsum("pij,pj->pi", np.broadcast_to(E, (systems, 4, 4)), y) + forced[k]
+        want.append(y.copy())
+    want = np.array(want)
+    for rows in (np.arange(steps + 1), np.array([0, 5, 191, 192, 193, 640, 999, 1024]), np.array([1024])):
+        got, _ = sampled.recurrence(E, forced, start, rows)
+        # each block's rounding against the plain loop's: a few hundred products of norm below 2
+        assert np.abs(got - want[rows]).max() <= 1e-12 * np.abs(want).max()

@@ -75,8 +75,8 @@ def table_states(blocks, times: np.ndarray, offset: int) -> np.ndarray:
 def applied(E: np.ndarray, y: np.ndarray) -> np.ndarray:
     """E_p y_p for each system p: E (P, s, s), y (..., P, s). One matrix product for one system; for many small ones
     a multiply-add per state component over all of them (einsum took 2 ms a call on 1,000 modes)."""
-    if E.shape[0] == 1:
-        return y @ E[0].T
+    if E.shape[0] == 1:  # one product over every leading axis: a batch of tiny ones costs a call each
+        return (y.reshape(-1, y.shape[-1]) @ E[0].T).reshape(y.shape)
     out = y[..., 0, None] * E[:, :, 0]
     for t in range(1, E.shape[2]):
         out += y[..., t, None] * E[:, :, t]
@@ -111,18 +111,23 @@ def recurrence(E: np.ndarray, forced: np.ndarray, start: np.ndarray, rows: np.nd
         starts[0] = y
         for b in range(count):
             starts[b + 1] = applied(powers[J], starts[b]) + within[b, J]
-        if P == 1:  # one product for all blocks and powers
-            free = (starts[:count, 0] @ powers[:J, 0].transpose(0, 2, 1)).transpose(1, 0, 2)[:, :, None]
-            states = within[:, :J] + free
+        if E.shape[0] == 1:  # one E: one product for all blocks, systems and powers
+            free = (starts[:count].reshape(count * P, s) @ powers[:J, 0].transpose(0, 2, 1))  # (J, count P, s)
+            states = within[:, :J] + free.reshape(J, count, P, s).transpose(1, 0, 2, 3)
         else:
             states = within[:, :J].copy()
             for j in range(J):
                 states[:, j] += applied(powers[j], starts[:count])
         states = states.reshape(count * J, P, s)
-        wanted = (rows >= first) & ((rows < last) | (last == steps))
-        inside = rows[wanted] - first
-        out[wanted] = np.where((inside < count * J)[:, None, None], states[np.minimum(inside, count * J - 1)],
-                               starts[count])
+        lo = int(np.searchsorted(rows, first))
+        hi = len(rows) if last == steps else int(np.searchsorted(rows, last))
+        inside = rows[lo:hi] - first
+        held = int(np.searchsorted(inside, count * J))  # rows past the chunk's blocks: its end, the next start
+        if held and inside[held - 1] - inside[0] == held - 1:  # every step wanted: a slice, not a gather
+            out[lo:lo + held] = states[inside[0]:inside[0] + held]
+        else:
+            out[lo:lo + held] = states[inside[:held]]
+        out[lo + held:hi] = starts[count]
         y = starts[count]  # a chunk is whole blocks: its end is the next block's start
     return out, 2 * J + -(-steps // J)
 
