@@ -31,9 +31,6 @@ from smdcli.solvers.registry import get_solver
 
 QUANTITIES = {"displacement": "m", "velocity": "m/s", "acceleration": "m/s^2"}
 SMOOTH_ERROR = 100  # a smooth scene's stated error, in units of its rtol: DOP853's global error over its local one
-SMOOTH_METHOD = ("forward sensitivity equations s' = J s + df/dp integrated beside the state by DOP853 (error "
-                 "controlled on both, restarted at force discontinuities and at the laws' kinks), J analytic, df/dp "
-                 "from the model at the parameter's stencil points")
 EVENT_METHOD = ("exact, event to event: between events the scene and its sensitivity equations solved together by "
                 "the matrix exponential; at each event its time's derivative from the guard it crosses and the "
                 "state's jump across it (the saltation), internal variables (plastic deformation) carried with "
@@ -191,8 +188,7 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
         blocks, stated, run = _events(base, derivatives, grid)
         method = EVENT_METHOD
     else:
-        blocks, stated, dense = _smooth(sc, base, derivatives, grid, advance)
-        method = SMOOTH_METHOD
+        blocks, stated, dense, method = _smooth(sc, base, derivatives, grid, advance)
     scales = np.array([relative_size(d.value) for d in derivatives])
     nominal = {q: np.ascontiguousarray(b[:, 0]) for q, b in blocks.items()}
     derived = {q: np.divide(np.moveaxis(b[:, 1:], 1, 0), scales[:, None, None],  # one pass into (P, N, n)
@@ -302,14 +298,15 @@ def _events(base, derivatives: list, grid: np.ndarray) -> tuple[dict, float, obj
             "acceleration": stacked(a, d_a)}, stated, run
 
 
-def _smooth(sc: Scenario, base, derivatives: list, grid: np.ndarray, advance=None) -> tuple[dict, float]:
+def _smooth(sc: Scenario, base, derivatives: list, grid: np.ndarray, advance=None) -> tuple:
     """The same blocks for a smooth nonlinear scene, by the forward sensitivity equations (smooth_sensitivity.py)
-    at rtol 1e-9 or the scenario's tighter one; its stated accuracy SMOOTH_ERROR times that rtol."""
+    at rtol 1e-9 or the scenario's tighter one; its stated accuracy SMOOTH_ERROR times that rtol, its dense
+    accelerations and how the equations were integrated."""
     from smdcli.analysis.smooth_sensitivity import RTOL, smooth_sensitivities
 
     rtol = min(RTOL, sc.solver.rtol)
     scales = np.array([relative_size(d.value) for d in derivatives])
-    y, S, rates, d_rates, rates_at = smooth_sensitivities(base, derivatives, scales, grid, rtol, advance)
+    y, S, rates, d_rates, rates_at, method = smooth_sensitivities(base, derivatives, scales, grid, rtol, advance)
     n, N = base.n, len(grid)
 
     def stacked(nominal, derived):  # (N, n) and (N, n, P) -> (N, P + 1, n)
@@ -322,7 +319,7 @@ def _smooth(sc: Scenario, base, derivatives: list, grid: np.ndarray, advance=Non
         rate, d_rate = rates_at(t, left)
         return rate[n:2 * n], d_rate[n:2 * n].T / scales[:, None]
     acceleration_at.breaks = rates_at.breaks
-    return blocks, SMOOTH_ERROR * rtol, acceleration_at
+    return blocks, SMOOTH_ERROR * rtol, acceleration_at, method
 
 
 def _forward_time(sc: Scenario, grid: np.ndarray) -> float:

@@ -1,7 +1,11 @@
 """Sensitivities of a smooth nonlinear scene (cubic springs, quadratic dampers, Bouc-Wen springs): the forward
 sensitivity equations s' = J(t, y) s + df/dp integrated beside the state y = [x, v, q] (q the laws' internal
-variables) by DOP853, the error controlled on state and sensitivities together, restarted at the forces'
-discontinuities and wherever a law's right-hand side has a kink (a Bouc-Wen rate or z changing sign).
+variables), the error controlled on state and sensitivities together.
+
+Where no parameter moves M, by the compiled kernel (smdcli.kernels.sensitivity: DOP853, restarted at the forces'
+discontinuities, every kink of a law landed on: a step ends just past it, on the branch of J it started on). Else
+in Python by scipy's DOP853, restarted at the forces' discontinuities and wherever a law's right-hand side has a
+kink (a Bouc-Wen rate or z changing sign): the tests' second way.
 
 J is analytic: the model's tangent for cubic springs and quadratic dampers, each law's smooth_jacobian for its
 tension and internal rates. df/dp is the right-hand side of the models at the parameter's stencil points
@@ -21,6 +25,13 @@ from smdcli.errors import SolverFailed
 from smdcli.model import Model
 
 RTOL = 1e-9  # smd sensitivity's default for smooth nonlinear scenes (a scenario's tighter rtol applies)
+COMPILED = True  # the compiled kernel where it takes the scene; the Python integration (the tests' second way) else
+COMPILED_METHOD = ("forward sensitivity equations s' = J s + df/dp integrated beside the state by compiled DOP853 "
+                   "(error controlled on both, restarted at force discontinuities, every output time landed on), J "
+                   "analytic, df/dp from the model at the parameter's stencil points")
+PYTHON_METHOD = ("forward sensitivity equations s' = J s + df/dp integrated beside the state by DOP853 (error "
+                 "controlled on both, restarted at force discontinuities and at the laws' kinks), J analytic, df/dp "
+                 "from the model at the parameter's stencil points (a parameter that moves M: in Python)")
 
 
 def smooth_refusal(model: Model) -> str | None:
@@ -178,12 +189,16 @@ def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gr
         y, S = Y[:size], Y[size:].reshape(size, P)
         return np.concatenate([flow.f(t, y), (flow.jacobian(t, y) @ S + parameter_rates(t, y)).ravel()])
 
+    cuts = np.concatenate([[grid[0]], model.breakpoints(float(grid[0]), float(grid[-1])), [grid[-1]]])
+    if COMPILED and not any(np.any(dM) for dM in masses):  # a mass moves M^-1: the accelerations' stencil is not exact
+        y, S, rates, d_rates = compiled_sensitivities(flow, points, weights, y0, s0, grid, cuts, rtol)
+        if advance is not None:
+            advance(len(grid))
+        return y, S, rates, d_rates, _resumed(grid, y, S, rhs, rtol, flow, parameter_rates, cuts), COMPILED_METHOD
     # a first pass of the state alone sets the absolute tolerances: rtol of each block's peak, a thousandth of it
     peak = np.abs(solve_ivp(flow.f, (grid[0], grid[-1]), y0, method="DOP853", rtol=1e-6, atol=1e-12,
                             t_eval=grid).y).max(axis=1)
-    floor = np.maximum(peak, 1e-12 * max(peak.max(initial=0.0), 1e-300))
-    atol = np.concatenate([floor, np.repeat(floor, P)]) * rtol * 1e-3
-    cuts = np.concatenate([[grid[0]], model.breakpoints(float(grid[0]), float(grid[-1])), [grid[-1]]])
+    atol = _absolute(peak, P, rtol)
     kinks = flow.kink_rows()
     Y = np.empty((len(grid), size * (1 + P)))
     state = np.concatenate([y0, s0.ravel()])
@@ -227,7 +242,71 @@ def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gr
         y_t, S_t = Y_t[:size], Y_t[size:].reshape(size, P)
         return flow.f(t, y_t), flow.jacobian(t, y_t) @ S_t + parameter_rates(t, y_t)
     rates_at.breaks = np.array([b for _, b, _ in pieces[:-1]], dtype=float)  # where one piece ends, the next starts
-    return y, S, rates, d_rates, rates_at
+    return y, S, rates, d_rates, rates_at, PYTHON_METHOD
+
+
+def _absolute(peak: np.ndarray, P: int, rtol: float) -> np.ndarray:
+    """Absolute tolerances of [y, S] from the state's peaks: rtol of each component's peak, a thousandth of it."""
+    floor = np.maximum(peak, 1e-12 * max(peak.max(initial=0.0), 1e-300))
+    return np.concatenate([floor, np.repeat(floor, P)]) * rtol * 1e-3
+
+
+def compiled_sensitivities(flow: _Flow, points: list, weights: list, y0: np.ndarray, s0: np.ndarray,
+                           grid: np.ndarray, cuts: np.ndarray, rtol: float):
+    """(y, S, y', S') on the grid by the compiled kernel (smdcli.kernels.sensitivity), the models at each parameter's
+    stencil points handed to it as arrays; a first run of the state alone at rtol 1e-6 sets the tolerances."""
+    from smdcli.solvers.sensitivity_run import run_sensitivities
+
+    base = _arrays(flow)
+    P, s = len(points), len(y0)
+    extra = base.ns_acc  # the energy terms ride along, out of the error's control: nothing here reads them
+    stencil = [(p, w, _arrays(f)) for p, (ws, fs) in enumerate(zip(weights, points)) for w, f in zip(ws, fs)
+               if f is not flow]  # the scene's own point adds f - f: nothing
+
+    def run(start, tolerance, atol, with_models):
+        return run_sensitivities(base, stencil if with_models else [], start, grid, cuts, tolerance, atol,
+                                 flow.model.source)
+
+    state0 = np.concatenate([y0, np.zeros(extra)])
+    peak = np.abs(run(state0, 1e-6, np.concatenate([np.full(s, 1e-12), np.full(extra, np.inf)]), False)[0][:, :s])
+    atol = _absolute(peak.max(axis=0), P, rtol)
+    atol = np.concatenate([atol[:s], np.full(extra, np.inf), atol[s:]])
+    out, rates = run(np.concatenate([state0, s0.ravel()]), rtol, atol, True)
+    size, N = s + extra, len(grid)
+    return (out[:, :s], out[:, size:].reshape(N, s, P), rates[:, :s], rates[:, size:].reshape(N, s, P))
+
+
+def _arrays(flow: _Flow):
+    """The kernels' arrays of a flow's model in its one mode (smooth models' own, or a SmoothScene's mode)."""
+    from smdcli.kernels.arrays import model_arrays
+
+    if not flow.elements:
+        return model_arrays(flow.model)
+    from smdcli.solvers.events.compiled_modes import mode_arrays, scene_arrays
+    from smdcli.solvers.events.smooth_scene import SmoothScene
+
+    scene = SmoothScene(flow.model)
+    return mode_arrays(scene_arrays(scene), scene, scene.mode(flow.states), flow.states)
+
+
+def _resumed(grid: np.ndarray, y: np.ndarray, S: np.ndarray, rhs, rtol: float, flow: _Flow, parameter_rates,
+             cuts: np.ndarray):
+    """rates_at for a compiled run: (y', dy'/dp * scale) at any time, integrated in Python from the output time
+    before it (the state is continuous: left and right limits differ only in the forces, read at t)."""
+    from scipy.integrate import solve_ivp
+
+    size, P = y.shape[1], S.shape[2]
+
+    def rates_at(t: float, left: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        k = min(max(int(np.searchsorted(grid, t, side="right")) - 1, 0), len(grid) - 1)
+        Y = np.concatenate([y[k], S[k].ravel()])
+        if t > grid[k]:
+            Y = solve_ivp(rhs, (float(grid[k]), t), Y, method="DOP853", rtol=rtol,
+                          atol=_absolute(np.abs(y).max(axis=0), P, rtol)).y[:, -1]
+        y_t, S_t = Y[:size], Y[size:].reshape(size, P)
+        return flow.f(t, y_t), flow.jacobian(t, y_t) @ S_t + parameter_rates(t, y_t)
+    rates_at.breaks = cuts[1:-1]
+    return rates_at
 
 
 def _until_kink(rhs, t: float, end: float, state: np.ndarray, rtol: float, atol: np.ndarray, wanted: np.ndarray,

@@ -224,18 +224,24 @@ def reversal(m, y, y_new, f, f_new, h):
         r0, r1 = relative(y, a, b, n), relative(y_new, a, b, n)
         if r0 * r1 >= 0.0:
             continue
-        d0, d1 = h * relative(f, a, b, n), h * relative(f_new, a, b, n)
-        lo, hi = 0.0, first
-        for _ in range(48):
-            s = 0.5 * (lo + hi)
-            u = 1.0 - s
-            value = (r0 * (1 + 2 * s) + d0 * s) * u * u + (r1 * (3 - 2 * s) - d1 * u) * s * s
-            if value * r0 > 0.0:
-                lo = s
-            else:
-                hi = s
-        first = hi
+        first = hermite_crossing(r0, r1, h * relative(f, a, b, n), h * relative(f_new, a, b, n), first)
     return first
+
+
+@no_alloc
+def hermite_crossing(r0, r1, d0, d1, first):
+    """Where in [0, first] the cubic Hermite interpolant of a quantity (values r0, r1 of opposite signs at the
+    step's ends, slopes d0, d1 over the step) changes sign, bracketed by bisection and returned at its far side."""
+    lo, hi = 0.0, first
+    for _ in range(48):
+        s = 0.5 * (lo + hi)
+        u = 1.0 - s
+        value = (r0 * (1 + 2 * s) + d0 * s) * u * u + (r1 * (3 - 2 * s) - d1 * u) * s * s
+        if value * r0 > 0.0:
+            lo = s
+        else:
+            hi = s
+    return hi
 
 
 @no_alloc

@@ -93,7 +93,7 @@ def bouc_wen_rate(p, z, rate):
 
 
 @no_alloc
-def _partials(p, z, rate):
+def bouc_wen_partials(p, z, rate):
     """(d z_rate / d z, d z_rate / d d')."""
     size = abs(z)
     sign_z = 1.0 if z >= 0 else -1.0
@@ -113,14 +113,14 @@ def z_step(p, z_old, d_old, d_new, h):
     start = bouc_wen_rate(p, z_old, rate)
     z = z_old + h * start
     for _ in range(50):
-        by_z, _ = _partials(p, z, rate)
+        by_z, _ = bouc_wen_partials(p, z, rate)
         f = z - z_old - 0.5 * h * (start + bouc_wen_rate(p, z, rate))
         step = f / (1.0 - 0.5 * h * by_z)
         z -= step
         if abs(step) <= 1e-15 * max(abs(z), abs(z_old), 1e-300):
             break
-    by_z, by_rate = _partials(p, z, rate)
-    _, by_rate_old = _partials(p, z_old, rate)
+    by_z, by_rate = bouc_wen_partials(p, z, rate)
+    _, by_rate_old = bouc_wen_partials(p, z_old, rate)
     return z, 0.5 * (by_rate_old + by_rate) / (1.0 - 0.5 * h * by_z)
 
 

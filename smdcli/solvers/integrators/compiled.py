@@ -112,6 +112,16 @@ def _tiny_run(family: str) -> None:
               pair, one, np.arange(2, dtype=np.int64), np.array([0, 1], dtype=np.int64), np.ones(2), np.zeros(2),
               np.zeros((2, 2)), np.zeros((2, 2)), np.zeros(3, dtype=np.int64), np.zeros(1))
         return
+    if family == "sensitivity":  # the state alone (no parameter's stencil), two output times
+        import numba
+
+        from smdcli.kernels.rhs import work_size
+
+        arrays = model_arrays(tiny)
+        models = [] if numba.config.DISABLE_JIT else numba.typed.List.empty_list(numba.typeof(arrays))
+        entry(arrays, models, np.zeros(0), np.zeros(0, dtype=np.int64), y0.copy(), grid, grid, 1e-3, np.full(2, 1e-6),
+              10, np.zeros((2, 2)), np.zeros((2, 2)), np.zeros(work_size(arrays)), np.zeros(3, dtype=np.int64))
+        return
     if family.startswith("modes:"):
         from smdcli.kernels.rhs import work_size
 
@@ -139,17 +149,18 @@ def _entry(family: str):
     module, name = {"erk": ("erk", "integrate"), "fixed": ("fixed", "march"), "stiff": ("stiff", "integrate"),
                     "radau": ("radau", "integrate"), "bdf": ("bdf", "integrate"), "rhs": ("rhs", "state_rhs"),
                     "return_mapping": ("return_mapping", "march"), "banded": ("banded", "march"),
-                    "taylor": ("taylor", "integrate"), "yielding": ("yielding", "run")}.get(family, (family.removeprefix("modes:"), "integrate_mode"))  # modes:MODULE: its mode kernel
+                    "taylor": ("taylor", "integrate"), "yielding": ("yielding", "run"),
+                    "sensitivity": ("sensitivity", "integrate")}.get(family, (family.removeprefix("modes:"), "integrate_mode"))  # modes:MODULE: its mode kernel
     return getattr(importlib.import_module(f"smdcli.kernels.{module}"), name)
 
 
 KERNEL_FAMILIES = ("erk", "fixed", "stiff", "radau", "bdf", "rhs", "modes:events", "modes:radau", "modes:bdf",
-                   "modes:stiff", "return_mapping", "banded", "taylor", "yielding")
+                   "modes:stiff", "return_mapping", "banded", "taylor", "yielding", "sensitivity")
 _warmed: set[str] = set()
 # two chains of kernel families that share compiled parts, each compiled in a child process of its own (3.8 minutes
 # for both on a 2-core machine, measured 2026-11-29; stiff alone took 139 s, radau 71 s, bdf 63 s, erk 59 s)
 COMPILE_CHAINS = (("stiff", "modes:stiff", "erk", "rhs", "modes:events", "fixed", "banded"),
-                  ("radau", "modes:radau", "bdf", "modes:bdf", "taylor", "return_mapping", "yielding"))
+                  ("radau", "modes:radau", "bdf", "modes:bdf", "taylor", "return_mapping", "yielding", "sensitivity"))
 
 
 def compile_side_by_side(families=KERNEL_FAMILIES) -> None:

@@ -1,0 +1,267 @@
+"""Compiled forward sensitivities of a smooth nonlinear scene: the state y = [x, v, q, energy] and its parameter
+sensitivities S = dy/dp (over [x, v, q], one column per parameter) integrated together by Dormand-Prince 8(5,3),
+the error controlled on both, every output time landed on.
+
+S' = J(t, y) S + df/dp. J is analytic: the linear rows, the cubic springs' and quadratic dampers' tangents, the
+smooth laws' tensions (Bouc-Wen's (1 - alpha) k z, regularized friction) and Bouc-Wen's internal rate. df/dp is
+the right-hand side of the scene's models at each parameter's stencil points (models, weights and the parameter
+each belongs to), as differences from the scene's own: exact where the parameter enters affinely.
+
+Must not import: solvers, sweep, io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from smdcli.elements.bouc_wen import SMOOTH_BOUC_WEN
+from smdcli.elements.friction import SMOOTH_STRIBECK, SMOOTH_TANH
+from smdcli.kernels import tableaus
+from smdcli.kernels.arrays import CUBIC_SPRING
+from smdcli.kernels.compiler import kernel, no_alloc
+from smdcli.kernels.erk import (DOP853, MAX_FACTOR, MIN_FACTOR, NOT_FINITE, OK, SAFETY, STEP_BUDGET,
+                                TOO_SMALL_STEP, _error_norm, axpy, assign, hermite_crossing, reversal, scaled_rms)
+from smdcli.kernels.rhs import rhs
+
+STAGES = tableaus.DOP853_STAGES
+KINK_MARGIN = 1e-8  # how far past a kink (a fraction of the step) a step ends: past it for sure, its branch held
+LANDINGS = 12  # tries a step may take to end just past a kink (each found on the last try's interpolant)
+A, B, C = tableaus.DOP853_A, tableaus.DOP853_B, tableaus.DOP853_C
+
+
+@no_alloc
+def frozen_partials(p, z, rate, sign_rate, sign_z):
+    """Bouc-Wen's (d z_rate / d z, d z_rate / d d') with |d'| and |z| read on the sides sign_rate and sign_z: the
+    branch a step keeps from its start, so that J has no jump inside it (rhs.bouc_wen_partials, signs given)."""
+    size = sign_z * z
+    power = size ** (p[4] - 1) if size > 0 or p[4] > 1 else 1.0
+    by_z = -p[2] * sign_rate * rate * p[4] * power - p[3] * rate * p[4] * power * sign_z
+    by_rate = p[1] - p[2] * sign_rate * power * z - p[3] * size ** p[4]
+    return by_z, by_rate
+
+
+@no_alloc
+def branches(m, y, f, signs):
+    """Each Bouc-Wen element's side of its two kinks at (y, f): the signs of its rate and of its z, where one is
+    zero the sign it moves to (its own rate's), as the step from y keeps them."""
+    n = m.n
+    for e in range(len(m.ns_belt)):
+        if m.ns_law[e] != SMOOTH_BOUC_WEN:
+            continue
+        rate, slope = m.ns_belt[e], 0.0
+        for i in range(n):
+            rate += m.ns_R[e, i] * y[n + i]
+            slope += m.ns_R[e, i] * f[n + i]
+        z = 2 * n + int(m.ns_par[e, 5])
+        signs[e, 0] = 1.0 if rate > 0 or rate == 0 and slope >= 0 else -1.0
+        signs[e, 1] = 1.0 if y[z] > 0 or y[z] == 0 and f[z] >= 0 else -1.0
+
+
+@no_alloc
+def exact_jacobian(m, y, J, dwork, signs):
+    """J = d rhs / d [x, v, q] at y (s x s, s = 2n + q), analytic, each Bouc-Wen element on the side of its kinks
+    that signs (E, 2: of its rate, of its z) holds for the step; dwork (n, s) is scratch for the forces' rows."""
+    n = m.n
+    s = 2 * n + m.ns_q
+    for i in range(s):
+        for c in range(s):
+            J[i, c] = 0.0
+    for i in range(n):
+        for c in range(s):
+            dwork[i, c] = 0.0
+        J[i, n + i] = 1.0
+        for k in range(m.a_ptr[i], m.a_ptr[i + 1]):
+            J[n + i, m.a_idx[k]] += m.a_val[k]
+    for e in range(len(m.el_law)):  # work[a] -= g(d), work[b] += g(d), d = y[a] - y[b] (of x or of v)
+        a, b = m.el_a[e], m.el_b[e]
+        offset = 0 if m.el_law[e] == CUBIC_SPRING else n
+        d = (y[offset + a] if a >= 0 else 0.0) - (y[offset + b] if b >= 0 else 0.0)
+        slope = 3 * m.el_coef[e] * d * d if m.el_law[e] == CUBIC_SPRING else 2 * m.el_coef[e] * abs(d)
+        for node, sign in ((a, -1.0), (b, 1.0)):
+            if node < 0:
+                continue
+            if a >= 0:
+                dwork[node, offset + a] += sign * slope
+            if b >= 0:
+                dwork[node, offset + b] -= sign * slope
+    for e in range(len(m.ns_belt)):  # work[i] -= T_e R_ei for each free element's smooth tension T_e
+        if m.ns_held[e]:
+            continue
+        p = m.ns_par[e]
+        rate = m.ns_belt[e]
+        for i in range(n):
+            rate += m.ns_R[e, i] * y[n + i]
+        law = m.ns_law[e]
+        by_rate = 0.0
+        if law == SMOOTH_BOUC_WEN:
+            col = 2 * n + int(p[5])
+            for i in range(n):
+                dwork[i, col] -= m.ns_R[e, i] * p[0]
+            z_by_z, z_by_rate = frozen_partials(p, y[col], rate, signs[e, 0], signs[e, 1])
+            J[col, col] += z_by_z
+            for i in range(n):
+                J[col, n + i] += z_by_rate * m.ns_R[e, i]
+        elif law == SMOOTH_STRIBECK:
+            by_rate = p[0] * (p[2] - p[1]) * math.exp(-(rate / p[3]) ** 2) * (-2.0 * rate / (p[3] * p[3]))
+        elif law == SMOOTH_TANH:
+            th = math.tanh(rate / p[1])
+            by_rate = p[0] * (1.0 - th * th) / p[1]
+        if by_rate != 0.0:
+            for i in range(n):
+                for c in range(n):
+                    dwork[i, n + c] -= m.ns_R[e, i] * by_rate * m.ns_R[e, c]
+    for i in range(n):  # the accelerations: M^-1 (as the mode projects it) of the forces' rows
+        for kk in range(m.mi_ptr[i], m.mi_ptr[i + 1]):
+            w = m.mi_val[kk]
+            for c in range(s):
+                J[n + i, c] += w * dwork[m.mi_idx[kk], c]
+
+
+@no_alloc
+def kink(m, y, y_new, f, f_new, h):
+    """Where in the step (a fraction of it) a law's right-hand side first has a kink, or 1.0 for none: a quadratic
+    damper's velocity (erk.reversal), a Bouc-Wen element's rate or its z changing sign; found on the cubic Hermite
+    interpolant, returned just past it, so that the step ends there and the kink falls between steps."""
+    n = m.n
+    first = reversal(m, y, y_new, f, f_new, h)
+    for e in range(len(m.ns_belt)):
+        if m.ns_law[e] != SMOOTH_BOUC_WEN or m.ns_held[e]:
+            continue
+        r0, r1, d0, d1 = m.ns_belt[e], m.ns_belt[e], 0.0, 0.0
+        for i in range(n):
+            r0 += m.ns_R[e, i] * y[n + i]
+            r1 += m.ns_R[e, i] * y_new[n + i]
+            d0 += h * m.ns_R[e, i] * f[n + i]
+            d1 += h * m.ns_R[e, i] * f_new[n + i]
+        if r0 * r1 < 0.0:
+            first = hermite_crossing(r0, r1, d0, d1, first)
+        z = 2 * n + int(m.ns_par[e, 5])
+        if y[z] * y_new[z] < 0.0:
+            first = hermite_crossing(y[z], y_new[z], h * f[z], h * f_new[z], first)
+    return first
+
+
+@kernel
+def augmented_rates(m, models, weights, owner, t, y, left, dy, work, J, dwork, f, signs):
+    """dy = [f(t, y); J S + df/dp] for y = [state; S row-major (s, P)], J on the sides `signs` holds (branches);
+    f, J, dwork are scratch."""
+    n = m.n
+    size = 2 * n + m.ns_q + m.ns_acc
+    s = 2 * n + m.ns_q
+    P = (len(y) - size) // s
+    rhs(m, t, y[:size], left, dy[:size], work)
+    exact_jacobian(m, y, J, dwork, signs)
+    for i in range(s):
+        for p in range(P):
+            total = 0.0
+            for c in range(s):
+                if J[i, c] != 0.0:
+                    total += J[i, c] * y[size + c * P + p]
+            dy[size + i * P + p] = total
+    for j in range(len(models)):
+        rhs(models[j], t, y[:size], left, f, work)
+        p, w = owner[j], weights[j]
+        for i in range(s):
+            dy[size + i * P + p] += w * (f[i] - dy[i])
+
+
+@kernel
+def integrate(m, models, weights, owner, y0, grid, cuts, rtol, atol, max_steps, out, rates, work, counts):
+    """From y0 at grid[0] over the grid, restarting at each cut (a force's discontinuity) as the compiled pairs do,
+    each output time landed on: out and rates (N, len(y0)) get the state and its rate there (right limits); counts:
+    right-hand sides, accepted and rejected steps. Returns OK, TOO_SMALL_STEP, STEP_BUDGET or NOT_FINITE."""
+    size_all = len(y0)
+    n = m.n
+    s = 2 * n + m.ns_q
+    K = np.zeros((STAGES + 1, size_all))
+    arg, y_new, scale = np.zeros(size_all), np.zeros(size_all), np.zeros(size_all)
+    err, err3 = np.zeros(size_all), np.zeros(size_all)
+    J, dwork, f = np.zeros((s, s)), np.zeros((n, s)), np.zeros(2 * n + m.ns_q + m.ns_acc)
+    signs, now = np.ones((len(m.ns_belt), 2)), np.ones((len(m.ns_belt), 2))
+    y = y0.copy()
+    out[0] = y
+    augmented_rates(m, models, weights, owner, grid[0], y, False, rates[0], work, J, dwork, f, signs)
+    branches(m, y, rates[0], signs)
+    augmented_rates(m, models, weights, owner, grid[0], y, False, rates[0], work, J, dwork, f, signs)
+    k = 1
+    exponent = -1.0 / 8.0
+    for seg in range(len(cuts) - 1):
+        ta, t_end = cuts[seg], cuts[seg + 1]
+        mid = 0.5 * (ta + t_end)
+        t = ta
+        augmented_rates(m, models, weights, owner, t, y, t >= mid, K[0], work, J, dwork, f, signs)
+        counts[0] += 1
+        if seg == 0:  # later segments go on at the pace the last one reached: a force's kink needs no new start
+            for i in range(size_all):
+                scale[i] = atol[i] + abs(y[i]) * rtol
+            d0, d1 = scaled_rms(y, scale), scaled_rms(K[0], scale)
+            h_abs = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+        while t < t_end:
+            target = grid[k] if k < len(grid) and grid[k] < t_end else t_end
+            min_step = 10 * abs(np.nextafter(t, np.inf) - t)
+            rejected = False
+            landed = 0
+            while True:
+                if h_abs < min_step:
+                    return TOO_SMALL_STEP
+                t_new = min(t + h_abs, target)
+                h = t_new - t
+                for st in range(1, STAGES):
+                    assign(arg, y)
+                    for j in range(st):
+                        if A[st, j] != 0.0:
+                            axpy(h * A[st, j], K[j], arg)
+                    ts = t + C[st] * h
+                    augmented_rates(m, models, weights, owner, ts, arg, ts >= mid, K[st], work, J, dwork, f, signs)
+                assign(y_new, y)
+                for st in range(STAGES):
+                    if B[st] != 0.0:
+                        axpy(h * B[st], K[st], y_new)
+                augmented_rates(m, models, weights, owner, t_new, y_new, t_new >= mid, K[STAGES], work, J, dwork, f, signs)
+                counts[0] += STAGES
+                at = kink(m, y, y_new, K[0], K[STAGES], h)
+                if at < 1.0 - 2 * KINK_MARGIN and landed < LANDINGS:
+                    # J jumps there: the step is taken again to end just past it, on the branch it started on, each
+                    # try's crossing (found on its own, shorter interpolant) nearer the end, until it is at the end
+                    landed += 1
+                    h_abs = max(abs(h) * (at + KINK_MARGIN), 2 * min_step)
+                    counts[2] += 1
+                    continue
+                for i in range(size_all):
+                    scale[i] = atol[i] + max(abs(y[i]), abs(y_new[i])) * rtol
+                error = _error_norm(DOP853, K, h, scale, err, err3)
+                if error < 1:
+                    factor = MAX_FACTOR if error == 0 else min(MAX_FACTOR, SAFETY * error ** exponent)
+                    if rejected:
+                        factor = min(1.0, factor)
+                    if t_new < target or h >= h_abs:  # a step cut short to land sets no pace for the next
+                        h_abs = abs(h) * factor
+                    break
+                h_abs = abs(h) * max(MIN_FACTOR, SAFETY * error ** exponent)
+                rejected = True
+                counts[2] += 1
+            counts[1] += 1
+            if counts[1] > max_steps:
+                return STEP_BUDGET
+            for i in range(size_all):
+                if not math.isfinite(y_new[i]):
+                    return NOT_FINITE
+            t = t_new
+            assign(y, y_new)
+            assign(K[0], K[STAGES])
+            branches(m, y, K[0], now)
+            if not np.array_equal(now, signs):  # a kink crossed: the next step's branch, its first stage again
+                signs[:, :] = now
+                augmented_rates(m, models, weights, owner, t, y, t >= mid, K[0], work, J, dwork, f, signs)
+                counts[0] += 1
+            if k < len(grid) and t == grid[k]:
+                out[k] = y
+                if t >= mid:  # the step's last stage took the left limit at a cut: the output's rate is the right
+                    augmented_rates(m, models, weights, owner, t, y, False, rates[k], work, J, dwork, f, signs)
+                    counts[0] += 1
+                else:
+                    assign(rates[k], K[0])
+                k += 1
+    return OK

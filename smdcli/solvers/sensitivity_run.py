@@ -1,0 +1,39 @@
+"""The compiled forward-sensitivity kernel (smdcli.kernels.sensitivity) run over a grid: its kernels warmed (or
+compiled, saying so), the stencil's models handed over as one typed list, a failure said where and why.
+
+Must not import: sweep, io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from smdcli.errors import SolverFailed
+
+MAX_STEPS = 10**7
+
+
+def run_sensitivities(base, stencil: list, start: np.ndarray, grid: np.ndarray, cuts: np.ndarray, rtol: float,
+                      atol: np.ndarray, source: str) -> tuple[np.ndarray, np.ndarray]:
+    """(y, y') (N, len(start)) from start over the grid, restarting at the cuts: base the scene's kernel arrays,
+    stencil (parameter, weight, arrays) of each model a parameter's derivative takes (none: the state alone)."""
+    import numba
+
+    from smdcli.kernels import sensitivity as kernel
+    from smdcli.kernels.rhs import work_size
+    from smdcli.solvers.integrators.compiled import failure_text, warm
+
+    warm("sensitivity")
+    models = [arrays for _, _, arrays in stencil]
+    if not numba.config.DISABLE_JIT:
+        models = numba.typed.List(models) if models else numba.typed.List.empty_list(numba.typeof(base))
+    out, rates = np.full((len(grid), len(start)), np.nan), np.full((len(grid), len(start)), np.nan)
+    status = kernel.integrate(base, models, np.array([w for _, w, _ in stencil], dtype=float),
+                              np.array([p for p, _, _ in stencil], dtype=np.int64), np.asarray(start, dtype=float),
+                              grid, cuts, float(rtol), atol, MAX_STEPS, out, rates, np.zeros(work_size(base)),
+                              np.zeros(3, dtype=np.int64))
+    if status != kernel.OK:
+        reached = grid[np.isfinite(out[:, 0])][-1]
+        raise SolverFailed(f"{source}: the sensitivity equations failed after t = {reached:.6g} s "
+                           f"({failure_text(status, MAX_STEPS, np.inf)})")
+    return out, rates
