@@ -21,6 +21,7 @@ SWEEPS = ["one_dof_regimes_sweep", "ic_underdamped", "ic_critical", "ic_overdamp
 GROUND = ["shear_frame_record", "quarter_car_bump", "transmissibility_1dof", "shock_half_sine"]  # support motion
 ANALYSES = ["five_storey_building", "component_random_vibration",  # response-spectrum analysis (smd rsa)
             "three_storey_shaker",  # identification from a shaker test (smd fit)
+            "bouc_wen_benchmark_fit",  # the Bouc-Wen benchmark's model identified from its multisine (smd fit)
             "tmd_one_dof", "five_storey_tmd",  # tuned mass dampers to tune (smd optimize)
             "ida_frame"]  # a frame of yielding storeys for incremental dynamic analysis (smd ida)
 NONSMOOTH = ["elastoplastic_record", "shear_frame_bilinear", "bouc_wen_multisine", "bouc_wen_benchmark",

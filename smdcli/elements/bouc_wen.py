@@ -80,7 +80,9 @@ class BoucWen(Law):
         return self.beta >= abs(self.gamma)
 
     def unit_of(self, key: str) -> str:
-        return f"1/m^{self.n:g}" if key in ("beta", "gamma") else self.units.get(key, "")
+        if key in ("beta", "gamma"):
+            return "1/m" if self.n == 1 else f"1/m^{self.n:g}"
+        return self.units.get(key, "")
 
     def warning(self) -> str | None:
         """With beta + gamma <= 0 (the Noel-Schoukens benchmark's identified law, for one) z is not bounded: loading

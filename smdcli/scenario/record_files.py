@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, replace
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -100,17 +101,27 @@ def read_samples(path: Path, text: str | None = None, format: str | None = None,
         raise ColumnsError(f"dt: only a one-column file takes a sampling interval; a {kind} file gives its own")
     if channel is not None and kind != "cosmos":
         raise ColumnsError(f"channel: only a COSMOS file has channels; this is read as {kind}")
-    text = read_text(path) if text is None else text
+    if kind == "one_column" and dt is None:
+        raise ColumnsError("a one-column file needs its sampling interval: dt = SECONDS (smd record --dt)")
+    return _parsed(kind, read_text(path) if text is None else text, channel, dt)
+
+
+@lru_cache(maxsize=8)
+def _parsed(kind: str, text: str, channel: int | None, dt: float | None) -> Samples:
+    """A record's samples from its text, parsed once per text (a fit or a sensitivity builds its scene again at
+    every trial point: 7 ms a build for the Bouc-Wen benchmark's table); its arrays read-only, being shared."""
     if kind == "at2":
-        return _at2(text)
-    if kind == "cosmos":
-        return _cosmos(text, 1 if channel is None else channel)
-    if kind == "one_column":
-        if dt is None:
-            raise ColumnsError("a one-column file needs its sampling interval: dt = SECONDS (smd record --dt)")
-        return _one_column(text, dt)
-    times, values = two_columns(text)
-    return Samples(np.asarray(times), np.asarray(values), "csv", None)
+        found = _at2(text)
+    elif kind == "cosmos":
+        found = _cosmos(text, 1 if channel is None else channel)
+    elif kind == "one_column":
+        found = _one_column(text, dt)
+    else:
+        times, values = two_columns(text)
+        found = Samples(np.asarray(times), np.asarray(values), "csv", None)
+    for array in (found.times, found.values):
+        array.setflags(write=False)
+    return found
 
 
 def _lines(text: str) -> list[str]:
