@@ -7,6 +7,10 @@ smooth laws' tensions (Bouc-Wen's (1 - alpha) k z, regularized friction) and Bou
 the right-hand side of the scene's models at each parameter's stencil points (models, weights and the parameter
 each belongs to), as differences from the scene's own: exact where the parameter enters affinely.
 
+J jumps where a Bouc-Wen element's d' or z changes sign (a kink of its rate): a step holds the branch of J it starts
+on (branches), and a step that would cross such a kink is taken again to end KINK_MARGIN of itself past it, the
+crossing found anew on each try's own interpolant, so that no step integrates S across a jump of J.
+
 Must not import: solvers, sweep, io, plots, commands, cli.
 """
 
@@ -28,6 +32,7 @@ from smdcli.kernels.rhs import rhs
 STAGES = tableaus.DOP853_STAGES
 KINK_MARGIN = 1e-8  # how far past a kink (a fraction of the step) a step ends: past it for sure, its branch held
 LANDINGS = 12  # tries a step may take to end just past a kink (each found on the last try's interpolant)
+CROSSING_SAMPLES = 8  # points of a step's interpolant a kink's quantity is looked at (its end among them)
 A, B, C = tableaus.DOP853_A, tableaus.DOP853_B, tableaus.DOP853_C
 
 
@@ -35,7 +40,7 @@ A, B, C = tableaus.DOP853_A, tableaus.DOP853_B, tableaus.DOP853_C
 def frozen_partials(p, z, rate, sign_rate, sign_z):
     """Bouc-Wen's (d z_rate / d z, d z_rate / d d') with |d'| and |z| read on the sides sign_rate and sign_z: the
     branch a step keeps from its start, so that J has no jump inside it (rhs.bouc_wen_partials, signs given)."""
-    size = sign_z * z
+    size = max(sign_z * z, 0.0)  # a step's last 1e-8 may lie past the kink, where the held branch's |z| is 0
     power = size ** (p[4] - 1) if size > 0 or p[4] > 1 else 1.0
     by_z = -p[2] * sign_rate * rate * p[4] * power - p[3] * rate * p[4] * power * sign_z
     by_rate = p[1] - p[2] * sign_rate * power * z - p[3] * size ** p[4]
@@ -135,11 +140,25 @@ def kink(m, y, y_new, f, f_new, h):
             r1 += m.ns_R[e, i] * y_new[n + i]
             d0 += h * m.ns_R[e, i] * f[n + i]
             d1 += h * m.ns_R[e, i] * f_new[n + i]
-        if r0 * r1 < 0.0:
-            first = hermite_crossing(r0, r1, d0, d1, first)
+        first = first_crossing(r0, r1, d0, d1, first)
         z = 2 * n + int(m.ns_par[e, 5])
-        if y[z] * y_new[z] < 0.0:
-            first = hermite_crossing(y[z], y_new[z], h * f[z], h * f_new[z], first)
+        first = first_crossing(y[z], y_new[z], h * f[z], h * f_new[z], first)
+    return first
+
+
+@no_alloc
+def first_crossing(r0, r1, d0, d1, first):
+    """Where in [0, first] the cubic Hermite interpolant of a quantity (values r0, r1 at the step's ends, slopes d0,
+    d1 over the step) first changes sign, just past it, or first for none: looked at in CROSSING_SAMPLES points, so
+    that one crossing and coming back within the step (a grazing d' or z: its held branch would be wrong between,
+    unseen by the error estimate) is found too, then bisected (erk.hermite_crossing)."""
+    if r0 == 0.0:
+        return first  # on the kink at the start: branches took the side it moves to
+    for j in range(1, CROSSING_SAMPLES + 1):
+        s = first * j / CROSSING_SAMPLES
+        u = 1.0 - s
+        if ((r0 * (1 + 2 * s) + d0 * s) * u * u + (r1 * (3 - 2 * s) - d1 * u) * s * s) * r0 < 0.0:
+            return hermite_crossing(r0, r1, d0, d1, s)
     return first
 
 
