@@ -296,13 +296,13 @@ def _resumed(grid: np.ndarray, y: np.ndarray, S: np.ndarray, rhs, rtol: float, f
     from scipy.integrate import solve_ivp
 
     size, P = y.shape[1], S.shape[2]
+    atol = _absolute(np.abs(y).max(axis=0), P, rtol)
 
     def rates_at(t: float, left: bool = False) -> tuple[np.ndarray, np.ndarray]:
         k = min(max(int(np.searchsorted(grid, t, side="right")) - 1, 0), len(grid) - 1)
         Y = np.concatenate([y[k], S[k].ravel()])
         if t > grid[k]:
-            Y = solve_ivp(rhs, (float(grid[k]), t), Y, method="DOP853", rtol=rtol,
-                          atol=_absolute(np.abs(y).max(axis=0), P, rtol)).y[:, -1]
+            Y = solve_ivp(rhs, (float(grid[k]), t), Y, method="DOP853", rtol=rtol, atol=atol).y[:, -1]
         y_t, S_t = Y[:size], Y[size:].reshape(size, P)
         return flow.f(t, y_t), flow.jacobian(t, y_t) @ S_t + parameter_rates(t, y_t)
     rates_at.breaks = cuts[1:-1]

@@ -89,3 +89,11 @@ def is_cached(dispatcher) -> bool:
     import os
 
     return os.path.exists(locator)
+
+
+def model_list(models: list, like):
+    """Kernel arrays as the sensitivity kernel takes them: one numba typed list of the type of `like` (empty too),
+    a plain list where the kernels run as Python (NUMBA_DISABLE_JIT=1)."""
+    if numba.config.DISABLE_JIT:
+        return list(models)
+    return numba.typed.List(models) if models else numba.typed.List.empty_list(numba.typeof(like))

@@ -171,6 +171,8 @@ def augmented_rates(m, models, weights, owner, t, y, left, dy, work, J, dwork, f
     s = 2 * n + m.ns_q
     P = (len(y) - size) // s
     rhs(m, t, y[:size], left, dy[:size], work)
+    if P == 0:
+        return  # the state alone (the first pass that sets the tolerances): no J
     exact_jacobian(m, y, J, dwork, signs)
     for i in range(s):
         for p in range(P):

@@ -18,6 +18,7 @@ import re
 import numpy as np
 
 from smdcli.model.damping import added_damping
+from smdcli.model.elements import incidence_row
 from smdcli.model.system import Model
 from smdcli.scenario import Scenario
 
@@ -38,12 +39,8 @@ def moved(model: Model, scenario: Scenario, path: str, value: float) -> Model | 
         element = next((e for e in model.elements if e.name == name and e.law == "linear"), None)
         if element is None:
             return None
-        stamp = np.zeros((model.n, model.n))
-        for i, si in ((element.a, 1.0), (element.b, -1.0)):
-            for j, sj in ((element.a, 1.0), (element.b, -1.0)):
-                if i >= 0 and j >= 0:
-                    stamp[i, j] = si * sj
-        change = (value - element.coef) * stamp
+        row = incidence_row(element.connects, {dof: i for i, dof in enumerate(model.dofs)}, model.n)
+        change = (value - element.coef) * np.outer(row, row)  # the element's stamp between its two ends
         M, C, K = model.M, model.C, model.K
         if key == "k":
             K = K + change

@@ -36,12 +36,19 @@ def quintic_coefficients(x0, v0, a0, x1, v1, a1, h) -> np.ndarray:
 
 
 def _value(c, s, order=0):
-    """The quintics c (intervals, 6) or a derivative of them at s (intervals,), by Horner's rule."""
+    """The quintics c (..., 6) or a derivative of them at s (matching c's leading axes), by Horner's rule."""
     factors = {0: (1, 1, 1, 1, 1, 1), 1: (0, 1, 2, 3, 4, 5), 2: (0, 0, 2, 6, 12, 20)}[order]
-    total = c[:, 5] * factors[5]
+    total = c[..., 5] * factors[5]
     for power in range(4, order - 1, -1):
-        total = total * s + c[:, power] * factors[power]
+        total = total * s + c[..., power] * factors[power]
     return total
+
+
+def _interval(time: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(k, h, s) of each time: the sample interval holding it, its length and the time's place in it (0 to 1)."""
+    k = np.clip(np.searchsorted(time, at, side="right") - 1, 0, max(len(time) - 2, 0))
+    h = time[k + 1] - time[k]
+    return k, h, np.clip((at - time[k]) / h, 0.0, 1.0)
 
 
 def quintic_at(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray, at: np.ndarray,
@@ -49,13 +56,11 @@ def quintic_at(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray, at
     """x (N,) read at the times `at` on the quintic Hermite interpolant of its samples x, v, a (exact for a
     displacement whose acceleration is linear between samples, as a record's ground motion); v_left, a_left: the
     left limits at each sample where they differ (an interval's end takes them)."""
-    k = np.clip(np.searchsorted(time, at, side="right") - 1, 0, max(len(time) - 2, 0))
     if len(time) < 2:
         return np.full(len(at), float(x[0]) if len(x) else 0.0)
-    h = time[k + 1] - time[k]
+    k, h, s = _interval(time, at)
     v_end, a_end = (v if v_left is None else v_left), (a if a_left is None else a_left)
-    c = _quintics(x[k], v[k], a[k], x[k + 1], v_end[k + 1], a_end[k + 1], h)
-    return _value(c, np.clip((at - time[k]) / h, 0.0, 1.0))
+    return _value(_quintics(x[k], v[k], a[k], x[k + 1], v_end[k + 1], a_end[k + 1], h), s)
 
 
 def quintic_each(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray, at: np.ndarray) -> np.ndarray:
@@ -63,16 +68,10 @@ def quintic_each(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray, 
     at[i] on the quintic Hermite interpolant of its samples (quintic_at's, for many histories at once)."""
     if len(time) < 2:
         return np.asarray(x[..., 0, :], dtype=float)
-    k = np.clip(np.searchsorted(time, at, side="right") - 1, 0, len(time) - 2)
+    k, h, s = _interval(time, at)
     columns = np.arange(len(at))
-    h = time[k + 1] - time[k]
-    c = _quintics(x[..., k, columns], v[..., k, columns], a[..., k, columns],
-                  x[..., k + 1, columns], v[..., k + 1, columns], a[..., k + 1, columns], h)
-    s = np.clip((at - time[k]) / h, 0.0, 1.0)
-    total = c[..., 5]
-    for power in range(4, -1, -1):
-        total = total * s + c[..., power]
-    return total
+    return _value(_quintics(x[..., k, columns], v[..., k, columns], a[..., k, columns],
+                            x[..., k + 1, columns], v[..., k + 1, columns], a[..., k + 1, columns], h), s)
 
 
 def _interval_peaks(x0, v0, a0, x1, v1, a1, h) -> tuple[np.ndarray, np.ndarray]:

@@ -17,16 +17,13 @@ def run_sensitivities(base, stencil: list, start: np.ndarray, grid: np.ndarray, 
                       atol: np.ndarray, source: str) -> tuple[np.ndarray, np.ndarray]:
     """(y, y') (N, len(start)) from start over the grid, restarting at the cuts: base the scene's kernel arrays,
     stencil (parameter, weight, arrays) of each model a parameter's derivative takes (none: the state alone)."""
-    import numba
-
     from smdcli.kernels import sensitivity as kernel
+    from smdcli.kernels.compiler import model_list
     from smdcli.kernels.rhs import work_size
     from smdcli.solvers.integrators.compiled import failure_text, warm
 
     warm("sensitivity")
-    models = [arrays for _, _, arrays in stencil]
-    if not numba.config.DISABLE_JIT:
-        models = numba.typed.List(models) if models else numba.typed.List.empty_list(numba.typeof(base))
+    models = model_list([arrays for _, _, arrays in stencil], base)
     out, rates = np.full((len(grid), len(start)), np.nan), np.full((len(grid), len(start)), np.nan)
     status = kernel.integrate(base, models, np.array([w for _, w, _ in stencil], dtype=float),
                               np.array([p for p, _, _ in stencil], dtype=np.int64), np.asarray(start, dtype=float),
@@ -37,3 +34,4 @@ def run_sensitivities(base, stencil: list, start: np.ndarray, grid: np.ndarray, 
         raise SolverFailed(f"{source}: the sensitivity equations failed after t = {reached:.6g} s "
                            f"({failure_text(status, MAX_STEPS, np.inf)})")
     return out, rates
+
