@@ -177,7 +177,11 @@ def impact(scene: Scene, states: list[State], z: np.ndarray, element: int, e: fl
     target = np.zeros(len(rows))
     target[0] = -e * (scene.R[element] @ v + scene.belts[element]) - scene.belts[element]
     target[1:] = -scene.belts[held] if held else target[1:]
-    impulse = np.linalg.lstsq(G @ MG, target - G @ v, rcond=None)[0]
+    W = G @ MG
+    if len(rows) == 1:  # the element alone: W is its (positive) effective inverse mass
+        impulse = (target - G @ v) / W[0]
+    else:
+        impulse = np.linalg.lstsq(W, target - G @ v, rcond=None)[0]
     out = z.copy()
     out[n:2 * n] = v + MG @ impulse
     # at the limit, not past it by the rounding of the impact's time (at speed, more than the rounding of d)

@@ -27,7 +27,7 @@ def step_integrals(run, flow: Flow, mode: Mode, states, Z0: np.ndarray, h: float
     v = Z[..., n:2 * n]
     out = {}
     if run.damped:
-        out["dissipated"] = np.einsum("mgi,ij,mgj->mg", v, model.C, v) @ w
+        out["dissipated"] = ((v @ model.C) * v).sum(axis=-1) @ w
     work = np.zeros(len(Z0))
     if scene.blocks:
         force = np.zeros_like(v)
@@ -43,7 +43,7 @@ def step_integrals(run, flow: Flow, mode: Mode, states, Z0: np.ndarray, h: float
     for e, (element, state) in enumerate(zip(scene.elements, states)):
         term, power = element.law.dissipation(state, d[..., e], rate[..., e], tension[..., e])
         if term:
-            out[term] = out.get(term, 0.0) + np.broadcast_to(power, d[..., e].shape) @ w
+            out[term] = out.get(term, 0.0) + (power @ w if np.ndim(power) else np.full(len(Z0), power * w.sum()))
     return out
 
 
@@ -52,8 +52,8 @@ def stored_energies(run, states, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     variables, if Z carries them, row by row)."""
     n, model, scene = run.n, run.model, run.scene
     x, v = Z[:, :n], Z[:, n:2 * n]
-    kinetic = 0.5 * np.einsum("mi,ij,mj->m", v, model.M, v)
-    strain = 0.5 * np.einsum("mi,ij,mj->m", x, model.K, x)
+    kinetic = 0.5 * ((v @ model.M) * v).sum(axis=1)
+    strain = 0.5 * ((x @ model.K) * x).sum(axis=1)
     if model.cubic is not None:
         strain = strain + (0.25 * model.cubic.coef * (x @ model.cubic.D.T) ** 4).sum(axis=1)
     contact = np.zeros(len(Z))
@@ -85,11 +85,12 @@ class Outputs:
         """Output point k at z."""
         self.store_many(k, z[None], states, {name: np.array([value]) for name, value in self.run.cumulative.items()})
 
-    def store_many(self, k: int, Z: np.ndarray, states, cumulative: dict[str, np.ndarray]) -> None:
-        """Output points k, k + 1, ... at the rows of Z, all in one mode; `cumulative` each term's integral there."""
+    def store_many(self, k: int, Z: np.ndarray, states, cumulative: dict[str, np.ndarray], mode: Mode | None = None):
+        """Output points k, k + 1, ... at the rows of Z, all in one mode (the states', where the caller has it not);
+        `cumulative` each term's integral there."""
         run = self.run
         scene, n = run.scene, run.n
-        mode = scene.mode(states)
+        mode = mode or scene.mode(states)
         rows = slice(k, k + len(Z))
         self.x[rows], self.v[rows] = Z[:, :n], Z[:, n:2 * n]
         run.v_scale = max(run.v_scale, float(np.abs(Z[:, n:2 * n]).max(initial=0.0)))
