@@ -212,6 +212,36 @@ def test_a_bad_matrix_file_is_one_line_exit_2_nothing_written(tmp_path, cli, cas
     assert not out.exists() or not any(out.iterdir())
 
 
+def _tridiagonal(n: int, diagonal, off: float):
+    """A symmetric tridiagonal matrix (CSR) of this diagonal (array or number) and off-diagonal."""
+    return scipy.sparse.diags([np.broadcast_to(diagonal, (n,)), np.full(n - 1, off), np.full(n - 1, off)],
+                              [0, 1, -1], format="csr")
+
+
+def test_a_narrow_matrix_of_any_size_is_proven_definite_by_its_banded_factor(tmp_path):
+    """Beyond the dense check's 2,000 DOFs a narrow matrix is still factored (banded): a 3,000-DOF tridiagonal K whose
+    diagonal is positive but which is indefinite (1 on the diagonal, -1 beside it: eigenvalues down to 1 - 2 cos(pi /
+    3001) < 0) is refused, a free-free chain's singular semi-definite K is taken, and the banded verdict agrees with
+    scipy's dense eigenvalues on a smaller such pair."""
+    from smdcli.scenario.matrix_files import _factors
+
+    n = 3000
+    free_free = _tridiagonal(n, np.r_[1.0, np.full(n - 2, 2.0), 1.0], -1.0)
+    indefinite = _tridiagonal(n, 1.0, -1.0)
+    scene = _bad(tmp_path, 'M = "M.mtx"\nK = "K.mtx"', {
+        "M.mtx": lambda path: scipy.io.mmwrite(path, scipy.sparse.eye(n, format="csr")),
+        "K.mtx": lambda path: scipy.io.mmwrite(path, indefinite)})
+    with pytest.raises(ScenarioError, match="system.K: expected a symmetric positive semi-definite matrix; K.mtx is "
+                                            "not"):
+        smdcli.load(scene)
+    assert _factors(free_free, 1e-12 * 2 * n) and not _factors(indefinite, 1e-12 * 2 * n)
+    small = 400  # above the dense-first size: the banded path, against the eigenvalues
+    for matrix in (_tridiagonal(small, np.r_[1.0, np.full(small - 2, 2.0), 1.0], -1.0), _tridiagonal(small, 1.0, -1.0),
+                   _tridiagonal(small, 2.0, -1.0)):
+        lowest = scipy.linalg.eigvalsh(matrix.toarray())[0]
+        assert _factors(matrix, 1e-12 * 2 * small) == (lowest > -1e-12 * 2 * small)
+
+
 def test_a_large_non_diagonal_mass_is_refused_before_it_fills_memory(tmp_path, monkeypatch):
     """Above SPARSE_DOFS a non-diagonal M would be solved dense: refused, with why and how much, where that would not
     fit the limit (lowered here so a small scene shows it)."""

@@ -409,6 +409,48 @@ def test_the_hermite_rule_agrees_with_the_closed_form_where_the_grid_resolves_th
         assert np.abs(approximate - exact).max() < 1e-9 * np.abs(exact).max()
 
 
+def _nodewise_hermite(model, result, points: int = 8):
+    """Each output step's dissipated energy and input work by Gauss-Legendre at the nodes of the quintic Hermite
+    interpolant of (x, v, a), its basis written out here: the rule the Gram form replaced, as the reference."""
+    nodes, weights = np.polynomial.legendre.leggauss(points)
+    s, w = 0.5 * (nodes + 1), 0.5 * weights
+    slopes = np.stack([-30 * s**2 + 60 * s**3 - 30 * s**4, 1 - 18 * s**2 + 32 * s**3 - 15 * s**4,
+                       (2 * s - 9 * s**2 + 12 * s**3 - 5 * s**4) / 2, 30 * s**2 - 60 * s**3 + 30 * s**4,
+                       -12 * s**2 + 28 * s**3 - 15 * s**4, (3 * s**2 - 8 * s**3 + 5 * s**4) / 2], axis=1)
+    t, x, v, a = result.time, result.displacement, result.velocity, result.acceleration
+    h = np.diff(t)[:, None]
+    dissipated, work = np.zeros(len(h)), np.zeros(len(h))
+    for g in range(points):
+        rate = (slopes[g, 0] * x[:-1] + slopes[g, 1] * h * v[:-1] + slopes[g, 2] * h**2 * a[:-1]
+                + slopes[g, 3] * x[1:] + slopes[g, 4] * h * v[1:] + slopes[g, 5] * h**2 * a[1:]) / h
+        power = np.einsum("ki,ij,kj->k", rate, np.asarray(model.C), rate)
+        if model.quadratic is not None:
+            power += (model.quadratic.coef * np.abs(rate @ model.quadratic.D.T) ** 3).sum(axis=1)
+        dissipated += w[g] * power * h[:, 0]
+        if model.signals:
+            work += w[g] * ((rate @ model.B) * model.forces(t[:-1] + s[g] * h[:, 0])).sum(axis=1) * h[:, 0]
+    return dissipated, work
+
+
+@pytest.mark.parametrize("stem", ["three_storey_shaker", "one_dof_nonlinear_stiff", "three_dof_matrix_forced",
+                                  "three_dof_free"])
+def test_the_hermite_rules_gram_form_equals_gauss_at_its_nodes(stem):
+    """The quadratic powers in closed form over the interpolant (a Gram form of the step's ends) against 8-point
+    Gauss at its nodes, for element dampers with added [damping] and forces, a quadratic damper, a [system]'s C,
+    each step to rounding (the interpolant's power is of degree 8, which 8 points integrate exactly)."""
+    from smdcli.analysis import energy
+
+    sc, model, grid = bundled(stem)
+    result = solve_scenario(sc, model, grid, "rk4" if model.is_linear else None)
+    assert not energy._events(model, result.time, grid[1] - grid[0])
+    dissipated, work = energy._hermite_gauss(model, result)
+    reference = _nodewise_hermite(model, result)
+    for cumulative, steps in zip((dissipated, work), reference):
+        scale = np.abs(steps).sum()
+        assert scale > 0 or not model.signals
+        assert np.abs(np.diff(cumulative) - steps).max() <= 1e-13 * max(scale, 1e-300)
+
+
 def test_energy_of_a_nonlinear_scene_books_the_ground_jumps_inside_output_steps():
     """A cubic tyre over the plank, its edges between output points: the jump work comes from the dense output
     at each jump (the right limit), the state before it by the jump itself."""

@@ -24,6 +24,9 @@ def check_matrices_finite(M: np.ndarray, C: np.ndarray, K: np.ndarray, scenario:
         if not isinstance(M, np.ndarray):  # a sparse scene's diagonal M: each row of K and C over its mass
             bad = ~(finite_rows(K.multiply(1.0 / M.diagonal()[:, None]).tocsr())
                     & finite_rows(C.multiply(1.0 / M.diagonal()[:, None]).tocsr()))
+        elif np.count_nonzero(M) == np.count_nonzero(np.diagonal(M)):  # each row's largest entry over its mass
+            bad = ~np.isfinite(np.maximum.reduce([K.max(axis=1), -K.min(axis=1), C.max(axis=1), -C.min(axis=1)])
+                               / np.diagonal(M))
         else:
             try:
                 rows = np.hstack([mass_solve(M, K), mass_solve(M, C)])

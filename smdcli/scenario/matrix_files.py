@@ -99,8 +99,8 @@ def _one_of(names: list[str], key: str, get):
 
 def check_file_matrix(t: _Table, key: str, matrix, n: int | None, strict: bool, sized_by: str = "") -> None:
     """A file's matrix fit to be M (strict: definite) or C, K: of the scene's size, finite, symmetric, and definite
-    (semi-definite for C and K) where it is small enough to factor dense; a large one's diagonal must be positive
-    (non-negative), as a definite matrix's is."""
+    (semi-definite for C and K) where it is narrow or small enough to factor (_factors); a large wide one's diagonal
+    must be positive (non-negative), as a definite matrix's is."""
     path = matrix_file_path(t, key).name
     if n is not None and matrix.shape[0] != n:
         raise t.fail(key, f"{path}: expected a {n} x {n} matrix ({sized_by}), found {matrix.shape[0]} x "
@@ -120,13 +120,39 @@ def check_file_matrix(t: _Table, key: str, matrix, n: int | None, strict: bool, 
     if len(bad):
         raise t.fail(key, f"expected a symmetric {need} matrix; {path} has {key}[{bad[0]}][{bad[0]}] = "
                           f"{diagonal[bad[0]]:g}")
-    if matrix.shape[0] <= DENSE_CHECK:  # Cholesky, shifted by the rounding a semi-definite matrix's zero may carry
-        tol = 1e-12 * scale * matrix.shape[0]
+    if not _factors(matrix, 0.0 if strict else 1e-12 * scale * matrix.shape[0]):
+        raise t.fail(key, f"expected a symmetric {need} matrix; {path} is not (its Cholesky factorization fails)")
+
+
+def _factors(matrix, shift: float) -> bool:
+    """Whether matrix + shift I has a Cholesky factor (the shift: the rounding a semi-definite matrix's zero may
+    carry): dense for a small matrix; banded (LAPACK pbtrf, n b^2 for half-bandwidth b) where it is narrow, as a
+    finite-element program's matrices in a good numbering are; dense up to DENSE_CHECK DOFs; True, unproven, for a
+    wide matrix beyond that."""
+    n = matrix.shape[0]
+    coo = matrix.tocoo()
+    width = int(np.abs(coo.row - coo.col).max(initial=0))
+    if n <= DENSE_FIRST or n * (width + 1) ** 2 > BANDED_WORK:
+        if n > DENSE_CHECK:
+            return True
         try:
-            np.linalg.cholesky(matrix.toarray() + (0.0 if strict else tol) * np.eye(matrix.shape[0]))
+            np.linalg.cholesky(matrix.toarray() + shift * np.eye(n))
         except np.linalg.LinAlgError:
-            raise t.fail(key, f"expected a symmetric {need} matrix; {path} is not (its Cholesky factorization "
-                              "fails)") from None
+            return False
+        return True
+    from scipy.linalg import LinAlgError, cholesky_banded
+
+    below = coo.row >= coo.col
+    bands = np.zeros((width + 1, n))  # LAPACK's lower band storage: bands[i - j, j] = A[i, j]
+    np.add.at(bands, (coo.row[below] - coo.col[below], coo.col[below]), coo.data[below])
+    bands[0] += shift
+    try:
+        cholesky_banded(bands, lower=True, check_finite=False)
+    except LinAlgError:
+        return False
+    return True
 
 
-DENSE_CHECK = 2000  # up to this many DOFs a file's matrix is proven definite by factoring it (0.1 s at 2,000)
+DENSE_CHECK = 2000  # up to this many DOFs a wide file's matrix is proven definite by factoring it (0.1 s at 2,000)
+DENSE_FIRST = 300  # up to this many DOFs the dense factorization is the cheapest (no scipy.linalg to import)
+BANDED_WORK = 10 ** 9  # n (b + 1)^2 up to which a narrow matrix is factored banded, whatever its size (about 0.3 s)
