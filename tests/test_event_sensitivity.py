@@ -12,7 +12,7 @@ import smdcli
 from smdcli.analysis.fit import fit, make_test
 from smdcli.analysis.fit_data import Measured
 from smdcli.sweep.family import scenario_with
-from tests.conftest import SCENARIOS, model_of
+from conftest import SCENARIOS, model_of
 
 ELASTOPLASTIC = """
 [time]

@@ -12,7 +12,7 @@ import smdcli
 from smdcli.analysis.fit import fit, make_test
 from smdcli.analysis.fit_data import Measured
 from smdcli.sweep.family import scenario_with
-from tests.conftest import SCENARIOS, force_block, model_of, one_dof
+from conftest import SCENARIOS, force_block, model_of, one_dof
 
 FRAME_TRUTH = {"spring[0].k": 3.0e6, "spring[1].k": 2.4e6, "spring[2].k": 1.6e6, "damping.alpha": 0.4,
                "damping.beta": 0.002}
@@ -61,7 +61,7 @@ def recovered(text: str, truth_values: dict[str, float], reference: dict, channe
 def test_an_elastoplastic_spring_s_k_and_yield_force_are_recovered_to_1e_6():
     """k and fy of an oscillator yielding both ways (22 events), from its exact event-to-event run's displacement:
     exact sensitivities through the events (their times move with k and fy); to 1e-6 (measured 6e-15, 7 solves)."""
-    from tests.test_event_sensitivity import ELASTOPLASTIC
+    from test_event_sensitivity import ELASTOPLASTIC
 
     run, error = recovered(ELASTOPLASTIC, {"spring[0].k": 400.0, "spring[0].fy": 20.0}, {"method": "exact"},
                            "m1.displacement")
@@ -74,7 +74,7 @@ def test_the_bouc_wen_benchmark_s_physical_parameters_are_recovered_to_1e_6():
     its k, alpha, beta, gamma and the damper's c, from DOP853's run at rtol 1e-13 (an independent integrator: the fit
     integrates the sensitivity equations at rtol 1e-9); the start puts beta + gamma on the other side of zero. To
     1e-6 (measured 4e-10, 16 solves)."""
-    from tests.test_sensitivity import BOUC_WEN
+    from test_sensitivity import BOUC_WEN
 
     truth = {"spring[0].k": 1.0e5, "spring[0].alpha": 0.5, "spring[0].beta": 800.0, "spring[0].gamma": -1100.0,
              "damper[0].c": 10.0}

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import smdcli
-from tests.conftest import ROOT
+from conftest import ROOT
 
 SUITE = ROOT / "records" / "suite"
 RECORDS = [SUITE / "record_01.AT2", SUITE / "record_05.V2", SUITE / "record_09.csv"]

@@ -212,3 +212,23 @@ def test_the_api_exposes_every_analysis_by_name():
     for name, (module, attribute) in api.ANALYSES.items():
         assert getattr(smdcli, name) is getattr(importlib.import_module(module), attribute), name
     assert set(smdcli._ANALYSES) <= set(smdcli.__all__)
+
+
+def test_no_test_imports_the_tests_folder_as_a_package():
+    """The tests import each other as the modules pytest puts on the path (`from conftest import ...`), never as
+    `tests.conftest`, nor do the scripts they run: the `peers` extra's pyrotd installs a top-level package named
+    `tests`, which shadows this folder (it has no __init__.py) and stopped the suite at collection once installed."""
+    offenders = []
+    for path in sorted(Path(__file__).resolve().parent.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                names = [node.module or ""]
+            elif isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            elif isinstance(node, ast.Constant) and isinstance(node.value, str):  # a script a test runs
+                names = [line.split()[1] for line in node.value.splitlines() if line.startswith(("from ", "import "))
+                         and len(line.split()) > 1]
+            else:
+                continue
+            offenders += [f"{path.name}:{node.lineno} {name}" for name in names if name.split(".")[0] == "tests"]
+    assert not offenders, offenders

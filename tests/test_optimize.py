@@ -11,7 +11,7 @@ import pytest
 
 import smdcli
 from smdcli.sweep.family import scenario_with
-from tests.conftest import ROOT, SCENARIOS, five_point, model_of
+from conftest import ROOT, SCENARIOS, five_point, model_of
 
 TMD = SCENARIOS / "tmd_one_dof.toml"  # primary m = 1 kg, k = 25 N/m (5 rad/s), undamped
 

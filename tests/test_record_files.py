@@ -11,7 +11,7 @@ import pytest
 
 import smdcli
 from smdcli.scenario.record_files import read_samples
-from tests.conftest import ROOT
+from conftest import ROOT
 
 G = 9.80665
 VALUES = ["  .1234567E-02", " -.2345678E-01", "  .3456789E+00", " -.4567891E-03", "  .5678912E-02",

@@ -13,7 +13,7 @@ import scipy.linalg
 
 import smdcli
 from smdcli.sweep.family import scenario_with
-from tests.conftest import SCENARIOS, model_of
+from conftest import SCENARIOS, model_of
 
 H = 1e-30  # the complex step: no subtraction, so no cancellation however small
 
@@ -417,10 +417,10 @@ def test_the_sensitivity_kernel_runs_as_plain_python():
     import sys
 
     code = ("import json, sys\n"
-            "sys.path.insert(0, '..')\n"
+            "sys.path.insert(0, '.')\n"
             "import smdcli\n"
-            "from tests.conftest import model_of\n"
-            "from tests.test_sensitivity import BOUC_WEN\n"
+            "from conftest import model_of\n"
+            "from test_sensitivity import BOUC_WEN\n"
             "sc, _, _ = model_of(BOUC_WEN.replace('end = 0.1', 'end = 0.02'), 'bouc_wen.toml')\n"
             "s = smdcli.sensitivity(sc, ['spring[0].k', 'spring[0].beta'])\n"
             "print(json.dumps(s.d_displacement.tolist()))\n")
@@ -459,7 +459,7 @@ def test_a_nonlinear_scene_shows_its_progress_on_a_terminal_and_none_when_piped(
     import re
     import subprocess
 
-    from tests.test_terminal import SMD, plain, run_in_pty
+    from test_terminal import SMD, plain, run_in_pty
 
     (tmp_path / "bw.toml").write_text(BOUC_WEN.replace("end = 0.1", "end = 0.04"))
     code, screen = run_in_pty(["sensitivity", "bw.toml", "--param", "spring[0].k", "--no-plots"], tmp_path)

@@ -16,7 +16,7 @@ import tomli_w
 import smdcli
 from smdcli.model import build, time_grid
 from smdcli.solvers.events.yielding import applies, solve_yielding
-from tests.conftest import ROOT
+from conftest import ROOT
 
 FRAME = ROOT / "scenarios" / "ida_frame.toml"
 SUITE = ROOT / "records" / "suite"
