@@ -20,7 +20,7 @@ def dissipated(s, name: str) -> tuple[float, np.ndarray]:
     """The energy a damper, a Coulomb friction contact or a yielding spring (_plastic_work) dissipates over a run, J,
     and its gradient from the run's sensitivities s: the integral of its power (a damper's c w^2, c |w|^3 if quadratic; a contact's F |w| + c_v w^2
     while it slips, nothing while it sticks; w the rate across it) by Gauss-Legendre on the quintic Hermite
-    interpolant of each output step, as the energy balance integrates (energy.hermite_slopes); the gradient the
+    interpolant of each output step, as the energy balance integrates (hermite_rule.hermite_slopes); the gradient the
     same sum differentiated, the rate's derivative from the sensitivities' own quintics. On a scene solved event
     to event a step holding an event (where the quintic does not hold) is split at its events, each piece's Gauss
     nodes read on the exact flow."""
@@ -145,7 +145,8 @@ def dissipated_history(result, name: str) -> np.ndarray:
 def _rates(row: np.ndarray, time, x, v, a) -> tuple[np.ndarray, np.ndarray]:
     """row . x' at each output step's Gauss nodes, from the quintic Hermite of x, v, a (..., N, n) ->
     (..., N - 1, G); and the nodes' weights times the step."""
-    from smdcli.analysis.energy import GAUSS_POINTS, hermite_slopes
+    from smdcli.analysis.energy import GAUSS_POINTS
+    from smdcli.analysis.hermite_rule import hermite_slopes
 
     nodes, weights = np.polynomial.legendre.leggauss(GAUSS_POINTS)
     slope = hermite_slopes(0.5 * (nodes + 1))

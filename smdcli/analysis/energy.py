@@ -32,6 +32,7 @@ import numpy as np
 
 from smdcli.model import Model
 from smdcli.analysis.forces import element_forces
+from smdcli.analysis.hermite_rule import gram_power, hermite_slopes, node_rates
 from smdcli.model.sparse import cheapest, rows_times
 from smdcli.result import Energy, Result, largest_energy
 
@@ -356,16 +357,6 @@ def _jumps_on_grid(model: Model, result: Result, events) -> np.ndarray:
     return work
 
 
-def hermite_slopes(points: np.ndarray) -> np.ndarray:
-    """d/ds of the quintic Hermite basis on s in [0, 1] for (x0, h v0, h^2 a0, x1, h v1, h^2 a1), (G, 6)."""
-    coefficients = np.array([  # powers s^0 .. s^5
-        [1, 0, 0, -10, 15, -6], [0, 1, 0, -6, 8, -3], [0, 0, 0.5, -1.5, 1.5, -0.5],
-        [0, 0, 0, 10, -15, 6], [0, 0, 0, -4, 7, -3], [0, 0, 0, 0.5, -1, 0.5]])
-    powers = points[:, None] ** np.arange(5)
-    slopes = np.concatenate([np.zeros((len(points), 1)), powers * np.arange(1, 6)], axis=1)
-    return slopes @ coefficients.T
-
-
 def _quadratic_powers(model: Model) -> list[Callable]:
     """The linear dampers' power as sum <L v, R v> over forms y -> (L y, R y) of rows of states (R's weight
     symmetric): the incidence rows and their coefficients, added damping, or C itself where the scene has no
@@ -382,35 +373,6 @@ def _quadratic_powers(model: Model) -> list[Callable]:
         added = 0.5 * (model.added_damping + model.added_damping.T)
         forms.append(lambda y: (y, y @ added))
     return forms
-
-
-def _gram_power(gram: np.ndarray, h: np.ndarray, x, v, a) -> np.ndarray:
-    """Each step's integral of <L x', R x'> on the Hermite interpolant of rows x, v, a ((L, R) pairs of the rows
-    k - 1 and k of each step): the Gram form of (x1 - x0, h v0, h^2 a0, h v1, h^2 a1)."""
-    (Lx, Rx), (Lv, Rv), (La, Ra) = x, v, a
-    dL, dR = Lx[1:] - Lx[:-1], Rx[1:] - Rx[:-1]
-
-    def dot(A, B):
-        return np.einsum("ij,ij->i", A, B)
-
-    vv, va, aa = dot(Lv, Rv), dot(Lv, Ra), dot(La, Ra)
-    h2 = h * h
-    products = {  # (i, j) of the basis: its inner product times the powers of h the ends carry
-        (0, 0): dot(dL, dR), (0, 1): h * dot(dL, Rv[:-1]), (0, 2): h2 * dot(dL, Ra[:-1]),
-        (0, 3): h * dot(dL, Rv[1:]), (0, 4): h2 * dot(dL, Ra[1:]),
-        (1, 1): h2 * vv[:-1], (1, 2): h * h2 * va[:-1], (1, 3): h2 * dot(Lv[:-1], Rv[1:]),
-        (1, 4): h * h2 * dot(Lv[:-1], Ra[1:]), (2, 2): h2 * h2 * aa[:-1], (2, 3): h * h2 * dot(La[:-1], Rv[1:]),
-        (2, 4): h2 * h2 * dot(La[:-1], Ra[1:]), (3, 3): h2 * vv[1:], (3, 4): h * h2 * va[1:], (4, 4): h2 * h2 * aa[1:]}
-    total = sum((gram[i, j] if i == j else 2 * gram[i, j]) * value for (i, j), value in products.items())
-    return total / h
-
-
-def _node_rates(slope: np.ndarray, h: np.ndarray, x, v, a) -> np.ndarray:
-    """The interpolant's rate at the Gauss nodes of each step, (steps, nodes, columns), from rows of x, v, a
-    (projected: x P for the columns of P)."""
-    ends = np.stack([x[1:] - x[:-1], h[:, None] * v[:-1], (h * h)[:, None] * a[:-1], h[:, None] * v[1:],
-                     (h * h)[:, None] * a[1:]], axis=1)
-    return np.einsum("gb,kbc->kgc", slope, ends) / h[:, None, None]
 
 
 def _hermite_gauss(model: Model, result: Result) -> tuple[np.ndarray, np.ndarray]:
@@ -433,10 +395,10 @@ def _hermite_gauss(model: Model, result: Result) -> tuple[np.ndarray, np.ndarray
     for lo in range(0, N - 1, chunk - 1):  # rows lo .. hi - 1: their steps lo + 1 .. hi - 1
         hi = min(N, lo + chunk)
         h = np.diff(t[lo:hi])
-        step[0, lo + 1:hi] = sum((_gram_power(gram, h, *(form(y[lo:hi]) for y in (x, v, a))) for form in forms),
+        step[0, lo + 1:hi] = sum((gram_power(gram, h, *(form(y[lo:hi]) for y in (x, v, a))) for form in forms),
                                  np.zeros(hi - lo - 1))
         if projected:
-            rates = [_node_rates(slope, h, *(y[lo:hi] @ P for y in (x, v, a))) for P in projected]
+            rates = [node_rates(slope, h, *(y[lo:hi] @ P for y in (x, v, a))) for P in projected]
             if model.signals:  # the forces' power: each force's value times the rate it acts on (x' B)
                 times = t[lo:hi - 1, None] + h[:, None] * s[None, :]
                 along = rates.pop(0)

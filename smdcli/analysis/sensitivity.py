@@ -195,10 +195,12 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
                             out=np.empty((b.shape[1] - 1, b.shape[0], b.shape[2])))
                for q, b in blocks.items()}
     accuracy = {}
-    for q, b in blocks.items():
-        # each block's peak over time and DOFs (over time first: the contiguous axis' reduction, not a strided one);
-        # fmax passes over nan, written where no derivative exists
-        block_peaks = np.nan_to_num(np.fmax.reduce(np.abs(b), axis=0)).max(axis=1, initial=0.0)  # (P + 1,)
+    for q in blocks:
+        # each block's peak over time and DOFs, from the contiguous copies (one reduction along memory, not a strided
+        # one over the blocks); fmax passes over nan, written where no derivative exists
+        block_peaks = np.nan_to_num(np.r_[np.fmax.reduce(np.abs(nominal[q].ravel()), initial=0.0),
+                                          np.fmax.reduce(np.abs(derived[q].reshape(P, -1)), axis=1, initial=0.0)
+                                          * scales])  # (P + 1,): the blocks' own, scale_i dx/dp_i
         largest = block_peaks[1:]
         if base.is_linear:  # the run's error is relative to the stacked state's peak (every block a displacement)
             absolute = stated * float(block_peaks.max())

@@ -191,6 +191,27 @@ def _solve_runs(model: Model, grid: np.ndarray, runs) -> tuple[np.ndarray, np.nd
     return x, v, stated, f"{message}; a grid of unequal steps, as {len(runs)} uniform runs"
 
 
+def _in_blocks(out: np.ndarray, k: int, stop: int, z: np.ndarray, powers: np.ndarray, reseed) -> np.ndarray:
+    """Rows k .. stop - 1 of out from z at row k - 1, in blocks of as many steps as powers (the step's propagator to
+    the 1st .. Jth power), reseed(z, row) restarting the force generators at each block's start: the starts one
+    after another (a product by the last power each), then every whole block's steps in one matrix product (not a
+    product of the stacked powers with each start: twice the speed at size 27, where that is flops, not Python).
+    The state at stop - 1, as stored."""
+    J, size = powers.shape[0], powers.shape[1]
+    count = stop - k
+    whole, rest = divmod(count, J)
+    starts = np.empty((whole + (rest > 0), size))
+    for b in range(len(starts)):
+        reseed(z, k + b * J)
+        starts[b] = z
+        z = powers[min(J, count - b * J) - 1] @ z
+    if whole:
+        np.matmul(starts[:whole], powers.reshape(J * size, size).T, out=out[k:k + whole * J].reshape(whole, J * size))
+    if rest:
+        out[k + whole * J:stop] = (powers[:rest].reshape(rest * size, size) @ starts[whole]).reshape(rest, size)
+    return out[stop - 1].copy()
+
+
 def solve_dense(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:
     """Displacement and velocity (N, n) by the dense exponential of the augmented system, the stated accuracy and
     a description."""
@@ -237,13 +258,9 @@ def solve_dense(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray,
             out[k] = z
             t_cur = grid[k]
             k += 1
-            while k < stop:
-                reseed(z, t_cur)
-                j = min(J, stop - k)
-                # one product of the stacked powers (j size x size) with z: not j small ones
-                out[k:k + j] = (powers[:j].reshape(j * size, size) @ z).reshape(j, size)
-                k += j
-                z = out[k - 1].copy()
+            if k < stop:
+                z = _in_blocks(out, k, stop, z, powers, lambda z, at: reseed(z, grid[at - 1]))
+                k = stop
                 t_cur = grid[k - 1]
         if not last and tb > t_cur:
             z = phi(tb - t_cur) @ z
