@@ -27,7 +27,7 @@ from smdcli.kernels.arrays import CUBIC_SPRING
 from smdcli.kernels.compiler import kernel, no_alloc
 from smdcli.kernels.erk import (DOP853, MAX_FACTOR, MIN_FACTOR, NOT_FINITE, OK, SAFETY, STEP_BUDGET,
                                 TOO_SMALL_STEP, _error_norm, axpy, assign, hermite_crossing, reversal, scaled_rms)
-from smdcli.kernels.rhs import rhs
+from smdcli.kernels.rhs import state_rhs
 
 STAGES = tableaus.DOP853_STAGES
 KINK_MARGIN = 1e-8  # how far past a kink (a fraction of the step) a step ends: past it for sure, its branch held
@@ -170,7 +170,9 @@ def augmented_rates(m, models, weights, owner, t, y, left, dy, work, J, dwork, f
     size = 2 * n + m.ns_q + m.ns_acc
     s = 2 * n + m.ns_q
     P = (len(y) - size) // s
-    rhs(m, t, y[:size], left, dy[:size], work)
+    # the model's right-hand side as a call compiled without reference counting (state_rhs; J is untouched at this
+    # length): inlined into this kernel, which counts references, every read of the model's arrays was counted
+    state_rhs(m, t, y[:size], left, dy[:size], work, J)
     if P == 0:
         return  # the state alone (the first pass that sets the tolerances): no J
     exact_jacobian(m, y, J, dwork, signs)
@@ -182,7 +184,7 @@ def augmented_rates(m, models, weights, owner, t, y, left, dy, work, J, dwork, f
                     total += J[i, c] * y[size + c * P + p]
             dy[size + i * P + p] = total
     for j in range(len(models)):
-        rhs(models[j], t, y[:size], left, f, work)
+        state_rhs(models[j], t, y[:size], left, f, work, J)
         p, w = owner[j], weights[j]
         for i in range(s):
             dy[size + i * P + p] += w * (f[i] - dy[i])
