@@ -268,7 +268,7 @@ omega = 4.0
 """
 
 
-def duffing_reference(grid, k=40.0, k3=300.0, cq=0.3, m=1.5, w=4.0):
+def duffing_reference(grid, k=40.0, k3=300.0, cq=0.3, m=1.5, w=4.0, phase=0.0):
     """The Duffing oscillator above with a quadratic damper, written here, by DOP853 at rtol 1e-13 in complex
     arithmetic (|v| continued as v sign(Re v))."""
     from scipy.integrate import solve_ivp
@@ -276,7 +276,7 @@ def duffing_reference(grid, k=40.0, k3=300.0, cq=0.3, m=1.5, w=4.0):
     def f(t, y):
         x, v = y
         size = v if v.real >= 0 else -v
-        return [v, (3.0 * np.sin(w * t) - k * x - k3 * x**3 - 0.8 * v - cq * size * v) / m]
+        return [v, (3.0 * np.sin(w * t + phase) - k * x - k3 * x**3 - 0.8 * v - cq * size * v) / m]
     return solve_ivp(f, (grid[0], grid[-1]), np.array([0.2, 0.0], complex), method="DOP853", rtol=1e-13,
                      atol=1e-16, t_eval=grid).y
 
@@ -323,6 +323,38 @@ def test_the_compiled_sensitivities_match_the_complex_step_and_the_python_integr
         assert np.all(np.abs(a - b).max(axis=(1, 2)) <= 1e-7 * np.abs(b).max(axis=(1, 2))), quantity
     monkeypatch.setattr(smooth, "COMPILED", True)
     assert "in Python" in smdcli.sensitivity(sc, ["spring[0].k", "mass.m.m"]).method
+
+
+def test_more_stencil_models_than_one_kernel_run_takes_are_run_in_groups(monkeypatch):
+    """Five parameters whose model derivatives take 14 stencil models (k3's, omega's and the phase's five-point
+    stencils, four each) where the kernel takes STENCIL_MODELS (8) a run: two runs after the state's, each
+    parameter's sensitivity against the complex step of DOP853 to 1e-7 of its largest, as in one run."""
+    from smdcli.analysis.smooth_sensitivity import _groups
+    from smdcli.kernels.compiler import STENCIL_MODELS
+    from smdcli.solvers import sensitivity_run
+
+    sc, _, grid = model_of(DUFFING.replace("omega = 4.0", "omega = 4.0\nphase = 0.3"), "duffing.toml")
+    arguments = {"spring[0].k": {"k": 40 + 1j * H}, "spring[1].k3": {"k3": 300 + 1j * H},
+                 "damper[1].c": {"cq": 0.3 + 1j * H}, "force[0].omega": {"w": 4 + 1j * H},
+                 "force[0].phase": {"phase": 0.3 + 1j * H}}
+    owners = [0, 1, 1, 1, 1, 2, 3, 3, 3, 3, 4, 4, 4, 4]
+    assert len(owners) > STENCIL_MODELS and _groups(owners, 5) == [[0, 1, 2], [3, 4]]
+    runs = []
+    original = sensitivity_run.run_sensitivities
+
+    def counted(base, stencil, *rest):
+        runs.append([p for p, _, _ in stencil])
+        return original(base, stencil, *rest)
+    monkeypatch.setattr(sensitivity_run, "run_sensitivities", counted)
+    s = smdcli.sensitivity(sc, list(arguments))
+    assert "compiled DOP853" in s.method
+    assert runs == [[], owners[:6], [0, 0, 0, 0, 1, 1, 1, 1]]  # the state alone, then each group (local indices)
+    for i, given in enumerate(arguments.values()):
+        want = duffing_reference(grid, **{"phase": 0.3, **given}).imag / H
+        assert np.abs(s.d_displacement[i, :, 0] - want[0]).max() <= 1e-7 * np.abs(want[0]).max()
+        assert np.abs(s.d_velocity[i, :, 0] - want[1]).max() <= 1e-7 * np.abs(want[1]).max()
+    nominal = duffing_reference(grid, phase=0.3).real
+    assert np.abs(s.displacement[:, 0] - nominal[0]).max() <= 1e-7 * np.abs(nominal[0]).max()
 
 
 BOUC_WEN = """

@@ -263,17 +263,40 @@ def compiled_sensitivities(flow: _Flow, points: list, weights: list, y0: np.ndar
     stencil = [(p, w, _arrays(f)) for p, (ws, fs) in enumerate(zip(weights, points)) for w, f in zip(ws, fs)
                if f is not flow]  # the scene's own point adds f - f: nothing
 
-    def run(start, tolerance, atol, with_models):
-        return run_sensitivities(base, stencil if with_models else [], start, grid, cuts, tolerance, atol,
-                                 flow.model.source)
+    def run(start, tolerance, atol, models):
+        return run_sensitivities(base, models, start, grid, cuts, tolerance, atol, flow.model.source)
 
     state0 = np.concatenate([y0, np.zeros(extra)])
-    peak = np.abs(run(state0, 1e-6, np.concatenate([np.full(s, 1e-12), np.full(extra, np.inf)]), False)[0][:, :s])
+    peak = np.abs(run(state0, 1e-6, np.concatenate([np.full(s, 1e-12), np.full(extra, np.inf)]), [])[0][:, :s])
     atol = _absolute(peak.max(axis=0), P, rtol)
-    atol = np.concatenate([atol[:s], np.full(extra, np.inf), atol[s:]])
-    out, rates = run(np.concatenate([state0, s0.ravel()]), rtol, atol, True)
     size, N = s + extra, len(grid)
-    return (out[:, :s], out[:, size:].reshape(N, s, P), rates[:, :s], rates[:, size:].reshape(N, s, P))
+    S, d_S = np.empty((N, s, P)), np.empty((N, s, P))
+    for group in _groups([p for p, _, _ in stencil], P):  # the kernel takes STENCIL_MODELS at a time
+        local = {p: i for i, p in enumerate(group)}
+        models = [(local[p], w, arrays) for p, w, arrays in stencil if p in local]
+        tolerance = np.concatenate([atol[:s], np.full(extra, np.inf), atol[s:].reshape(s, P)[:, group].ravel()])
+        out, rates = run(np.concatenate([state0, s0[:, group].ravel()]), rtol, tolerance, models)
+        if group[0] == 0:  # the state of the first run (the others' differ by their tolerance, not more)
+            y, rate = out[:, :s], rates[:, :s]
+        S[:, :, group] = out[:, size:].reshape(N, s, len(group))
+        d_S[:, :, group] = rates[:, size:].reshape(N, s, len(group))
+    return y, S, rate, d_S
+
+
+def _groups(owners: list[int], P: int) -> list[list[int]]:
+    """The parameters 0 .. P - 1 in runs of consecutive ones whose stencil models (owners: each model's parameter)
+    number at most STENCIL_MODELS: one run for the usual few, more only for many parameters."""
+    from smdcli.kernels.compiler import STENCIL_MODELS
+
+    groups, count = [[]], 0
+    for p in range(P):
+        needs = owners.count(p)
+        if groups[-1] and count + needs > STENCIL_MODELS:
+            groups.append([])
+            count = 0
+        groups[-1].append(p)
+        count += needs
+    return groups
 
 
 def _arrays(flow: _Flow):

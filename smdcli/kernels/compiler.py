@@ -91,9 +91,13 @@ def is_cached(dispatcher) -> bool:
     return os.path.exists(locator)
 
 
-def model_list(models: list, like):
-    """Kernel arrays as the sensitivity kernel takes them: one numba typed list of the type of `like` (empty too),
-    a plain list where the kernels run as Python (NUMBA_DISABLE_JIT=1)."""
-    if numba.config.DISABLE_JIT:
-        return list(models)
-    return numba.typed.List(models) if models else numba.typed.List.empty_list(numba.typeof(like))
+STENCIL_MODELS = 8  # the stencil models one sensitivity run takes (more: the parameters in groups, a run each)
+
+
+def model_tuple(models: list, like) -> tuple:
+    """Kernel arrays as the sensitivity kernel takes them: a tuple of STENCIL_MODELS, padded with `like` (one type
+    for any count, one compile). A tuple, not a numba typed list: reading a typed list's item counts a reference to
+    each of its 44 arrays, and a function that indexes one cannot be compiled without reference counting."""
+    if len(models) > STENCIL_MODELS:
+        raise ValueError(f"{len(models)} stencil models; a sensitivity run takes at most {STENCIL_MODELS}")
+    return tuple(models) + (like,) * (STENCIL_MODELS - len(models))

@@ -1,5 +1,5 @@
 """The compiled forward-sensitivity kernel (smdcli.kernels.sensitivity) run over a grid: its kernels warmed (or
-compiled, saying so), the stencil's models handed over as one typed list, a failure said where and why.
+compiled, saying so), the stencil's models handed over as one padded tuple, a failure said where and why.
 
 Must not import: sweep, io, plots, commands, cli.
 """
@@ -16,14 +16,15 @@ MAX_STEPS = 10**7
 def run_sensitivities(base, stencil: list, start: np.ndarray, grid: np.ndarray, cuts: np.ndarray, rtol: float,
                       atol: np.ndarray, source: str) -> tuple[np.ndarray, np.ndarray]:
     """(y, y') (N, len(start)) from start over the grid, restarting at the cuts: base the scene's kernel arrays,
-    stencil (parameter, weight, arrays) of each model a parameter's derivative takes (none: the state alone)."""
+    stencil (parameter, weight, arrays) of each model a parameter's derivative takes (none: the state alone; at most
+    compiler.STENCIL_MODELS)."""
     from smdcli.kernels import sensitivity as kernel
-    from smdcli.kernels.compiler import model_list
+    from smdcli.kernels.compiler import model_tuple
     from smdcli.kernels.rhs import work_size
     from smdcli.solvers.integrators.compiled import failure_text, warm
 
     warm("sensitivity")
-    models = model_list([arrays for _, _, arrays in stencil], base)
+    models = model_tuple([arrays for _, _, arrays in stencil], base)
     out, rates = np.full((len(grid), len(start)), np.nan), np.full((len(grid), len(start)), np.nan)
     status = kernel.integrate(base, models, np.array([w for _, w, _ in stencil], dtype=float),
                               np.array([p for p, _, _ in stencil], dtype=np.int64), np.asarray(start, dtype=float),

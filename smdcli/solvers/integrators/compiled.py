@@ -114,10 +114,10 @@ def _tiny_run(family: str) -> None:
         return
     if family == "sensitivity":  # the state alone (no parameter's stencil), two output times
         from smdcli.kernels.rhs import work_size
-        from smdcli.kernels.compiler import model_list
+        from smdcli.kernels.compiler import model_tuple
 
         arrays = model_arrays(tiny)
-        entry(arrays, model_list([], arrays), np.zeros(0), np.zeros(0, dtype=np.int64), y0.copy(), grid, grid, 1e-3, np.full(2, 1e-6),
+        entry(arrays, model_tuple([], arrays), np.zeros(0), np.zeros(0, dtype=np.int64), y0.copy(), grid, grid, 1e-3, np.full(2, 1e-6),
               10, np.zeros((2, 2)), np.zeros((2, 2)), np.zeros(work_size(arrays)), np.zeros(3, dtype=np.int64))
         return
     if family.startswith("modes:"):
