@@ -91,29 +91,48 @@ def _incidence(model: Model, kind: str) -> tuple[np.ndarray, np.ndarray, np.ndar
     return model.__dict__[key]
 
 
-def _dissipation(model: Model, v: np.ndarray, dampers: tuple | None = None) -> np.ndarray:
-    """x'^T C x' + c |d'|^3 of quadratic dampers, per element where the scene has them, over the last axis;
-    dampers: _incidence(model, "damper") where the caller has it already."""
-    if not model.element_form:
-        return (rows_times(v, model.sparse[0]) * v).sum(axis=-1)
-    D, c, _ = dampers if dampers is not None else _incidence(model, "damper")
-    dv = rows_times(v, D.T)
-    power = (c * dv**2).sum(axis=-1)
-    if model.added_damping is not None:
-        power = power + ((v @ model.added_damping) * v).sum(axis=-1)
-    if model.quadratic is not None:
-        dv = v @ model.quadratic.D.T
-        power = power + (model.quadratic.coef * np.abs(dv) ** 3).sum(axis=-1)
-    return power
+def _dissipation(model: Model, v: np.ndarray) -> np.ndarray:
+    """x'^T C x' + c |d'|^3 of quadratic dampers, per element where the scene has them, over the last axis."""
+    power = sum(((L * R).sum(axis=-1) for L, R in (form(v) for form in _damper_forms(model))), np.zeros(v.shape[:-1]))
+    return power if model.quadratic is None else power + _quadratic_dampers(model, v @ model.quadratic.D.T)
+
+
+def _quadratic_dampers(model: Model, rates: np.ndarray) -> np.ndarray:
+    """The quadratic dampers' power c |d'|^3 at their rates d' (..., dampers), summed over the last axis."""
+    return (model.quadratic.coef * np.abs(rates) ** 3).sum(axis=-1)
 
 
 def _input_power(model: Model, v: np.ndarray, times: np.ndarray) -> np.ndarray:
     """x'^T B u(t), the applied forces' power, at velocities v (..., n) and their times (flat, as many as v's leading
-    entries): each force's value times the velocity it acts on (v B, not the n-wide force B u of every time)."""
-    if not model.signals:
-        return np.zeros(v.shape[:-1])
-    along = v @ model.B  # (..., forces)
+    entries)."""
+    return _forces_power(model, v @ model.B, times) if model.signals else np.zeros(v.shape[:-1])
+
+
+def _forces_power(model: Model, along: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """Each force's value times the rate it acts on (along = x' B, (..., forces); not the n-wide force B u of every
+    time), summed over the forces, at the times (flat, as many as along's leading entries)."""
     return (along * model.forces(times).reshape(along.shape)).sum(axis=-1)
+
+
+def _damper_forms(model: Model) -> list[Callable]:
+    """The linear dampers' power as the sum of <L v, R v> over forms y -> (L y, R y) of rows of states, R's weight
+    symmetric (the Hermite rule's Gram form needs it): the damper rows and their coefficients and added damping, or
+    C itself where the scene has no elements; kept with the (frozen) model, as _incidence is."""
+    if "_damper_forms" not in model.__dict__:
+        if not model.element_form:
+            C = model.sparse[0]
+            symmetric_C = 0.5 * (C + C.T)
+            forms = [lambda y: (y, rows_times(y, symmetric_C))]
+        else:
+            forms = []
+            D, c, _ = _incidence(model, "damper")
+            if len(c):
+                forms.append(lambda y: (lambda dy: (dy, dy * c))(rows_times(y, D.T)))
+            if model.added_damping is not None:
+                added = 0.5 * (model.added_damping + model.added_damping.T)
+                forms.append(lambda y: (y, y @ added))
+        model.__dict__["_damper_forms"] = forms
+    return model.__dict__["_damper_forms"]
 
 
 def energy_balance(model: Model, result: Result, dense: Callable | None = None) -> Energy:
@@ -357,24 +376,6 @@ def _jumps_on_grid(model: Model, result: Result, events) -> np.ndarray:
     return work
 
 
-def _quadratic_powers(model: Model) -> list[Callable]:
-    """The linear dampers' power as sum <L v, R v> over forms y -> (L y, R y) of rows of states (R's weight
-    symmetric): the incidence rows and their coefficients, added damping, or C itself where the scene has no
-    elements."""
-    if not model.element_form:
-        C = model.sparse[0]
-        symmetric_C = 0.5 * (C + C.T)
-        return [lambda y: (y, rows_times(y, symmetric_C))]
-    forms = []
-    D, c, _ = _incidence(model, "damper")
-    if len(c):
-        forms.append(lambda y: (lambda dy: (dy, dy * c))(rows_times(y, D.T)))
-    if model.added_damping is not None:
-        added = 0.5 * (model.added_damping + model.added_damping.T)
-        forms.append(lambda y: (y, y @ added))
-    return forms
-
-
 def _hermite_gauss(model: Model, result: Result) -> tuple[np.ndarray, np.ndarray]:
     """Cumulative dissipated and input energy on the quintic Hermite interpolant of each step: its quadratic
     powers (x'^T C x') exactly, as a Gram form of the step's ends, and the rest (the forces' power, quadratic
@@ -388,7 +389,7 @@ def _hermite_gauss(model: Model, result: Result) -> tuple[np.ndarray, np.ndarray
     t, x, v, a = result.time, result.displacement, result.velocity, result.acceleration
     N, n = x.shape
     step = np.zeros((2, N))
-    forms = _quadratic_powers(model)
+    forms = _damper_forms(model)
     projected = [P for P in (model.B if model.signals else None,
                              model.quadratic.D.T if model.quadratic is not None else None) if P is not None]
     chunk = max(2, _CHUNK_VALUES // (4 * max(n, 1)))
@@ -401,12 +402,9 @@ def _hermite_gauss(model: Model, result: Result) -> tuple[np.ndarray, np.ndarray
             rates = [node_rates(slope, h, *(y[lo:hi] @ P for y in (x, v, a))) for P in projected]
             if model.signals:  # the forces' power: each force's value times the rate it acts on (x' B)
                 times = t[lo:hi - 1, None] + h[:, None] * s[None, :]
-                along = rates.pop(0)
-                power = (along * model.forces(times.ravel()).reshape(along.shape)).sum(axis=-1)
-                step[1, lo + 1:hi] = (power @ w) * h
+                step[1, lo + 1:hi] = (_forces_power(model, rates.pop(0), times.ravel()) @ w) * h
             if model.quadratic is not None:
-                power = (model.quadratic.coef * np.abs(rates.pop(0)) ** 3).sum(axis=-1)
-                step[0, lo + 1:hi] += (power @ w) * h
+                step[0, lo + 1:hi] += (_quadratic_dampers(model, rates.pop(0)) @ w) * h
     events = _events(model, t, (t[-1] - t[0]) / (N - 1))
     interrupted: dict[int, list] = {}  # no smooth interpolant spans these steps
     for k, time, jump in events:
@@ -427,7 +425,6 @@ def _reintegrated_step(model: Model, ta: float, tb: float, x: np.ndarray, v: np.
     from smdcli.solvers.base import force_function
 
     n = model.n
-    dampers = _incidence(model, "damper")
     z = np.concatenate([x, v, [0.0, 0.0]])
     scale = max(float(np.abs(z).max()), 1e-300)
     t = ta
@@ -439,7 +436,7 @@ def _reintegrated_step(model: Model, ta: float, tb: float, x: np.ndarray, v: np.
                 values, velocity = u(time), y[n:2 * n]
                 power = velocity @ (model.B @ values) if len(values) else 0.0
                 return np.concatenate([model.rhs(time, y[:2 * n], values),
-                                       [_dissipation(model, velocity, dampers), power]])
+                                       [_dissipation(model, velocity), power]])
 
             z = solve_ivp(flow, (t, t_event), z, method="DOP853", rtol=1e-12, atol=1e-14 * scale).y[:, -1]
         if jump is not None:

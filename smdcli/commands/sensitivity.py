@@ -69,8 +69,8 @@ def format_sensitivity(d: dict) -> str:
     """Terminal text: each DOF's peak and its derivatives, per unit and per 100 % of each parameter."""
     from smdcli.text import plural
 
-    how = "exact" if d["method"].startswith("exact") else \
-        f"forward sensitivity equations, {'compiled DOP853' if 'compiled DOP853' in d['method'] else 'DOP853 in Python'}"
+    integrated = "compiled DOP853" if "compiled DOP853" in d["method"] else "DOP853 in Python"
+    how = "exact" if d["method"].startswith("exact") else f"forward sensitivity equations, {integrated}"
     lines = [f"{d['scenario']}: sensitivities of the peak displacement ({plural(len(d['parameters']), 'parameter')}, "
              f"{how})"]
     width = max(len(p["path"]) for p in d["parameters"])

@@ -167,7 +167,7 @@ def augmented_rates(m, models, weights, owner, t, y, left, dy, work, J, dwork, f
     """dy = [f(t, y); J S + df/dp] for y = [state; S row-major (s, P)], J on the sides `signs` holds (branches);
     models: the stencil's first len(weights) of a padded tuple (compiler.model_tuple); f, J, dwork are scratch.
     Compiled without reference counting: with it, every read of a model's arrays was counted (a solve of the
-    Bouc-Wen benchmark's window with five parameters took 101 ms, now 39)."""
+    Bouc-Wen benchmark's window with five parameters took 101 ms, now 37)."""
     n = m.n
     size = 2 * n + m.ns_q + m.ns_acc
     s = 2 * n + m.ns_q

@@ -35,4 +35,3 @@ def run_sensitivities(base, stencil: list, start: np.ndarray, grid: np.ndarray, 
         raise SolverFailed(f"{source}: the sensitivity equations failed after t = {reached:.6g} s "
                            f"({failure_text(status, MAX_STEPS, np.inf)})")
     return out, rates
-

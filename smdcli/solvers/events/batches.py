@@ -45,7 +45,8 @@ class Batches:
         crosses or may touch (the step-by-step path takes that one): (z, t, k) after them, or None for none. Without
         a kink to reseed the generators at, the steps are taken by doubling (steps d+1 .. 2d are E^d times steps
         1 .. d plus the forcing's sum: a product for each doubling, not a Python step for each sample), and checked
-        for events CHECKED_TOGETHER steps and then a doubling at a time, so that an event near the start wastes little."""
+        for events CHECKED_TOGETHER steps and then a doubling at a time, so that an event near the start wastes
+        little."""
         grid = self.grid
         if abs(grid[k] - t - h_out) > 1e-9 * h_out or k == self.guarded_step:
             return None  # after an event, a step of its own; or the step a batch just stopped before

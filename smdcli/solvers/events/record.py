@@ -90,7 +90,7 @@ class Outputs:
         `cumulative` each term's integral there."""
         run = self.run
         scene, n = run.scene, run.n
-        mode = mode or scene.mode(states)
+        mode = scene.mode(states) if mode is None else mode
         rows = slice(k, k + len(Z))
         self.x[rows], self.v[rows] = Z[:, :n], Z[:, n:2 * n]
         run.v_scale = max(run.v_scale, float(np.abs(Z[:, n:2 * n]).max(initial=0.0)))
