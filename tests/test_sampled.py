@@ -9,6 +9,7 @@ from conftest import SCENARIOS, model_of
 
 from smdcli import scenario
 from smdcli.model import build, time_grid
+from smdcli.shapes.registry import Constant, FourierSquare, Harmonic, Pulse, Square, Step
 from smdcli.shapes.table import Table
 from smdcli.solvers import ground, solve
 from smdcli.solvers.exact import sampled
@@ -135,6 +136,18 @@ def test_a_tables_states_at_many_times_are_its_states_at_each(interpolation):
     times = np.array([0.0, 0.5, 0.7, 1.0, 1.1, 1.25, 2.0, 3.0, 3.5])
     expected = np.array([signal.exo_state(float(t)) for t in times])
     np.testing.assert_array_equal(signal.exo_states(times), expected)
+
+
+@pytest.mark.parametrize("signal", [Harmonic(2.0, 7.0, 0.3, False), Harmonic(2.0, 7.0, 0.3, True), Step(1.5, 1.25),
+                                    Constant(-4.0), FourierSquare(1.0, 3.0, 5, 0.2), Square(1.0, 3.0, 0.3, 0.2),
+                                    Pulse(0.5, 2.0, 1.0, 2.0, 3, 0)])
+def test_every_generator_s_states_at_many_times_are_its_states_at_each(signal):
+    """exo_states at many times (vectorized where the shape has it: the exact solver reseeds every block's start and
+    the event batches every step with them) equals exo_state at each: at and around a step's or a pulse's edge and
+    over late times, to an ulp of numpy's sin and cos against the math module's."""
+    times = np.array([0.0, 0.1999999, 0.2, 0.5, 1.25 - 1e-12, 1.25, 1.7, 2.0, 3.3, 1234.5678])
+    expected = np.array([signal.exo_state(float(t)) for t in times]).reshape(len(times), -1)
+    np.testing.assert_allclose(signal.exo_states(times), expected, rtol=0, atol=4 * np.finfo(float).eps)
 
 
 def test_a_large_classically_damped_chain_under_a_record_steps_its_modes_in_blocks(monkeypatch, tmp_path):

@@ -616,3 +616,34 @@ def test_a_fourier_series_force_s_amplitude_sensitivity_is_the_response_over_the
     x = smdcli.simulate(sc, method="exact").displacement
     assert np.abs(s.displacement - x).max() <= 1e-12 * np.abs(x).max()
     assert np.abs(s.d_displacement[0] - x / 100.0).max() <= 1e-12 * np.abs(x / 100.0).max()
+
+
+@pytest.mark.parametrize("name, params", [
+    ("three_dof_forced", ["spring[0].k", "damper[0].c", "mass.m2.m", "force[0].amplitude"]),  # stepped densely
+    ("three_storey_shaker", ["spring[1].k", "damping.alpha", "damping.beta"]),
+    ("five_storey_building", ["spring[0].k", "mass[2].m", "ground_motion.scale"]),  # a record's samples
+])
+def test_the_read_off_sensitivities_are_the_stacked_model_s_solution(monkeypatch, name, params):
+    """A linear scene's sensitivities read off the stacked state straight into their places (each derivative
+    block's products on its own columns, the scene's and the forces') equal the stacked model solved as a Result
+    and split into blocks, to 1e-13 of each quantity's largest; the scene's own equal `smd simulate`'s exact run."""
+    import smdcli.solvers.exact.linear as linear
+
+    reads = []
+    original = linear.read_exactly
+    monkeypatch.setattr(linear, "read_exactly", lambda *args: reads.append(original(*args)) or reads[-1])
+    sc = smdcli.load(SCENARIOS / f"{name}.toml")
+    read = smdcli.sensitivity(sc, params)
+    assert reads and reads[-1] is not None  # the read route was taken
+    monkeypatch.setattr(linear, "read_exactly", lambda *args: None)
+    solved = smdcli.sensitivity(sc, params)
+    forward = smdcli.simulate(sc, method="exact")
+    for quantity in ("displacement", "velocity", "acceleration"):
+        want = getattr(solved, quantity)
+        assert np.abs(getattr(read, quantity) - want).max() <= 1e-13 * np.abs(want).max(), quantity
+        assert np.abs(getattr(forward, quantity) - want).max() <= 1e-13 * np.abs(want).max(), quantity
+        for i, path in enumerate(params):
+            want = getattr(solved, f"d_{quantity}")[i]
+            got = getattr(read, f"d_{quantity}")[i]
+            assert np.abs(got - want).max() <= 1e-13 * np.abs(want).max(), (quantity, path)
+    np.testing.assert_allclose(read.d_peak_displacement, solved.d_peak_displacement, rtol=1e-12)

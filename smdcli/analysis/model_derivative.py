@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import math
 import re
 from dataclasses import dataclass
@@ -48,13 +49,17 @@ ROUNDING = 16  # units of rounding in a model's number (a generator's state at a
 _REFUSED = ("time.", "solver.", "sweep.", "output.", "plot")  # the run's span and settings: not the scene's
 
 
+@functools.lru_cache(maxsize=32)
 def stencil_weights(offsets: tuple[float, ...]) -> np.ndarray:
-    """Weights w with sum w_k f(o_k) = f'(0) exactly for polynomials of degree len(offsets) - 1 (delta = 1)."""
+    """Weights w with sum w_k f(o_k) = f'(0) exactly for polynomials of degree len(offsets) - 1 (delta = 1); read
+    only (a handful of stencils, each solved once)."""
     o = np.asarray(offsets, dtype=float)
     powers = o[None, :] ** np.arange(len(o))[:, None]
     target = np.zeros(len(o))
     target[1] = 1.0
-    return np.linalg.solve(powers, target)
+    weights = np.linalg.solve(powers, target)
+    weights.flags.writeable = False
+    return weights
 
 
 @dataclass

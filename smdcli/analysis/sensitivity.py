@@ -182,25 +182,22 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
     tol = Tolerances()
     run = dense = None
     if base.is_linear:
-        blocks, stated = _linear(sc, base, derivatives, grid, tol)
+        nominal, derived, stated = _linear(sc, base, derivatives, grid, tol)
         method = METHOD
-    elif piecewise:
-        blocks, stated, run = _events(base, derivatives, grid)
-        method = EVENT_METHOD
     else:
-        blocks, stated, dense, method = _smooth(sc, base, derivatives, grid, advance)
+        if piecewise:
+            blocks, stated, run = _events(base, derivatives, grid)
+            method = EVENT_METHOD
+        else:
+            blocks, stated, dense, method = _smooth(sc, base, derivatives, grid, advance)
+        nominal, derived = _split(blocks, derivatives)
     scales = np.array([relative_size(d.value) for d in derivatives])
-    nominal = {q: np.ascontiguousarray(b[:, 0]) for q, b in blocks.items()}
-    derived = {q: np.divide(np.moveaxis(b[:, 1:], 1, 0), scales[:, None, None],  # one pass into (P, N, n)
-                            out=np.empty((b.shape[1] - 1, b.shape[0], b.shape[2])))
-               for q, b in blocks.items()}
     accuracy = {}
-    for q in blocks:
+    for q in QUANTITIES:
         # each block's peak over time and DOFs, from the contiguous copies (one reduction along memory, not a strided
         # one over the blocks); fmax passes over nan, written where no derivative exists
-        block_peaks = np.nan_to_num(np.r_[np.fmax.reduce(np.abs(nominal[q].ravel()), initial=0.0),
-                                          np.fmax.reduce(np.abs(derived[q].reshape(P, -1)), axis=1, initial=0.0)
-                                          * scales])  # (P + 1,): the blocks' own, scale_i dx/dp_i
+        block_peaks = np.r_[_largest(nominal[q].reshape(1, -1)),
+                            _largest(derived[q].reshape(P, -1)) * scales]  # (P + 1,): the blocks' own, scale_i dx/dp_i
         largest = block_peaks[1:]
         if base.is_linear:  # the run's error is relative to the stacked state's peak (every block a displacement)
             absolute = stated * float(block_peaks.max())
@@ -253,6 +250,13 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
     return found
 
 
+def _largest(rows: np.ndarray) -> np.ndarray:
+    """Each row's largest magnitude over its numbers (nan passed over; 0 for none), from its extremes: no |rows|
+    made (a fresh array's pages cost more than the pass)."""
+    return np.maximum(np.maximum(np.fmax.reduce(rows, axis=1, initial=-np.inf),
+                                 -np.fmin.reduce(rows, axis=1, initial=np.inf)), 0.0)
+
+
 def _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_peaks, accuracy, notes,
             method) -> Sensitivity:
     from smdcli.sweep.spec import parameter_units
@@ -267,16 +271,50 @@ def _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_
         notes=notes, model=base, derivatives=derivatives, method=method)
 
 
-def _linear(sc: Scenario, base, derivatives: list, grid: np.ndarray, tol: Tolerances) -> tuple[dict, float]:
-    """Each quantity's (N, P + 1, n) blocks (the scene, then scale_i d/dp_i) by the exact solver, and its accuracy."""
-    stacked, _ = augmented_model(base, derivatives)
-    exact = get_solver("exact")
-    result = across_jumps(lambda piece, times: exact.solve(piece, times, tol), stacked, grid)
-    if not result.success or not np.all(np.isfinite(result.displacement)):
-        raise SolverFailed(f"{sc.path}: the sensitivity equations could not be solved: {result.stats.message}")
-    P, n = len(derivatives), base.n
-    return {q: getattr(result, q).reshape(len(grid), P + 1, n) for q in QUANTITIES}, \
-        float(result.stats.stated_accuracy)
+def _split(blocks: dict, derivatives: list) -> tuple[dict, dict]:
+    """Each quantity's (N, P + 1, n) blocks (the scene, then scale_i d/dp_i) as the scene's (N, n) and the
+    derivatives' (P, N, n), each contiguous."""
+    scales = np.array([relative_size(d.value) for d in derivatives])
+    nominal = {q: np.ascontiguousarray(b[:, 0]) for q, b in blocks.items()}
+    derived = {q: np.divide(np.moveaxis(b[:, 1:], 1, 0), scales[:, None, None],  # one pass into (P, N, n)
+                            out=np.empty((b.shape[1] - 1, b.shape[0], b.shape[2])))
+               for q, b in blocks.items()}
+    return nominal, derived
+
+
+def _linear(sc: Scenario, base, derivatives: list, grid: np.ndarray, tol: Tolerances) -> tuple[dict, dict, float]:
+    """Each quantity's scene (N, n) and derivatives (P, N, n) by the exact solver, and its accuracy: on the dense
+    path each read off the stacked state straight into its place (a derivative block reaches only itself, the
+    scene and the forces: its products skip the rest); elsewhere (jumps, a record's samples, the modal or sparse
+    paths) as blocks of the stacked model's result."""
+    from smdcli.solvers.exact.linear import read_exactly
+
+    stacked, scales = augmented_model(base, derivatives)
+    P, n, N = len(derivatives), base.n, len(grid)
+    nominal = {q: np.empty((N, n)) for q in QUANTITIES}
+    derived = {q: np.empty((P, N, n)) for q in QUANTITIES}
+    total, reads = (P + 1) * n, []
+    rates, inputs = stacked.state_matrix[total:], stacked.input_matrix[total:]
+    for block in range(P + 1):
+        rows, by = slice(block * n, (block + 1) * n), (1.0 if block == 0 else scales[block - 1])
+        x_read = np.zeros((n, 2 * total))
+        x_read[:, rows] = np.eye(n) / by
+        into = {q: nominal[q] if block == 0 else derived[q][block - 1] for q in QUANTITIES}
+        reads += [(x_read, None, into["displacement"]), (np.roll(x_read, total, axis=1), None, into["velocity"]),
+                  (rates[rows] / by, inputs[rows] / by, into["acceleration"])]
+    solved = None if stacked.jumps else read_exactly(stacked, grid, reads)
+    if solved is None:
+        exact = get_solver("exact")
+        result = across_jumps(lambda piece, times: exact.solve(piece, times, tol), stacked, grid)
+        if not result.success:
+            raise SolverFailed(f"{sc.path}: the sensitivity equations could not be solved: {result.stats.message}")
+        nominal, derived = _split({q: getattr(result, q).reshape(N, P + 1, n) for q in QUANTITIES}, derivatives)
+        stated = float(result.stats.stated_accuracy)
+    else:
+        stated = solved[0]
+    if not (np.all(np.isfinite(nominal["displacement"])) and np.all(np.isfinite(derived["displacement"]))):
+        raise SolverFailed(f"{sc.path}: the sensitivity equations could not be solved: not finite")
+    return nominal, derived, float(stated)
 
 
 def _piecewise(base) -> bool:

@@ -39,6 +39,9 @@ class Constant(Signal):
     def exo_state(self, t):
         return np.ones(1)
 
+    def exo_states(self, t):
+        return np.ones((len(t), 1))
+
     def derivative(self, start):
         return None
 

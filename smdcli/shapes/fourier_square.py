@@ -87,5 +87,11 @@ class FourierSquare(Signal):
         out[0::2], out[1::2] = np.sin(arg), np.cos(arg)
         return out
 
+    def exo_states(self, t):
+        arg = np.multiply.outer(np.asarray(t, dtype=float) - self.t0, self.harmonics * self.omega) + self.phase
+        out = np.empty((len(arg), 2 * arg.shape[1]))
+        out[:, 0::2], out[:, 1::2] = np.sin(arg), np.cos(arg)
+        return out
+
     def kernel_row(self):
         return FOURIER_SQUARE, [self.omega, self.t0, self.phase], [*self.harmonics, *self.coefs], []

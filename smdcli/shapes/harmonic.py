@@ -47,6 +47,10 @@ class Harmonic(Signal):
         arg = self.omega * t + self.phase
         return np.array([math.sin(arg), math.cos(arg)])
 
+    def exo_states(self, t):
+        arg = self.omega * np.asarray(t, dtype=float) + self.phase
+        return np.stack([np.sin(arg), np.cos(arg)], axis=1)
+
     def derivative(self, start):
         return Harmonic(self.amplitude * self.omega, self.omega, self.phase + math.pi / 2, self.cosine)
 

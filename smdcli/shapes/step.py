@@ -45,6 +45,9 @@ class Step(Signal):
     def exo_state(self, t):
         return np.array([1.0 if t >= self.t0 else 0.0])
 
+    def exo_states(self, t):
+        return (np.asarray(t, dtype=float) >= self.t0).astype(float)[:, None]
+
     def derivative(self, start):
         return None
 

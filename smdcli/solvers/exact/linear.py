@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -134,13 +135,13 @@ class Exact(Solver):
         harmonics = split(model)
         if harmonics is not None:  # thousands of Fourier terms: superposed in closed form, not augmented
             reduced, particular = harmonics
-            x, v, stated, message = _solve_linear(from_rest_less(reduced, particular, float(grid[0])), grid)
+            x, v, stated, message, _ = _solve_linear(from_rest_less(reduced, particular, float(grid[0])), grid)
             xp, vp = particular.at(grid)
-            x, v = x + xp, v + vp
+            x, v, acceleration = x + xp, v + vp, None
             stated = stated + particular.accuracy(grid)
             message += f"; {plural(len(particular.w), 'harmonic')} superposed in closed form"
         else:
-            x, v, stated, message = _solve_linear(model, grid)
+            x, v, stated, message, acceleration = _solve_linear(model, grid)
         if held:
             stated = max(stated, hold_error(original, grid, held))
             message += f"; first-order hold on the output grid for {', '.join(held)} (error O(step^2))"
@@ -149,10 +150,21 @@ class Exact(Solver):
             nlu=0, steps_accepted=max(len(grid) - 1, 0), wall_time_s=time.perf_counter() - start,
             message=message, stated_accuracy=stated,
         )
-        return make_result(model, grid, x, v, stats)
+        return make_result(model, grid, x, v, stats, acceleration=acceleration)
 
 
-def _solve_linear(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:
+class Solved(NamedTuple):
+    """A path's displacement and velocity (N, n), its stated accuracy and description, and the acceleration where
+    the path read it off its own state (the dense one: a product by the state matrix's rows, no force evaluated)."""
+
+    x: np.ndarray
+    v: np.ndarray
+    stated: float
+    message: str
+    acceleration: np.ndarray | None = None
+
+
+def _solve_linear(model: Model, grid: np.ndarray) -> Solved:
     """x, v, stated accuracy and a description, by the cheapest exact path: modal, the sparse action, blocks of
     steps between a table's samples (sampled.py) or dense. Each path steps a uniform grid; a grid of other steps
     (an internal caller's) is taken as its uniform runs one after the other."""
@@ -160,12 +172,41 @@ def _solve_linear(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarra
     if len(runs) > 1:
         return _solve_runs(model, grid, runs)
     if modal_applies(model):
-        return solve_modal(model, grid)
+        return Solved(*solve_modal(model, grid))
     action = sparse_action(model, grid)
     if action is not None:
-        return solve_action(model, grid, action)
+        return Solved(*solve_action(model, grid, action))
     knots = sampled.uniform_knots(model, grid)
-    return sampled.solve_sampled(model, knots, *augmented(model)) if knots is not None else solve_dense(model, grid)
+    return Solved(*sampled.solve_sampled(model, knots, *augmented(model))) if knots is not None \
+        else solve_dense(model, grid)
+
+
+def read_exactly(model: Model, grid: np.ndarray, readouts: list) -> tuple[float, str] | None:
+    """Each of readouts' (R (r, 2n), G (r, signals) or None, out (N, r)) given R [x; v] + G u at every grid time (u
+    the force signals' values there), where Exact.solve steps the augmented system or a table's samples (every
+    force with its generator, no harmonics superposed, one uniform run, neither modal nor the sparse action): only
+    what is read is written, each output contiguous. The stated accuracy and a description; None where Exact.solve
+    takes another path (the caller solves it as a Result)."""
+    if first_order_hold(model, grid)[1] or split(model) is not None or len(_uniform_runs(grid)) > 1 \
+            or modal_applies(model) or sparse_action(model, grid) is not None:
+        return None
+    knots = sampled.uniform_knots(model, grid)
+    if knots is None:
+        return propagate(model, grid, readouts)
+    states, stated, message = sampled.sampled_states(model, knots, *augmented(model))
+    for R, _, out in readouts:
+        np.matmul(states, R.T, out=out)
+    _add_forces(model, grid, readouts)
+    return stated, message
+
+
+def _add_forces(model: Model, grid: np.ndarray, readouts: list) -> None:
+    """out += u G^T for the readouts that read the forces (u the signals' values on the grid)."""
+    inputs = [(G, out) for _, G, out in readouts if G is not None and G.any()]
+    if inputs:
+        values = model.forces(grid)
+        for G, out in inputs:
+            out += values @ G.T
 
 
 def _uniform_runs(grid: np.ndarray) -> list[tuple[int, int]]:
@@ -178,43 +219,62 @@ def _uniform_runs(grid: np.ndarray) -> list[tuple[int, int]]:
     return [(lo, hi) for lo, hi in zip(ends[:-1], ends[1:])]
 
 
-def _solve_runs(model: Model, grid: np.ndarray, runs) -> tuple[np.ndarray, np.ndarray, float, str]:
+def _solve_runs(model: Model, grid: np.ndarray, runs) -> Solved:
     """The linear scene on each uniform run in turn, each from the state the last one ended in."""
     x, v = np.empty((len(grid), model.n)), np.empty((len(grid), model.n))
     stated, message, start = 0.0, "", model
     for lo, hi in runs:
-        xs, vs, accuracy, described = _solve_linear(start, grid[lo:hi + 1])
+        xs, vs, accuracy, described, _ = _solve_linear(start, grid[lo:hi + 1])
         message = message or described
         x[lo:hi + 1], v[lo:hi + 1] = xs, vs
         stated = max(stated, accuracy)
         start = dataclasses.replace(model, x0=xs[-1].copy(), v0=vs[-1].copy())
-    return x, v, stated, f"{message}; a grid of unequal steps, as {len(runs)} uniform runs"
+    return Solved(x, v, stated, f"{message}; a grid of unequal steps, as {len(runs)} uniform runs")
 
 
-def _in_blocks(out: np.ndarray, k: int, stop: int, z: np.ndarray, powers: np.ndarray, reseed) -> np.ndarray:
-    """Rows k .. stop - 1 of out from z at row k - 1, in blocks of as many steps as powers (the step's propagator to
-    the 1st .. Jth power), reseed(z, row) restarting the force generators at each block's start: the starts one
-    after another (a product by the last power each), then every whole block's steps in one matrix product (not a
-    product of the stacked powers with each start: twice the speed at size 27, where that is flops, not Python).
-    The state at stop - 1, as stored."""
+def _in_blocks(reads: list, k: int, stop: int, z: np.ndarray, powers: np.ndarray, seeds) -> np.ndarray:
+    """Rows k .. stop - 1 of each read's output from z at row k - 1, in blocks of as many steps as powers (the step's
+    propagator to the 1st .. Jth power), the force generators restarted at each block's start (seeds(rows): their
+    states at those rows, (len(rows), m), the last m entries of z): the starts one after another (a product by the
+    last power each), then every whole block's steps in one matrix product per read (not a product of the stacked
+    powers with each start: twice the speed at size 27, where that is flops, not Python). reads: (R P, columns,
+    out), the read's rows times the powers (J, r, columns) on the state's columns that reach it, and its (N, r)
+    output. The state at stop - 1."""
     J, size = powers.shape[0], powers.shape[1]
     count = stop - k
     whole, rest = divmod(count, J)
     starts = np.empty((whole + (rest > 0), size))
+    restarts = seeds(k - 1 + J * np.arange(len(starts)))
+    first = size - restarts.shape[1]
     for b in range(len(starts)):
-        reseed(z, k + b * J)
+        z[first:] = restarts[b]
         starts[b] = z
         z = powers[min(J, count - b * J) - 1] @ z
-    if whole:
-        np.matmul(starts[:whole], powers.reshape(J * size, size).T, out=out[k:k + whole * J].reshape(whole, J * size))
-    if rest:
-        out[k + whole * J:stop] = (powers[:rest].reshape(rest * size, size) @ starts[whole]).reshape(rest, size)
-    return out[stop - 1].copy()
+    for read, columns, out in reads:
+        r, known = out.shape[1], starts[:, columns]
+        if whole:
+            np.matmul(known[:whole], read.reshape(J * r, len(columns)).T,
+                      out=out[k:k + whole * J].reshape(whole, J * r))
+        if rest:
+            out[k + whole * J:stop] = (read[:rest].reshape(rest * r, len(columns)) @ known[whole]).reshape(rest, r)
+    return z
 
 
-def solve_dense(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:
-    """Displacement and velocity (N, n) by the dense exponential of the augmented system, the stated accuracy and
-    a description."""
+def solve_dense(model: Model, grid: np.ndarray) -> Solved:
+    """Displacement, velocity and acceleration (N, n) by the dense exponential of the augmented system (the
+    acceleration read off the state, plus the forces' values at each time: a jump's sample its right limit), the
+    stated accuracy and a description."""
+    n, N = model.n, len(grid)
+    x, v, a = (np.empty((N, n)) for _ in range(3))
+    stated, message = propagate(model, grid, [(np.eye(n, 2 * n), None, x), (np.eye(n, 2 * n, n), None, v),
+                                              (model.state_matrix[n:], model.input_matrix[n:], a)])
+    return Solved(x, v, stated, message, a)
+
+
+def propagate(model: Model, grid: np.ndarray, readouts) -> tuple[float, str]:
+    """The dense exponential of the augmented system (state z = [x; v; the forces' generators]) stepped over the
+    grid, each of readouts' (R (r, 2n), G (r, signals) or None, out (N, r)) given R [x; v] + G u at every grid
+    time (read_exactly's). The stated accuracy and a description."""
     Aaug, blocks = augmented(model)
     size = Aaug.shape[0]
     n, N = model.n, len(grid)
@@ -236,12 +296,17 @@ def solve_dense(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray,
         powers[0] = phi(h)
         for j in range(1, J):
             powers[j] = powers[j - 1] @ powers[0]
+    reads = []
+    for R, _, out in readouts:
+        R = np.hstack([R, np.zeros((len(R), size - 2 * n))])
+        read = np.matmul(R, powers)  # (J, r, size)
+        columns = np.flatnonzero(read.any(axis=(0, 1)))  # the state's entries that reach the read (a sensitivity
+        reads.append((R, np.ascontiguousarray(read[:, :, columns]), columns, out))  # block: its own, the scene's)
 
     def reseed(z: np.ndarray, t: float) -> None:
         for lo, hi, signal in blocks:
             z[lo:hi] = signal.exo_state(t)
 
-    out = np.empty((N, size))
     z = np.zeros(size)
     z[:n], z[n:2 * n] = model.x0, model.v0
     k = 0  # next grid index to fill
@@ -255,17 +320,20 @@ def solve_dense(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray,
             if grid[k] > t_cur:
                 z = phi(grid[k] - t_cur) @ z
                 n_expm += 1
-            out[k] = z
+            for R, _, _, out in reads:
+                out[k] = R @ z
             t_cur = grid[k]
             k += 1
             if k < stop:
-                z = _in_blocks(out, k, stop, z, powers, lambda z, at: reseed(z, grid[at - 1]))
+                z = _in_blocks([r[1:] for r in reads], k, stop, z, powers,
+                               lambda rows: sampled.table_states(blocks, grid[rows], 2 * n))
                 k = stop
                 t_cur = grid[k - 1]
         if not last and tb > t_cur:
             z = phi(tb - t_cur) @ z
             n_expm += 1
+    _add_forces(model, grid, readouts)
     stated = stated_rounding(N + len(segs) + n_expm, 1.0 if accurate else growth)
     message = (f"ok: {plural(len(segs), 'force segment')}, {plural(len(cache), 'matrix exponential')} "
                f"of size {size}" + (" in double-double (a stiff scene)" if accurate else ""))
-    return out[:, :n].copy(), out[:, n:2 * n].copy(), stated, message
+    return stated, message

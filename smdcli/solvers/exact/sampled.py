@@ -64,8 +64,8 @@ def uniform_knots(model: Model, grid: np.ndarray) -> Knots | None:
 
 
 def table_states(blocks, times: np.ndarray, offset: int) -> np.ndarray:
-    """The tables' generator states (value, slope) just after each time, (len(times), m); blocks: (lo, hi, signal)
-    with lo and hi counted from `offset`."""
+    """The signals' generator states just after each time (a table's: value, slope), (len(times), m); blocks:
+    (lo, hi, signal) with lo and hi counted from `offset`."""
     w = np.empty((len(times), max((hi for _, hi, _ in blocks), default=offset) - offset))
     for lo, hi, signal in blocks:
         w[:, lo - offset:hi - offset] = signal.exo_states(times)
@@ -134,6 +134,12 @@ def recurrence(E: np.ndarray, forced: np.ndarray, start: np.ndarray, rows: np.nd
 
 def solve_sampled(model: Model, knots: Knots, Aaug: np.ndarray, blocks) -> tuple:
     """x, v (N, n), the stated accuracy and a description; Aaug and blocks: exact.augmented's."""
+    states, stated, message = sampled_states(model, knots, Aaug, blocks)
+    return states[:, :model.n].copy(), states[:, model.n:].copy(), stated, message
+
+
+def sampled_states(model: Model, knots: Knots, Aaug: np.ndarray, blocks) -> tuple[np.ndarray, float, str]:
+    """The states [x, v] (N, 2n) at the output points, the stated accuracy and a description."""
     n, s, size = model.n, 2 * model.n, Aaug.shape[0]
     steps = len(knots.times) - 1
     step, norm, accurate = propagator(Aaug, knots.step)
@@ -144,4 +150,4 @@ def solve_sampled(model: Model, knots: Knots, Aaug: np.ndarray, blocks) -> tuple
     message = (f"ok: {plural(steps, 'step')} between the tables' samples and the output points, each exact for "
                f"the tables' first-order hold, in blocks of {min(BLOCK, steps)} (one matrix exponential of size "
                f"{size}{' in double-double, a stiff scene' if accurate else ''})")
-    return states[:, 0, :n].copy(), states[:, 0, n:].copy(), stated, message
+    return states[:, 0], stated, message
