@@ -16,17 +16,22 @@ SCENES = ["two_dof_forced", "three_dof_forced", "three_storey_shaker", "five_sto
 
 
 def _paths(sc, model) -> list[str]:
-    """Every path moved() takes in the scene: each mass by name and by index, each linear spring's k and damper's c."""
+    """Every path moved() takes in the scene: each mass by name and by index, each linear spring's k and damper's c,
+    Rayleigh's alpha and beta where the scenario gives them."""
     paths = []
     for i, name in enumerate(model.dofs):
         paths += [f"mass.{name}.m", f"mass[{i}].m", f"mass.{name}.x0", f"mass[{i}].v0"]
     paths += [f"{e.name}.{'k' if e.kind == 'spring' else 'c'}" for e in model.elements if e.law == "linear"]
+    if sc.damping is not None and sc.damping.given in ("alpha", "beta"):
+        paths += ["damping.alpha", "damping.beta"]
     return paths
 
 
-def _now(model, path: str) -> float:
-    """The model's number at a mass's m, a spring's k or a damper's c path."""
+def _now(model, path: str, sc=None) -> float:
+    """The model's number at a mass's m, a spring's k, a damper's c or Rayleigh's alpha or beta path."""
     owner = path.rpartition(".")[0]
+    if owner == "damping":
+        return 1e-3 + getattr(sc.damping, path.rpartition(".")[2])  # never 0: a move must change C
     if owner.startswith("mass"):
         i = int(owner[5:-1]) if owner.startswith("mass[") else model.dofs.index(owner[5:])
         return float(model.M[i, i])
@@ -44,7 +49,7 @@ def _same(a: np.ndarray, b: np.ndarray) -> float:
 def test_a_moved_model_is_the_model_built_with_the_number(name):
     sc, base, _ = bundled(name)
     for path in _paths(sc, base):
-        value = 1.3 * _now(base, path) if path.endswith((".m", ".k", ".c")) else 0.37
+        value = 1.3 * _now(base, path, sc) if path.endswith((".m", ".k", ".c", "alpha", "beta")) else 0.37
         fast = moved(base, sc, path, value)
         built = build(scenario_with(sc, {path: value}))
         assert fast is not None, path
@@ -67,4 +72,9 @@ def test_a_scene_only_build_can_make_is_left_to_it():
     assert moved(base, sc, "spring[0].k", -1.0) is None  # not a scene: build's refusal turns the stencil one-sided
     assert moved(base, sc, "mass.m.m", 0.0) is None
     assert moved(base, sc, "force[0].amplitude", 2.0) is None
+    assert moved(base, sc, "damping.alpha", 2.0) is None  # no [damping]
+    sc, base, _ = bundled("shear_frame_bilinear")
+    assert moved(base, sc, "damping.alpha", 2.0) is None  # nonlinear, and its Rayleigh given through zeta
+    sc, base, _ = model_of(one_dof(0.5) + "[damping]\nzeta = 0.05\nomega = [2.0, 9.0]\n")
+    assert moved(base, sc, "damping.alpha", 2.0) is None  # build says what alpha means beside zeta
     assert moved(base, sc, "spring[0].k", 30.0).K[0, 0] == pytest.approx(30.0, rel=1e-15)

@@ -3,7 +3,7 @@ displacement or velocity), assembled from the model it was built as instead of f
 parameter's derivative takes at each point of its stencil, at a hundredth of a build's cost.
 
 The numbers change where build would put them: a mass on M's diagonal, an element's k or c stamped between its
-two ends, [damping]'s part of C made again from the moved M and K (Rayleigh's alpha M + beta K, or the modal
+two ends, [damping]'s part of C made again from the moved M and K (or from a moved alpha or beta) (Rayleigh's alpha M + beta K, or the modal
 damping of the moved modes), the ground's jumps from the moved M and C (Model.with_matrices), and the element's
 own coefficient (its tension reads it).
 
@@ -23,17 +23,24 @@ from smdcli.model.system import Model
 from smdcli.scenario import Scenario
 
 _PATH = re.compile(r"mass(?:\.(?P<name>[^.\[\]]+)|\[(?P<index>\d+)\])\.(?P<field>m|x0|v0)"
-                   r"|(?P<element>spring\[\d+\]\.k|damper\[\d+\]\.c)")
+                   r"|(?P<element>spring\[\d+\]\.k|damper\[\d+\]\.c)|damping\.(?P<rayleigh>alpha|beta)")
 
 
 def moved(model: Model, scenario: Scenario, path: str, value: float) -> Model | None:
     """The model with the number at path set to value (SI), or None where only build can say (a nonlinear scene, a
-    [system] or sparse one, a path that is not a mass's, a linear spring's k or a linear damper's c)."""
+    [system] or sparse one, a path that is not a mass's, a linear spring's k, a linear damper's c or Rayleigh's
+    alpha or beta)."""
     found = _PATH.fullmatch(path)
     if found is None or not model.is_linear or not model.element_form or model.is_sparse:
         return None
     if value < 0 or value == 0 and found["field"] == "m":
         return None  # not a scene: build refuses it, and the stencil turns one-sided
+    if found["rayleigh"]:  # Rayleigh's coefficient as the scenario gives it (not through zeta at two frequencies)
+        spec = scenario.damping
+        if spec is None or spec.modal or spec.given not in ("alpha", "beta"):
+            return None
+        damped = dataclasses.replace(scenario, damping=dataclasses.replace(spec, **{found["rayleigh"]: value}))
+        return _damped(model, damped, model.M, model.C, model.K)
     if found["element"]:
         name, _, key = found["element"].partition(".")
         element = next((e for e in model.elements if e.name == name and e.law == "linear"), None)

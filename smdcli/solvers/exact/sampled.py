@@ -15,6 +15,7 @@ Must not import: sweep, io, plots, commands, cli.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -26,6 +27,10 @@ from smdcli.solvers.base import stated_rounding
 from smdcli.text import plural
 
 BLOCK = 64  # steps a block takes at most
+# Seconds per Python-level product of the blocks' loops and per flop of a small product (2-core machine): they only
+# set the block length, which trades J products for the powers and J for each block's forced part against
+# steps / J for the blocks' starts
+_PRODUCT_S, _FLOP_S = 5e-6, 2.5e-10
 CHUNK_ENTRIES = 1 << 21  # states (systems x state size) a chunk of steps holds: 16 MB an array
 
 
@@ -83,6 +88,14 @@ def applied(E: np.ndarray, y: np.ndarray) -> np.ndarray:
     return out
 
 
+def block_length(steps: int, systems: int, s: int) -> int:
+    """recurrence's J: the fewest seconds for J powers (a product of `systems` s x s matrices each) and 2 J + steps /
+    J Python-level products; at most BLOCK. 2,001 steps of a 5-DOF frame: 32 (0.69 ms, 1.17 at 64); of its 20-DOF
+    sensitivity system: 16 (2.6 ms, 3.6 at 64)."""
+    power = _PRODUCT_S + _FLOP_S * 2 * systems * s ** 3
+    return int(max(1, min(BLOCK, steps, round(math.sqrt(steps * _PRODUCT_S / (_PRODUCT_S + power))))))
+
+
 def recurrence(E: np.ndarray, forced: np.ndarray, start: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, int]:
     """y_(k+1) = E y_k + forced_k from y_0 = start for independent systems side by side, at the steps `rows`
     (increasing): (len(rows), P, s), and the longest chain of dependent products (the rounding's count). E (P, s, s),
@@ -90,7 +103,7 @@ def recurrence(E: np.ndarray, forced: np.ndarray, start: np.ndarray, rows: np.nd
     across all blocks at once; the blocks' starts one after another; each block's free part one product with E^j.
     Taken CHUNK_ENTRIES states at a time, so that many systems over many steps need no more."""
     steps, P, s = forced.shape
-    J = min(BLOCK, max(steps, 1))
+    J = block_length(steps, P, s)
     powers = np.empty((J + 1, P, s, s))
     powers[0] = np.eye(s)
     for j in range(J):
@@ -148,6 +161,6 @@ def sampled_states(model: Model, knots: Knots, Aaug: np.ndarray, blocks) -> tupl
     states, chain = recurrence(E[None], forced[:, None], np.concatenate([model.x0, model.v0])[None], knots.rows)
     stated = stated_rounding(steps + chain, 1.0 if accurate else norm)  # E's own rounding enters every step
     message = (f"ok: {plural(steps, 'step')} between the tables' samples and the output points, each exact for "
-               f"the tables' first-order hold, in blocks of {min(BLOCK, steps)} (one matrix exponential of size "
+               f"the tables' first-order hold, in blocks of {block_length(steps, 1, s)} (one matrix exponential of size "
                f"{size}{' in double-double, a stiff scene' if accurate else ''})")
     return states[:, 0], stated, message
