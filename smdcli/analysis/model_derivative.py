@@ -32,12 +32,13 @@ import numpy as np
 from smdcli import scenario as scenario_mod
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import Model, build
+from smdcli.model.damping import modal_damping_derivative
 from smdcli.model.moved import moved
 from smdcli.model.system import GROUND_DOF
 from smdcli.scenario import Scenario
 from smdcli.shapes.base import Exo, Signal
 from smdcli.shapes.table import Table
-from smdcli.sweep.family import decoded, parameter_value, set_parameter
+from smdcli.sweep.family import STRUCTURAL, decoded, parameter_value, set_parameter
 
 CENTRAL = (-2.0, -1.0, 1.0, 2.0)  # offsets in units of delta: exact for polynomials of degree 4 (its symmetry)
 FORWARD = (0.0, 1.0, 2.0, 3.0, 4.0)  # where p - delta is not a valid scene (a damper at c = 0): degree 4 too
@@ -140,6 +141,10 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
 
     if affine(sc, base, path):
         return _affine_derivative(sc, doc, base, grid, path, value, scale, structure, arrays_of)
+    if sc.damping is not None and sc.damping.modal:
+        found = _modal_derivative(sc, doc, base, grid, path, value, scale, structure, arrays_of)
+        if found is not None:
+            return found
     best = refused = None
     for relative in STEPS:
         delta = relative * scale
@@ -213,8 +218,6 @@ def affine(sc: Scenario, base: Model, path: str) -> bool:
     """Whether every number of the model is affine in the parameter: a mass, stiffness, damper, [system] entry,
     initial state, Rayleigh coefficient, force amplitude, record scale or a smooth law's affine key (not with modal
     damping, whose C follows the modes, nor a mass where the ground jumps, whose jump holds M^-1 C)."""
-    from smdcli.sweep.family import STRUCTURAL
-
     if any(e.law.piecewise_linear for e in base.nonsmooth):
         return False  # a mode's numbers multiply the parameter by internal variables that move with it (k d_p)
     owner, _, key = path.rpartition(".")
@@ -228,6 +231,13 @@ def affine(sc: Scenario, base: Model, path: str) -> bool:
 def _affine_derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str, value: float,
                        scale: float, structure: tuple, arrays_of) -> Derivative:
     """An affine parameter's derivative: one difference over a step of AFFINE_STEP of it, exact up to rounding."""
+    other, delta = _moved_once(sc, doc, base, grid, path, value, scale, structure)
+    return _difference(path, value, delta, base, other, arrays_of)
+
+
+def _moved_once(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str, value: float, scale: float,
+                structure: tuple) -> tuple[Model, float]:
+    """The scene at p + AFFINE_STEP of p (or p - it, where p + it is no scene) and the step."""
     for sign in (1.0, -1.0):
         delta = sign * AFFINE_STEP * scale
         try:
@@ -239,11 +249,38 @@ def _affine_derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, p
     else:
         raise _unbuildable(path, value, AFFINE_STEP * scale, refused)
     _same_structure(other, base, structure, grid, path)
+    return other, delta
+
+
+def _difference(path: str, value: float, delta: float, base: Model, other: Model, arrays_of,
+                error: float = 0.0) -> Derivative:
+    """The derivative as the difference of two models a step apart whose numbers are affine in p, its error their
+    rounding's (or `error`, where larger)."""
     weights = np.array([-1.0, 1.0]) / delta
     pair = [arrays_of(base), arrays_of(other)]
     largest = max((float(np.abs(b - a).max(initial=0.0)) for a, b in zip(*pair)), default=0.0) / abs(delta)
-    error = _rounding(pair, weights, largest) if largest > 0 else 0.0
+    error = max(error, _rounding(pair, weights, largest) if largest > 0 else 0.0)
     return Derivative(path, value, delta, [base, other], weights, error, (0.0, 1.0))
+
+
+def _modal_derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str, value: float,
+                      scale: float, structure: tuple, arrays_of) -> Derivative | None:
+    """A mass's, stiffness's or damper's derivative under modal damping, exact: M, K and the elements' C are affine
+    in it, and modal damping's C moves with the modes by damping.modal_damping_derivative; the scene a step away
+    with that C on its tangent, so that the difference is the derivative (six scenes of a stencil, each with its
+    eigenproblem, and their 1e-11, otherwise). None where that has no derivative (damping.py says when)."""
+    if not (base.is_linear and not base.jumps and isinstance(base.M, np.ndarray) and STRUCTURAL.match(path)):
+        return None
+    other, delta = _moved_once(sc, doc, base, grid, path, value, scale, structure)
+    if other.added_damping is None or other.jumps:
+        return None
+    found = modal_damping_derivative(sc, base.M, base.K, (other.M - base.M) / delta, (other.K - base.K) / delta)
+    if found is None:
+        return None
+    slope, rounding = found
+    added = base.added_damping + delta * slope
+    tangent = other.with_matrices(C=other.C - other.added_damping + added, added_damping=added)
+    return _difference(path, value, delta, base, tangent, arrays_of, rounding)
 
 
 class ParameterDerivative(Signal):

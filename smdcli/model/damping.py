@@ -47,3 +47,42 @@ def check_damping(C: np.ndarray, scenario: Scenario) -> None:
         key = "damping.modal" if scenario.damping.modal else "damping"
         raise ScenarioError(scenario.path, key, f"makes the damping matrix indefinite (eigenvalue {lowest:.4g} N s/m): "
                                                 "some mode would be negatively damped; expected damping >= 0")
+
+
+def modal_damping_derivative(scenario: Scenario, M: np.ndarray, K: np.ndarray, dM: np.ndarray, dK: np.ndarray
+                             ) -> tuple[np.ndarray, float] | None:
+    """d/dp of modal damping's C (added_damping's) where M and K move by dM and dK per unit of p, exactly, and the
+    rounding that reaches it relative to its largest entry: C = L f(A) L with M = L L (diagonal), A = L^-1 K L^-1 = V
+    diag(lambda) V^T and f(lambda_i) = 2 zeta_i sqrt(lambda_i); d f(A) = V ((V^T dA V) o G) V^T (Daleckii and Krein),
+    G_ij the divided difference of f (f' on the diagonal; 2 zeta / (sqrt(lambda_i) + sqrt(lambda_j)) where the ratios
+    are equal, with no cancellation). None where it is not this form or has no such derivative: M not diagonal,
+    a mode at zero frequency (sqrt has no slope there), two modes of different ratios at one frequency."""
+    masses = np.diag(M)
+    if np.count_nonzero(M) != np.count_nonzero(masses) or np.count_nonzero(dM) != np.count_nonzero(np.diag(dM)) \
+            or not np.all(masses > 0):
+        return None
+    root = np.sqrt(masses)
+    A = K / root[:, None] / root[None, :]
+    squared, V = np.linalg.eigh(A)
+    if squared[0] <= 1e-12 * abs(squared[-1]):
+        return None
+    ratios = np.broadcast_to(np.asarray(scenario.damping.modal, dtype=float), squared.shape)
+    w = np.sqrt(squared)
+    f = 2 * ratios * w
+    same = ratios[:, None] == ratios[None, :]
+    gap = squared[:, None] - squared[None, :]
+    apart = np.abs(gap) > 1e-8 * squared[-1]
+    if np.any(~same & ~apart & ~np.eye(len(w), dtype=bool)):
+        return None
+    with np.errstate(divide="ignore", invalid="ignore"):
+        G = np.where(same, 2 * ratios[:, None] / (w[:, None] + w[None, :]),
+                     (f[:, None] - f[None, :]) / np.where(apart, gap, 1.0))
+    half = np.diag(dM) / (2 * masses)  # L^-1 dL
+    dA = dK / root[:, None] / root[None, :] - half[:, None] * A - A * half[None, :]
+    F = (V * f) @ V.T
+    dF = V @ ((V.T @ dA @ V) * G) @ V.T
+    dL = half * root
+    dC = dL[:, None] * F * root[None, :] + root[:, None] * dF * root[None, :] + root[:, None] * F * dL[None, :]
+    # eigenvectors good to eps over the gaps they are divided by: the spread of the G's over their diagonal's
+    conditioning = float(np.abs(G).max() / np.abs(np.diag(G)).min()) * np.sqrt(squared[-1] / squared[0])
+    return dC, float(np.finfo(float).eps) * len(w) * conditioning

@@ -161,6 +161,6 @@ def sampled_states(model: Model, knots: Knots, Aaug: np.ndarray, blocks) -> tupl
     states, chain = recurrence(E[None], forced[:, None], np.concatenate([model.x0, model.v0])[None], knots.rows)
     stated = stated_rounding(steps + chain, 1.0 if accurate else norm)  # E's own rounding enters every step
     message = (f"ok: {plural(steps, 'step')} between the tables' samples and the output points, each exact for "
-               f"the tables' first-order hold, in blocks of {block_length(steps, 1, s)} (one matrix exponential of size "
-               f"{size}{' in double-double, a stiff scene' if accurate else ''})")
+               f"the tables' first-order hold, in blocks of {block_length(steps, 1, s)} (one matrix exponential of "
+               f"size {size}{' in double-double, a stiff scene' if accurate else ''})")
     return states[:, 0], stated, message
