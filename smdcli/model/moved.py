@@ -1,11 +1,11 @@
 """A linear scene's model with one structural number moved (a mass, a spring's k, a damper's c, an initial
-displacement or velocity, Rayleigh's alpha or beta), assembled from the model it was built as instead of from the scenario again: what a
-parameter's derivative takes at each point of its stencil, at a hundredth of a build's cost.
+displacement or velocity, Rayleigh's alpha or beta), assembled from the model it was built as instead of from the
+scenario again: what a parameter's derivative takes at each point of its stencil, at a hundredth of a build's cost.
 
 The numbers change where build would put them: a mass on M's diagonal, an element's k or c stamped between its
 two ends, [damping]'s part of C made again from the moved M and K or coefficient (Rayleigh's alpha M + beta K, or
-the modal damping of the moved modes), the ground's jumps from the moved M and C (Model.with_matrices), and the element's
-own coefficient (its tension reads it).
+the modal damping of the moved modes), the ground's jumps from the moved M and C (Model.with_matrices), and the
+element's own coefficient (its tension reads it).
 
 Must not import: solvers, sweep, io, plots, commands, cli.
 """
