@@ -2,10 +2,11 @@
 sensitivity equations s' = J(t, y) s + df/dp integrated beside the state y = [x, v, q] (q the laws' internal
 variables), the error controlled on state and sensitivities together.
 
-Where no parameter moves M, by the compiled kernel (smdcli.kernels.sensitivity: DOP853, restarted at the forces'
-discontinuities, every kink of a law landed on: a step ends just past it, on the branch of J it started on). Else
-in Python by scipy's DOP853, restarted at the forces' discontinuities and wherever a law's right-hand side has a
-kink (a Bouc-Wen rate or z changing sign): the tests' second way.
+By the compiled kernel (smdcli.kernels.sensitivity: DOP853, restarted at the forces' discontinuities, every kink of
+a law landed on: a step ends just past it, on the branch of J it started on); a stencil model that moves M enters
+through M^-1 M_j, so that its forces are combined, not its accelerations. In Python by scipy's DOP853, restarted at
+the forces' discontinuities and wherever a law's right-hand side has a kink (a Bouc-Wen rate or z changing sign):
+the tests' second way.
 
 J is analytic: the model's tangent for cubic springs and quadratic dampers, each law's smooth_jacobian for its
 tension and internal rates. df/dp is the right-hand side of the models at the parameter's stencil points
@@ -31,7 +32,7 @@ COMPILED_METHOD = ("forward sensitivity equations s' = J s + df/dp integrated be
                    "analytic, df/dp from the model at the parameter's stencil points")
 PYTHON_METHOD = ("forward sensitivity equations s' = J s + df/dp integrated beside the state by DOP853 (error "
                  "controlled on both, restarted at force discontinuities and at the laws' kinks), J analytic, df/dp "
-                 "from the model at the parameter's stencil points (a parameter that moves M: in Python)")
+                 "from the model at the parameter's stencil points, in Python")
 
 
 def smooth_refusal(model: Model) -> str | None:
@@ -190,7 +191,7 @@ def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gr
         return np.concatenate([flow.f(t, y), (flow.jacobian(t, y) @ S + parameter_rates(t, y)).ravel()])
 
     cuts = np.concatenate([[grid[0]], model.breakpoints(float(grid[0]), float(grid[-1])), [grid[-1]]])
-    if COMPILED and not any(np.any(dM) for dM in masses):  # a mass moves M^-1: the accelerations' stencil is not exact
+    if COMPILED:
         y, S, rates, d_rates = compiled_sensitivities(flow, points, weights, y0, s0, grid, cuts, rtol)
         if advance is not None:
             advance(len(grid))
@@ -260,7 +261,9 @@ def compiled_sensitivities(flow: _Flow, points: list, weights: list, y0: np.ndar
     base = _arrays(flow)
     P, s = len(points), len(y0)
     extra = base.ns_acc  # the energy terms ride along, out of the error's control: nothing here reads them
-    stencil = [(p, w, _arrays(f)) for p, (ws, fs) in enumerate(zip(weights, points)) for w, f in zip(ws, fs)
+    mass = flow.model.M
+    stencil = [(p, w, _arrays(f), None if np.array_equal(f.model.M, mass) else flow.model.Minv @ f.model.M)
+               for p, (ws, fs) in enumerate(zip(weights, points)) for w, f in zip(ws, fs)
                if f is not flow]  # the scene's own point adds f - f: nothing
 
     def run(start, tolerance, atol, models):
@@ -271,9 +274,9 @@ def compiled_sensitivities(flow: _Flow, points: list, weights: list, y0: np.ndar
     atol = _absolute(peak.max(axis=0), P, rtol)
     size, N = s + extra, len(grid)
     S, d_S = np.empty((N, s, P)), np.empty((N, s, P))
-    for group in _groups([p for p, _, _ in stencil], P):  # the kernel takes STENCIL_MODELS at a time
+    for group in _groups([p for p, *_ in stencil], P):  # the kernel takes STENCIL_MODELS at a time
         local = {p: i for i, p in enumerate(group)}
-        models = [(local[p], w, arrays) for p, w, arrays in stencil if p in local]
+        models = [(local[p], w, arrays, ratio) for p, w, arrays, ratio in stencil if p in local]
         tolerance = np.concatenate([atol[:s], np.full(extra, np.inf), atol[s:].reshape(s, P)[:, group].ravel()])
         out, rates = run(np.concatenate([state0, s0[:, group].ravel()]), rtol, tolerance, models)
         if group[0] == 0:  # the state of the first run (the others' differ by their tolerance, not more)

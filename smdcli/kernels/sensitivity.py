@@ -163,9 +163,12 @@ def first_crossing(r0, r1, d0, d1, first):
 
 
 @no_alloc
-def augmented_rates(m, models, weights, owner, t, y, left, dy, work, J, dwork, f, signs):
+def augmented_rates(m, models, weights, owner, ratios, moves, g, t, y, left, dy, work, J, dwork, f, signs):
     """dy = [f(t, y); J S + df/dp] for y = [state; S row-major (s, P)], J on the sides `signs` holds (branches);
-    models: the stencil's first len(weights) of a padded tuple (compiler.model_tuple); f, J, dwork are scratch.
+    models: the stencil's first len(weights) of a padded tuple (compiler.model_tuple); where moves[j], model j
+    moves M and its accelerations' difference from the scene's enters as M^-1 M_j (a_j - a) (ratios[j] = M^-1 M_j:
+    the stencil's combination is then M^-1 (dF/dp - dM/dp a), the forces' stencil, not the accelerations'); f, J,
+    dwork and g (n) are scratch.
     Compiled without reference counting: with it, every read of a model's arrays was counted (a solve of the
     Bouc-Wen benchmark's window with five parameters took 101 ms, now 37)."""
     n = m.n
@@ -186,12 +189,21 @@ def augmented_rates(m, models, weights, owner, t, y, left, dy, work, J, dwork, f
     for j in range(len(weights)):
         state_rhs(models[j], t, y[:size], left, f, work, J)
         p, w = owner[j], weights[j]
+        if moves[j]:
+            for i in range(n):
+                g[i] = f[n + i] - dy[n + i]
+            for i in range(n):
+                total = 0.0
+                for c in range(n):
+                    total += ratios[j, i, c] * g[c]
+                f[n + i] = dy[n + i] + total
         for i in range(s):
             dy[size + i * P + p] += w * (f[i] - dy[i])
 
 
 @kernel
-def integrate(m, models, weights, owner, y0, grid, cuts, rtol, atol, max_steps, out, rates, work, counts):
+def integrate(m, models, weights, owner, ratios, moves, y0, grid, cuts, rtol, atol, max_steps, out, rates, work,
+              counts):
     """From y0 at grid[0] over the grid, restarting at each cut (a force's discontinuity) as the compiled pairs do,
     each output time landed on: out and rates (N, len(y0)) get the state and its rate there (right limits); counts:
     right-hand sides, accepted and rejected steps. Returns OK, TOO_SMALL_STEP, STEP_BUDGET or NOT_FINITE."""
@@ -201,20 +213,20 @@ def integrate(m, models, weights, owner, y0, grid, cuts, rtol, atol, max_steps, 
     K = np.zeros((STAGES + 1, size_all))
     arg, y_new, scale = np.zeros(size_all), np.zeros(size_all), np.zeros(size_all)
     err, err3 = np.zeros(size_all), np.zeros(size_all)
-    J, dwork, f = np.zeros((s, s)), np.zeros((n, s)), np.zeros(2 * n + m.ns_q + m.ns_acc)
+    J, dwork, f, g = np.zeros((s, s)), np.zeros((n, s)), np.zeros(2 * n + m.ns_q + m.ns_acc), np.zeros(n)
     signs, now = np.ones((len(m.ns_belt), 2)), np.ones((len(m.ns_belt), 2))
     y = y0.copy()
     out[0] = y
-    augmented_rates(m, models, weights, owner, grid[0], y, False, rates[0], work, J, dwork, f, signs)
+    augmented_rates(m, models, weights, owner, ratios, moves, g, grid[0], y, False, rates[0], work, J, dwork, f, signs)
     branches(m, y, rates[0], signs)
-    augmented_rates(m, models, weights, owner, grid[0], y, False, rates[0], work, J, dwork, f, signs)
+    augmented_rates(m, models, weights, owner, ratios, moves, g, grid[0], y, False, rates[0], work, J, dwork, f, signs)
     k = 1
     exponent = -1.0 / 8.0
     for seg in range(len(cuts) - 1):
         ta, t_end = cuts[seg], cuts[seg + 1]
         mid = 0.5 * (ta + t_end)
         t = ta
-        augmented_rates(m, models, weights, owner, t, y, t >= mid, K[0], work, J, dwork, f, signs)
+        augmented_rates(m, models, weights, owner, ratios, moves, g, t, y, t >= mid, K[0], work, J, dwork, f, signs)
         counts[0] += 1
         if seg == 0:  # later segments go on at the pace the last one reached: a force's kink needs no new start
             for i in range(size_all):
@@ -237,12 +249,14 @@ def integrate(m, models, weights, owner, y0, grid, cuts, rtol, atol, max_steps, 
                         if A[st, j] != 0.0:
                             axpy(h * A[st, j], K[j], arg)
                     ts = t + C[st] * h
-                    augmented_rates(m, models, weights, owner, ts, arg, ts >= mid, K[st], work, J, dwork, f, signs)
+                    augmented_rates(m, models, weights, owner, ratios, moves, g,
+                                    ts, arg, ts >= mid, K[st], work, J, dwork, f, signs)
                 assign(y_new, y)
                 for st in range(STAGES):
                     if B[st] != 0.0:
                         axpy(h * B[st], K[st], y_new)
-                augmented_rates(m, models, weights, owner, t_new, y_new, t_new >= mid, K[STAGES], work, J, dwork, f, signs)
+                augmented_rates(m, models, weights, owner, ratios, moves, g,
+                                t_new, y_new, t_new >= mid, K[STAGES], work, J, dwork, f, signs)
                 counts[0] += STAGES
                 at = kink(m, y, y_new, K[0], K[STAGES], h)
                 if at < 1.0 - 2 * KINK_MARGIN and landed < LANDINGS:
@@ -277,12 +291,14 @@ def integrate(m, models, weights, owner, y0, grid, cuts, rtol, atol, max_steps, 
             branches(m, y, K[0], now)
             if not np.array_equal(now, signs):  # a kink crossed: the next step's branch, its first stage again
                 signs[:, :] = now
-                augmented_rates(m, models, weights, owner, t, y, t >= mid, K[0], work, J, dwork, f, signs)
+                augmented_rates(m, models, weights, owner, ratios, moves, g,
+                                t, y, t >= mid, K[0], work, J, dwork, f, signs)
                 counts[0] += 1
             if k < len(grid) and t == grid[k]:
                 out[k] = y
                 if t >= mid:  # the step's last stage took the left limit at a cut: the output's rate is the right
-                    augmented_rates(m, models, weights, owner, t, y, False, rates[k], work, J, dwork, f, signs)
+                    augmented_rates(m, models, weights, owner, ratios, moves, g,
+                                    t, y, False, rates[k], work, J, dwork, f, signs)
                     counts[0] += 1
                 else:
                     assign(rates[k], K[0])

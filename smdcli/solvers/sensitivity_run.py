@@ -16,20 +16,25 @@ MAX_STEPS = 10**7
 def run_sensitivities(base, stencil: list, start: np.ndarray, grid: np.ndarray, cuts: np.ndarray, rtol: float,
                       atol: np.ndarray, source: str) -> tuple[np.ndarray, np.ndarray]:
     """(y, y') (N, len(start)) from start over the grid, restarting at the cuts: base the scene's kernel arrays,
-    stencil (parameter, weight, arrays) of each model a parameter's derivative takes (none: the state alone; at most
-    compiler.STENCIL_MODELS)."""
+    stencil (parameter, weight, arrays, M^-1 M_j or None where the model leaves M alone) of each model a parameter's
+    derivative takes (none: the state alone; at most compiler.STENCIL_MODELS)."""
     from smdcli.kernels import sensitivity as kernel
     from smdcli.kernels.compiler import model_tuple
     from smdcli.kernels.rhs import work_size
     from smdcli.solvers.integrators.compiled import failure_text, warm
 
     warm("sensitivity")
-    models = model_tuple([arrays for _, _, arrays in stencil], base)
+    models = model_tuple([arrays for _, _, arrays, _ in stencil], base)
     out, rates = np.full((len(grid), len(start)), np.nan), np.full((len(grid), len(start)), np.nan)
-    status = kernel.integrate(base, models, np.array([w for _, w, _ in stencil], dtype=float),
-                              np.array([p for p, _, _ in stencil], dtype=np.int64), np.asarray(start, dtype=float),
-                              grid, cuts, float(rtol), atol, MAX_STEPS, out, rates, np.zeros(work_size(base)),
-                              np.zeros(3, dtype=np.int64))
+    ratios = np.zeros((len(stencil), base.n, base.n))
+    for j, (_, _, _, ratio) in enumerate(stencil):
+        if ratio is not None:
+            ratios[j] = ratio
+    status = kernel.integrate(base, models, np.array([w for _, w, _, _ in stencil], dtype=float),
+                              np.array([p for p, _, _, _ in stencil], dtype=np.int64), ratios,
+                              np.array([r is not None for *_, r in stencil], dtype=np.bool_),
+                              np.asarray(start, dtype=float), grid, cuts, float(rtol), atol, MAX_STEPS, out, rates,
+                              np.zeros(work_size(base)), np.zeros(3, dtype=np.int64))
     if status != kernel.OK:
         reached = grid[np.isfinite(out[:, 0])][-1]
         raise SolverFailed(f"{source}: the sensitivity equations failed after t = {reached:.6g} s "

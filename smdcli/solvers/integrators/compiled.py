@@ -117,7 +117,8 @@ def _tiny_run(family: str) -> None:
         from smdcli.kernels.compiler import model_tuple
 
         arrays = model_arrays(tiny)
-        entry(arrays, model_tuple([], arrays), np.zeros(0), np.zeros(0, dtype=np.int64), y0.copy(), grid, grid, 1e-3,
+        entry(arrays, model_tuple([], arrays), np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros((0, 1, 1)),
+              np.zeros(0, dtype=np.bool_), y0.copy(), grid, grid, 1e-3,
               np.full(2, 1e-6), 10, np.zeros((2, 2)), np.zeros((2, 2)), np.zeros(work_size(arrays)),
               np.zeros(3, dtype=np.int64))
         return
