@@ -196,8 +196,8 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
     for q in QUANTITIES:
         # each block's peak over time and DOFs, from the contiguous copies (one reduction along memory, not a strided
         # one over the blocks); fmax passes over nan, written where no derivative exists
-        block_peaks = np.r_[_largest(nominal[q].reshape(1, -1)),
-                            _largest(derived[q].reshape(P, -1)) * scales]  # (P + 1,): the blocks' own, scale_i dx/dp_i
+        block_peaks = np.concatenate([_largest(nominal[q].reshape(1, -1)),  # (P + 1,): the blocks' own,
+                                      _largest(derived[q].reshape(P, -1)) * scales])  # scale_i dx/dp_i
         largest = block_peaks[1:]
         if base.is_linear:  # the run's error is relative to the stacked state's peak (every block a displacement)
             absolute = stated * float(block_peaks.max())
@@ -297,10 +297,10 @@ def _linear(sc: Scenario, base, derivatives: list, grid: np.ndarray, tol: Tolera
     rates, inputs = stacked.state_matrix[total:], stacked.input_matrix[total:]
     for block in range(P + 1):
         rows, by = slice(block * n, (block + 1) * n), (1.0 if block == 0 else scales[block - 1])
-        x_read = np.zeros((n, 2 * total))
-        x_read[:, rows] = np.eye(n) / by
+        x_read, v_read = np.zeros((n, 2 * total)), np.zeros((n, 2 * total))
+        x_read[:, rows] = v_read[:, total + block * n:total + (block + 1) * n] = np.eye(n) / by
         into = {q: nominal[q] if block == 0 else derived[q][block - 1] for q in QUANTITIES}
-        reads += [(x_read, None, into["displacement"]), (np.roll(x_read, total, axis=1), None, into["velocity"]),
+        reads += [(x_read, None, into["displacement"]), (v_read, None, into["velocity"]),
                   (rates[rows] / by, inputs[rows] / by, into["acceleration"])]
     solved = None if stacked.jumps else read_exactly(stacked, grid, reads)
     if solved is None:

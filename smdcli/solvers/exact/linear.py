@@ -38,6 +38,8 @@ from smdcli.text import plural
 
 BLOCK = 64  # output steps per stacked propagation
 _POWERS_BYTES = 64 * 2**20
+SUPPORTED_READS = 16  # a state this large has each read's products on the entries that reach it alone
+
 # Seconds per flop of a dense matrix product and per entry of a matrix-vector product (memory-bound), on a 2-core
 # machine: they only decide between this path and the sparse action (action.py), whose cost is on the same scale.
 _DENSE_FLOP_S, _DENSE_ENTRY_S = 2e-11, 3e-10
@@ -294,14 +296,26 @@ def propagate(model: Model, grid: np.ndarray, readouts) -> tuple[float, str]:
     powers = np.empty((J, size, size))
     if N > 1:
         powers[0] = phi(h)
-        for j in range(1, J):
-            powers[j] = powers[j - 1] @ powers[0]
-    reads = []
+        done = 1
+        while done < J:  # by doubling: powers done+1 .. 2 done are powers 1 .. done times the done-th
+            more = min(done, J - done)
+            np.matmul(powers[:more], powers[done - 1], out=powers[done:done + more])
+            done += more
+    # every read's rows times the powers at once (a product each was a third of a small scene's solve), then each
+    # read on the state's entries that reach it (a sensitivity block: its own, the scene's, the forces')
+    rows = np.zeros((sum(len(R) for R, _, _ in readouts), size))
+    rows[:, :2 * n] = np.vstack([R for R, _, _ in readouts])
+    read_all = np.matmul(rows, powers)  # (J, reads' rows, size)
+    reads, first, every = [], 0, np.arange(size)
     for R, _, out in readouts:
-        R = np.hstack([R, np.zeros((len(R), size - 2 * n))])
-        read = np.matmul(R, powers)  # (J, r, size)
-        columns = np.flatnonzero(read.any(axis=(0, 1)))  # the state's entries that reach the read (a sensitivity
-        reads.append((R, np.ascontiguousarray(read[:, :, columns]), columns, out))  # block: its own, the scene's)
+        read = read_all[:, first:first + len(R)]
+        if size >= SUPPORTED_READS:
+            columns = np.flatnonzero(read.any(axis=(0, 1)))
+            read = np.ascontiguousarray(read[:, :, columns])
+        else:  # a small state: the whole product costs less than finding what reaches the read
+            columns, read = every, np.ascontiguousarray(read)
+        reads.append((rows[first:first + len(R)], read, columns, out))
+        first += len(R)
 
     def reseed(z: np.ndarray, t: float) -> None:
         for lo, hi, signal in blocks:
