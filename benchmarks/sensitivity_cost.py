@@ -25,7 +25,7 @@ from pathlib import Path
 import smdcli
 from smdcli.analysis.sensitivity import _forward_time, sensitivity
 from smdcli.resources import small_blas
-from smdcli.solvers.peaks import jump_times, located_peaks
+from smdcli.solvers.peaks import located_peaks
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = [  # (scenario, its parameters)
@@ -54,7 +54,6 @@ def main() -> None:
     for name, params in SCENES:
         sc = smdcli.load(ROOT / "scenarios" / f"{name}.toml")
         found = smdcli.sensitivity(sc, params)  # warm-up: imports, compiled kernels' loading
-        events = jump_times(found.model, found.time) if found.model.is_linear else found.event_times
         _forward_time(sc, found.time)
         histories, whole, forward, peaks = [], [], [], []
         for _ in range(args.repeats):
@@ -67,7 +66,7 @@ def main() -> None:
             with small_blas(2 * len(sc.dof_names)):  # at its best: BLAS as the sensitivities run it, one thread on a small scene
                 forward.append(_forward_time(sc, found.time))
             begin = time.perf_counter()
-            located_peaks(found.time, found.displacement, found.velocity, found.acceleration, events)
+            located_peaks(found.time, found.displacement, found.velocity, found.acceleration, found.event_times)
             peaks.append(time.perf_counter() - begin)
         h, s, f, p = (statistics.median(q) for q in (histories, whole, forward, peaks))
         print(f"{name:<21} {len(params):>2} {h * 1e3:7.1f} ms {f * 1e3:6.2f} ms {h / f:5.1f}x   {s * 1e3:7.1f} ms "

@@ -181,17 +181,17 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
     n, P = base.n, len(derivatives)
     tol = Tolerances()
     run = dense = None
+    scales = np.array([relative_size(d.value) for d in derivatives])
     if base.is_linear:
         nominal, derived, stated = _linear(sc, base, derivatives, grid, tol)
         method = METHOD
     else:
         if piecewise:
-            blocks, stated, run = _events(base, derivatives, grid)
+            blocks, stated, run = _events(base, derivatives, scales, grid)
             method = EVENT_METHOD
         else:
-            blocks, stated, dense, method = _smooth(sc, base, derivatives, grid, advance)
-        nominal, derived = _split(blocks, derivatives)
-    scales = np.array([relative_size(d.value) for d in derivatives])
+            blocks, stated, dense, method = _smooth(sc, base, derivatives, scales, grid, advance)
+        nominal, derived = _split(blocks, scales)
     accuracy = {}
     for q in QUANTITIES:
         # each block's peak over time and DOFs, from the contiguous copies (one reduction along memory, not a strided
@@ -271,10 +271,9 @@ def _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_
         notes=notes, model=base, derivatives=derivatives, method=method)
 
 
-def _split(blocks: dict, derivatives: list) -> tuple[dict, dict]:
+def _split(blocks: dict, scales: np.ndarray) -> tuple[dict, dict]:
     """Each quantity's (N, P + 1, n) blocks (the scene, then scale_i d/dp_i) as the scene's (N, n) and the
     derivatives' (P, N, n), each contiguous."""
-    scales = np.array([relative_size(d.value) for d in derivatives])
     nominal = {q: np.ascontiguousarray(b[:, 0]) for q, b in blocks.items()}
     derived = {q: np.divide(np.moveaxis(b[:, 1:], 1, 0), scales[:, None, None],  # one pass into (P, N, n)
                             out=np.empty((b.shape[1] - 1, b.shape[0], b.shape[2])))
@@ -283,10 +282,10 @@ def _split(blocks: dict, derivatives: list) -> tuple[dict, dict]:
 
 
 def _linear(sc: Scenario, base, derivatives: list, grid: np.ndarray, tol: Tolerances) -> tuple[dict, dict, float]:
-    """Each quantity's scene (N, n) and derivatives (P, N, n) by the exact solver, and its accuracy: on the dense
-    path each read off the stacked state straight into its place (a derivative block reaches only itself, the
-    scene and the forces: its products skip the rest); elsewhere (jumps, a record's samples, the modal or sparse
-    paths) as blocks of the stacked model's result."""
+    """Each quantity's scene (N, n) and derivatives (P, N, n) by the exact solver, and its accuracy: on its dense
+    and record-sample paths each read off the stacked state straight into its place (read_exactly; a derivative
+    block reaches only itself, the scene and the forces: its products skip the rest); elsewhere (jumps, harmonics
+    superposed, the modal or sparse paths, unequal steps) as blocks of the stacked model's result."""
     from smdcli.solvers.exact.linear import read_exactly
 
     stacked, scales = augmented_model(base, derivatives)
@@ -308,7 +307,7 @@ def _linear(sc: Scenario, base, derivatives: list, grid: np.ndarray, tol: Tolera
         result = across_jumps(lambda piece, times: exact.solve(piece, times, tol), stacked, grid)
         if not result.success:
             raise SolverFailed(f"{sc.path}: the sensitivity equations could not be solved: {result.stats.message}")
-        nominal, derived = _split({q: getattr(result, q).reshape(N, P + 1, n) for q in QUANTITIES}, derivatives)
+        nominal, derived = _split({q: getattr(result, q).reshape(N, P + 1, n) for q in QUANTITIES}, scales)
         stated = float(result.stats.stated_accuracy)
     else:
         stated = solved[0]
@@ -323,12 +322,11 @@ def _piecewise(base) -> bool:
         base.cubic is None and base.quadratic is None
 
 
-def _events(base, derivatives: list, grid: np.ndarray) -> tuple[dict, float, object]:
+def _events(base, derivatives: list, scales: np.ndarray, grid: np.ndarray) -> tuple[dict, float, object]:
     """The same blocks for a piecewise-linear scene, exact event to event (event_sensitivity.py), its stated
     accuracy and the run (its sensitivities between samples, and where they stop existing)."""
     from smdcli.analysis.event_sensitivity import event_sensitivities
 
-    scales = np.array([relative_size(d.value) for d in derivatives])
     x, v, a, S, d_a, run, stated = event_sensitivities(base, derivatives, scales, grid)
     n = base.n
 
@@ -338,14 +336,13 @@ def _events(base, derivatives: list, grid: np.ndarray) -> tuple[dict, float, obj
             "acceleration": stacked(a, d_a)}, stated, run
 
 
-def _smooth(sc: Scenario, base, derivatives: list, grid: np.ndarray, advance=None) -> tuple:
+def _smooth(sc: Scenario, base, derivatives: list, scales: np.ndarray, grid: np.ndarray, advance=None) -> tuple:
     """The same blocks for a smooth nonlinear scene, by the forward sensitivity equations (smooth_sensitivity.py)
     at rtol 1e-9 or the scenario's tighter one; its stated accuracy SMOOTH_ERROR times that rtol, its dense
     accelerations and how the equations were integrated."""
     from smdcli.analysis.smooth_sensitivity import RTOL, smooth_sensitivities
 
     rtol = min(RTOL, sc.solver.rtol)
-    scales = np.array([relative_size(d.value) for d in derivatives])
     y, S, rates, d_rates, rates_at, method = smooth_sensitivities(base, derivatives, scales, grid, rtol, advance)
     n, N = base.n, len(grid)
 

@@ -16,19 +16,16 @@ def added_damping(scenario: Scenario, M: np.ndarray, K: np.ndarray) -> np.ndarra
     undamped modes (Phi mass-normalized); refused where the total C would let a mode gain energy."""
     spec = scenario.damping
     if spec.modal:
-        masses = np.diag(M)
-        if np.count_nonzero(M) == np.count_nonzero(masses) and np.all(masses > 0):
-            # a diagonal M: the standard problem of M^-1/2 K M^-1/2 (numpy's; scipy's generalized one costs 4x
-            # on a small scene, where a sensitivity's stencil builds this 18 times)
-            root = 1.0 / np.sqrt(masses)
-            squared, shapes = np.linalg.eigh(K * root[:, None] * root[None, :])
-            shapes = shapes * root[:, None]
+        standard = _standard_modes(M, K)
+        if standard is not None:  # M Phi = L V: M's root times the standard problem's eigenvectors
+            root, _, squared, V = standard
+            left = root[:, None] * V
         else:
             from scipy.linalg import eigh
 
             squared, shapes = eigh(K, M)
+            left = M @ shapes
         ratios = np.broadcast_to(np.asarray(spec.modal, dtype=float), squared.shape)
-        left = M @ shapes
         return (left * (2 * ratios * np.sqrt(np.maximum(squared, 0.0)))) @ left.T
     return spec.alpha * M + spec.beta * K
 
@@ -57,13 +54,10 @@ def modal_damping_derivative(scenario: Scenario, M: np.ndarray, K: np.ndarray, d
     G_ij the divided difference of f (f' on the diagonal; 2 zeta / (sqrt(lambda_i) + sqrt(lambda_j)) where the ratios
     are equal, with no cancellation). None where it is not this form or has no such derivative: M not diagonal,
     a mode at zero frequency (sqrt has no slope there), two modes of different ratios at one frequency."""
-    masses = np.diag(M)
-    if np.count_nonzero(M) != np.count_nonzero(masses) or np.count_nonzero(dM) != np.count_nonzero(np.diag(dM)) \
-            or not np.all(masses > 0):
+    standard = _standard_modes(M, K)
+    if standard is None or np.count_nonzero(dM) != np.count_nonzero(np.diag(dM)):
         return None
-    root = np.sqrt(masses)
-    A = K / root[:, None] / root[None, :]
-    squared, V = np.linalg.eigh(A)
+    root, A, squared, V = standard
     if squared[0] <= 1e-12 * abs(squared[-1]):
         return None
     ratios = np.broadcast_to(np.asarray(scenario.damping.modal, dtype=float), squared.shape)
@@ -77,7 +71,7 @@ def modal_damping_derivative(scenario: Scenario, M: np.ndarray, K: np.ndarray, d
     with np.errstate(divide="ignore", invalid="ignore"):
         G = np.where(same, 2 * ratios[:, None] / (w[:, None] + w[None, :]),
                      (f[:, None] - f[None, :]) / np.where(apart, gap, 1.0))
-    half = np.diag(dM) / (2 * masses)  # L^-1 dL
+    half = np.diag(dM) / (2 * np.diag(M))  # L^-1 dL
     dA = dK / root[:, None] / root[None, :] - half[:, None] * A - A * half[None, :]
     F = (V * f) @ V.T
     dF = V @ ((V.T @ dA @ V) * G) @ V.T
@@ -86,3 +80,16 @@ def modal_damping_derivative(scenario: Scenario, M: np.ndarray, K: np.ndarray, d
     # eigenvectors good to eps over the gaps they are divided by: the spread of the G's over their diagonal's
     conditioning = float(np.abs(G).max() / np.abs(np.diag(G)).min()) * np.sqrt(squared[-1] / squared[0])
     return dC, float(np.finfo(float).eps) * len(w) * conditioning
+
+
+def _standard_modes(M: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """For a diagonal M = L L: (L's diagonal, A = L^-1 K L^-1, A's eigenvalues (the modes' squared frequencies,
+    ascending) and eigenvectors V), by numpy's standard eigenproblem (scipy's generalized one costs 4x on a small
+    scene, where a sensitivity's stencil makes this 18 times); None for any other M."""
+    masses = np.diag(M)
+    if np.count_nonzero(M) != np.count_nonzero(masses) or not np.all(masses > 0):
+        return None
+    root = np.sqrt(masses)
+    A = K / root[:, None] / root[None, :]
+    squared, V = np.linalg.eigh(A)
+    return root, A, squared, V

@@ -38,8 +38,6 @@ from smdcli.text import plural
 
 BLOCK = 64  # output steps per stacked propagation
 _POWERS_BYTES = 64 * 2**20
-SUPPORTED_READS = 16  # a state this large has each read's products on the entries that reach it alone
-
 # Seconds per flop of a dense matrix product and per entry of a matrix-vector product (memory-bound), on a 2-core
 # machine: they only decide between this path and the sparse action (action.py), whose cost is on the same scale.
 _DENSE_FLOP_S, _DENSE_ENTRY_S = 2e-11, 3e-10
@@ -167,34 +165,48 @@ class Solved(NamedTuple):
 
 
 def _solve_linear(model: Model, grid: np.ndarray) -> Solved:
-    """x, v, stated accuracy and a description, by the cheapest exact path: modal, the sparse action, blocks of
-    steps between a table's samples (sampled.py) or dense. Each path steps a uniform grid; a grid of other steps
-    (an internal caller's) is taken as its uniform runs one after the other."""
+    """x, v, stated accuracy and a description, by the cheapest exact path (_path's). Each path steps a uniform
+    grid; a grid of other steps (an internal caller's) is taken as its uniform runs one after the other."""
+    path, how = _path(model, grid)
+    if path == "runs":
+        return _solve_runs(model, grid, how)
+    if path == "modal":
+        return Solved(*solve_modal(model, grid))
+    if path == "action":
+        return Solved(*solve_action(model, grid, how))
+    return Solved(*sampled.solve_sampled(model, how, *augmented(model))) if path == "sampled" \
+        else solve_dense(model, grid)
+
+
+def _path(model: Model, grid: np.ndarray) -> tuple[str, object]:
+    """Which exact path a scene takes on the grid, and what it takes it with: ("runs", the grid's uniform runs),
+    ("modal", None), ("action", the sparse action), ("sampled", a table's knots: blocks of steps between its
+    samples) or ("dense", None), the first that applies."""
     runs = _uniform_runs(grid)
     if len(runs) > 1:
-        return _solve_runs(model, grid, runs)
+        return "runs", runs
     if modal_applies(model):
-        return Solved(*solve_modal(model, grid))
+        return "modal", None
     action = sparse_action(model, grid)
     if action is not None:
-        return Solved(*solve_action(model, grid, action))
+        return "action", action
     knots = sampled.uniform_knots(model, grid)
-    return Solved(*sampled.solve_sampled(model, knots, *augmented(model))) if knots is not None \
-        else solve_dense(model, grid)
+    return ("sampled", knots) if knots is not None else ("dense", None)
 
 
 def read_exactly(model: Model, grid: np.ndarray, readouts: list) -> tuple[float, str] | None:
     """Each of readouts' (R (r, 2n), G (r, signals) or None, out (N, r)) given R [x; v] + G u at every grid time (u
     the force signals' values there), where Exact.solve steps the augmented system or a table's samples (every
-    force with its generator, no harmonics superposed, one uniform run, neither modal nor the sparse action): only
-    what is read is written, each output contiguous. The stated accuracy and a description; None where Exact.solve
-    takes another path (the caller solves it as a Result)."""
-    if first_order_hold(model, grid)[1] or split(model) is not None or len(_uniform_runs(grid)) > 1 \
-            or modal_applies(model) or sparse_action(model, grid) is not None:
+    force with its generator, no harmonics superposed, _path dense or sampled): only what is read is written, each
+    output contiguous. The stated accuracy and a description; None where Exact.solve takes another path (the
+    caller solves it as a Result)."""
+    if first_order_hold(model, grid)[1] or split(model) is not None:
         return None
-    knots = sampled.uniform_knots(model, grid)
-    if knots is None:
+    path, knots = _path(model, grid)
+    if path == "dense":
         return propagate(model, grid, readouts)
+    if path != "sampled":
+        return None
     states, stated, message = sampled.sampled_states(model, knots, *augmented(model))
     for R, _, out in readouts:
         np.matmul(states, R.T, out=out)
@@ -306,15 +318,11 @@ def propagate(model: Model, grid: np.ndarray, readouts) -> tuple[float, str]:
     rows = np.zeros((sum(len(R) for R, _, _ in readouts), size))
     rows[:, :2 * n] = np.vstack([R for R, _, _ in readouts])
     read_all = np.matmul(rows, powers)  # (J, reads' rows, size)
-    reads, first, every = [], 0, np.arange(size)
+    reads, first = [], 0
     for R, _, out in readouts:
         read = read_all[:, first:first + len(R)]
-        if size >= SUPPORTED_READS:
-            columns = np.flatnonzero(read.any(axis=(0, 1)))
-            read = np.ascontiguousarray(read[:, :, columns])
-        else:  # a small state: the whole product costs less than finding what reaches the read
-            columns, read = every, np.ascontiguousarray(read)
-        reads.append((rows[first:first + len(R)], read, columns, out))
+        columns = np.flatnonzero(read.any(axis=(0, 1)))
+        reads.append((rows[first:first + len(R)], np.ascontiguousarray(read[:, :, columns]), columns, out))
         first += len(R)
 
     def reseed(z: np.ndarray, t: float) -> None:
