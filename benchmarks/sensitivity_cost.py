@@ -63,7 +63,8 @@ def main() -> None:
             begin = time.perf_counter()
             smdcli.sensitivity(sc, params)
             whole.append(time.perf_counter() - begin)
-            with small_blas(2 * len(sc.dof_names)):  # at its best: BLAS as the sensitivities run it, one thread on a small scene
+            # at its best: BLAS as the sensitivities run it, one thread on a small scene
+            with small_blas(2 * len(sc.dof_names)):
                 forward.append(_forward_time(sc, found.time))
             begin = time.perf_counter()
             located_peaks(found.time, found.displacement, found.velocity, found.acceleration, found.event_times)

@@ -140,12 +140,11 @@ def derivative_units(of: str, parameter: str) -> str:
 def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None, timed: bool = False,
                 peaks: bool = True, advance=None, built: tuple[dict, Model] | None = None) -> Sensitivity:
     """The sensitivities of a linear, piecewise-linear (yielding, friction, stops) or smooth nonlinear scene's response
-    to each parameter path (the sweep's paths), on the
-    scenario's output grid or on `grid` (any increasing times from the scenario's start); `timed`: one forward
-    run of the scene alone (built and solved) is timed after it (forward_time_s), for the cost's comparison; without `peaks` the
-    peaks and their derivatives are left out (nan: a fit reads the histories only); advance(count): a progress
-    bar's, over the output times of a smooth scene's integration; built: the scenario's TOML document and model, where
-    the caller has them (a fit's trial point)."""
+    to each parameter path (the sweep's paths), on the scenario's output grid or on `grid` (any increasing times
+    from the scenario's start); `timed`: one forward run of the scene alone (built and solved) is timed after it
+    (forward_time_s), for the cost's comparison; without `peaks` the peaks and their derivatives are left out (nan:
+    a fit reads the histories only); advance(count): a progress bar's, over the output times of a smooth scene's
+    integration; built: the scenario's TOML document and model, where the caller has them (a fit's trial point)."""
     import scipy.linalg  # noqa: F401  the solvers' own imports, before the clock: a process pays them once, and
     import scipy.sparse  # noqa: F401  forward_time_s, timed after, would not
 
@@ -174,8 +173,8 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
         if refusal:
             raise UsageError(f"{sc.path}: {refusal}")
     if (len(params) + 1) * base.n > MAX_SIZE:
-        raise UsageError(f"{sc.path}: {len(params)} parameters of a {base.n}-DOF scene stack {(len(params) + 1) * base.n} "
-                         f"DOFs; smd sensitivity takes at most {MAX_SIZE}")
+        raise UsageError(f"{sc.path}: {len(params)} parameters of a {base.n}-DOF scene stack "
+                         f"{(len(params) + 1) * base.n} DOFs; smd sensitivity takes at most {MAX_SIZE}")
     grid = time_grid(sc.time) if grid is None else np.asarray(grid, dtype=float)
     derivatives = model_derivatives(sc, base, grid, list(params), doc)
     n, P = base.n, len(derivatives)
