@@ -30,6 +30,8 @@ from smdcli.solvers.peaks import located_peaks
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = [  # (scenario, its parameters)
     ("one_dof_underdamped", ["spring[0].k"]),
+    ("ic_critical", ["mass[0].m"]),
+    ("one_dof_harmonic", ["force[0].amplitude"]),
     ("two_dof_forced", ["spring[0].k", "spring[1].k", "mass.m1.m", "damper[1].c"]),
     ("three_dof_forced", ["spring[0].k", "spring[2].k", "damper[0].c"]),
     ("three_dof_forced", ["spring[0].k", "spring[1].k", "spring[2].k", "spring[3].k", "damper[0].c",
@@ -39,7 +41,10 @@ SCENES = [  # (scenario, its parameters)
     ("five_storey_tmd", ["spring[0].k", "spring[5].k", "damper[0].c"]),
     ("shear_frame_record", ["spring[0].k", "mass[1].m"]),
     ("quarter_car_bump", ["spring[0].k", "damper[0].c"]),
+    ("elastoplastic_record", ["spring[0].fy"]),
     ("elastoplastic_record", ["spring[0].k", "spring[0].fy"]),
+    ("coulomb_free_decay", ["friction[0].force"]),
+    ("coulomb_free_decay", ["spring[0].k"]),
     ("stick_slip_belt", ["friction[0].force", "friction[0].static", "spring[0].k"]),
     ("vibro_impact_gap", ["stop[0].restitution", "spring[0].k"]),
 ]

@@ -93,3 +93,18 @@ def test_a_batch_goes_on_past_a_turn_whose_top_stays_below_the_yield_level(monke
     assert np.abs(times - times_every).max() <= 1e-12 * grid[-1]
     assert np.abs(x - x_every).max() <= 1e-12 * np.abs(x_every).max()
     assert batches * 2 <= batches_every  # 129 against 290
+
+
+def test_steps_by_doubling_are_the_steps_taken_one_by_one():
+    """Flow.stepped (a product a doubling) against Flow.at taken step after step: 1,000 steps of a forced, damped
+    oscillator, to 1e-12 of the largest state (the doubled powers' rounding against the steps')."""
+    A = np.array([[0.0, 1.0], [-400.0, -2.0]])
+    b = np.array([0.0, 3.0])
+    flow = Flow(A)
+    z = np.array([0.1, -0.5])
+    want = [z]
+    for _ in range(1000):
+        want.append(flow.at(want[-1], b, 0.003, keep=True))
+    got = flow.stepped(z, b, 0.003, 1000)
+    want = np.array(want)
+    assert np.abs(got - want).max() <= 1e-12 * np.abs(want).max()

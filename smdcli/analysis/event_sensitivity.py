@@ -24,7 +24,8 @@ import numpy as np
 
 from smdcli.elements.base import KINK, RATE
 from smdcli.elements import State
-from smdcli.analysis.model_derivative import combined
+from smdcli.analysis.event_carry import CarriedSensitivities
+from smdcli.analysis.signal_derivative import combined
 from smdcli.model import Model
 from smdcli.solvers.events.decisions import impact, project
 from smdcli.solvers.events.piecewise import PiecewiseRun
@@ -61,7 +62,7 @@ def event_refusal(model: Model) -> str | None:
     return None
 
 
-class EventSensitivityRun(PiecewiseRun):
+class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
     """The exact event-driven run with the P scaled sensitivities scale_i dz/dp_i carried beside the state."""
 
     def __init__(self, model: Model, grid: np.ndarray, derivatives: list, scales: np.ndarray):
@@ -118,52 +119,6 @@ class EventSensitivityRun(PiecewiseRun):
                 forcing[(i + 1) * s:(i + 2) * s] = flat[s * s:]
             found = self._augmented[key] = (Flow(big), forcing, big)
         return found
-
-    # ----------------------------------------------------------------------------- carrying S
-    def carry(self, Z: np.ndarray, t_from: float, t_to: float, checkpoint: tuple, augmented=None) -> np.ndarray:
-        """[z; S] carried from t_from to t_to on the flow of a checkpoint's mode (`augmented`: its flow, if at hand),
-        the generators' sensitivities reseeded at each break between (a record's samples, which a batch takes in
-        stride, and one at t_to: its right limits, as the run stores)."""
-        _, _, _, states_c, dq_c = checkpoint
-        flow, forcing, _ = augmented or self.augmented(states_c, dq_c)
-        if not len(self.break_times):
-            h = t_to - t_from
-            return flow.at(Z, forcing, h, abs(h - self.h_out) <= 1e-9 * self.h_out)
-        lo = int(np.searchsorted(self.break_times, t_from, side="right"))
-        hi = int(np.searchsorted(self.break_times, t_to, side="right"))
-        for stop in [*self.break_times[lo:hi].tolist(), t_to]:
-            h = stop - t_from
-            if h > 0:
-                Z = flow.at(Z, forcing, h, abs(h - self.h_out) <= 1e-9 * self.h_out)
-                t_from = stop
-            if stop in self._break_set:
-                Z = self._reseeded(Z.copy(), stop)
-        return Z
-
-    @property
-    def _break_set(self) -> set[float]:
-        """The run's break times (set once the run has started)."""
-        if getattr(self, "_breaks_seen", None) is None:
-            self._breaks_seen = set(self.break_times.tolist())
-        return self._breaks_seen
-
-    def _reseeded(self, Z: np.ndarray, t: float) -> np.ndarray:
-        """Z with its generators reseeded at break t and each sensitivity's generator block set to their derivative
-        there."""
-        if not self._seeds:  # every break's at once: the generators' states in one call
-            at = self.break_times
-
-            def reseeded(scene, c):
-                return np.hstack([signal.exo_states(at) for _, _, signal, _ in scene.blocks])
-            table = [self.total(i, reseeded) for i in range(self.P)]
-            own = np.hstack([signal.exo_states(at) for _, _, signal, _ in self.scene.blocks])
-            self._seeds.update({float(time): ([d[row] for d in table], own[row]) for row, time in enumerate(at)})
-        seeds, own = self._seeds[t]  # t is a break: carry and cross_break reseed nowhere else
-        s, n = self.scene.size, self.n
-        Z[2 * n:s] = own  # the state's own generators, as the run reseeds them
-        for i, seed in enumerate(seeds):
-            Z[(i + 1) * s + 2 * n:(i + 2) * s] = seed
-        return Z
 
     def advance(self, t: float, z: np.ndarray) -> None:
         """S carried from the last checkpoint to t (the run's own z at t kept), as a checkpoint."""
@@ -358,69 +313,6 @@ class EventSensitivityRun(PiecewiseRun):
         self.carry_internal(states, after, z, S, self.events[before:])
         self.settle_checkpoint(t, z_after, S, after)
         return after, z_after
-
-    # ----------------------------------------------------------------------------- between samples
-    def outputs(self) -> tuple[np.ndarray, np.ndarray]:
-        """S (N, P, s) and its rate at the output points, each on the flow from the last checkpoint at or before it
-        (after an event at its time: the right limits, as the run stores), step by step from the output before in
-        the same segment; nan from where the response has no derivative."""
-        N, P, s = len(self.grid), self.P, self.scene.size
-        S_out, rates_out = np.full((N, P, s), np.nan), np.full((N, P, s), np.nan)
-        times = np.array([c[0] for c in self.checkpoints])
-        ends = self.undefined_from[0] if self.undefined_from is not None else np.inf
-        grid = self.grid[self.grid < ends]
-        segments = np.searchsorted(times, grid, side="right") - 1
-        Zs = np.empty((len(grid), (P + 1) * s))
-        for j in np.unique(segments):  # each checkpoint's outputs, stepped from one to the next on its flow
-            t_c, z_c, S_c, states_c, dq_c = self.checkpoints[j]
-            augmented = self.augmented(states_c, dq_c)
-            Z, t_prev = np.concatenate([z_c, S_c.ravel()]), t_c
-            for k in np.flatnonzero(segments == j):
-                t = float(grid[k])
-                if t > t_prev:
-                    Z = self.carry(Z, t_prev, t, self.checkpoints[j], augmented)
-                Zs[k], t_prev = Z, t
-            _, forcing, big = augmented
-            at = segments == j
-            S_out[:len(grid)][at] = Zs[at, s:].reshape(-1, P, s)
-            rates_out[:len(grid)][at] = (Zs[at] @ big[s:].T + forcing[s:]).reshape(-1, P, s)
-        return S_out, rates_out
-
-    def state_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """(z, S) at time t on the exact flow, from the last checkpoint before it (S nan where the response has no
-        derivative): the state between samples, as the energy a damper dissipates across an event needs."""
-        times = [c[0] for c in self.checkpoints]
-        j = max(int(np.searchsorted(times, t, side="right")) - 1, 0)
-        t_c, z_c, S_c, _, _ = self.checkpoints[j]
-        Z = np.concatenate([z_c, S_c.ravel()]) if t == t_c else \
-            self.carry(np.concatenate([z_c, S_c.ravel()]), t_c, t, self.checkpoints[j])
-        S = Z[len(z_c):].reshape(self.P, len(z_c))
-        if self.undefined_from is not None and t >= self.undefined_from[0]:
-            S = np.full_like(S, np.nan)
-        return Z[:len(z_c)], S
-
-    def rates_at(self, t: float, left: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(Z, Z', Z'') at time t on the exact flow, Z = [z; S] stacked (S nan where the response has no
-        derivative): right limits, or (left) the limits before an event at t, from the last checkpoint before it.
-        Within a mode Z' = A Z + b with b constant, so Z'' = A Z'."""
-        times = [c[0] for c in self.checkpoints]
-        j = max(int(np.searchsorted(times, t, side="left" if left else "right")) - 1, 0)
-        t_c, z_c, S_c, states_c, dq_c = self.checkpoints[j]
-        augmented = self.augmented(states_c, dq_c)
-        Z = np.concatenate([z_c, S_c.ravel()])
-        if t != t_c:
-            Z = self.carry(Z, t_c, t, self.checkpoints[j], augmented)
-        _, forcing, big = augmented
-        rate = big @ Z + forcing
-        out = (Z, rate, big @ rate)
-        if self.undefined_from is not None and t >= self.undefined_from[0]:
-            for q in out:
-                q[len(z_c):] = np.nan
-        return out
-
-    def at(self, t: float) -> np.ndarray:
-        """S at time t (nan where the response has no derivative), from the last checkpoint before it."""
-        return self.state_at(t)[1]
 
 
 def _values(state: State) -> list[float]:

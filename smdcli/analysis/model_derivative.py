@@ -30,13 +30,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from smdcli import scenario as scenario_mod
+from smdcli.analysis.signal_derivative import combined, signal_derivative
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import Model, build
 from smdcli.model.damping import modal_damping_derivative
 from smdcli.model.moved import moved
 from smdcli.model.system import GROUND_DOF
 from smdcli.scenario import Scenario
-from smdcli.shapes.base import Exo, Signal
 from smdcli.shapes.table import Table
 from smdcli.sweep.family import STRUCTURAL, decoded, parameter_value, set_parameter
 
@@ -44,6 +44,7 @@ CENTRAL = (-2.0, -1.0, 1.0, 2.0)  # offsets in units of delta: exact for polynom
 FORWARD = (0.0, 1.0, 2.0, 3.0, 4.0)  # where p - delta is not a valid scene (a damper at c = 0): degree 4 too
 BACKWARD = (0.0, -1.0, -2.0, -3.0, -4.0)  # where p + delta is not (a kinetic friction force just below its static one)
 STEPS = (1e-3, 1e-4, 2e-5)  # relative deltas tried, largest first, until the stencil's error is rounding's
+_LINEAR_ELEMENT = re.compile(r"spring\[\d+\]\.k|damper\[\d+\]\.c")
 AFFINE_STEP = 1e-2  # relative step of an affine parameter's one difference: exact for any step; larger, less rounding
 EPS = np.finfo(float).eps
 ROUNDING = 16  # units of rounding in a model's number (a generator's state at a late time: sin(w t) of a large w t)
@@ -80,6 +81,8 @@ class Derivative:
         """d/dp of a model's array read(model), combined over the stencil (as differences from its first point: the
         weights sum to zero only up to rounding, and an array p does not change must come out exactly zero)."""
         first = np.asarray(read(self.models[0]), dtype=float)
+        if len(self.models) == 2:  # a difference (an affine parameter's, or a moved scene's)
+            return self.weights[1] * (np.asarray(read(self.models[1]), dtype=float) - first)
         return sum(w * (np.asarray(read(m), dtype=float) - first) for w, m in zip(self.weights[1:], self.models[1:]))
 
 
@@ -182,11 +185,6 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
     return best
 
 
-def combined(weights: np.ndarray, values) -> np.ndarray:
-    """sum w_k f_k as differences from the first value (Derivative.of's rule)."""
-    return sum(w * (v - values[0]) for w, v in zip(weights[1:], values[1:]))
-
-
 def _unbuildable(path: str, value: float, step: float, refused: ScenarioError) -> ScenarioError:
     """Why no scene near the parameter could be built: the reader's own line (a misspelt key is named with the one
     it likely means), at the values tried."""
@@ -218,9 +216,12 @@ def affine(sc: Scenario, base: Model, path: str) -> bool:
     """Whether every number of the model is affine in the parameter: a mass, stiffness, damper, [system] entry,
     initial state, Rayleigh coefficient, force amplitude, record scale or a smooth law's affine key (not with modal
     damping, whose C follows the modes, nor a mass where the ground jumps, whose jump holds M^-1 C)."""
-    if any(e.law.piecewise_linear for e in base.nonsmooth):
-        return False  # a mode's numbers multiply the parameter by internal variables that move with it (k d_p)
     owner, _, key = path.rpartition(".")
+    if any(e.law.piecewise_linear for e in base.nonsmooth):
+        # a law's own numbers multiply internal variables that move with them (k d_p): not affine; a linear spring's
+        # k or damper's c enters every mode as M^-1 times it, beside the laws' (the stencil's derivative to 1e-12)
+        return bool(_LINEAR_ELEMENT.fullmatch(path)) and not (sc.damping is not None and sc.damping.modal) and \
+            any(e.name == owner and e.law == "linear" for e in base.elements)
     if any(e.path == owner and key in e.law.affine_keys for e in base.nonsmooth):
         return True
     if STRUCTURAL.match(path):
@@ -257,9 +258,13 @@ def _difference(path: str, value: float, delta: float, base: Model, other: Model
     """The derivative as the difference of two models a step apart whose numbers are affine in p, its error their
     rounding's (or `error`, where larger)."""
     weights = np.array([-1.0, 1.0]) / delta
-    pair = [arrays_of(base), arrays_of(other)]
-    largest = max((float(np.abs(b - a).max(initial=0.0)) for a, b in zip(*pair)), default=0.0) / abs(delta)
-    error = max(error, _rounding(pair, weights, largest) if largest > 0 else 0.0)
+    moves = [(float(np.abs(b - a).max(initial=0.0)), a, b) for a, b in zip(arrays_of(base), arrays_of(other))
+             if a is not b]  # a moved model keeps what it did not move
+    largest = max((move for move, _, _ in moves), default=0.0) / abs(delta)
+    if largest > 0:  # _rounding's, of the arrays that moved
+        size = max(max(float(np.abs(a).max(initial=0.0)), float(np.abs(b).max(initial=0.0)))
+                   for move, a, b in moves if move > 0)
+        error = max(error, ROUNDING * EPS * size * 2 / abs(delta) / largest)
     return Derivative(path, value, delta, [base, other], weights, error, (0.0, 1.0))
 
 
@@ -281,69 +286,6 @@ def _modal_derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, pa
     added = base.added_damping + delta * slope
     tangent = other.with_matrices(C=other.C - other.added_damping + added, added_damping=added)
     return _difference(path, value, delta, base, tangent, arrays_of, rounding)
-
-
-class ParameterDerivative(Signal):
-    """du/dp of a force as a signal: the stencil's combination of the force at its points; its generator the
-    force's with the derivative's beside it, [[S, 0], [dS, S]] on [w; dw], read as dg w + g dw."""
-
-    exact = True
-
-    def __init__(self, base: Signal, points: list[Signal], weights: np.ndarray):
-        self.base, self.points, self.weights = base, points, weights
-
-    def value(self, t):
-        return combined(self.weights, [s.value(t) for s in self.points])
-
-    def value_left(self, t):
-        return combined(self.weights, [s.value_left(t) for s in self.points])
-
-    def breakpoints(self, t0, t1):
-        return self.base.breakpoints(t0, t1)
-
-    def exo(self):
-        exo = self.base.exo()
-        if exo is None:
-            return None
-        m = exo.S.shape[0]
-        S = np.zeros((2 * m, 2 * m))
-        S[:m, :m] = S[m:, m:] = exo.S
-        S[m:, :m] = combined(self.weights, [s.exo().S for s in self.points])
-        dg = combined(self.weights, [s.exo().g for s in self.points])
-        return Exo(S, np.concatenate([dg, exo.g]))
-
-    def exo_state(self, t):
-        return np.concatenate([self.base.exo_state(t),
-                               combined(self.weights, [s.exo_state(t) for s in self.points])])
-
-    def derivative(self, start):
-        base = self.base.derivative(start)
-        if base is None:
-            return None
-        return ParameterDerivative(base, [s.derivative(start) for s in self.points], self.weights)
-
-
-def _signal_derivative(base: Signal, d: Derivative, j: int) -> Signal | None:
-    """du_j/dp as a signal, None where the force does not depend on p."""
-    points = [m.signals[j] for m in d.models]
-    if isinstance(base, Table):
-        dv = combined(d.weights, [s.v for s in points])
-        if not np.any(dv):
-            return None
-        return Table(base.t, dv, "previous" if base.previous else "linear", ended=base.ended)
-    if all(_same_signal(base, s) for s in points):
-        return None
-    return ParameterDerivative(base, points, d.weights)
-
-
-def _same_signal(a: Signal, b: Signal) -> bool:
-    ea, eb = a.exo(), b.exo()
-    if ea is None or eb is None:
-        return a is b or (type(a) is type(b) and vars(a).keys() == vars(b).keys() and all(
-            np.array_equal(np.asarray(x), np.asarray(y)) if isinstance(x, np.ndarray) else x == y
-            for x, y in zip(vars(a).values(), vars(b).values())))
-    return (np.array_equal(ea.S, eb.S) and np.array_equal(ea.g, eb.g)
-            and np.array_equal(a.exo_state(0.0), b.exo_state(0.0)))
 
 
 def augmented_model(base: Model, derivatives: list[Derivative]) -> tuple[Model, np.ndarray]:
@@ -378,20 +320,24 @@ def augmented_model(base: Model, derivatives: list[Derivative]) -> tuple[Model, 
         signals.append(signal)
         columns.append(column)
         grounds.append(ground)
+        own = column, ground
         for i, (d, scale) in enumerate(zip(derivatives, scales)):
-            derived = _signal_derivative(signal, d, j)
+            derived = signal_derivative(signal, d, j)
             if derived is None:
                 continue
-            column, ground = np.zeros(size), np.zeros(size)
+            if isinstance(derived, float):  # du/dp = derived u: the signal itself acts on the block too
+                (column, ground), by = own, scale * derived
+            else:
+                column, ground, by = np.zeros(size), np.zeros(size), scale
+                signals.append(derived)
+                columns.append(column)
+                grounds.append(ground)
             on = slice((i + 1) * n, (i + 2) * n)
             if base.force_dofs[j] == GROUND_DOF:
-                column[on] = -scale * (base.M @ ones)
-                ground[on] = scale
+                column[on] += -by * (base.M @ ones)
+                ground[on] += by
             else:
-                column[(i + 1) * n + base.force_dofs[j]] = scale
-            signals.append(derived)
-            columns.append(column)
-            grounds.append(ground)
+                column[(i + 1) * n + base.force_dofs[j]] += by
     jumps = []
     for k, (t, dx, dv) in enumerate(base.jumps):
         jx, jv = np.zeros(size), np.zeros(size)

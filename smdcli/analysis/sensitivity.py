@@ -191,21 +191,24 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
         else:
             blocks, stated, dense, method = _smooth(sc, base, derivatives, scales, grid, advance)
         nominal, derived = _split(blocks, scales)
+    # each quantity's block peaks over time and DOFs (the scene's, then scale_i dx/dp_i), from the contiguous copies
+    # (one reduction along memory, not a strided one over the blocks); fmax passes over nan, written where no
+    # derivative exists; every quantity at once below (a small scene's cost is its numpy calls)
+    peaks_of = np.array([np.concatenate([_largest(nominal[q].reshape(1, -1)), _largest(derived[q].reshape(P, -1))])
+                         for q in QUANTITIES])  # (quantities, P + 1)
+    peaks_of[:, 1:] *= scales
+    largest = peaks_of[:, 1:]
+    if base.is_linear:  # the run's error is relative to the stacked state's peak (every block a displacement)
+        absolute = stated * peaks_of.max(axis=1, keepdims=True)
+    elif piecewise:
+        absolute = max(stated, EVENT_ERROR) * peaks_of.max(axis=1, keepdims=True)
+    else:  # the integrator's: rtol of each component, atol a thousandth of rtol of the state's peak
+        absolute = stated * (largest + 1e-3 * peaks_of[:, :1])
+    relative = np.maximum(np.where(largest > 0, absolute / np.where(largest > 0, largest, 1.0), 0.0),
+                          [d.error for d in derivatives])
     accuracy = {}
-    for q in QUANTITIES:
-        # each block's peak over time and DOFs, from the contiguous copies (one reduction along memory, not a strided
-        # one over the blocks); fmax passes over nan, written where no derivative exists
-        block_peaks = np.concatenate([_largest(nominal[q].reshape(1, -1)),  # (P + 1,): the blocks' own,
-                                      _largest(derived[q].reshape(P, -1)) * scales])  # scale_i dx/dp_i
-        largest = block_peaks[1:]
-        if base.is_linear:  # the run's error is relative to the stacked state's peak (every block a displacement)
-            absolute = stated * float(block_peaks.max())
-        elif piecewise:
-            absolute = max(stated, EVENT_ERROR) * float(block_peaks.max())
-        else:  # the integrator's: rtol of each component, atol a thousandth of rtol of the state's peak
-            absolute = stated * (largest + 1e-3 * float(block_peaks[0]))
-        accuracy[f"d_{q}"] = np.maximum(np.where(largest > 0, absolute / np.where(largest > 0, largest, 1.0), 0.0),
-                                        [d.error for d in derivatives])
+    for q, row in zip(QUANTITIES, relative):
+        accuracy[f"d_{q}"] = row
         accuracy[q] = np.full(1, stated)
     if not peaks:
         nan = np.full(n, np.nan)
@@ -295,8 +298,7 @@ def _linear(sc: Scenario, base, derivatives: list, grid: np.ndarray, tol: Tolera
     rates, inputs = stacked.state_matrix[total:], stacked.input_matrix[total:]
     for block in range(P + 1):
         rows, by = slice(block * n, (block + 1) * n), (1.0 if block == 0 else scales[block - 1])
-        x_read, v_read = np.zeros((n, 2 * total)), np.zeros((n, 2 * total))
-        x_read[:, rows] = v_read[:, total + block * n:total + (block + 1) * n] = np.eye(n) / by
+        x_read, v_read = np.eye(n, 2 * total, block * n) / by, np.eye(n, 2 * total, total + block * n) / by
         into = {q: nominal[q] if block == 0 else derived[q][block - 1] for q in QUANTITIES}
         reads += [(x_read, None, into["displacement"]), (v_read, None, into["velocity"]),
                   (rates[rows] / by, inputs[rows] / by, into["acceleration"])]

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from smdcli.analysis.model_derivative import combined
+from smdcli.analysis.signal_derivative import combined
 from smdcli.elements.base import KINK
 from smdcli.errors import SolverFailed
 from smdcli.model import Model

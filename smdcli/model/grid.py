@@ -5,6 +5,7 @@ Must not import: solvers, sweep, io, plots, commands, cli.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -31,6 +32,17 @@ def time_grid(spec: TimeSpec) -> np.ndarray:
 def _decimal_grid(start: float, step: float, end: float) -> np.ndarray | None:
     """start + k*step, k = 0.. while <= end, in exact decimal arithmetic then rounded once; None where the integers
     involved pass 2^53 (a float holds them exactly below that, so one division rounds correctly)."""
+    found = _decimal_terms(start, step, end)
+    if found is None:
+        return None
+    first, stride, den, n = found
+    return (first + stride * np.arange(n, dtype=np.int64)).astype(float) / den
+
+
+@functools.lru_cache(maxsize=256)
+def _decimal_terms(start: float, step: float, end: float) -> tuple[int, int, int, int] | None:
+    """The grid's integers (first numerator, stride, common denominator, count), once per [time] table: a fit or a
+    sensitivity asks for the same grid at every trial, and the decimal arithmetic is most of a small grid's cost."""
     from fractions import Fraction
 
     a, h, b = (Fraction(repr(float(x))) for x in (start, step, end))
@@ -39,4 +51,4 @@ def _decimal_grid(start: float, step: float, end: float) -> np.ndarray | None:
     first, stride = a.numerator * (den // a.denominator), h.numerator * (den // h.denominator)
     if max(abs(first), abs(first + stride * (n - 1)), den) >= 2**53:
         return None
-    return (first + stride * np.arange(n, dtype=np.int64)).astype(float) / den
+    return first, stride, den, n

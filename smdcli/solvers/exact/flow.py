@@ -68,6 +68,25 @@ class Flow:
             powers.append(powers[-1] @ powers[-1])
         return powers
 
+    def stepped(self, z: np.ndarray, b: np.ndarray, h: float, count: int) -> np.ndarray:
+        """z after 0, 1, .., count steps of h, (count + 1, s), by doubling: steps d+1 .. 2d are E^d times steps
+        1 .. d plus the forcing's sum over d steps (a product a doubling, not a Python step a sample)."""
+        E, Phi = self.operators(h, keep=True)
+        shift = Phi @ b
+        Z = np.empty((count + 1, len(z)))
+        Z[0] = z
+        if count:
+            Z[1] = E @ z + shift
+        powers, forced, done = self.doubling(h, count), shift, 1  # forced: sum of E^i shift, i < done
+        for power in powers:
+            if done >= count:
+                break
+            stop = min(2 * done, count)
+            Z[done + 1:stop + 1] = Z[1:stop - done + 1] @ power.T + forced
+            forced = power @ forced + forced
+            done = stop
+        return Z
+
     def at(self, z: np.ndarray, b: np.ndarray, h: float, keep: bool = False) -> np.ndarray:
         """z after h."""
         if h == 0:

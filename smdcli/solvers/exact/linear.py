@@ -318,11 +318,12 @@ def propagate(model: Model, grid: np.ndarray, readouts) -> tuple[float, str]:
     rows = np.zeros((sum(len(R) for R, _, _ in readouts), size))
     rows[:, :2 * n] = np.vstack([R for R, _, _ in readouts])
     read_all = np.matmul(rows, powers)  # (J, reads' rows, size)
+    reaches = read_all.any(axis=0)  # (reads' rows, size): which of the state's entries each row reads
     reads, first = [], 0
     for R, _, out in readouts:
-        read = read_all[:, first:first + len(R)]
-        columns = np.flatnonzero(read.any(axis=(0, 1)))
-        reads.append((rows[first:first + len(R)], np.ascontiguousarray(read[:, :, columns]), columns, out))
+        columns = np.flatnonzero(reaches[first:first + len(R)].any(axis=0))
+        read = np.ascontiguousarray(read_all[:, first:first + len(R), columns])
+        reads.append((rows[first:first + len(R)], read, columns, out))
         first += len(R)
 
     def reseed(z: np.ndarray, t: float) -> None:

@@ -145,6 +145,22 @@ def recurrence(E: np.ndarray, forced: np.ndarray, start: np.ndarray, rows: np.nd
     return out, 2 * J + -(-steps // J)
 
 
+def reseeded_steps(E: np.ndarray, shift: np.ndarray, start: np.ndarray, seeds: np.ndarray,
+                   restarted: np.ndarray) -> np.ndarray:
+    """The states after 0, 1, .., len(seeds) steps z -> E z + shift from start, the entries `restarted` set to
+    seeds[i] after step i (force generators restarted at each of a record's samples; they do not depend on the rest
+    of the state): (len(seeds) + 1, size). The rest is one recurrence driven by the restarts (`recurrence`)."""
+    size = len(start)
+    kept = np.setdiff1d(np.arange(size), restarted)
+    before = np.vstack([start[restarted][None], seeds[:-1]])  # the restarted entries at each step's start
+    forced = before @ E[np.ix_(kept, restarted)].T + shift[kept]
+    rest, _ = recurrence(E[np.ix_(kept, kept)][None], forced[:, None], start[kept][None], np.arange(len(seeds) + 1))
+    states = np.empty((len(seeds) + 1, size))
+    states[0] = start
+    states[1:, kept], states[1:, restarted] = rest[1:, 0], seeds
+    return states
+
+
 def solve_sampled(model: Model, knots: Knots, Aaug: np.ndarray, blocks) -> tuple:
     """x, v (N, n), the stated accuracy and a description; Aaug and blocks: exact.augmented's."""
     states, stated, message = sampled_states(model, knots, Aaug, blocks)
