@@ -71,10 +71,37 @@ def test_a_scene_only_build_can_make_is_left_to_it():
     assert moved(base, sc, "mass[3].m", 2.0) is None
     assert moved(base, sc, "spring[0].k", -1.0) is None  # not a scene: build's refusal turns the stencil one-sided
     assert moved(base, sc, "mass.m.m", 0.0) is None
-    assert moved(base, sc, "force[0].amplitude", 2.0) is None
     assert moved(base, sc, "damping.alpha", 2.0) is None  # no [damping]
     sc, base, _ = bundled("shear_frame_bilinear")
     assert moved(base, sc, "damping.alpha", 2.0) is None  # nonlinear, and its Rayleigh given through zeta
     sc, base, _ = model_of(one_dof(0.5) + "[damping]\nzeta = 0.05\nomega = [2.0, 9.0]\n")
     assert moved(base, sc, "damping.alpha", 2.0) is None  # build says what alpha means beside zeta
     assert moved(base, sc, "spring[0].k", 30.0).K[0, 0] == pytest.approx(30.0, rel=1e-15)
+
+
+def test_a_moved_amplitude_is_the_force_built_with_it():
+    """A force's amplitude, on every bundled linear scene whose forces have one: the moved force's values over the
+    run and its generator's state at the end are the built scene's, to 1e-13; a table's or an expression's is left to
+    build (its numbers are its values)."""
+    from smdcli.model import time_grid
+    from smdcli.shapes.table import Table
+
+    checked = 0
+    for name in ["one_dof_harmonic", "three_dof_forced", "two_dof_forced", "one_dof_square_wave", "one_dof_square_fourier",
+                 "three_storey_shaker", "tmd_one_dof"]:
+        sc, base, _ = bundled(name)
+        grid = time_grid(sc.time)
+        for j, force in enumerate(sc.forces):
+            path, value = f"force[{j}].amplitude", 1.7 * force.amplitude + 0.3
+            fast = moved(base, sc, path, value)
+            if force.type in ("table", "expression"):
+                assert fast is None, path
+                continue
+            built = build(scenario_with(sc, {path: value}))
+            assert _same(fast.signals[j].value(grid), built.signals[j].value(grid)) < 1e-13, (name, path)
+            if built.signals[j].exo() is not None:
+                end = float(grid[-1])
+                assert _same(fast.signals[j].exo_state(end), built.signals[j].exo_state(end)) < 1e-13, (name, path)
+            assert not isinstance(fast.signals[j], Table)
+            checked += 1
+    assert checked >= 10

@@ -1,11 +1,12 @@
-"""A linear scene's model with one structural number moved (a mass, a spring's k, a damper's c, an initial
-displacement or velocity, Rayleigh's alpha or beta), assembled from the model it was built as instead of from the
-scenario again: what a parameter's derivative takes at each point of its stencil, at a hundredth of a build's cost.
+"""A linear scene's model with one number moved (a mass, a spring's k, a damper's c, an initial displacement or
+velocity, Rayleigh's alpha or beta, a force's amplitude), assembled from the model it was built as instead of from
+the scenario again: what a parameter's derivative takes at each point of its stencil, at a hundredth of a build's
+cost.
 
 The numbers change where build would put them: a mass on M's diagonal, an element's k or c stamped between its
 two ends, [damping]'s part of C made again from the moved M and K or coefficient (Rayleigh's alpha M + beta K, or
-the modal damping of the moved modes), the ground's jumps from the moved M and C (Model.with_matrices), and the
-element's own coefficient (its tension reads it).
+the modal damping of the moved modes), the ground's jumps from the moved M and C (Model.with_matrices), the
+element's own coefficient (its tension reads it), and a force made again from its spec.
 
 Must not import: solvers, sweep, io, plots, commands, cli.
 """
@@ -21,18 +22,27 @@ from smdcli.model.damping import added_damping
 from smdcli.model.elements import incidence_row
 from smdcli.model.system import Model
 from smdcli.scenario import Scenario
+from smdcli.shapes import build_signal
 
 _PATH = re.compile(r"mass(?:\.(?P<name>[^.\[\]]+)|\[(?P<index>\d+)\])\.(?P<field>m|x0|v0)"
-                   r"|(?P<element>spring\[\d+\]\.k|damper\[\d+\]\.c)|damping\.(?P<rayleigh>alpha|beta)")
+                   r"|(?P<element>spring\[\d+\]\.k|damper\[\d+\]\.c)|damping\.(?P<rayleigh>alpha|beta)"
+                   r"|force\[(?P<force>\d+)\]\.amplitude")
+_NO_AMPLITUDE = ("table", "expression")  # force types whose amplitude is not what their numbers are made from
 
 
 def moved(model: Model, scenario: Scenario, path: str, value: float) -> Model | None:
     """The model with the number at path set to value (SI), or None where only build can say (a nonlinear scene, a
-    [system] or sparse one, a path that is not a mass's, a linear spring's k, a linear damper's c or Rayleigh's
-    alpha or beta)."""
+    [system] or sparse one, a path that is not a mass's, a linear spring's k, a linear damper's c, Rayleigh's
+    alpha or beta or a force's amplitude, a table's or an expression's amplitude)."""
     found = _PATH.fullmatch(path)
     if found is None or not model.is_linear or not model.element_form or model.is_sparse:
         return None
+    if found["force"] is not None:  # the force made again from its spec with the amplitude moved
+        index = int(found["force"])
+        if index >= len(scenario.forces) or scenario.forces[index].type in _NO_AMPLITUDE:
+            return None
+        signal = build_signal(dataclasses.replace(scenario.forces[index], amplitude=value))
+        return dataclasses.replace(model, signals=model.signals[:index] + (signal,) + model.signals[index + 1:])
     if value < 0 or value == 0 and found["field"] == "m":
         return None  # not a scene: build refuses it, and the stencil turns one-sided
     if found["rayleigh"]:  # Rayleigh's coefficient as the scenario gives it (not through zeta at two frequencies)
