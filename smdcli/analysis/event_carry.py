@@ -17,7 +17,7 @@ import numpy as np
 
 from smdcli.solvers.exact.sampled import reseeded_steps
 
-FEW_BREAKS = 64  # breaks up to which a carry steps from one to the next (a recurrence's set-up costs more)
+FEW_BREAKS = 32  # breaks up to which a carry steps from one to the next (a recurrence's set-up costs more)
 
 
 class CarriedSensitivities:
@@ -44,13 +44,19 @@ class CarriedSensitivities:
                                   self.break_times[lo + 1:hi], float(self.break_times[lo + 1]) - first)
             self._kept(checkpoint).update(zip(self.break_times[lo:hi].tolist(), states))
             Z, lo, t_from = states[-1], hi, last
+        kept, steps = self._kept(checkpoint), {}  # steps: a whole step's E and forcing, by its length
         for stop in [*self.break_times[lo:hi].tolist(), t_to]:
             h = stop - t_from
-            if h > 0:
-                Z = flow.at(Z, forcing, h, abs(h - self.h_out) <= 1e-9 * self.h_out)
-                t_from = stop
+            if h > 0 and abs(h - self.h_out) <= 1e-9 * self.h_out:  # a whole output step: its kept exponential
+                if h not in steps:
+                    E, Phi = flow.operators(h, keep=True)
+                    steps[h] = E, Phi @ forcing
+                E, shift = steps[h]
+                Z, t_from = E @ Z + shift, stop
+            elif h > 0:
+                Z, t_from = flow.at(Z, forcing, h), stop
             if stop in self._break_set:
-                Z = self._kept(checkpoint)[stop] = self._reseeded(Z.copy(), stop)
+                Z = kept[stop] = self._reseeded(Z.copy(), stop)
         return Z
 
     def _kept(self, checkpoint: tuple) -> dict[float, np.ndarray]:
@@ -84,8 +90,10 @@ class CarriedSensitivities:
 
     def _generator_columns(self) -> np.ndarray:
         """Where [z; S] holds the generators' states: each block's entries past its displacements and velocities."""
-        s, n = self.scene.size, self.n
-        return (np.arange(self.P + 1)[:, None] * s + np.arange(2 * n, s)[None]).ravel()
+        if getattr(self, "_generators", None) is None:
+            s, n = self.scene.size, self.n
+            self._generators = (np.arange(self.P + 1)[:, None] * s + np.arange(2 * n, s)[None]).ravel()
+        return self._generators
 
     def _seeds_table(self) -> tuple[dict, np.ndarray]:
         """Each break's row ({time: row}) and every break's reseeded generator entries of [z; S], (breaks, entries):
