@@ -20,19 +20,26 @@ def check_matrices_finite(M: np.ndarray, C: np.ndarray, K: np.ndarray, scenario:
                            dofs: tuple[str, ...]) -> None:
     """Refuse a scene whose accelerations overflow (a mass of 1e-320 kg under a stiffness), naming the mass: no
     method could solve it, and the undamped modes [damping] needs could not be computed."""
+    # also each column's sum of magnitudes (the state matrix's 1-norm, what its exponential is scaled by): two
+    # entries of 1e308 in one column are each finite and their norm is not
     with np.errstate(all="ignore"):
         if not isinstance(M, np.ndarray):  # a sparse scene's diagonal M: each row of K and C over its mass
-            bad = ~(finite_rows(K.multiply(1.0 / M.diagonal()[:, None]).tocsr())
-                    & finite_rows(C.multiply(1.0 / M.diagonal()[:, None]).tocsr()))
+            K_over, C_over = (A.multiply(1.0 / M.diagonal()[:, None]).tocsr() for A in (K, C))
+            bad = ~(finite_rows(K_over) & finite_rows(C_over))
+            bad |= ~np.isfinite(np.asarray(abs(K_over).sum(axis=0) + abs(C_over).sum(axis=0)).ravel())
         elif np.count_nonzero(M) == np.count_nonzero(np.diagonal(M)):  # each row's largest entry over its mass
             bad = ~np.isfinite(np.maximum.reduce([K.max(axis=1), -K.min(axis=1), C.max(axis=1), -C.min(axis=1)])
                                / np.diagonal(M))
+            over = 1.0 / np.abs(np.diagonal(M))[:, None]
+            bad |= ~np.isfinite((np.abs(K) * over).sum(axis=0) + (np.abs(C) * over).sum(axis=0))
         else:
             try:
                 rows = np.hstack([mass_solve(M, K), mass_solve(M, C)])
             except np.linalg.LinAlgError:
                 rows = np.full((len(dofs), 2 * len(dofs)), np.nan)
             bad = ~np.isfinite(rows).all(axis=1)
+            n = len(dofs)
+            bad |= ~np.isfinite(np.abs(rows[:, :n]).sum(axis=0) + np.abs(rows[:, n:]).sum(axis=0))
     if bad.any():
         i = int(np.argmax(bad))
         where = f"mass[{i}].m" if scenario.system is None else "system.M"
