@@ -23,7 +23,10 @@ FEW_BREAKS = 32  # breaks up to which a carry steps from one to the next (a recu
 class CarriedSensitivities:
     """EventSensitivityRun's carrying and reading of S (its checkpoints, flows, breaks and seeds)."""
 
-    _seed_table: tuple[dict, np.ndarray] | None = None
+    _seed_table: tuple[dict, np.ndarray] | None = None  # each made once a run, on first use
+    _carried: dict[int, dict[float, np.ndarray]] | None = None
+    _generators: np.ndarray | None = None
+    _breaks_seen: set[float] | None = None
 
     # ----------------------------------------------------------------------------- carrying S
     def carry(self, Z: np.ndarray, t_from: float, t_to: float, checkpoint: tuple, augmented=None) -> np.ndarray:
@@ -62,7 +65,7 @@ class CarriedSensitivities:
     def _kept(self, checkpoint: tuple) -> dict[float, np.ndarray]:
         """[z; S] at the breaks a carry from this checkpoint passed, by time: the run carries S to each event across a
         record's samples, and the outputs there are those states (not carried again)."""
-        if not hasattr(self, "_carried"):
+        if self._carried is None:
             self._carried = {}
         return self._carried.setdefault(id(checkpoint), {})
 
@@ -84,13 +87,13 @@ class CarriedSensitivities:
     @property
     def _break_set(self) -> set[float]:
         """The run's break times (set once the run has started)."""
-        if getattr(self, "_breaks_seen", None) is None:
+        if self._breaks_seen is None:
             self._breaks_seen = set(self.break_times.tolist())
         return self._breaks_seen
 
     def _generator_columns(self) -> np.ndarray:
         """Where [z; S] holds the generators' states: each block's entries past its displacements and velocities."""
-        if getattr(self, "_generators", None) is None:
+        if self._generators is None:
             s, n = self.scene.size, self.n
             self._generators = (np.arange(self.P + 1)[:, None] * s + np.arange(2 * n, s)[None]).ravel()
         return self._generators
@@ -137,10 +140,10 @@ class CarriedSensitivities:
             kept = {t_c: Z, **self._kept(self.checkpoints[j])}
             if len(kept) > 1 and all(t in kept for t in grid[rows].tolist()):
                 Zs[rows], rows = [kept[t] for t in grid[rows].tolist()], ()
-            stepped = None if not len(rows) else self._stepped(Z, t_c, grid[rows], self.checkpoints[j], augmented) \
-                if len(rows) > 2 and steps[rows[0]:rows[-1]].all() else None
-            if stepped is not None:
-                Zs[rows], rows = stepped, ()
+            if len(rows) > 2 and steps[rows[0]:rows[-1]].all():
+                stepped = self._stepped(Z, t_c, grid[rows], self.checkpoints[j], augmented)
+                if stepped is not None:
+                    Zs[rows], rows = stepped, ()
             for k in rows:
                 t = float(grid[k])
                 if t > t_prev:

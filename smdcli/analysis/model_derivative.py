@@ -80,10 +80,7 @@ class Derivative:
     def of(self, read) -> np.ndarray:
         """d/dp of a model's array read(model), combined over the stencil (as differences from its first point: the
         weights sum to zero only up to rounding, and an array p does not change must come out exactly zero)."""
-        first = np.asarray(read(self.models[0]), dtype=float)
-        if len(self.models) == 2:  # a difference (an affine parameter's, or a moved scene's)
-            return self.weights[1] * (np.asarray(read(self.models[1]), dtype=float) - first)
-        return sum(w * (np.asarray(read(m), dtype=float) - first) for w, m in zip(self.weights[1:], self.models[1:]))
+        return combined(self.weights, [np.asarray(read(m), dtype=float) for m in self.models])
 
 
 def _scene_at(sc: Scenario, doc: dict, base: Model, path: str, value: float) -> Model:
@@ -261,10 +258,8 @@ def _difference(path: str, value: float, delta: float, base: Model, other: Model
     moves = [(float(np.abs(b - a).max(initial=0.0)), a, b) for a, b in zip(arrays_of(base), arrays_of(other))
              if a is not b]  # a moved model keeps what it did not move
     largest = max((move for move, _, _ in moves), default=0.0) / abs(delta)
-    if largest > 0:  # _rounding's, of the arrays that moved
-        size = max(max(float(np.abs(a).max(initial=0.0)), float(np.abs(b).max(initial=0.0)))
-                   for move, a, b in moves if move > 0)
-        error = max(error, ROUNDING * EPS * size * 2 / abs(delta) / largest)
+    if largest > 0:
+        error = max(error, _rounding([[a for _, a, _ in moves], [b for _, _, b in moves]], weights, largest))
     return Derivative(path, value, delta, [base, other], weights, error, (0.0, 1.0))
 
 
