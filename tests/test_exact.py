@@ -366,3 +366,24 @@ def test_a_grid_of_unequal_steps_gives_the_uniform_grids_values(stem):
         shared = np.isin(times, grid)
         difference = np.abs(run.displacement[shared] - uniform.displacement[np.isin(grid, times)]).max()
         assert difference <= 1e-12 * np.abs(uniform.displacement).max()
+
+
+@pytest.mark.parametrize("stem, params", [("three_dof_forced", ["spring[0].k", "damper[0].c"]),
+                                          ("five_storey_building", ["spring[0].k"])])
+def test_reads_of_the_same_entries_taken_together_give_each_reads_values(stem, params, monkeypatch):
+    """propagate takes the readouts that reach the same state entries as one read (up to _MERGED_BYTES of output):
+    the scene's and its sensitivities' histories are those of each readout taken alone, to rounding, and to the
+    solve_ivp reference of the scene."""
+    import smdcli
+    from smdcli.solvers.exact import linear
+
+    sc = scenario.load(SCENARIOS / f"{stem}.toml")
+    together = smdcli.sensitivity(sc, params)
+    monkeypatch.setattr(linear, "_MERGED_BYTES", 0)
+    alone = smdcli.sensitivity(sc, params)
+    for q in ("displacement", "velocity", "acceleration", "d_displacement", "d_velocity", "d_acceleration"):
+        a, b = getattr(together, q), getattr(alone, q)
+        assert np.abs(a - b).max() <= 1e-13 * np.abs(b).max(), q
+    model = build(sc)
+    reference = solve(model, together.time, "DOP853", Tolerances(rtol=1e-11, atol=1e-14))
+    assert np.abs(together.displacement - reference.displacement).max() <= 1e-8 * np.abs(reference.displacement).max()

@@ -38,6 +38,7 @@ from smdcli.text import plural
 
 BLOCK = 64  # output steps per stacked propagation
 _POWERS_BYTES = 64 * 2**20
+_MERGED_BYTES = 2**20  # propagate's reads of the same entries taken as one, up to this many bytes of output
 # Seconds per flop of a dense matrix product and per entry of a matrix-vector product (memory-bound), on a 2-core
 # machine: they only decide between this path and the sparse action (action.py), whose cost is on the same scale.
 _DENSE_FLOP_S, _DENSE_ENTRY_S = 2e-11, 3e-10
@@ -274,6 +275,40 @@ def _in_blocks(reads: list, k: int, stop: int, z: np.ndarray, powers: np.ndarray
     return z
 
 
+def _reads(readouts: list, powers: np.ndarray, n: int, N: int) -> tuple[list, list]:
+    """propagate's reads: (rows R, R times the powers on the state's entries that reach them (J, r, columns), those
+    columns, the (N, r) output), the readouts that reach the same entries taken as one read where their outputs
+    together are small (a small scene's cost is its numpy calls: a sensitivity's six reads of a 1-DOF scene were a
+    third of its solve); and each such read's (combined output, the readouts' outputs) to copy out after."""
+    sizes = [len(R) for R, _, _ in readouts]
+    starts = np.cumsum([0, *sizes[:-1]]).astype(int)
+    size = powers.shape[1]
+    # every read's rows times the powers at once, then each read on the state's entries that reach it (a
+    # sensitivity block: its own, the scene's, the forces')
+    rows = np.zeros((sum(sizes), size))
+    rows[:, :2 * n] = np.vstack([R for R, _, _ in readouts])
+    read_all = np.matmul(rows, powers)  # (J, reads' rows, size)
+    reaching = np.logical_or.reduceat(read_all.any(axis=0), starts, axis=0)  # (readouts, size)
+    groups, filling = [], {}  # filling: the group being filled for each set of entries
+    for i, mask in enumerate(reaching):
+        group = filling.get(key := mask.tobytes())
+        if group is None or N * (sum(sizes[j] for j in group) + sizes[i]) * 8 > _MERGED_BYTES:
+            group = filling[key] = []
+            groups.append(group)
+        group.append(i)
+    reads, merged = [], []
+    for group in groups:
+        picked = np.concatenate([np.arange(starts[i], starts[i] + sizes[i]) for i in group])
+        columns = np.flatnonzero(reaching[group[0]])
+        lo, hi = int(picked[0]), int(picked[-1]) + 1  # consecutive readouts (a block's x, v, a): a slice, not a copy
+        read = (read_all[:, lo:hi] if hi - lo == len(picked) else read_all[:, picked]).take(columns, axis=2)
+        out = readouts[group[0]][2] if len(group) == 1 else np.empty((N, len(picked)))
+        if len(group) > 1:
+            merged.append((out, [readouts[i][2] for i in group]))
+        reads.append((rows[picked], read, columns, out))
+    return reads, merged
+
+
 def solve_dense(model: Model, grid: np.ndarray) -> Solved:
     """Displacement, velocity and acceleration (N, n) by the dense exponential of the augmented system (the
     acceleration read off the state, plus the forces' values at each time: a jump's sample its right limit), the
@@ -313,18 +348,7 @@ def propagate(model: Model, grid: np.ndarray, readouts) -> tuple[float, str]:
             more = min(done, J - done)
             np.matmul(powers[:more], powers[done - 1], out=powers[done:done + more])
             done += more
-    # every read's rows times the powers at once (a product each was a third of a small scene's solve), then each
-    # read on the state's entries that reach it (a sensitivity block: its own, the scene's, the forces')
-    rows = np.zeros((sum(len(R) for R, _, _ in readouts), size))
-    rows[:, :2 * n] = np.vstack([R for R, _, _ in readouts])
-    read_all = np.matmul(rows, powers)  # (J, reads' rows, size)
-    reaches = read_all.any(axis=0)  # (reads' rows, size): which of the state's entries each row reads
-    reads, first = [], 0
-    for R, _, out in readouts:
-        columns = np.flatnonzero(reaches[first:first + len(R)].any(axis=0))
-        read = np.ascontiguousarray(read_all[:, first:first + len(R), columns])
-        reads.append((rows[first:first + len(R)], read, columns, out))
-        first += len(R)
+    reads, merged = _reads(readouts, powers, n, N)
 
     def reseed(z: np.ndarray, t: float) -> None:
         for lo, hi, signal in blocks:
@@ -355,6 +379,11 @@ def propagate(model: Model, grid: np.ndarray, readouts) -> tuple[float, str]:
         if not last and tb > t_cur:
             z = phi(tb - t_cur) @ z
             n_expm += 1
+    for combined, outs in merged:
+        first = 0
+        for out in outs:
+            out[:] = combined[:, first:first + out.shape[1]]
+            first += out.shape[1]
     _add_forces(model, grid, readouts)
     stated = stated_rounding(N + len(segs) + n_expm, 1.0 if accurate else growth)
     message = (f"ok: {plural(len(segs), 'force segment')}, {plural(len(cache), 'matrix exponential')} "
