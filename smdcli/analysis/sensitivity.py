@@ -182,7 +182,7 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
     run = dense = None
     scales = np.array([relative_size(d.value) for d in derivatives])
     if base.is_linear:
-        nominal, derived, stated = _linear(sc, base, derivatives, grid, tol)
+        values, stated = _linear(sc, base, derivatives, grid, tol)
         method = METHOD
     else:
         if piecewise:
@@ -190,12 +190,13 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
             method = EVENT_METHOD
         else:
             blocks, stated, dense, method = _smooth(sc, base, derivatives, scales, grid, advance)
-        nominal, derived = _split(blocks, scales)
-    # each quantity's block peaks over time and DOFs (the scene's, then scale_i dx/dp_i), from the contiguous copies
-    # (one reduction along memory, not a strided one over the blocks); fmax passes over nan, written where no
-    # derivative exists; every quantity at once below (a small scene's cost is its numpy calls)
-    peaks_of = np.array([np.concatenate([_largest(nominal[q].reshape(1, -1)), _largest(derived[q].reshape(P, -1))])
-                         for q in QUANTITIES])  # (quantities, P + 1)
+        values = _split(blocks, scales)
+    nominal = {q: values[i, 0] for i, q in enumerate(QUANTITIES)}
+    derived = {q: values[i, 1:] for i, q in enumerate(QUANTITIES)}
+    # each quantity's block peaks over time and DOFs (the scene's, then scale_i dx/dp_i), every block contiguous (one
+    # reduction along memory for all of them: a small scene's cost is its numpy calls); fmax passes over nan, written
+    # where no derivative exists
+    peaks_of = _largest(values.reshape(len(QUANTITIES) * (P + 1), -1)).reshape(len(QUANTITIES), P + 1)
     peaks_of[:, 1:] *= scales
     largest = peaks_of[:, 1:]
     if base.is_linear:  # the run's error is relative to the stacked state's peak (every block a displacement)
@@ -221,10 +222,11 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
     events = jump_times(base, grid) if run is None else np.array([e[0] for e in run.events], dtype=float)
     peaks, at = located_peaks(grid, nominal["displacement"], nominal["velocity"], nominal["acceleration"], events,
                               with_times=True)
-    sign = np.sign(quintic_each(grid, nominal["displacement"], nominal["velocity"], nominal["acceleration"], at))
-    if run is None:  # on each DOF's quintic at its peak's time
-        d_peaks = sign * quintic_each(grid, derived["displacement"], derived["velocity"], derived["acceleration"], at)
+    if run is None:  # the scene and its derivatives on each DOF's quintic at its peak's time, in one evaluation
+        read = quintic_each(grid, values[0], values[1], values[2], at)  # (P + 1, n)
+        d_peaks = np.sign(read[0]) * read[1:]
     else:  # on the exact flow at the peak's time
+        sign = np.sign(quintic_each(grid, nominal["displacement"], nominal["velocity"], nominal["acceleration"], at))
         d_peaks = sign * np.stack([run.at(float(at[i]))[:, i] for i in range(n)], axis=1) / scales[:, None]
     for i in np.flatnonzero(peaks == 0):
         notes.append(f"{base.dofs[i]} does not move: its peak |x| has no derivative (written as nan)")
@@ -273,48 +275,48 @@ def _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_
         notes=notes, model=base, derivatives=derivatives, method=method)
 
 
-def _split(blocks: dict, scales: np.ndarray) -> tuple[dict, dict]:
-    """Each quantity's (N, P + 1, n) blocks (the scene, then scale_i d/dp_i) as the scene's (N, n) and the
-    derivatives' (P, N, n), each contiguous."""
-    nominal = {q: np.ascontiguousarray(b[:, 0]) for q, b in blocks.items()}
-    derived = {q: np.divide(np.moveaxis(b[:, 1:], 1, 0), scales[:, None, None],  # one pass into (P, N, n)
-                            out=np.empty((b.shape[1] - 1, b.shape[0], b.shape[2])))
-               for q, b in blocks.items()}
-    return nominal, derived
+def _split(blocks: dict, scales: np.ndarray) -> np.ndarray:
+    """Each quantity's (N, P + 1, n) blocks (the scene, then scale_i d/dp_i) as one (quantities, P + 1, N, n) array:
+    the scene's (N, n), then its derivatives', each block contiguous."""
+    N, blocks_count, n = blocks["displacement"].shape
+    values = np.empty((len(QUANTITIES), blocks_count, N, n))
+    for i, q in enumerate(QUANTITIES):
+        values[i, 0] = blocks[q][:, 0]
+        np.divide(np.moveaxis(blocks[q][:, 1:], 1, 0), scales[:, None, None], out=values[i, 1:])
+    return values
 
 
-def _linear(sc: Scenario, base, derivatives: list, grid: np.ndarray, tol: Tolerances) -> tuple[dict, dict, float]:
-    """Each quantity's scene (N, n) and derivatives (P, N, n) by the exact solver, and its accuracy: on its dense
-    and record-sample paths each read off the stacked state straight into its place (read_exactly; a derivative
-    block reaches only itself, the scene and the forces: its products skip the rest); elsewhere (jumps, harmonics
-    superposed, the modal or sparse paths, unequal steps) as blocks of the stacked model's result."""
+def _linear(sc: Scenario, base, derivatives: list, grid: np.ndarray, tol: Tolerances) -> tuple[np.ndarray, float]:
+    """Each quantity's scene (N, n) and derivatives (P, N, n), as _split's one array, by the exact solver, and its
+    accuracy: on its dense and record-sample paths each read off the stacked state straight into its place
+    (read_exactly; a derivative block reaches only itself, the scene and the forces: its products skip the rest);
+    elsewhere (jumps, harmonics superposed, the modal or sparse paths, unequal steps) as blocks of the stacked
+    model's result."""
     from smdcli.solvers.exact.linear import read_exactly
 
     stacked, scales = augmented_model(base, derivatives)
     P, n, N = len(derivatives), base.n, len(grid)
-    nominal = {q: np.empty((N, n)) for q in QUANTITIES}
-    derived = {q: np.empty((P, N, n)) for q in QUANTITIES}
+    values = np.empty((len(QUANTITIES), P + 1, N, n))
     total, reads = (P + 1) * n, []
     rates, inputs = stacked.state_matrix[total:], stacked.input_matrix[total:]
     for block in range(P + 1):
         rows, by = slice(block * n, (block + 1) * n), (1.0 if block == 0 else scales[block - 1])
         x_read, v_read = np.eye(n, 2 * total, block * n) / by, np.eye(n, 2 * total, total + block * n) / by
-        into = {q: nominal[q] if block == 0 else derived[q][block - 1] for q in QUANTITIES}
-        reads += [(x_read, None, into["displacement"]), (v_read, None, into["velocity"]),
-                  (rates[rows] / by, inputs[rows] / by, into["acceleration"])]
+        reads += [(x_read, None, values[0, block]), (v_read, None, values[1, block]),
+                  (rates[rows] / by, inputs[rows] / by, values[2, block])]
     solved = None if stacked.jumps else read_exactly(stacked, grid, reads)
     if solved is None:
         exact = get_solver("exact")
         result = across_jumps(lambda piece, times: exact.solve(piece, times, tol), stacked, grid)
         if not result.success:
             raise SolverFailed(f"{sc.path}: the sensitivity equations could not be solved: {result.stats.message}")
-        nominal, derived = _split({q: getattr(result, q).reshape(N, P + 1, n) for q in QUANTITIES}, scales)
+        values = _split({q: getattr(result, q).reshape(N, P + 1, n) for q in QUANTITIES}, scales)
         stated = float(result.stats.stated_accuracy)
     else:
         stated = solved[0]
-    if not (np.all(np.isfinite(nominal["displacement"])) and np.all(np.isfinite(derived["displacement"]))):
+    if not np.isfinite(values[0]).all():
         raise SolverFailed(f"{sc.path}: the sensitivity equations could not be solved: not finite")
-    return nominal, derived, float(stated)
+    return values, float(stated)
 
 
 def _piecewise(base) -> bool:
