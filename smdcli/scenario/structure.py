@@ -93,6 +93,18 @@ def _read_elements(top: _Table, file: str, kind: str, dofs: tuple[str, ...]) -> 
     return tuple(elements)
 
 
+def read_law(file: str, kind: str, index: int, item: dict):
+    """The law of [[kind]] entry `index` read from its table `item` (the TOML entry, numbers in SI or as unit strings)
+    with the checks the scenario's reading makes of it: ScenarioError where it is no law (a yield force of 0, a
+    restitution past 1)."""
+    from smdcli.elements import SPRING_LAWS, TABLES
+
+    cls = SPRING_LAWS[item["law"]] if kind == "spring" else TABLES[kind]
+    t = _Table(file, f"{kind}[{index}]", item)
+    t.units.update(cls.units)
+    return cls.read(t)
+
+
 def _refuse_other_keys(t: _Table, law: str, allowed: tuple[str, ...]) -> None:
     """A key of another spring law (fy on a linear spring, say) named with the law that takes it."""
     from smdcli.elements import SPRING_LAWS
