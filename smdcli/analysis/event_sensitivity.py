@@ -80,6 +80,7 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
         self.moves: dict[float, np.ndarray] = {}  # each event's time -> its scaled derivatives scale_i dt*/dp_i
         self.undefined_from: tuple[float, str] | None = None
         self._augmented: dict = {}
+        self._flows: dict[bytes, Flow] = {}  # the augmented flows, by their matrix
         self._seeds: dict[float, tuple] = {}  # (sensitivities', state's) generators reseeded at a break, by its time
 
     # ----------------------------------------------------------------------------- stencils
@@ -117,7 +118,12 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
                 flat = self.total(i, read)
                 big[(i + 1) * s:(i + 2) * s, :s] = flat[:s * s].reshape(s, s)
                 forcing[(i + 1) * s:(i + 2) * s] = flat[s * s:]
-            found = self._augmented[key] = (Flow(big), forcing, big)
+            # the flow by its matrix: internal variables move the forcing only (a plastic deformation), so that a
+            # mode met again after an event steps on the exponentials it already has
+            flow = self._flows.get(matrix := big.tobytes())
+            if flow is None:
+                flow = self._flows[matrix] = Flow(big)
+            found = self._augmented[key] = (flow, forcing, big)
         return found
 
     def advance(self, t: float, z: np.ndarray) -> None:
