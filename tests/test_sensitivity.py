@@ -5,6 +5,7 @@ parameters whose matrices are not polynomial in them (modal damping)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -12,8 +13,9 @@ import pytest
 import scipy.linalg
 
 import smdcli
+from smdcli import scenario
 from smdcli.sweep.family import scenario_with
-from conftest import SCENARIOS, model_of
+from conftest import SCENARIOS, model_of, one_dof
 
 H = 1e-30  # the complex step: no subtraction, so no cancellation however small
 
@@ -165,6 +167,29 @@ def test_amplitude_and_scale_derivatives_are_the_response_over_the_factor():
     for j in range(2):
         want = alone[j].displacement / s.value[j]
         assert np.abs(s.d_displacement[j] - want).max() <= 1e-11 * np.abs(want).max()
+
+
+@pytest.mark.parametrize("force", ['type = "square"\namplitude = 40.0\nfrequency = 0.7\nduty = 0.3',
+                                   'type = "step"\namplitude = 40.0\nt0 = 0.35',
+                                   'type = "constant"\namplitude = 40.0'])
+def test_a_shaped_force_s_amplitude_derivative_is_the_response_over_it(force):
+    """A square wave's, a step's and a constant force's amplitude multiplies the whole force: from rest dx/dA = x / A
+    (and v, a), to 1e-12 of the largest, through the force's own column (its ratio to the moved force: no second
+    signal); a square wave of another duty is no multiple of it."""
+    from smdcli.analysis.model_derivative import augmented_model
+    from smdcli.shapes import build_signal
+
+    text = one_dof(0.8, x0=0.0) + f"[[force]]\non = \"m\"\n{force}\n"
+    s = smdcli.sensitivity(scenario.parse(text, "amplitude.toml"), ["force[0].amplitude"])
+    assert len(augmented_model(s.model, s.derivatives)[0].signals) == len(s.model.signals)
+    for q in ("displacement", "velocity", "acceleration"):
+        want = getattr(s, q) / s.value[0]
+        assert np.abs(getattr(s, f"d_{q}")[0] - want).max() <= 1e-12 * np.abs(want).max(), q
+    square = scenario.parse(one_dof(0.8) + '[[force]]\non = "m"\ntype = "square"\namplitude = 4.0\nomega = 2.0\n',
+                            "square.toml").forces[0]
+    other = dataclasses.replace(square, duty=0.25)
+    assert build_signal(square).ratio_to(build_signal(dataclasses.replace(square, amplitude=2.0))) == 2.0
+    assert build_signal(square).ratio_to(build_signal(other)) is None
 
 
 def _central(path, parameter: str, value: float, read, relative: float = 1e-4):

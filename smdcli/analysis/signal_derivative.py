@@ -72,6 +72,9 @@ def signal_derivative(base: Signal, d, j: int) -> Signal | float | None:
                                                        ended=base.ended)
     if all(_same_signal(base, s) for s in points):
         return None
+    ratios = [s.ratio_to(base) for s in points]
+    if all(r is not None for r in ratios):  # an amplitude moved: u times its weighed ratios
+        return float(np.dot(d.weights, ratios))
     terms, others = base.harmonic_terms(), [s.harmonic_terms() for s in points]
     if terms is not None and all(o is not None and np.array_equal(o[0], terms[0]) and np.array_equal(o[2], terms[2])
                                  for o in others):  # sum c_k sin(w_k t + p_k) with the same w and p: c moved

@@ -43,6 +43,7 @@ class Signal:
     series: ClassVar[bool] = True  # the Taylor solver has its series (smdcli.kernels.forces.force_series)
     shock: ClassVar[bool] = False  # one event, whose velocity change as a ground acceleration is meant (delta-v)
     schema: ClassVar[dict[str, Any]] = {}  # JSON Schema of its keys that are not plain numbers
+    scaled_by_amplitude: ClassVar[bool] = False  # its `amplitude` attribute multiplies the whole signal, nothing else
 
     @classmethod
     def read(cls, t) -> dict[str, Any]:
@@ -92,6 +93,14 @@ class Signal:
         """d/dt between the signal's jumps, for a run from `start` (None where it is zero); the jumps themselves
         are the caller's (value - value_left at the breakpoints)."""
         raise NotImplementedError
+
+    def ratio_to(self, other: Signal) -> float | None:
+        """c where this signal is c times `other` at every time (the same shape with another amplitude), else None."""
+        if type(other) is not type(self) or not self.scaled_by_amplitude or other.amplitude == 0:
+            return None
+        mine, theirs = dict(vars(self)), dict(vars(other))
+        ratio = mine.pop("amplitude") / theirs.pop("amplitude")
+        return ratio if mine == theirs else None
 
     def harmonic_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """(w, c, p) with the signal = sum c sin(w t + p), or None for a signal that is not a sum of harmonics."""

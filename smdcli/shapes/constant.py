@@ -16,6 +16,7 @@ class Constant(Signal):
     """amplitude, always."""
 
     types = ("constant",)
+    scaled_by_amplitude = True
     fields = ("amplitude",)
     kinds = (CONSTANT,)
 

@@ -18,6 +18,7 @@ class Square(Signal):
     """The exact square wave: +amplitude for the first `duty` of each period from t0, -amplitude after."""
 
     types = ("square",)
+    scaled_by_amplitude = True
     fields = ("amplitude", "omega", "frequency", "period", "duty", "t0")
     kinds = (SQUARE,)
 

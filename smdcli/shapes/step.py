@@ -16,6 +16,7 @@ class Step(Signal):
     """amplitude * Heaviside(t - t0), with Heaviside(0) = 1."""
 
     types = ("step",)
+    scaled_by_amplitude = True
     fields = ("amplitude", "t0")
     kinds = (STEP,)
 
