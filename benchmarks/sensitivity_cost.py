@@ -9,6 +9,10 @@ sensitivity` must cost less, whichever way it is compared:
 - with the peaks: the whole of `smdcli.sensitivity` (also each DOF's peak located between samples and its
   derivative) against that forward run with its peaks located (a difference of the peaks needs each run's).
 
+The last rows are classically damped chains (wall.chain's), whose forward run is output-bound: each sensitivity
+has an output of its own and a coupling to the scene's state on top (its equations are driven by dA/dp x), so that
+where the outputs' cost dominates the fixed cost a run shares, P exact sensitivities cost more than P + 1 runs.
+
 Median wall times in one process, interleaved, after a warm-up of each (the forward run with BLAS on one thread
 where the scene is small, as the sensitivities run it); the ratios against P + 1.
 
@@ -47,7 +51,21 @@ SCENES = [  # (scenario, its parameters)
     ("coulomb_free_decay", ["spring[0].k"]),
     ("stick_slip_belt", ["friction[0].force", "friction[0].static", "spring[0].k"]),
     ("vibro_impact_gap", ["stop[0].restitution", "spring[0].k"]),
+    # wall.chain's: a classically damped chain, whose forward run is output-bound (its cost grows as the output)
+    ("chain of 10 masses", ["spring[0].k"]),
+    ("chain of 30 masses", ["spring[0].k"]),
+    ("chain of 30 masses", ["spring[0].k", "damper[0].c"]),
 ]
+
+
+def _scene(name: str):
+    """A bundled scenario by stem, or wall.chain's n-mass chain ("chain of n masses")."""
+    if not name.startswith("chain of "):
+        return smdcli.load(ROOT / "scenarios" / f"{name}.toml")
+    from smdcli.scenario import parse
+    from wall import chain
+
+    return parse(chain(int(name.split()[2]), False, "every"), f"{name.replace(' ', '_')}.toml")
 
 
 def main() -> None:
@@ -57,7 +75,7 @@ def main() -> None:
     print(f"{'scene':<21} {'P':>2} {'histories':>10} {'run':>9} {'ratio':>6}   {'with peaks':>10} {'run':>9} "
           f"{'ratio':>6} {'P + 1':>6}")
     for name, params in SCENES:
-        sc = smdcli.load(ROOT / "scenarios" / f"{name}.toml")
+        sc = _scene(name)
         found = smdcli.sensitivity(sc, params)  # warm-up: imports, compiled kernels' loading
         _forward_time(sc, found.time)
         histories, whole, forward, peaks = [], [], [], []

@@ -20,6 +20,7 @@ Must not import: sweep, io, plots, commands, cli.
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from typing import NamedTuple
 
@@ -36,11 +37,12 @@ from smdcli.solvers.exact.action import ACTION_DOFS, Action, action_cost, solve_
 from smdcli.solvers.exact.modal import modal_applies, solve_modal
 from smdcli.text import plural
 
-BLOCK = 64  # output steps per stacked propagation
+BLOCK = 64  # output steps per stacked propagation, at most
 _POWERS_BYTES = 64 * 2**20
 _MERGED_BYTES = 2**20  # propagate's reads of the same entries taken as one, up to this many bytes of output
 # Seconds per flop of a dense matrix product and per entry of a matrix-vector product (memory-bound), on a 2-core
-# machine: they only decide between this path and the sparse action (action.py), whose cost is on the same scale.
+# machine: they only decide between this path and the sparse action (action.py), whose cost is on the same scale, and
+# how many of the step's powers the dense path stacks.
 _DENSE_FLOP_S, _DENSE_ENTRY_S = 2e-11, 3e-10
 
 
@@ -75,13 +77,18 @@ def dense_cost(model: Model, grid: np.ndarray) -> float:
     """Estimated seconds of the dense path: expm (about 16 size^3 flops), the J stacked powers of the propagator,
     and a pass over the propagator per output step."""
     size = 2 * model.n + sum(s.exo().S.shape[0] for s in model.signals)
-    J = _stacked_powers(size, len(grid))
+    J = _stacked_powers(size, len(grid), 3 * model.n)
     return (16 + 2 * J) * size**3 * _DENSE_FLOP_S + len(grid) * size**2 * _DENSE_ENTRY_S
 
 
-def _stacked_powers(size: int, N: int) -> int:
-    """How many powers of the step's propagator are stacked: BLOCK, less where they would pass 64 MB."""
-    return max(1, min(BLOCK, N - 1, _POWERS_BYTES // (8 * size * size)))
+def _stacked_powers(size: int, N: int, rows: int = 0) -> int:
+    """How many powers of the step's propagator are stacked: the fewest seconds for J powers (each also multiplied by
+    the `rows` read) and N / J blocks' starts (a product with the state each), at most BLOCK and 64 MB. A 60-mass
+    chain's sensitivity system (size 242, 360 rows read) takes 4, not 64: its 64 powers were 90 % of its solve."""
+    power = sampled.PRODUCT_S + 2 * (size ** 3 + rows * size ** 2) * _DENSE_FLOP_S
+    start = sampled.PRODUCT_S + size ** 2 * _DENSE_ENTRY_S
+    best = round(math.sqrt(max(N - 1, 1) * start / power))
+    return max(1, min(BLOCK, N - 1, best, _POWERS_BYTES // (8 * size * size)))
 
 
 def first_order_hold(model: Model, grid: np.ndarray) -> tuple[Model, tuple[str, ...]]:
@@ -339,7 +346,7 @@ def propagate(model: Model, grid: np.ndarray, readouts) -> tuple[float, str]:
             cache[dt] = propagator(Aaug, dt)[0]
         return cache[dt]
 
-    J = _stacked_powers(size, N)
+    J = _stacked_powers(size, N, sum(len(R) for R, _, _ in readouts))
     powers = np.empty((J, size, size))
     if N > 1:
         powers[0] = phi(h)

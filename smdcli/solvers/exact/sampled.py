@@ -30,7 +30,7 @@ BLOCK = 64  # steps a block takes at most
 # Seconds per Python-level product of the blocks' loops and per flop of a small product (2-core machine): they only
 # set the block length, which trades J products for the powers and J for each block's forced part against
 # steps / J for the blocks' starts
-_PRODUCT_S, _FLOP_S = 5e-6, 2.5e-10
+PRODUCT_S, _FLOP_S = 5e-6, 2.5e-10
 CHUNK_ENTRIES = 1 << 21  # states (systems x state size) a chunk of steps holds: 16 MB an array
 
 
@@ -92,8 +92,8 @@ def block_length(steps: int, systems: int, s: int) -> int:
     """recurrence's J: the fewest seconds for J powers (a product of `systems` s x s matrices each) and 2 J + steps /
     J Python-level products; at most BLOCK. 2,001 steps of a 5-DOF frame: 32 (0.69 ms, 1.17 at 64); of its 20-DOF
     sensitivity system: 16 (2.6 ms, 3.6 at 64)."""
-    power = _PRODUCT_S + _FLOP_S * 2 * systems * s ** 3
-    return int(max(1, min(BLOCK, steps, round(math.sqrt(steps * _PRODUCT_S / (_PRODUCT_S + power))))))
+    power = PRODUCT_S + _FLOP_S * 2 * systems * s ** 3
+    return int(max(1, min(BLOCK, steps, round(math.sqrt(steps * PRODUCT_S / (PRODUCT_S + power))))))
 
 
 def recurrence(E: np.ndarray, forced: np.ndarray, start: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, int]:
