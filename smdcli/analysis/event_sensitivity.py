@@ -171,8 +171,8 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
             slope0, slope1 = (direction * float(row @ (mode.A @ z + mode.b)) for z in (z0, z1))
             if not slope0 > 0 > slope1:
                 continue
-            turn = self._root(flow, mode, z0, row @ mode.A, float(row @ mode.b), 0.0, h)
-            top = direction * float(row @ flow.at(z0, mode.b, turn) + const)
+            turn, value = self._turn_top(flow, mode, z0, row, const, h)
+            top = direction * value
             if top >= -GRAZE * scale:
                 self.no_derivative(self.now + turn, f"{self.scene.elements[e].path} comes within {-top:.3g} of its "
                                    f"{guard.kind} without reaching it: a graze, which a change of the parameters that "
@@ -192,13 +192,9 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
             self.settle_checkpoint(t, z, S, states)
         return found
 
-    def turn_may_hold_event(self, flow: Flow, mode, guard, row, const, z0, h) -> bool:
-        # a near miss inside a batch: the step-by-step path takes that step, where first_crossing sees it
-        if super().turn_may_hold_event(flow, mode, guard, row, const, z0, h):
-            return True
-        scale = self._graze_scale(guard, row, const, z0)
-        turn = self._root(flow, mode, z0, row @ mode.A, float(row @ mode.b), 0.0, h)
-        return guard.direction * float(row @ flow.at(z0, mode.b, turn) + const) >= -GRAZE * scale
+    def turn_margin(self, guard, row, const, z0) -> float:
+        # a near miss inside a batch too: the step-by-step path takes that step, where first_crossing sees it
+        return GRAZE * self._graze_scale(guard, row, const, z0)
 
     def _graze_scale(self, guard, row: np.ndarray, const: float, z0: np.ndarray) -> float:
         """What a guard's nearness to its level is judged against: the terms it sums, or for a rate the run's speeds

@@ -59,11 +59,17 @@ class Crossings:
         return flow.guard_polynomial(z0, mode.b, row, const, h) or \
             (lambda tau: float(row @ flow.at(z0, mode.b, tau) + const))
 
+    def _turn_top(self, flow: Flow, mode: Mode, z0: np.ndarray, row: np.ndarray, const: float,
+                  h: float) -> tuple[float, float]:
+        """Where a guard's slope turns in (0, h] (rising at the start, falling at h), and the guard's value there."""
+        turn = self._root(flow, mode, z0, row @ mode.A, float(row @ mode.b), 0.0, h)
+        return turn, self._along(flow, mode, z0, row, const, h)(turn)
+
     def _touch(self, flow: Flow, mode: Mode, z0: np.ndarray, row: np.ndarray, const: float, s: float, h: float):
         """Where a guard below its level at both ends of a step, rising at its start and falling at its end, reaches
         its level before its turn, or None where its top stays below."""
-        turn = self._root(flow, mode, z0, row @ mode.A, float(row @ mode.b), 0.0, h)
-        if s * self._along(flow, mode, z0, row, const, h)(turn) >= 0:
+        turn, top = self._turn_top(flow, mode, z0, row, const, h)
+        if s * top >= 0:
             return self._root(flow, mode, z0, row, const, 0.0, turn)
         return None
 
@@ -71,10 +77,17 @@ class Crossings:
                             h: float) -> bool:
         """Whether first_crossing could find an event of this guard on a step from z0 that a batch flagged as a
         possible touch (below its level at both ends, its slope turning): a start at its level, or a top that
-        reaches it. A top that stays below lets the batch go on where the single step would find nothing."""
+        comes within turn_margin of it. A top further below lets the batch go on where the single step would find
+        nothing."""
         if guard.direction * float(row @ z0 + const) >= -self._level(guard, row, const, z0):
             return True
-        return self._touch(flow, mode, z0, row, const, guard.direction, h) is not None
+        return guard.direction * self._turn_top(flow, mode, z0, row, const, h)[1] >= \
+            -self.turn_margin(guard, row, const, z0)
+
+    def turn_margin(self, guard, row: np.ndarray, const: float, z0: np.ndarray) -> float:
+        """How far below its level a guard's top may stay and still end a batch: none (only a top that reaches its
+        level holds an event)."""
+        return 0.0
 
     def _return(self, flow: Flow, mode: Mode, z0: np.ndarray, row: np.ndarray, const: float, s: float, h: float):
         """Where a guard the event just taken left at its level comes back to it in (0, h], from the bottom of its
