@@ -76,7 +76,7 @@ class Batches:
             else []
         clear, done = count, 0  # steps before the first that a guard may end; steps taken
         jumped_to = set()  # steps whose start a force's jump put past a guard's level (a stuck contact's breakaway)
-        doubling = None if reseed else flow.doubling(h_out, count)
+        doubled = None if reseed else flow.doubled(Z, mode.b, h_out)
         while done < clear:  # in chunks, so that an event near the start wastes little
             if reseed:
                 chunk = range(done, min(done + CHUNK, count))
@@ -87,17 +87,9 @@ class Batches:
                             Z[i + 1, lo:hi] = states_at[i]
             else:  # doublings until CHECKED_TOGETHER steps are new: a product is cheaper than a check
                 start = done
-                while done < count and (done == start or done - start < CHECKED_TOGETHER):
-                    if done == 0:
-                        Z[1] = E @ z + shift
-                        sums = [shift]  # sums[j] = sum of E^i shift, i < 2^j: the forcing's part of 2^j steps
-                        done = 1
-                    else:  # steps done+1 .. 2 done from steps 1 .. done: E^done Z + its forcing, one product
-                        j = len(sums) - 1  # done = 2^j
-                        stop = min(2 * done, count)
-                        Z[done + 1:stop + 1] = Z[1:stop - done + 1] @ doubling[j].T + sums[j]
-                        sums.append(doubling[j] @ sums[j] + sums[j])
-                        done = stop
+                for done in doubled:
+                    if done - start >= CHECKED_TOGETHER:
+                        break
                 chunk = range(start, done)
             starts, stops = Z[chunk.start:chunk.stop], ends[chunk.start:chunk.stop]
             if mode.guards:

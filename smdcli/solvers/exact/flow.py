@@ -9,6 +9,8 @@ Must not import: sweep, io, plots, commands, cli.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 
 GAUSS_POINTS = 8
@@ -69,23 +71,33 @@ class Flow:
         return powers
 
     def stepped(self, z: np.ndarray, b: np.ndarray, h: float, count: int) -> np.ndarray:
-        """z after 0, 1, .., count steps of h, (count + 1, s), by doubling: steps d+1 .. 2d are E^d times steps
-        1 .. d plus the forcing's sum over d steps (a product a doubling, not a Python step a sample)."""
-        E, Phi = self.operators(h, keep=True)
-        shift = Phi @ b
+        """z after 0, 1, .., count steps of h, (count + 1, s), by doubling (doubled's)."""
         Z = np.empty((count + 1, len(z)))
         Z[0] = z
-        if count:
-            Z[1] = E @ z + shift
-        powers, forced, done = self.doubling(h, count), shift, 1  # forced: sum of E^i shift, i < done
-        for power in powers:
+        for _ in self.doubled(Z, b, h):
+            pass
+        return Z
+
+    def doubled(self, Z: np.ndarray, b: np.ndarray, h: float) -> Iterator[int]:
+        """Z[1:] filled with the steps of h from Z[0] by doubling: steps d+1 .. 2d are E^d times steps 1 .. d plus
+        the forcing's sum over d steps (a product a doubling, not a Python step a sample); yields how many steps are
+        done after each product (so that a caller may check them and stop early)."""
+        count = len(Z) - 1
+        if count < 1:
+            return
+        E, Phi = self.operators(h, keep=True)
+        forced = Phi @ b  # the sum of E^i (Phi b) over i < done
+        Z[1] = E @ Z[0] + forced
+        done = 1
+        yield done
+        for power in self.doubling(h, count):
             if done >= count:
-                break
+                return
             stop = min(2 * done, count)
             Z[done + 1:stop + 1] = Z[1:stop - done + 1] @ power.T + forced
             forced = power @ forced + forced
             done = stop
-        return Z
+            yield done
 
     def at(self, z: np.ndarray, b: np.ndarray, h: float, keep: bool = False) -> np.ndarray:
         """z after h."""
