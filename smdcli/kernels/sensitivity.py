@@ -24,10 +24,10 @@ from smdcli.elements.bouc_wen import SMOOTH_BOUC_WEN
 from smdcli.elements.friction import SMOOTH_STRIBECK, SMOOTH_TANH
 from smdcli.kernels import tableaus
 from smdcli.kernels.arrays import CUBIC_SPRING
-from smdcli.kernels.compiler import kernel, no_alloc
+from smdcli.kernels.compiler import inlined, kernel, no_alloc
 from smdcli.kernels.erk import (DOP853, MAX_FACTOR, MIN_FACTOR, NOT_FINITE, OK, SAFETY, STEP_BUDGET,
                                 TOO_SMALL_STEP, _error_norm, axpy, assign, hermite_crossing, reversal, scaled_rms)
-from smdcli.kernels.rhs import state_rhs
+from smdcli.kernels.rhs import state_rhs_inlined
 
 STAGES = tableaus.DOP853_STAGES
 KINK_MARGIN = 1e-8  # how far past a kink (a fraction of the step) a step ends: past it for sure, its branch held
@@ -64,7 +64,7 @@ def branches(m, y, f, signs):
         signs[e, 1] = 1.0 if y[z] > 0 or y[z] == 0 and f[z] >= 0 else -1.0
 
 
-@no_alloc
+@inlined
 def exact_jacobian(m, y, J, dwork, signs):
     """J = d rhs / d [x, v, q] at y (s x s, s = 2n + q), analytic, each Bouc-Wen element on the side of its kinks
     that signs (E, 2: of its rate, of its z) holds for the step; dwork (n, s) is scratch for the forces' rows."""
@@ -170,12 +170,15 @@ def augmented_rates(m, models, weights, owner, ratios, moves, g, t, y, left, dy,
     the stencil's combination is then M^-1 (dF/dp - dM/dp a), the forces' stencil, not the accelerations'); f, J,
     dwork and g (n) are scratch.
     Compiled without reference counting: with it, every read of a model's arrays was counted (a solve of the
-    Bouc-Wen benchmark's window with five parameters took 101 ms, now 37)."""
+    Bouc-Wen benchmark's window with five parameters took 101 ms, now 37). The right-hand sides and the Jacobian
+    inlined (numba's inliner, not LLVM's): a call into another compiled library passes a model's 44 arrays member
+    by member, and the kernel as numba loads it from its cache, where nothing is inlined across libraries, took
+    the Bouc-Wen benchmark's fit 2.3 times as long as in the process that compiled it."""
     n = m.n
     size = 2 * n + m.ns_q + m.ns_acc
     s = 2 * n + m.ns_q
     P = (len(y) - size) // s
-    state_rhs(m, t, y[:size], left, dy[:size], work, J)  # J is untouched at this length
+    state_rhs_inlined(m, t, y[:size], left, dy[:size], work, J)  # J is untouched at this length
     if P == 0:
         return  # the state alone (the first pass that sets the tolerances): no J
     exact_jacobian(m, y, J, dwork, signs)
@@ -187,7 +190,7 @@ def augmented_rates(m, models, weights, owner, ratios, moves, g, t, y, left, dy,
                     total += J[i, c] * y[size + c * P + p]
             dy[size + i * P + p] = total
     for j in range(len(weights)):
-        state_rhs(models[j], t, y[:size], left, f, work, J)
+        state_rhs_inlined(models[j], t, y[:size], left, f, work, J)
         p, w = owner[j], weights[j]
         if moves[j]:
             for i in range(n):
