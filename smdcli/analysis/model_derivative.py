@@ -105,7 +105,7 @@ def _law_moved(sc: Scenario, doc: dict, base: Model, path: str, value: float) ->
     the matrices or the belt move with the key (a spring's k or hardening, a belt's speed): build says then. A
     record's scene is six builds faster (each reads its record again)."""
     found = _LAW_KEY.fullmatch(path)
-    if found is None or found["key"] == "belt_velocity":
+    if found is None:
         return None
     kind, index, key = found["kind"], int(found["index"]), found["key"]
     element = next((e for e in base.nonsmooth if e.path == f"{kind}[{index}]"), None)
@@ -114,11 +114,17 @@ def _law_moved(sc: Scenario, doc: dict, base: Model, path: str, value: float) ->
     item = dict(doc[kind][index])
     item[key] = float(value)
     law = read_law(sc.path, kind, index, item)
-    if (law.elastic_stiffness, law.linear_stiffness) != (element.law.elastic_stiffness, element.law.linear_stiffness):
+    if _beside_law(law) != _beside_law(element.law):
         return None
     nonsmooth = tuple(dataclasses.replace(e, law=law) if e is element else e for e in base.nonsmooth)
     check_initial_state(sc, nonsmooth, base.x0)
     return dataclasses.replace(base, nonsmooth=nonsmooth)
+
+
+def _beside_law(law) -> tuple[float, float, float]:
+    """What of a law the model holds outside it: the stiffness stamped into K, the one [damping] sees at rest, the
+    belt's speed under a contact (model.nonsmooth's belt)."""
+    return law.elastic_stiffness, law.linear_stiffness, float(getattr(law, "belt_velocity", 0.0))
 
 
 def _model_arrays(model: Model, t_end: float) -> list[np.ndarray]:

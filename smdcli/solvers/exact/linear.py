@@ -285,8 +285,8 @@ def _in_blocks(reads: list, k: int, stop: int, z: np.ndarray, powers: np.ndarray
 def _reads(readouts: list, powers: np.ndarray, n: int, N: int) -> tuple[list, list]:
     """propagate's reads: (rows R, R times the powers on the state's entries that reach them (J, r, columns), those
     columns, the (N, r) output), the readouts that reach the same entries taken as one read where their outputs
-    together are small (a small scene's cost is its numpy calls: a sensitivity's six reads of a 1-DOF scene were a
-    third of its solve); and each such read's (combined output, the readouts' outputs) to copy out after."""
+    together are small (a small scene's cost is its numpy calls: a 1-DOF sensitivity's six readouts are two reads);
+    and each such read's (combined output, the readouts' outputs) to copy out after."""
     sizes = [len(R) for R, _, _ in readouts]
     starts = np.cumsum([0, *sizes[:-1]]).astype(int)
     size = powers.shape[1]
@@ -296,13 +296,14 @@ def _reads(readouts: list, powers: np.ndarray, n: int, N: int) -> tuple[list, li
     rows[:, :2 * n] = np.vstack([R for R, _, _ in readouts])
     read_all = np.matmul(rows, powers)  # (J, reads' rows, size)
     reaching = np.logical_or.reduceat(read_all.any(axis=0), starts, axis=0)  # (readouts, size)
-    groups, filling = [], {}  # filling: the group being filled for each set of entries
+    groups, filling = [], {}  # filling: the group being filled for each set of entries, and its rows so far
     for i, mask in enumerate(reaching):
-        group = filling.get(key := mask.tobytes())
-        if group is None or N * (sum(sizes[j] for j in group) + sizes[i]) * 8 > _MERGED_BYTES:
-            group = filling[key] = []
+        group, filled = filling.get(key := mask.tobytes(), (None, 0))
+        if group is None or N * (filled + sizes[i]) * 8 > _MERGED_BYTES:
+            group, filled = [], 0
             groups.append(group)
         group.append(i)
+        filling[key] = group, filled + sizes[i]
     reads, merged = [], []
     for group in groups:
         picked = np.concatenate([np.arange(starts[i], starts[i] + sizes[i]) for i in group])
