@@ -106,6 +106,32 @@ def test_band_kernel_and_sparse_lu_take_the_same_steps(sparse_from_ten):
     assert peak_error(x_band, x_lu) < 1e-12 and peak_error(v_band, v_lu) < 1e-12
 
 
+def test_a_doubled_pass_takes_the_last_pass_finer_runs_and_one_new_run(sparse_from_ten):
+    _, model, grid = model_of(chain(25, cubic=True))
+    march = _March(model, grid, Tolerances())
+    march.extrapolated(1)
+    first = march.steps
+    x, v, estimate, peaks = march.extrapolated(2)
+    assert march.steps - first == march.steps_per_pass(2) * 8 // 14  # the run at 8 divisions only: 8 of 2 + 4 + 8
+    fresh = _March(model, grid, Tolerances())
+    x_fresh, v_fresh, estimate_fresh, peaks_fresh = fresh.extrapolated(2)
+    assert peak_error(x, x_fresh) < 1e-14 and peak_error(v, v_fresh) < 1e-14  # the same runs, combined alike
+    assert estimate == pytest.approx(estimate_fresh, rel=1e-6)
+    assert peaks == pytest.approx((np.abs(x).max(), np.abs(v).max()), rel=1e-15)
+    reference = solve(model.dense(), grid, "Radau", Tolerances(1e-12, 1e-15))
+    assert peak_error(x, reference.displacement) < estimate[0] / peaks[0]  # the estimate (T32's) bounds T33's error
+
+
+def test_a_pass_that_misses_its_tolerance_doubles_the_steps_with_one_new_run(sparse_from_ten):
+    _, model, grid = model_of(chain(30))
+    rtol = 5e-6  # the first pass (steps of 0.02, /2, /4) misses it by less than twice the steps make up for
+    run = solve(model, grid, "sparse_newmark", Tolerances(rtol=rtol, atol=1e-14))
+    reference = solve(model.dense(), grid, "exact", Tolerances())
+    assert run.success and "steps of 0.01, /2 and /4 s extrapolated (Romberg) in 2 pass(es)" in run.notes[0]
+    assert run.stats.steps_accepted == (len(grid) - 1) * (1 + 2 + 4 + 8)  # not (1 + 2 + 4) + (2 + 4 + 8)
+    assert peak_error(run.displacement, reference.displacement) <= run.stats.stated_accuracy <= 10 * rtol
+
+
 @pytest.mark.parametrize("width", [1, 3])
 def test_band_cholesky_solve_and_product_against_dense_linear_algebra(width):
     rng = np.random.default_rng(width)
@@ -128,6 +154,15 @@ def test_band_cholesky_solve_and_product_against_dense_linear_algebra(width):
     assert not banded.cholesky(band - np.array([[4 * np.abs(dense).max()] * n] + [[0.0] * n] * width))
 
 
+def test_a_sparse_product_of_many_rows_keeps_their_layout():
+    rng = np.random.default_rng(7)
+    A = coo_matrix((rng.normal(size=300), (rng.integers(0, 40, 300), rng.integers(0, 30, 300))), shape=(40, 30))
+    q = rng.normal(size=(3, 21, 40))  # 63 rows: blocks of ROWS_AT_ONCE and a short last one
+    product = sparse_module.rows_times(q, A.tocsr())
+    assert product.shape == (3, 21, 30) and product.flags["C_CONTIGUOUS"]
+    assert np.allclose(product, q @ A.toarray(), rtol=1e-13, atol=1e-13 * np.abs(q @ A.toarray()).max())
+
+
 def test_other_methods_take_a_sparse_scene_dense(sparse_from_ten):
     _, model, grid = model_of(chain(12))
     run = solve(model, grid, "exact", Tolerances())
@@ -147,9 +182,12 @@ def test_sparse_newmark_refuses_what_it_cannot_take():
     assert solver_class("sparse_newmark")().refuse(model_of(chain(2))[1]) is None
 
 
-def test_a_chain_above_sparse_dofs_from_the_command_line(cli, tmp_path):
+def test_a_chain_above_sparse_dofs_from_the_command_line(cli, tmp_path, monkeypatch):
     """2,100 masses (sparse for real): the run, the file's chunked matrices, and its lowest modes against the fixed-
     free chain's closed form w_j = 2 sqrt(k/m) sin((2j - 1) pi / (2 (2n + 1)))."""
+    import smdcli.io.hdf5 as hdf5
+
+    monkeypatch.setattr(hdf5, "LARGE_VALUES", 100_000)  # the force's 212,100 values: its zero columns left unwritten
     n = 2100
     assert n > sparse_module.SPARSE_DOFS
     scene = tmp_path / "long.toml"
@@ -159,6 +197,13 @@ def test_a_chain_above_sparse_dofs_from_the_command_line(cli, tmp_path):
     assert "sparse_newmark" in ran.stdout and "met by the error estimate" in ran.stdout
     with h5py.File(tmp_path / "out" / "long.h5") as f:
         assert f["displacement"].shape == (101, n)
+        force, t = f["force"], f["time"][()]
+        assert force.shape == (101, n) and force.chunks is not None and force.attrs["units"] == "N"
+        assert force.id.get_storage_size() < force.nbytes / 20  # one column's chunk of 33 written
+        expected = np.zeros((101, n))
+        expected[:, 0] = 10.0 * np.sin(5.0 * t)
+        assert np.array_equal(force[()], expected)
+        assert f["force"].dims[0][0] == f["time"] and f["force"].dims[1][0] == f["dof"]
         stored = f["model/K"]  # its nonzero entries only: what scipy's coo_matrix and MATLAB's sparse() read
         assert stored.attrs["format"] == "coordinate" and list(stored.attrs["shape"]) == [n, n]
         assert stored["value"].shape == (3 * n - 2,) and stored["value"].attrs["units"] == "N/m"

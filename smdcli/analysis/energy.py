@@ -63,7 +63,7 @@ def mechanical_energy(model: Model, x: np.ndarray, v: np.ndarray) -> tuple[np.nd
         kinetic[lo:lo + rows] = 0.5 * (rows_times(vs, M) * vs).sum(axis=1)
         if D is not None:
             d = rows_times(xs, D.T)
-            strain[lo:lo + rows] = (0.5 * k * d**2 + 0.25 * k3 * d**4).sum(axis=1)
+            strain[lo:lo + rows] = (0.5 * k * d**2 + 0.25 * k3 * d**4 if k3.any() else 0.5 * k * d**2).sum(axis=1)
         else:
             strain[lo:lo + rows] = 0.5 * (rows_times(xs, model.sparse[1]) * xs).sum(axis=1)
     return kinetic, strain

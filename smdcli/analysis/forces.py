@@ -35,10 +35,11 @@ def _tensions(elements: list[Element], q: np.ndarray, recorded: dict) -> np.ndar
         block = q[lo:lo + rows]
         padded = np.concatenate([block, np.zeros((len(block), 1))], axis=1)
         d = padded[:, b] - padded[:, a]
+        # the nonlinear terms only where an element has one (d^3 of 10,000 linear springs was a third of the table)
         if elements[0].kind == "spring":
-            out[lo:lo + rows] = coef * d + cubic * d**3
+            out[lo:lo + rows] = coef * d + cubic * d**3 if cubic.any() else coef * d
         else:
-            out[lo:lo + rows] = coef * np.where(quadratic, np.abs(d) * d, d)
+            out[lo:lo + rows] = coef * np.where(quadratic, np.abs(d) * d, d) if quadratic.any() else coef * d
     for j, e in enumerate(elements):
         if e.name in recorded:
             out[:, j] = recorded[e.name]
@@ -78,7 +79,8 @@ def element_forces(model, x: np.ndarray, v: np.ndarray, history=None) -> Element
             added = -(v @ model.added_damping.T)
             meaning += " ([damping]'s force, in added_damping_force, not included)"
     else:
-        reaction = -(x @ model.K.T + v @ model.C.T).sum(axis=1)
+        # 1^T (K x) = (1^T K) x: the columns' sums once, not K x on every row (two 80 MB products on 10,000 DOFs)
+        reaction = -(x @ _column_sums(model.K) + v @ _column_sums(model.C))
         meaning = ("-1^T (K x + C v): a [system] scene has no elements; this is the ground's reaction where K and C "
                    "are assembled from two-terminal elements (internal forces cancel in the sum)")
     extra = {}
@@ -91,3 +93,8 @@ def element_forces(model, x: np.ndarray, v: np.ndarray, history=None) -> Element
     return ElementForces(spring, damper, tuple(e.name for e in springs), tuple(e.name for e in dampers),
                          tuple(e.connects for e in springs), tuple(e.connects for e in dampers), reaction, meaning,
                          added, model.element_form, **extra)
+
+
+def _column_sums(A) -> np.ndarray:
+    """1^T A as a flat array, for a dense or a sparse A."""
+    return np.asarray(A.sum(axis=0), dtype=float).ravel()

@@ -114,7 +114,9 @@ def located_peaks(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray,
 def row_peaks(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray,
               events: np.ndarray = np.empty(0), with_times: bool = False):
     """located_peaks of histories laid out as rows (histories, N): a sweep's members and DOFs, contiguous in time."""
-    x, v, a = (np.ascontiguousarray(q, dtype=float) for q in (x, v, a))
+    # as laid out: v and a are read at the candidate intervals only, and |x| in any order (a run's (N, n) arrays,
+    # transposed into rows, would be three copies: 240 MB and a second of a 10,000-DOF run)
+    x, v, a = (np.asarray(q, dtype=float) for q in (x, v, a))
     rows, N = x.shape
     magnitude = np.abs(x)
     magnitude[~np.isfinite(magnitude)] = 0.0
