@@ -97,8 +97,10 @@ def test_nonlinear_chain_against_radau(sparse_from_ten):
     assert peak_error(run.displacement, reference.displacement) < 1e-8  # measured 3e-11
 
 
-def test_band_kernel_and_sparse_lu_take_the_same_steps(sparse_from_ten):
-    _, model, grid = model_of(chain(25, cubic=True, quadratic=True))
+@pytest.mark.parametrize("linear", [False, True])  # a linear chain's steps: banded._chain_step's fused passes
+@pytest.mark.parametrize("force", ["sine", "step"])
+def test_band_kernel_and_sparse_lu_take_the_same_steps(sparse_from_ten, linear, force):
+    _, model, grid = model_of(chain(25, cubic=not linear, quadratic=not linear, force=force))
     march = _March(model, grid, Tolerances())
     assert march.band is not None and march.band.stiffness.shape[0] == 2  # a chain: half-bandwidth 1
     x_band, v_band = march.run(2)

@@ -11,8 +11,9 @@ there, from equilibrium with the force's right limit), and Romberg's table cance
 |T33 - T32| estimates the error of T32 (fourth order), which bounds that of T33 (sixth order): the error this
 run states. Where it is above rtol of the peak (and atol), the steps are made finer by the fourth root of the
 excess and the three runs repeat; where twice the steps will do, the pass takes the last pass's two finer runs as
-its coarser two, and only its finest is new (the 10,000-mass chain's second pass: 8,000 steps, not 14,000). Cubic springs and quadratic dampers enter each step's equation through
-modified Newton iterations on the same LU, refactored at the tangent only where they converge slowly.
+its coarser two, and only its finest is new (the 10,000-mass chain's second pass: 8,000 steps, not 14,000).
+Cubic springs and quadratic dampers enter each step's equation through modified Newton iterations on the same
+LU, refactored at the tangent only where they converge slowly.
 
 Must not import: sweep, io, plots, commands, cli.
 """
@@ -218,7 +219,7 @@ class _March:
         effective = np.stack([band.stiffness + (2.0 / h) * band.damping + (4.0 / h ** 2) * band.mass_padded
                               for h in known])
         factors = effective.copy()
-        for factor, h in zip(factors, known):
+        for factor in factors:
             if not banded.cholesky(factor):
                 return None
         signals = len(model.signals)
