@@ -31,6 +31,7 @@ from typing import Callable
 import numpy as np
 
 from smdcli.model import Model
+from smdcli.model.elements import incidence_matrix
 from smdcli.analysis.forces import element_forces
 from smdcli.analysis.hermite_rule import gram_power, hermite_slopes, node_rates
 from smdcli.model.sparse import cheapest, rows_times
@@ -75,18 +76,7 @@ def _incidence(model: Model, kind: str) -> tuple[np.ndarray, np.ndarray, np.ndar
     key = f"_incidence_{kind}"
     if key not in model.__dict__:
         chosen = [e for e in model.elements if e.kind == kind and e.law != "quadratic"]
-        ends = [(i, node, sign) for i, e in enumerate(chosen) for node, sign in ((e.a, 1.0), (e.b, -1.0)) if node >= 0]
-        rows, columns, signs = (np.array([end[j] for end in ends], dtype=float if j == 2 else int) for j in range(3))
-        # the same rule as cheapest(): dense where small or more than a tenth full (built without scipy.sparse,
-        # whose import is most of a small scene's start-up)
-        if len(chosen) < 64 or len(ends) > (len(chosen) * model.n) // 10:
-            D = np.zeros((len(chosen), model.n))
-            np.add.at(D, (rows, columns), signs)
-        else:
-            from scipy.sparse import coo_matrix
-
-            D = coo_matrix((signs, (rows, columns)), shape=(len(chosen), model.n)).tocsr()
-        model.__dict__[key] = (D, np.array([e.coef for e in chosen]),
+        model.__dict__[key] = (incidence_matrix(chosen, model.n), np.array([e.coef for e in chosen]),
                                np.array([e.k3 if e.law == "cubic" else 0.0 for e in chosen]))
     return model.__dict__[key]
 

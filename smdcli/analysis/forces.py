@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from smdcli.model.elements import Element
+from smdcli.model.elements import Element, incidence_matrix
+from smdcli.model.sparse import rows_times
 from smdcli.result import ElementForces
 from smdcli.scenario import GROUND
 
@@ -26,15 +27,13 @@ def _tensions(elements: list[Element], q: np.ndarray, recorded: dict) -> np.ndar
     out = np.empty((N, len(elements)))
     if not elements:
         return out
-    a, b = (np.array([getattr(e, end) for e in elements]) for end in ("a", "b"))  # -1: the ground, q's last column
+    stretch = incidence_matrix(elements, q.shape[1]).T  # q @ it = q_a - q_b: minus each element's d
     coef = np.array([e.coef for e in elements])
     cubic = np.array([e.k3 if e.law == "cubic" else 0.0 for e in elements])
     quadratic = np.array([e.law == "quadratic" for e in elements])
     rows = max(1, ROWS_VALUES // (q.shape[1] + 1))
     for lo in range(0, N, rows):
-        block = q[lo:lo + rows]
-        padded = np.concatenate([block, np.zeros((len(block), 1))], axis=1)
-        d = padded[:, b] - padded[:, a]
+        d = -rows_times(q[lo:lo + rows], stretch)  # q_b - q_a, to the bit: the product's two terms, one rounding
         # the nonlinear terms only where an element has one (d^3 of 10,000 linear springs was a third of the table)
         if elements[0].kind == "spring":
             out[lo:lo + rows] = coef * d + cubic * d**3 if cubic.any() else coef * d
