@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from smdcli.model import Model
-from smdcli.result import Result
+from smdcli.result import Result, finite_peak
 
 SLACK = 10.0  # times the run's stated accuracy: what a check allows beyond it
 FLOOR = 1e-12  # relative: rounding of the sums the checks read
@@ -27,7 +27,7 @@ def static_work(model: Model, result: Result) -> float:
     """The energy the scene's loads would store statically, F^2 / k (the largest load on the stiffest spring, the
     ground's as M a_g): the scale against which a run that barely moves is judged (a block held by friction the whole
     run has energies of 1e-18 J, all rounding, whose ratios to each other say nothing)."""
-    loads = [float(np.nanmax(np.abs(result.force), initial=0.0))] if model.is_forced else []
+    loads = [finite_peak(result.force)] if model.is_forced else []  # no temporary of the force's size
     if result.ground is not None:
         loads.append(float(np.max(np.abs(result.ground.acceleration), initial=0.0)
                            * np.max(np.abs(model.M.diagonal()), initial=0.0)))  # dense or sparse: never made dense
