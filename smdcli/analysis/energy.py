@@ -32,7 +32,7 @@ import numpy as np
 
 from smdcli.model import Model
 from smdcli.model.elements import incidence_matrix
-from smdcli.analysis.forces import element_forces
+from smdcli.analysis.forces import ROWS_VALUES, element_forces
 from smdcli.analysis.hermite_rule import gram_power, hermite_slopes, node_rates
 from smdcli.model.sparse import cheapest, rows_times
 from smdcli.result import Energy, Result, largest_energy
@@ -58,7 +58,7 @@ def mechanical_energy(model: Model, x: np.ndarray, v: np.ndarray) -> tuple[np.nd
     M = cheapest(model.M)
     D, k, k3 = _incidence(model, "spring") if model.element_form else (None, None, None)
     kinetic, strain = np.empty(len(x)), np.empty(len(x))
-    rows = max(1, _CHUNK_VALUES // max(x.shape[-1], 1))  # temporaries of a block of rows, not four of the run's size
+    rows = max(1, ROWS_VALUES // max(x.shape[-1], 1))  # temporaries of a block of rows, in cache
     for lo in range(0, len(x), rows):
         xs, vs = x[lo:lo + rows], v[lo:lo + rows]
         kinetic[lo:lo + rows] = 0.5 * (rows_times(vs, M) * vs).sum(axis=1)

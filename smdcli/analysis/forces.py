@@ -17,7 +17,7 @@ from smdcli.result import ElementForces
 from smdcli.scenario import GROUND
 
 
-ROWS_VALUES = 2_000_000  # states (rows x DOFs) an element table is computed from at once
+ROWS_VALUES = 2 ** 18  # states (rows x DOFs) an element table is computed from at once: its temporaries in cache
 
 
 def _tensions(elements: list[Element], q: np.ndarray, recorded: dict) -> np.ndarray:
@@ -31,14 +31,17 @@ def _tensions(elements: list[Element], q: np.ndarray, recorded: dict) -> np.ndar
     coef = np.array([e.coef for e in elements])
     cubic = np.array([e.k3 if e.law == "cubic" else 0.0 for e in elements])
     quadratic = np.array([e.law == "quadratic" for e in elements])
+    nonlinear = cubic.any() if elements[0].kind == "spring" else quadratic.any()
     rows = max(1, ROWS_VALUES // (q.shape[1] + 1))
     for lo in range(0, N, rows):
+        if not nonlinear:  # (q_a - q_b) (-c): c d to the bit, in one pass into the table
+            np.multiply(rows_times(q[lo:lo + rows], stretch), -coef, out=out[lo:lo + rows])
+            continue
         d = -rows_times(q[lo:lo + rows], stretch)  # q_b - q_a, to the bit: the product's two terms, one rounding
-        # the nonlinear terms only where an element has one (d^3 of 10,000 linear springs was a third of the table)
         if elements[0].kind == "spring":
-            out[lo:lo + rows] = coef * d + cubic * d**3 if cubic.any() else coef * d
+            out[lo:lo + rows] = coef * d + cubic * d**3
         else:
-            out[lo:lo + rows] = coef * np.where(quadratic, np.abs(d) * d, d) if quadratic.any() else coef * d
+            out[lo:lo + rows] = coef * np.where(quadratic, np.abs(d) * d, d)
     for j, e in enumerate(elements):
         if e.name in recorded:
             out[:, j] = recorded[e.name]
