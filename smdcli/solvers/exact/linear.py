@@ -39,7 +39,10 @@ from smdcli.text import plural
 
 BLOCK = 64  # output steps per stacked propagation, at most
 _POWERS_BYTES = 64 * 2**20
-_MERGED_BYTES = 2**20  # propagate's reads of the same entries taken as one, up to this many bytes of output
+# propagate's reads of the same entries taken as one, up to this many bytes of output: beyond, the one larger
+# product cost more than the calls it spared (OpenBLAS threads it: the 3-DOF forced scene's 12,001 steps took 8 ms
+# merged, 0.6 ms read by read; below 2,000 steps the two are even)
+_MERGED_BYTES = 2**17
 # Seconds per flop of a dense matrix product and per entry of a matrix-vector product (memory-bound), on a 2-core
 # machine: they only decide between this path and the sparse action (action.py), whose cost is on the same scale, and
 # how many of the step's powers the dense path stacks.
