@@ -78,7 +78,8 @@ class SparseNewmark(Solver):
                 break
             excess = max(estimate[0] / (tol.rtol * peak_x + tol.atol), estimate[1] / (tol.rtol * peak_v + tol.atol))
             finer = math.ceil(divisions * STEP_SAFETY * excess ** 0.25) if excess > 1 else divisions
-            if 4 * 2 * divisions <= sum(LEVELS) * finer:  # doubled, the pass reuses two runs: one new run of 8 d
+            # twice the divisions where its one new run (the others kept) costs no more than a fresh pass at finer
+            if LEVELS[-1] * 2 * divisions <= sum(LEVELS) * finer:
                 finer = max(finer, 2 * divisions)
             if excess <= 1 or not math.isfinite(excess) or march.steps_per_pass(finer) > max_steps:
                 break
