@@ -156,10 +156,11 @@ def test_band_cholesky_solve_and_product_against_dense_linear_algebra(width):
     assert not banded.cholesky(band - np.array([[4 * np.abs(dense).max()] * n] + [[0.0] * n] * width))
 
 
-def test_a_sparse_product_of_many_rows_keeps_their_layout():
+def test_a_sparse_product_of_many_rows_keeps_their_layout(monkeypatch):
+    monkeypatch.setattr(sparse_module, "VALUES_AT_ONCE", 8 * 40)  # blocks of 8 rows
     rng = np.random.default_rng(7)
     A = coo_matrix((rng.normal(size=300), (rng.integers(0, 40, 300), rng.integers(0, 30, 300))), shape=(40, 30))
-    q = rng.normal(size=(3, 21, 40))  # 63 rows: blocks of ROWS_AT_ONCE and a short last one
+    q = rng.normal(size=(3, 21, 40))  # 63 rows: seven blocks and a short last one
     product = sparse_module.rows_times(q, A.tocsr())
     assert product.shape == (3, 21, 30) and product.flags["C_CONTIGUOUS"]
     assert np.allclose(product, q @ A.toarray(), rtol=1e-13, atol=1e-13 * np.abs(q @ A.toarray()).max())
