@@ -72,7 +72,8 @@ class SparseNewmark(Solver):
         while True:
             passes += 1
             try:
-                x, v, estimate, (peak_x, peak_v) = march.extrapolated(divisions)
+                x, v, estimate, extremes = march.extrapolated(divisions)
+                peak_x, peak_v = (max(high, -low) for low, high in extremes)
             except NewtonFailed as stop:
                 failure = stop
                 break
@@ -108,7 +109,8 @@ class SparseNewmark(Solver):
                  f"{passes} pass(es); estimated error {stated:.3g} of the peak",) if met else ()
         # past the step budget, the best it allows is still returned, flagged failed
         t_failed = None if met else failure.t if failure is not None else float(grid[-1])
-        return make_result(model, grid, x, v, stats, t_failed=t_failed, notes=notes)
+        found = ((x, extremes[0]), (v, extremes[1])) if met else ()  # found as the table was combined: no pass more
+        return make_result(model, grid, x, v, stats, t_failed=t_failed, notes=notes, found_extremes=found)
 
 
 class _March:
@@ -137,13 +139,13 @@ class _March:
         """Steps of the three runs at this many divisions of each interval between nodes."""
         return (len(self.nodes) - 1) * divisions * sum(LEVELS)
 
-    def extrapolated(self, divisions: int) -> tuple[np.ndarray, np.ndarray, tuple[float, float], tuple[float, float]]:
+    def extrapolated(self, divisions: int) -> tuple[np.ndarray, np.ndarray, tuple[float, float], tuple]:
         """(x, v) on the output grid from Romberg's table of three runs, the estimated errors of x and v, and their
-        peaks. The runs at 2 and 4 divisions are kept: a pass at twice the divisions takes them as its coarser
-        two."""
+        extremes ((min, max) each). The runs at 2 and 4 divisions are kept: a pass at twice the divisions takes them
+        as its coarser two."""
         (x, v), (x2, v2), (x3, v3) = self._levels(divisions)
         self.kept = {divisions * LEVELS[1]: (x2, v2), divisions * LEVELS[2]: (x3, v3)}
-        estimate, peak = [0.0, 0.0], [0.0, 0.0]
+        estimate, low, high = [0.0, 0.0], [math.inf, math.inf], [-math.inf, -math.inf]
         block = max(1, ROMBERG_VALUES // max(x.shape[1], 1))
         for start in range(0, len(x), block):  # by rows: the table's temporaries stay in cache, the runs untouched
             rows = slice(start, start + block)
@@ -155,8 +157,9 @@ class _March:
                 t22 *= -1.0 / 15.0
                 t22 += t32
                 coarse[rows] = t22
-                peak[which] = max(peak[which], float(np.abs(t22).max(initial=0.0)))
-        return x, v, (estimate[0], estimate[1]), (peak[0], peak[1])
+                low[which] = min(low[which], float(t22.min()))
+                high[which] = max(high[which], float(t22.max()))
+        return x, v, (estimate[0], estimate[1]), ((low[0], high[0]), (low[1], high[1]))
 
     def _levels(self, divisions: int) -> list[tuple[np.ndarray, np.ndarray]]:
         """The runs at each of LEVELS times `divisions` (those kept from the last pass taken as they are): on
