@@ -152,6 +152,20 @@ def test_a_sweep_of_a_scene_from_files_is_each_member_simulated(tmp_path, cli):
     np.testing.assert_allclose(peaks[0], one / 2, rtol=1e-9)
 
 
+@pytest.mark.parametrize("command", ["sweep", "sensitivity"])
+def test_an_entry_of_a_matrix_from_a_file_is_refused_as_such(tmp_path, cli, command):
+    """system.K[0][0] of a K read from a file: one line naming the file and the way out (the matrix inline), exit 2,
+    nothing written; not "system.K has no entry [0]", which says the matrix is not there."""
+    scene = _book_from_files(tmp_path, ".mtx")
+    values = ["--values", "90,110"] if command == "sweep" else []
+    ran = cli(command, scene, "--param", "system.K[0][0]", *values, "-o", tmp_path / "out")
+    assert ran.exit_code == 2
+    assert ran.output.strip().splitlines() == [
+        "smd: --param system.K[0][0]: system.K is read from the file 'book_K.mtx', whose entries cannot be varied; "
+        "write system.K inline to vary an entry"]
+    assert not (tmp_path / "out").exists()
+
+
 def _bad(tmp_path, system: str, files: dict) -> tuple:
     """A scene whose [system] is `system` with files written beside it: (scenario path, output folder)."""
     for name, write in files.items():

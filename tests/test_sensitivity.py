@@ -214,6 +214,41 @@ def test_peak_derivatives_match_central_differences_of_located_peaks():
         assert np.abs(s.d_peak_displacement[i] - want).max() <= 1e-7 * np.abs(want).max(), parameter
 
 
+def _chain_text(n: int, end: float) -> str:
+    """n masses of 1 kg, 100 N/m and 0.5 N s/m on every link, 10 sin 5t on the first: a wave that reaches about 10
+    masses a second, the rest of the chain still to rounding."""
+    lines = ["[time]", f"end = {end}", "step = 0.01"]
+    lines += [f'[[mass]]\nname = "m{i}"\nm = 1.0' for i in range(n)]
+    for i in range(n):
+        ends = f'["ground", "m0"]' if i == 0 else f'["m{i - 1}", "m{i}"]'
+        lines += [f"[[spring]]\nconnects = {ends}\nk = 100.0", f"[[damper]]\nconnects = {ends}\nc = 0.5"]
+    lines += ['[[force]]\non = "m0"\ntype = "sine"\namplitude = 10.0\nomega = 5.0']
+    return "\n".join(lines) + "\n"
+
+
+def test_a_peak_within_the_run_s_error_has_no_derivative_and_one_note(tmp_path):
+    """The far masses of a chain the wave has not reached move by the solution's rounding (or not at all): their
+    peaks' derivatives are that rounding's digits, so they are nan, in one note naming how many; every DOF above
+    the run's error keeps its derivative, and those match central differences of the located peaks."""
+    from smdcli.solvers.peaks import result_peaks
+
+    path = tmp_path / "chain.toml"
+    path.write_text(_chain_text(40, 1.0))
+    s = smdcli.sensitivity(path, ["spring[0].k"])
+    floor = float(s.accuracy["displacement"][0]) * max(np.abs(s.displacement).max(),
+                                                      s.value[0] * np.abs(s.d_displacement).max())
+    still = s.peak_displacement <= floor
+    assert 5 < still.sum() < 35 and not still[:5].any()  # the wave's first masses move; the far ones do not
+    assert np.isnan(s.d_peak_displacement[0, still]).all()
+    assert np.isfinite(s.d_peak_displacement[0, ~still]).all()
+    assert [note for note in s.notes if "no derivative" in note] == [
+        f"{still.sum()} DOFs (m{np.flatnonzero(still)[0]}, m{np.flatnonzero(still)[1]}, ..., m39) "
+        f"move no more than the run's error of x ({floor:.2g} m): their peaks have no derivative (written as nan)"]
+    want = _central(path, "spring[0].k", s.value[0], result_peaks)
+    near = np.flatnonzero(~still)[:3]  # the driven masses: differences of their peaks are accurate
+    assert np.abs(s.d_peak_displacement[0, near] - want[near]).max() <= 1e-7 * np.abs(want).max()
+
+
 def test_modal_damping_carries_its_stencil_error_and_meets_it():
     """A modal damping ratio enters C through the modes, not as a polynomial: its derivative still holds to 1e-8
     of the largest against central differences of exact runs, and the stated accuracy says how good it is."""

@@ -173,7 +173,9 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
         if refusal:
             raise UsageError(f"{sc.path}: {refusal}")
     if (len(params) + 1) * base.n > MAX_SIZE:
-        raise UsageError(f"{sc.path}: {len(params)} parameters of a {base.n}-DOF scene stack "
+        from smdcli.text import plural
+
+        raise UsageError(f"{sc.path}: {plural(len(params), 'parameter')} of a {base.n}-DOF scene stack "
                          f"{(len(params) + 1) * base.n} DOFs; smd sensitivity takes at most {MAX_SIZE}")
     grid = time_grid(sc.time) if grid is None else np.asarray(grid, dtype=float)
     derivatives = model_derivatives(sc, base, grid, list(params), doc)
@@ -228,9 +230,12 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
     else:  # on the exact flow at the peak's time
         sign = np.sign(quintic_each(grid, nominal["displacement"], nominal["velocity"], nominal["acceleration"], at))
         d_peaks = sign * np.stack([run.at(float(at[i]))[:, i] for i in range(n)], axis=1) / scales[:, None]
-    for i in np.flatnonzero(peaks == 0):
-        notes.append(f"{base.dofs[i]} does not move: its peak |x| has no derivative (written as nan)")
-        d_peaks[:, i] = np.nan
+    # a peak within the run's own error of x (a DOF the motion has not reached: zeros, or the rounding of the solution)
+    # has no derivative worth a number: its digits are the rounding's
+    floor = stated * peaks_of[0].max()
+    still = peaks <= floor
+    d_peaks[:, still] = np.nan
+    notes += _unmoved(base.dofs, peaks, still, floor)
     found = _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_peaks, accuracy,
                     tuple(notes), method)
     found.event_times = events
@@ -252,6 +257,21 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
         found.law_states = [(t, states, [{name: value / scales for name, value in d.items()} for d in dq])
                             for t, _, _, states, dq in run.checkpoints]
     return found
+
+
+def _unmoved(dofs, peaks: np.ndarray, still: np.ndarray, floor: float) -> list[str]:
+    """One note for the DOFs whose peaks are within the run's error of x (floor, m): named, or counted where many."""
+    which = np.flatnonzero(still)
+    if not len(which):
+        return []
+    names = [dofs[i] for i in which]
+    listed = ", ".join(names) if len(names) <= 4 else f"{len(names)} DOFs ({', '.join(names[:2])}, ..., {names[-1]})"
+    many = len(names) > 1
+    if not peaks[which].any():
+        how = "do not move" if many else "does not move"
+    else:
+        how = f"move{'' if many else 's'} no more than the run's error of x ({floor:.2g} m)"
+    return [f"{listed} {how}: {'their peaks have' if many else 'its peak |x| has'} no derivative (written as nan)"]
 
 
 def _largest(rows: np.ndarray) -> np.ndarray:

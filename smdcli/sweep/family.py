@@ -94,6 +94,7 @@ def _located(doc: dict, path: str) -> tuple[Any, str | int, float]:
         node, walked = _descend(node, step, path, walked)
     last = steps[-1]
     if isinstance(last, int):
+        _not_a_file(node, path, walked)
         if not isinstance(node, list) or last >= len(node):
             raise UsageError(f"--param {path}: {walked} has no entry [{last}]")
         current = node[last]
@@ -107,8 +108,16 @@ def _located(doc: dict, path: str) -> tuple[Any, str | int, float]:
     return node, last, current
 
 
+def _not_a_file(node: Any, path: str, walked: str) -> None:
+    """A UsageError where a path indexes a matrix read from a file (its entries are not in the scenario)."""
+    if isinstance(node, str):
+        raise UsageError(f"--param {path}: {walked} is read from the file {node!r}, whose entries cannot be varied; "
+                         f"write {walked} inline to vary an entry")
+
+
 def _descend(node: Any, step: str | int, path: str, walked: str) -> tuple[Any, str]:
     if isinstance(step, int):
+        _not_a_file(node, path, walked)
         if not isinstance(node, list) or step >= len(node):
             raise UsageError(f"--param {path}: {walked} has no entry [{step}]")
         return node[step], f"{walked}[{step}]"
