@@ -243,3 +243,40 @@ def test_diff_within_stated_uses_the_scale_and_ignores_what_is_not_determined(tm
     write(tmp_path / "c.h5", np.array([0.0, 5e-11]), np.array([0.0, 1.0]))
     report = diff(tmp_path / "a.h5", tmp_path / "c.h5", stated=True)
     assert [d.name for d in report.datasets if d.status != "same"] == ["energy/residual"]
+
+
+# ------------------------------------------------------------------------------------------- adaptive methods
+
+
+def _cubic_chain(n: int) -> str:
+    """n masses of 1 kg, 100 N/m links, a cubic spring (k3 1000 N/m^3) and a 0.5 N s/m damper to the ground on the
+    first, 10 sin 5t on it, 10 s: a wave that moves a few tens of the masses, the rest at rest."""
+    lines = ["[time]", "end = 10.0", "step = 0.01"]
+    lines += [f'[[mass]]\nname = "m{i}"\nm = 1.0' for i in range(n)]
+    lines += ['[[spring]]\nconnects = ["ground", "m0"]\nk = 100.0\nlaw = "cubic"\nk3 = 1000.0']
+    lines += [f'[[spring]]\nconnects = ["m{i - 1}", "m{i}"]\nk = 100.0' for i in range(1, n)]
+    lines += ['[[damper]]\nconnects = ["ground", "m0"]\nc = 0.5',
+              '[[force]]\non = "m0"\ntype = "sine"\namplitude = 10.0\nomega = 5.0']
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("method", ["DOP853", "RK45"])
+@pytest.mark.parametrize("rtol, atol", [(1e-8, 1e-16), (1e-10, None)], ids=["rtol", "atol"])
+def test_an_adaptive_method_s_stated_accuracy_covers_a_long_chain(method, rtol, atol):
+    """The error norm of scipy's step control (and the compiled kernels') is the root mean square over the state's
+    components, so one moving mass among many at rest may err sqrt(2 n) times the tolerance, and atol adds up over
+    the steps as rtol does: 10 rtol + atol / peak was exceeded 1.5x (DOP853, rtol 1e-8) to 20x (RK45, rtol 1e-10
+    with the default atol 1e-9) on this 100-mass chain. x and v against the Taylor series at rtol 1e-13 (its own
+    error about 1e-12 of the peak)."""
+    import smdcli
+    from smdcli.scenario import parse
+
+    sc = parse(_cubic_chain(100), "chain.toml")
+    reference = smdcli.simulate(sc, method="taylor", rtol=1e-13)
+    run = smdcli.simulate(sc, method=method, rtol=rtol, atol=atol)
+    stated = run.stats.stated_accuracy
+    for quantity in ("displacement", "velocity"):
+        want = getattr(reference, quantity)
+        error = np.abs(getattr(run, quantity) - want).max() / np.abs(want).max()
+        assert error <= stated, (quantity, error, stated)
+    assert stated < 30 * math.sqrt(200) * (rtol + (atol or 1e-9) / np.abs(reference.displacement).max())

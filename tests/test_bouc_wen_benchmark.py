@@ -131,4 +131,6 @@ def test_the_stated_accuracy_covers_the_error_past_the_kinks(reference_short, me
     peak = np.abs(expected).max()
     error = np.abs(got - expected).max() / peak
     assert error <= result.stats.stated_accuracy, (error, result.stats.stated_accuracy)
-    assert result.stats.stated_accuracy <= max(100 * error, 12 * rtol)  # and not a bound that says nothing
+    # and not a bound that says nothing: the tolerance's own share is 10 sqrt(2) (rtol + atol / peak), 21 rtol here
+    # (atol = rtol / 1000 over the smaller peak, x's 1.9e-3 m)
+    assert result.stats.stated_accuracy <= max(100 * error, 30 * rtol)

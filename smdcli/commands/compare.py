@@ -199,6 +199,7 @@ def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], to
     out = Comparison(sc, model, grid, reference, ref_name, ref_error, omega_max, breakpoints,
                      refused=refusals(model, DEFAULTS, methods))
     peak = float(np.abs(reference.displacement).max()) or 1.0
+    states = 2 * reference.displacement.shape[1]  # what the adaptive methods' error norm runs over
     exhausted: set[str] = set()
     span = float(grid[-1] - grid[0])
     for method, tol in plan(methods, tolerances, steps):
@@ -236,7 +237,7 @@ def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], to
         growth = float(computed.max() / peak) if computed.size else math.nan
         error = float(np.abs(result.displacement - reference.displacement).max() / peak) if s.success else math.nan
         energy = run_energy(scene, result).max_relative_residual if s.success else math.nan
-        within = CONVERGENCE_SLACK * stated_tolerance(tol.rtol, tol.atol, peak) if adaptive else 0.0
+        within = CONVERGENCE_SLACK * stated_tolerance(tol.rtol, tol.atol, peak, states) if adaptive else 0.0
         failure = verdict(result, error, energy, growth, reference, variant, within) if s.success else s.message
         out.runs.append(Run(
             method=method, adaptive=adaptive, rtol=tol.rtol, atol=tol.atol, dt=tol.dt or math.nan,
@@ -245,14 +246,14 @@ def compare(sc: Scenario, model: Model, grid: np.ndarray, methods: list[str], to
             steps_accepted=s.steps_accepted, steps_rejected=s.steps_rejected, success=not failure,
             message=failure or s.message))
         progress(1)
-    _judge_convergence(out.runs, peak)
+    _judge_convergence(out.runs, peak, states)
     return out
 
 
 CONVERGENCE_SLACK = 10.0  # times what a tolerance lets the global error reach (stated_tolerance)
 
 
-def _judge_convergence(runs: list[Run], peak: float) -> None:
+def _judge_convergence(runs: list[Run], peak: float, states: int) -> None:
     """An adaptive method that at its tightest tolerance is still off the reference by more than that tolerance allows,
     and no nearer than at its loosest, converges to something else (a smoothed law, a missed event's branch): each
     of its runs is failed, saying so, never 'ok' (penalty contact on the bouncing ball sat at 1.7e-2 from rtol 1e-3
@@ -267,7 +268,7 @@ def _judge_convergence(runs: list[Run], peak: float) -> None:
             continue
         tightest = min(indices, key=lambda i: runs[i].rtol)
         loosest = max(indices, key=lambda i: runs[i].rtol)
-        allowed = CONVERGENCE_SLACK * stated_tolerance(runs[tightest].rtol, runs[tightest].atol, peak)
+        allowed = CONVERGENCE_SLACK * stated_tolerance(runs[tightest].rtol, runs[tightest].atol, peak, states)
         # at its tightest still off by more than it allows, and no nearer than at its loosest: not converging
         if runs[tightest].error <= allowed or runs[tightest].error < 0.1 * runs[loosest].error:
             continue

@@ -140,14 +140,14 @@ def estimate_error(run: Callable[[Tolerances], Result], result: Result, used: To
                  if getattr(result.stats, key) >= 0 and getattr(check.stats, key) >= 0}
     if not check.success:
         note = (f"the error estimate's rerun at rtol {tighter.rtol:.3g} failed ({check.stats.message}): the stated "
-                "accuracy is the tolerance's, 10 rtol + atol / peak, unmeasured")
+                "accuracy is the tolerance's, 10 sqrt(2n) (rtol + atol / peak), unmeasured")
         return result.changed(stats=dataclasses.replace(result.stats, **spent), notes=(*result.notes, note))
     with np.errstate(invalid="ignore"):
         x = result.displacement
         finite = np.isfinite(x).all(axis=1) & np.isfinite(check.displacement).all(axis=1)
         peak = float(np.abs(x[finite]).max(initial=0.0))
         difference = float(np.abs(x[finite] - check.displacement[finite]).max(initial=0.0))
-    promised = stated_tolerance(result.stats.rtol, result.stats.atol, peak)
+    promised = stated_tolerance(result.stats.rtol, result.stats.atol, peak, 2 * x.shape[1])
     q = used.rtol / check.stats.rtol if looser is not None else 10.0  # the kept run's tolerance over the other's
     shrink = q ** SLOWEST_GROWTH
     factor = shrink / (1 - shrink) if looser is not None else 1 / (1 - 1 / shrink)

@@ -48,6 +48,7 @@ class Taylor(Solver):
 
     compiled = True
     order = None
+    rms_error_norm = False  # each step's terms are held to atol + rtol times x's and v's peaks, component by component
     watch: Watch | None = None
 
     def __init__(self, watch: bool = False):
