@@ -52,22 +52,30 @@ class Method:
         return self.events is not None or self.return_mapping or self.exact_events
 
 
+LOWEST_STATED_ORDER = 4  # below this order an adaptive method's global error is measured (Solver.measured_error)
+
+
 def _explicit(name, tableau, order, boundary, text, compare=None):
     return Method(name, "explicit Runge-Kutta", text, "integrators.compiled:CompiledRK",
-                  (("tableau", tableau), ("order", order), ("stability_boundary", boundary)), events=tableau,
+                  (("tableau", tableau), ("order", order), ("stability_boundary", boundary),
+                   ("measured_error", order < LOWEST_STATED_ORDER)), events=tableau,
                   compiled_modes=("events", tableau), compare=compare)
 
 
 def _stiff(name, kernel, formula, text, order=2, modes=None, compare=None):
+    variable = formula == "BDF"  # orders 1-5, its lowest where it starts and wherever it drops back
     return Method(name, "implicit", text, "integrators.compiled:CompiledStiff",
-                  (("kernel_method", kernel), ("order", order)), stiff=True, events=formula,
+                  (("kernel_method", kernel), ("order", order),
+                   ("measured_error", variable or order < LOWEST_STATED_ORDER)), stiff=True, events=formula,
                   compiled_modes=modes or ("stiff", kernel), compare=compare)
 
 
 def _scipy(name, formula, implicit, order, boundary, text, compiled_rhs=False, compare=None):
+    measured = formula == "BDF" or order < LOWEST_STATED_ORDER
     return Method(name, "scipy.integrate (Python-driven)", text, "integrators.scipy_driven:ScipyMethod",
                   (("scipy_name", formula), ("implicit", implicit), ("order", order), ("stability_boundary", boundary),
-                   ("compiled_rhs", compiled_rhs)), stiff=implicit, events=formula, compare=compare)
+                   ("compiled_rhs", compiled_rhs), ("measured_error", measured)), stiff=implicit, events=formula,
+                  compare=compare)
 
 
 _PYTHON_STIFF = "'s formula in Python on scipy's OdeSolver (smdcli.solvers.integrators.stiff23), driven from Python"
