@@ -46,8 +46,8 @@ class Solver:
     # an adaptive method's step control holds the root mean square of the state's local errors to the tolerance
     # (scipy's norm, and the compiled kernels'), not each component's: stated_tolerance's sqrt(states)
     rms_error_norm: ClassVar[bool] = True
-    # low order (3 or less, or BDF's variable order from 1): the global error outgrows that statement at tight
-    # tolerances (ode23t 100x at rtol 1e-8 on a 3-mass chain), so it is measured by a rerun at a tenth of them
+    # low order (3 or less, or a variable order from 1: BDF, LSODA, ode113): the global error outgrows that statement
+    # at tight tolerances (ode23t 100x at rtol 1e-8 on a 3-mass chain), so it is measured by a rerun at a tenth of them
     measured_error: ClassVar[bool] = False
     implicit: ClassVar[bool] = False
     order: ClassVar[int | None] = None

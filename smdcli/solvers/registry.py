@@ -71,7 +71,7 @@ def _stiff(name, kernel, formula, text, order=2, modes=None, compare=None):
 
 
 def _scipy(name, formula, implicit, order, boundary, text, compiled_rhs=False, compare=None):
-    measured = formula == "BDF" or order < LOWEST_STATED_ORDER
+    measured = formula in ("BDF", "LSODA") or order < LOWEST_STATED_ORDER  # LSODA: variable order from 1
     return Method(name, "scipy.integrate (Python-driven)", text, "integrators.scipy_driven:ScipyMethod",
                   (("scipy_name", formula), ("implicit", implicit), ("order", order), ("stability_boundary", boundary),
                    ("compiled_rhs", compiled_rhs), ("measured_error", measured)), stiff=implicit, events=formula,
