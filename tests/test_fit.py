@@ -192,6 +192,8 @@ def _csv(path, text: str):
     ("time,m.displacement\n0.03,0.1\n", "at least two rows"),
     ("time,m.displacement\n-1.0,0.1\n0.5,0.2\n", "before the scenario's start"),
     ("t,m.displacement\n0.03,0.1\n0.06,0.2\n", "expected the header 'time'"),
+    ("time,m.displacement\n0.03,0.0\n0.06,0.0\n0.09,0.0\n", "'m.displacement' is zero throughout"),  # was a
+    # ValueError from inside the least squares: a weight of 1e300
 ])
 def test_bad_data_is_one_line_exit_2_naming_the_place_and_nothing_is_written(cli, tmp_path, content, message):
     scene = tmp_path / "one.toml"

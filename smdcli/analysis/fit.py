@@ -119,8 +119,8 @@ def make_test(sc: Scenario, measured: Measured, channels: tuple[str, ...] | None
         np.concatenate([[start], measured.time])
     rows = np.arange(len(grid) - len(measured.time), len(grid))
     given = dict(weights or {})
-    default = default_weights(measured, chosen)
-    return Test(sc, measured, chosen, np.array([given.get(c, default[c]) for c in chosen]), grid, rows)
+    default = default_weights(measured, tuple(c for c in chosen if c not in given))
+    return Test(sc, measured, chosen, np.array([given[c] if c in given else default[c] for c in chosen]), grid, rows)
 
 
 WEIGHT_FLOOR = 1e-3  # of the largest RMS among a quantity's channels: the least RMS a default weight divides by
@@ -135,7 +135,12 @@ def default_weights(measured: Measured, channels: tuple[str, ...]) -> dict[str, 
     largest: dict[str, float] = {}
     for c in channels:
         largest[quantity_of(c)] = max(largest.get(quantity_of(c), 0.0), rms[c])
-    return {c: 1.0 / max(rms[c], WEIGHT_FLOOR * largest[quantity_of(c)], 1e-300) for c in channels}
+    for c in channels:
+        if largest[quantity_of(c)] == 0.0:
+            raise UsageError(f"{measured.file}: column {c!r} is zero throughout, and so is every "
+                             f"{quantity_of(c)} column: its default weight, 1 / its RMS, has no value; give it a "
+                             "weight ([fit] weights in the scenario) or leave it out ([fit] channels)")
+    return {c: 1.0 / max(rms[c], WEIGHT_FLOOR * largest[quantity_of(c)]) for c in channels}
 
 
 def _model_channels(test: Test, sc: Scenario, params: list[str], built: tuple | None = None) -> tuple[dict, dict]:
