@@ -249,6 +249,27 @@ def test_a_peak_within_the_run_s_error_has_no_derivative_and_one_note(tmp_path):
     assert np.abs(s.d_peak_displacement[0, near] - want[near]).max() <= 1e-7 * np.abs(want).max()
 
 
+def test_a_long_chain_s_terminal_and_plot_show_the_dofs_that_move(cli, tmp_path):
+    """40 masses: the terminal lists the first few DOFs and the largest peak, and says --json lists every one (which
+    it does); the plot draws the DOFs of the largest sensitivities, not evenly spaced masses the wave never reached,
+    and its title's count is the panels'."""
+    from smdcli.plots.sensitivity import MAX_PANELS, _panels
+
+    path = tmp_path / "chain.toml"
+    path.write_text(_chain_text(40, 1.0))
+    ran = cli("sensitivity", path, "--param", "spring[0].k", "-o", tmp_path / "out")
+    assert ran.exit_code == 0, ran.output
+    listed = [line for line in ran.output.splitlines() if "peak |x|" in line]
+    assert 1 <= len(listed) <= 7 and "(40 DOFs: the first 6 and the largest peak shown; --json" in ran.output
+    data = json.loads(cli("sensitivity", path, "--param", "spring[0].k", "-o", tmp_path / "json", "--json").stdout)
+    assert len(data["peak_displacement"]) == 40
+    s = smdcli.sensitivity(path, ["spring[0].k"])
+    picked, note = _panels(s)
+    size = np.abs(s.d_displacement[0]).max(axis=0)
+    assert len(picked) == MAX_PANELS and f"({MAX_PANELS} of 40 DOFs drawn" in note
+    assert size[picked].min() >= np.delete(size, picked).max()
+
+
 def test_modal_damping_carries_its_stencil_error_and_meets_it():
     """A modal damping ratio enters C through the modes, not as a polynomial: its derivative still holds to 1e-8
     of the largest against central differences of exact runs, and the stated accuracy says how good it is."""

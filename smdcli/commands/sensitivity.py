@@ -74,7 +74,14 @@ def format_sensitivity(d: dict) -> str:
     lines = [f"{d['scenario']}: sensitivities of the peak displacement ({plural(len(d['parameters']), 'parameter')}, "
              f"{how})"]
     width = max(len(p["path"]) for p in d["parameters"])
-    for dof, peak in d["peak_displacement"].items():
+    from smdcli.commands.simulate import SHOWN
+
+    items = list(d["peak_displacement"].items())
+    shown = items
+    if len(items) > SHOWN:  # a large model's DOFs are for --json or the file: the first few and the largest peak
+        largest = max(items, key=lambda item: item[1]["value"])
+        shown = items[:SHOWN // 2] + ([largest] if largest not in items[:SHOWN // 2] else [])
+    for dof, peak in shown:
         lines.append(f"  {dof}: peak |x| {peak['value']:.6g} m at t = {peak['time']:.6g} s")
         for p in d["parameters"]:
             value = peak["derivative"][p["path"]]
@@ -84,6 +91,9 @@ def format_sensitivity(d: dict) -> str:
             relative = value * p["value"] / peak["value"] if peak["value"] else float("nan")
             lines.append(f"    d/d {p['path']:<{width}}  {value: .6g} {p['derivative_units']}"
                          f"   ({relative:+.4g} % per % of {p['value']:.4g}{'' if p['units'] == '1' else ' ' + p['units']})")
+    if len(shown) < len(items):
+        lines.append(f"  ... ({len(items)} DOFs: the first {SHOWN // 2} and the largest peak shown; --json and the "
+                     "file list every one)")
     for note in d["notes"]:
         lines.append(f"  note: {note}")
     if d["outputs"]:

@@ -6,15 +6,28 @@ from __future__ import annotations
 
 import numpy as np
 
-from smdcli.plots.common import _figure, drawn_dofs, envelope, legend_beside
+from smdcli.plots.common import _figure, envelope, legend_beside
 
 MAX_PANELS = 6  # DOFs drawn, one panel each (evenly spaced beyond)
 
 
+def _panels(s) -> tuple[np.ndarray, str]:
+    """The DOFs drawn, in their order, and a note for the title: every one up to MAX_PANELS, else those whose
+    largest |p dx/dp| is largest (evenly spaced DOFs of a long chain are mostly masses the motion never reached:
+    flat panels of rounding)."""
+    n = len(s.dof)
+    if n <= MAX_PANELS:
+        return np.arange(n), ""
+    scales = np.where(np.asarray(s.value) != 0, np.abs(s.value), 1.0)
+    largest = np.nan_to_num(np.abs(s.d_displacement).max(axis=1) * scales[:, None]).max(axis=0)  # (n,)
+    picked = np.sort(np.argsort(-largest, kind="stable")[:MAX_PANELS])
+    return picked, (f"\n({len(picked)} of {n} DOFs drawn: those of the largest sensitivities; the HDF5 file holds "
+                    "every one)")
+
+
 def sensitivity_figure(s):
     """One panel per DOF: p dx/dp (m) of each parameter against time, the DOF's own x faint behind."""
-    picked, note = drawn_dofs(len(s.dof))
-    picked = picked[np.unique(np.linspace(0, len(picked) - 1, min(len(picked), MAX_PANELS)).round().astype(int))]
+    picked, note = _panels(s)
     fig = _figure(figsize=(9.0, 1.0 + 2.0 * len(picked)))
     axes = np.atleast_1d(fig.subplots(len(picked), 1, sharex=True))
     for ax, i in zip(axes, picked):
@@ -28,7 +41,7 @@ def sensitivity_figure(s):
     axes[-1].set_xlabel("Time [s]")
     fig.suptitle(f"Sensitivities of {s.scenario.rsplit('/', 1)[-1]}: p dx/dp (the change of x per 100 % of p)"
                  + note, fontsize=10)
-    height = 1.0 + 2.0 * len(picked)  # inches: half an inch above for the title, 0.45 below for the time axis
-    fig.subplots_adjust(left=0.12, top=1 - 0.5 / height, bottom=0.45 / height, hspace=0.15)
+    height = 1.0 + 2.0 * len(picked)  # inches: half an inch above for the title (its note a line more), 0.45 below
+    fig.subplots_adjust(left=0.12, top=1 - (0.7 if note else 0.5) / height, bottom=0.45 / height, hspace=0.15)
     legend_beside(fig, axes[0], fontsize=8)
     return fig
