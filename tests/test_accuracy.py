@@ -248,16 +248,12 @@ def test_diff_within_stated_uses_the_scale_and_ignores_what_is_not_determined(tm
 # ------------------------------------------------------------------------------------------- adaptive methods
 
 
-def _cubic_chain(n: int) -> str:
+def cubic_chain(n: int) -> str:
     """n masses of 1 kg, 100 N/m links, a cubic spring (k3 1000 N/m^3) and a 0.5 N s/m damper to the ground on the
     first, 10 sin 5t on it, 10 s: a wave that moves a few tens of the masses, the rest at rest."""
-    lines = ["[time]", "end = 10.0", "step = 0.01"]
-    lines += [f'[[mass]]\nname = "m{i}"\nm = 1.0' for i in range(n)]
-    lines += ['[[spring]]\nconnects = ["ground", "m0"]\nk = 100.0\nlaw = "cubic"\nk3 = 1000.0']
-    lines += [f'[[spring]]\nconnects = ["m{i - 1}", "m{i}"]\nk = 100.0' for i in range(1, n)]
-    lines += ['[[damper]]\nconnects = ["ground", "m0"]\nc = 0.5',
-              '[[force]]\non = "m0"\ntype = "sine"\namplitude = 10.0\nomega = 5.0']
-    return "\n".join(lines) + "\n"
+    from test_large import chain
+
+    return chain(n, cubic=True, dampers="first", end=10.0, step=0.01)
 
 
 @pytest.mark.parametrize("method", ["DOP853", "RK45"])
@@ -271,7 +267,7 @@ def test_an_adaptive_method_s_stated_accuracy_covers_a_long_chain(method, rtol, 
     import smdcli
     from smdcli.scenario import parse
 
-    sc = parse(_cubic_chain(100), "chain.toml")
+    sc = parse(cubic_chain(100), "chain.toml")
     reference = smdcli.simulate(sc, method="taylor", rtol=1e-13)
     run = smdcli.simulate(sc, method=method, rtol=rtol, atol=atol)
     stated = run.stats.stated_accuracy
@@ -292,7 +288,7 @@ def test_a_low_order_method_s_stated_accuracy_is_measured_and_covers_its_error(m
     import smdcli
     from smdcli.scenario import parse
 
-    sc = parse(_cubic_chain(3), "chain.toml")
+    sc = parse(cubic_chain(3), "chain.toml")
     reference = smdcli.simulate(sc, method="taylor", rtol=1e-13)
     run = smdcli.simulate(sc, method=method, rtol=1e-8, atol=1e-16)
     stated = run.stats.stated_accuracy

@@ -50,9 +50,9 @@ def test_a_long_chain_s_spring_is_recovered_from_its_whole_result_file(tmp_path)
     Each channel weighted by 1 / its RMS alone, those far channels weighed up to 1e15 times, and the fit chased their
     rounding: 100.075 for 100, and 53 % of the data called unexplained."""
     from smdcli.analysis.fit_data import read_measured
-    from test_sensitivity import _chain_text
+    from test_large import chain
 
-    text = _chain_text(70, 3.0)
+    text = chain(70, end=3.0, step=0.01)
     truth_sc, _, _ = model_of(text, "chain.toml")
     truth = smdcli.simulate(truth_sc)
     assert "modal" in truth.stats.message  # the data's run is not the sensitivities' path

@@ -24,9 +24,10 @@ SPARSE_DOFS = sparse_module.SPARSE_DOFS
 
 
 def chain(n: int, *, cubic: bool = False, quadratic: bool = False, force: str = "sine", rayleigh: str = "",
-          end: float = 4.0, step: float = 0.02) -> str:
-    """An n-mass chain fixed at one end: 1 kg and 100 N/m a link, 0.5 N s/m on every link; a force on the first
-    mass; optionally its first spring cubic (k3 1000) and its last damper quadratic."""
+          end: float = 4.0, step: float = 0.02, dampers: str = "every") -> str:
+    """An n-mass chain fixed at one end: 1 kg and 100 N/m a link, 0.5 N s/m on every link (dampers "every") or on
+    the first only ("first"); a force on the first mass; optionally its first spring cubic (k3 1000) and its last
+    damper quadratic."""
     lines = ["[time]", f"end = {end}", f"step = {step}"]
     lines += [line for i in range(n) for line in ("[[mass]]", f'name = "m{i}"', "m = 1.0")]
     for i in range(n):
@@ -34,7 +35,8 @@ def chain(n: int, *, cubic: bool = False, quadratic: bool = False, force: str = 
         lines += ["[[spring]]", f'connects = ["{left}", "m{i}"]', "k = 100.0"]
         if i == 0 and cubic:
             lines += ['law = "cubic"', "k3 = 1000.0"]
-        lines += ["[[damper]]", f'connects = ["{left}", "m{i}"]', "c = 0.5"]
+        if dampers == "every" or i == 0:
+            lines += ["[[damper]]", f'connects = ["{left}", "m{i}"]', "c = 0.5"]
         if i == n - 1 and quadratic:
             lines += ['law = "quadratic"']
     if force == "sine":

@@ -214,26 +214,15 @@ def test_peak_derivatives_match_central_differences_of_located_peaks():
         assert np.abs(s.d_peak_displacement[i] - want).max() <= 1e-7 * np.abs(want).max(), parameter
 
 
-def _chain_text(n: int, end: float) -> str:
-    """n masses of 1 kg, 100 N/m and 0.5 N s/m on every link, 10 sin 5t on the first: a wave that reaches about 10
-    masses a second, the rest of the chain still to rounding."""
-    lines = ["[time]", f"end = {end}", "step = 0.01"]
-    lines += [f'[[mass]]\nname = "m{i}"\nm = 1.0' for i in range(n)]
-    for i in range(n):
-        ends = f'["ground", "m0"]' if i == 0 else f'["m{i - 1}", "m{i}"]'
-        lines += [f"[[spring]]\nconnects = {ends}\nk = 100.0", f"[[damper]]\nconnects = {ends}\nc = 0.5"]
-    lines += ['[[force]]\non = "m0"\ntype = "sine"\namplitude = 10.0\nomega = 5.0']
-    return "\n".join(lines) + "\n"
-
-
 def test_a_peak_within_the_run_s_error_has_no_derivative_and_one_note(tmp_path):
     """The far masses of a chain the wave has not reached move by the solution's rounding (or not at all): their
     peaks' derivatives are that rounding's digits, so they are nan, in one note naming how many; every DOF above
     the run's error keeps its derivative, and those match central differences of the located peaks."""
     from smdcli.solvers.peaks import result_peaks
+    from test_large import chain
 
     path = tmp_path / "chain.toml"
-    path.write_text(_chain_text(40, 1.0))
+    path.write_text(chain(40, end=1.0, step=0.01))
     s = smdcli.sensitivity(path, ["spring[0].k"])
     floor = float(s.accuracy["displacement"][0]) * max(np.abs(s.displacement).max(),
                                                       s.value[0] * np.abs(s.d_displacement).max())
@@ -254,9 +243,10 @@ def test_a_long_chain_s_terminal_and_plot_show_the_dofs_that_move(cli, tmp_path)
     it does); the plot draws the DOFs of the largest sensitivities, not evenly spaced masses the wave never reached,
     and its title's count is the panels'."""
     from smdcli.plots.sensitivity import MAX_PANELS, _panels
+    from test_large import chain
 
     path = tmp_path / "chain.toml"
-    path.write_text(_chain_text(40, 1.0))
+    path.write_text(chain(40, end=1.0, step=0.01))
     ran = cli("sensitivity", path, "--param", "spring[0].k", "-o", tmp_path / "out")
     assert ran.exit_code == 0, ran.output
     listed = [line for line in ran.output.splitlines() if "peak |x|" in line]

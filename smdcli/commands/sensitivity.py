@@ -79,8 +79,8 @@ def format_sensitivity(d: dict) -> str:
     items = list(d["peak_displacement"].items())
     shown = items
     if len(items) > SHOWN:  # a large model's DOFs are for --json or the file: the first few and the largest peak
-        largest = max(items, key=lambda item: item[1]["value"])
-        shown = items[:SHOWN // 2] + ([largest] if largest not in items[:SHOWN // 2] else [])
+        first, largest = items[:SHOWN // 2], max(items, key=lambda item: item[1]["value"])
+        shown = first if largest in first else [*first, largest]
     for dof, peak in shown:
         lines.append(f"  {dof}: peak |x| {peak['value']:.6g} m at t = {peak['time']:.6g} s")
         for p in d["parameters"]:

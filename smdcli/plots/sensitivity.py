@@ -8,7 +8,7 @@ import numpy as np
 
 from smdcli.plots.common import _figure, envelope, legend_beside
 
-MAX_PANELS = 6  # DOFs drawn, one panel each (evenly spaced beyond)
+MAX_PANELS = 6  # DOFs drawn, one panel each (beyond, those of the largest sensitivities)
 
 
 def _panels(s) -> tuple[np.ndarray, str]:

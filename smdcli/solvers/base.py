@@ -75,9 +75,11 @@ def stated_rounding(operations: int, growth: float = 1.0) -> float:
     return 8 * UNIT_ROUNDOFF * max(operations, 1) * max(growth, 1.0)
 
 
-def stated_tolerance(rtol: float | None, atol: float | None, peak: float, states: int = 1) -> float:
-    """What an adaptive method's tolerances let the global error reach, relative to the peak (the smallest of the
-    stated quantities' peaks: atol is absolute in each): 10 sqrt(states) (rtol + atol / peak).
+def stated_tolerance(rtol: float | None, atol: float | None, peak: float, states: int = 1,
+                     speed: float = 0.0) -> float:
+    """What an adaptive method's tolerances let the global error reach, relative to the peak of x and, where the
+    velocity's peak `speed` is given and smaller, of v (atol is absolute in each): 10 sqrt(states) (rtol + atol /
+    peak).
 
     The step control holds the root mean square of the local errors over the state's `states` components to the
     tolerance, which lets one component's error reach sqrt(states) times it (a chain where a wave moves a few of its
@@ -86,6 +88,7 @@ def stated_tolerance(rtol: float | None, atol: float | None, peak: float, states
     the relative part's (DOP853 at rtol 1e-10 and atol 1e-9 on a 300-mass chain with a cubic spring: 1.4e-7 of the
     peak off where rtol + atol / peak said 1.1e-8; tests/test_accuracy.py)."""
     margin = 10 * math.sqrt(max(states, 1))
+    peak = min(peak, speed) if speed > 0 else peak
     return margin * ((rtol or 0.0) + (atol or 0.0) / peak) if peak > 0 else margin * (rtol or 0.0)
 
 

@@ -58,8 +58,6 @@ def solve(model: Model, grid: np.ndarray, method: str, tol: Tolerances, field: s
     stats = result.stats
     if math.isnan(stats.stated_accuracy):
         peak = finite_peak(result.displacement, x_extremes)
-        speed = finite_peak(result.velocity, result.extremes_of("velocity"))
-        peak = min(peak, speed) if speed > 0 else peak  # atol is absolute in x and in v: the smaller peak's share
         stats = dataclasses.replace(stats, stated_accuracy=_stated_accuracy(get_solver(stats.method), model, result,
                                                                             peak))
     if method != "auto":
@@ -95,11 +93,12 @@ def _nothing() -> None:
 
 
 def _stated_accuracy(solver: Solver, model: Model, result: Result, peak: float) -> float:
-    """The error a run vouches for, relative to the peak (the largest finite |displacement|, or |velocity| where that
-    is smaller), for methods that do not state it themselves."""
+    """The error a run vouches for, relative to the peak (the largest finite |displacement|), for methods that do not
+    state it themselves."""
     s = result.stats
     if solver.adaptive:
-        return stated_tolerance(s.rtol, s.atol, peak, 2 * model.n if solver.rms_error_norm else 1)
+        speed = finite_peak(result.velocity, result.extremes_of("velocity"))
+        return stated_tolerance(s.rtol, s.atol, peak, 2 * model.n if solver.rms_error_norm else 1, speed)
     span = float(result.time[-1] - result.time[0]) if len(result.time) > 1 else 0.0
     steps = int(span / s.dt) + 1 if s.dt else len(result.time)
     if s.dt and solver.order:  # global truncation of order p: (omega h)^p per radian, over omega * span radians
