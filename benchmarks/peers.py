@@ -15,8 +15,8 @@ Work compared:
 - a linear 3-DOF forced response (three_dof_forced, 0..120 s, 12,001 points): smd exact against
   python-control's forced_response and scipy's solve_ivp RK45 (rtol 1e-6); error: largest displacement
   difference from DOP853 at rtol 1e-12, over the peak;
-- linear chains of 1,000 and 10,000 masses, 1,001 output points: smd's `auto` (exact at 1,000, extrapolated sparse
-  Newmark at 10,000) against OpenSees (Newmark, banded), and the whole `smd simulate` of the 10,000; error of both
+- linear chains of 1,000 and 10,000 masses, 1,001 output points: smd's `auto` (exact at 1,000, the Taylor series on
+  the sparse rows at 10,000) against OpenSees (Newmark, banded), and the whole `smd simulate` of the 10,000; error of both
   against the dense state transition of the 1,000 (one expm of the whole augmented system, stepped);
 - an elastoplastic 1-DOF under the record: smd exact against OpenSees ElasticPP at dt / 16 (from
   benchmarks/elastoplastic_vs_opensees.py); error against smd's event-driven Radau at rtol 1e-11;
@@ -281,9 +281,9 @@ def opensees_chain(n: int, dt: float, steps: int, repeats: int):
 def chain_rows(repeats):
     """Linear chains of 1,000 and 10,000 masses (1 kg, 100 N/m and 0.5 N s/m on every link), a sine force on the
     first, 0..10 s on 1,001 points: smd (the model built, and solved by `auto`: exact in modal coordinates at 1,000
-    masses, extrapolated sparse Newmark at 10,000) against OpenSees (the model built, Newmark average acceleration,
+    masses, the Taylor series on the sparse rows at 10,000) against OpenSees (the model built, Newmark average acceleration,
     banded solver, the output step); and the whole `smd simulate` of the 10,000 (scenario read, solved, element
-    forces and energy balance, the 0.5 GB HDF5 file and three PNGs written). Error: the first mass's displacement
+    forces and energy balance, the HDF5 file and three PNGs written). Error: the first mass's displacement
     against the dense state transition of the 1,000-mass chain, over its peak. The 10,000-mass chain's first mass
     moves as the 1,000's to rounding over these 10 s: a wave travels at most sqrt(k/m) = 10 links a second, so the
     far end's reflection would return after 200 s."""

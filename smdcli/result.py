@@ -177,6 +177,20 @@ def extremes(q: np.ndarray) -> tuple[float, float]:
     return (float(np.min(q)), float(np.max(q))) if q.size else (0.0, 0.0)
 
 
+AT_REST_VALUES = 2 ** 20  # values of a run's histories from which its columns at rest are looked for
+
+
+def moving_columns(*histories: np.ndarray) -> np.ndarray | None:
+    """The columns of (N, n) histories that are not 0 at every row of every one, where the others (at rest
+    throughout: DOFs a wave has not reached) are most of many; None where they are not, or the histories are small,
+    so that a caller works on every column as it is."""
+    N, n = histories[0].shape
+    if n < 64 or N * n < AT_REST_VALUES:
+        return None
+    moving = np.flatnonzero(np.logical_or.reduce([np.any(q != 0, axis=0) for q in histories]))
+    return moving if len(moving) <= n // 2 else None
+
+
 def all_finite(q: np.ndarray, known: tuple[float, float] | None = None) -> bool:
     """Every entry of q finite (a NaN or an inf makes its minimum or maximum one); known: q's extremes, where the
     caller has them."""

@@ -35,7 +35,7 @@ from smdcli.model.elements import incidence_matrix
 from smdcli.analysis.forces import ROWS_VALUES, element_forces
 from smdcli.analysis.hermite_rule import gram_power, hermite_slopes, node_rates
 from smdcli.model.sparse import cheapest, rows_times
-from smdcli.result import Energy, Result, largest_energy
+from smdcli.result import Energy, Result, largest_energy, moving_columns
 
 VAN_LOAN_SIZE = 400  # largest augmented state taken in closed form: two exponentials of twice this size
 GAUSS_POINTS = 8
@@ -104,25 +104,34 @@ def _forces_power(model: Model, along: np.ndarray, times: np.ndarray) -> np.ndar
     return (along * model.forces(times).reshape(along.shape)).sum(axis=-1)
 
 
-def _damper_forms(model: Model) -> list[Callable]:
+def _damper_forms(model: Model, moving: np.ndarray | None = None) -> list[Callable]:
     """The linear dampers' power as the sum of <L v, R v> over forms y -> (L y, R y) of rows of states, R's weight
-    symmetric (the Hermite rule's Gram form needs it): the damper rows and their coefficients and added damping, or
-    C itself where the scene has no elements; kept with the (frozen) model, as _incidence is."""
-    if "_damper_forms" not in model.__dict__:
-        if not model.element_form:
-            C = model.sparse[0]
-            symmetric_C = 0.5 * (C + C.T)
-            forms = [lambda y: (y, rows_times(y, symmetric_C))]
-        else:
-            forms = []
-            D, c, _ = _incidence(model, "damper")
-            if len(c):
-                forms.append(lambda y: (lambda dy: (dy, dy * c))(rows_times(y, D.T)))
-            if model.added_damping is not None:
-                added = 0.5 * (model.added_damping + model.added_damping.T)
-                forms.append(lambda y: (y, y @ added))
+    symmetric (the Hermite rule's Gram form needs it): the damper rows and their coefficients and added damping, or C
+    itself where the scene has no elements; kept with the (frozen) model, as _incidence is; with `moving`
+    (result.moving_columns), of states held at those columns, the others 0 throughout (those not kept)."""
+    if moving is None and "_damper_forms" in model.__dict__:
+        return model.__dict__["_damper_forms"]
+    cut = (lambda A: A) if moving is None else (  # noqa: E731 (rows and columns of the moving DOFs)
+        lambda A: A[np.ix_(moving, moving)] if isinstance(A, np.ndarray) else A[moving][:, moving])
+    if not model.element_form:
+        C = model.sparse[0]
+        symmetric_C = cut(0.5 * (C + C.T))
+        forms = [lambda y: (y, rows_times(y, symmetric_C))]
+    else:
+        forms = []
+        D, c, _ = _incidence(model, "damper")
+        if moving is not None and len(c):  # the dampers that touch the moving DOFs, on their columns
+            D = D[:, moving]
+            touched = np.flatnonzero(np.asarray(abs(D).sum(axis=1)).ravel())
+            D, c = D[touched], c[touched]
+        if len(c):
+            forms.append(lambda y: (lambda dy: (dy, dy * c))(rows_times(y, D.T)))
+        if model.added_damping is not None:
+            added = cut(0.5 * (model.added_damping + model.added_damping.T))
+            forms.append(lambda y: (y, y @ added))
+    if moving is None:
         model.__dict__["_damper_forms"] = forms
-    return model.__dict__["_damper_forms"]
+    return forms
 
 
 def energy_balance(model: Model, result: Result, dense: Callable | None = None) -> Energy:
@@ -377,11 +386,14 @@ def _hermite_gauss(model: Model, result: Result) -> tuple[np.ndarray, np.ndarray
     slope = hermite_slopes(s)[:, [3, 1, 2, 4, 5]]
     gram = slope.T @ (w[:, None] * slope)  # int_0^1 of their products: exact, degree 8 under Gauss's 15
     t, x, v, a = result.time, result.displacement, result.velocity, result.acceleration
-    N, n = x.shape
-    step = np.zeros((2, N))
-    forms = _damper_forms(model)
+    moving = moving_columns(x, v, a)  # DOFs at rest throughout (a wave's far ones) add no power: left out
+    forms = _damper_forms(model, moving)
     projected = [P for P in (model.B if model.signals else None,
                              model.quadratic.D.T if model.quadratic is not None else None) if P is not None]
+    if moving is not None:
+        (x, v, a), projected = (q[:, moving] for q in (x, v, a)), [P[moving] for P in projected]
+    N, n = x.shape
+    step = np.zeros((2, N))
     chunk = max(2, _CHUNK_VALUES // (4 * max(n, 1)))
     for lo in range(0, N - 1, chunk - 1):  # rows lo .. hi - 1: their steps lo + 1 .. hi - 1
         hi = min(N, lo + chunk)
@@ -401,7 +413,8 @@ def _hermite_gauss(model: Model, result: Result) -> tuple[np.ndarray, np.ndarray
         interrupted.setdefault(k, []).extend([(time, jump)] if time is not None else [])
     for k, inner in interrupted.items():
         inner.sort(key=lambda event: event[0])
-        step[:, k] = _reintegrated_step(model, t[k - 1], t[k], x[k - 1], v[k - 1], inner)
+        step[:, k] = _reintegrated_step(model, t[k - 1], t[k], result.displacement[k - 1], result.velocity[k - 1],
+                                        inner)
     step[1] += _jumps_on_grid(model, result, events)
     return np.cumsum(step[0]), np.cumsum(step[1])
 

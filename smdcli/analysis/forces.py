@@ -9,11 +9,13 @@ Must not import: commands, io, plots, cli.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from smdcli.model.elements import Element, incidence_matrix
 from smdcli.model.sparse import rows_times
-from smdcli.result import ElementForces
+from smdcli.result import ElementForces, moving_columns
 from smdcli.scenario import GROUND
 
 
@@ -26,6 +28,16 @@ def _tensions(elements: list[Element], q: np.ndarray, recorded: dict) -> np.ndar
     N = len(q)
     out = np.empty((N, len(elements)))
     if not elements:
+        return out
+    moving = moving_columns(q)
+    if moving is not None:  # zero tension where both ends stay at 0 (a wave's far elements): the others' alone
+        index = np.full(q.shape[1] + 1, -1)  # a DOF's column among the moving ones; -1 (the ground's) elsewhere
+        index[moving] = np.arange(len(moving))
+        live = [j for j, e in enumerate(elements) if index[e.a] >= 0 or index[e.b] >= 0 or e.name in recorded]
+        moved = [dataclasses.replace(elements[j], a=int(index[elements[j].a]), b=int(index[elements[j].b]))
+                 for j in live]
+        out = np.zeros((N, len(elements)))
+        out[:, live] = _tensions(moved, q[:, moving], recorded)
         return out
     stretch = incidence_matrix(elements, q.shape[1]).T  # q @ it = q_a - q_b: minus each element's d
     coef = np.array([e.coef for e in elements])

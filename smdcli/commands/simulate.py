@@ -242,7 +242,7 @@ def info(path: str | Path, state_space: Path | None = None) -> dict:
     m = model.modes
     from smdcli.solvers.auto import Auto
 
-    solver, reason = Auto().choose(model, grid)
+    solver, reason = Auto().choose(model, grid, sc.solver.rtol)
     # participation in a ground motion moving every DOF alike (r = ones): Gamma = phi^T M r of the mass-normalised
     # undamped shapes, effective mass Gamma^2, which sum to the total mass
     gamma = m.shapes.T @ (model.M @ np.ones(model.n))

@@ -220,7 +220,13 @@ def jacobian(m, y, J):
         d = (y[offset + a] if a >= 0 else 0.0) - (y[offset + b] if b >= 0 else 0.0)
         slope = 3 * m.el_coef[e] * d * d if m.el_law[e] == CUBIC_SPRING else 2 * m.el_coef[e] * abs(d)
         for r in range(n):
-            w = ((m.minv[r, a] if a >= 0 else 0.0) - (m.minv[r, b] if b >= 0 else 0.0)) * slope
+            w = 0.0  # (M^-1[r, a] - M^-1[r, b]) slope, from M^-1's sparse rows
+            for k in range(m.mi_ptr[r], m.mi_ptr[r + 1]):
+                if m.mi_idx[k] == a:
+                    w += m.mi_val[k]
+                elif m.mi_idx[k] == b:
+                    w -= m.mi_val[k]
+            w *= slope
             if a >= 0:
                 J[n + r, offset + a] -= w
             if b >= 0:

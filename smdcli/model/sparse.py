@@ -124,7 +124,45 @@ def gershgorin_omega(model) -> float:
     return math.sqrt(float((abs(model.K) @ np.ones(model.n) / model.M.diagonal()).max()))
 
 
+def gershgorin_rate(model) -> float:
+    """A bound on the largest |eigenvalue| of a sparse scene's state matrix [[0, I], [-M^-1 K, -M^-1 C]]: a mode's
+    |lambda| is at most its c_j + omega_j (c_j / 2 m_j + its root), so at most Gershgorin's bound on M^-1 C's plus
+    gershgorin_omega."""
+    return float((abs(model.C) @ np.ones(model.n) / model.M.diagonal()).max()) + gershgorin_omega(model)
+
+
 DENSE_FILE_BYTES = 1_600_000_000  # the most M, C and K read from files may take when made dense (10,000 DOFs: 2.4 GB)
+
+
+DENSE_MATRICES = 12  # n x n doubles a linear solve holds at its peak (9.8 GB measured for 10,000 masses)
+
+
+def check_dense_size(scenario: Scenario) -> None:
+    """Refuse, before anything is assembled, a scene kept dense (not is_sparse_scene) whose dense matrices could not
+    fit in memory, saying why it is not kept sparse where it is large enough to be. A sparse scene's memory grows
+    with its elements and its output (which MAX_SAMPLES bounds): it passes."""
+    from smdcli.resources import fits, physical_memory
+
+    n = len(scenario.dof_names)
+    needed = DENSE_MATRICES * 8.0 * n * n
+    if not fits(needed) and not is_sparse_scene(scenario):
+        why = f" (kept dense because {_why_dense(scenario)})" if n > SPARSE_DOFS else ""
+        raise ScenarioError(scenario.path, "system.dofs" if scenario.system is not None else "mass",
+                            f"{n} DOFs need about {needed / 2**30:.3g} GB for their dense matrices{why}, more than "
+                            f"half of this machine's {physical_memory() / 2**30:.3g} GB; model fewer masses")
+
+
+def _why_dense(scenario: Scenario) -> str:
+    """Why a scene of more than SPARSE_DOFS DOFs is not kept sparse."""
+    if scenario.system is not None and not scenario.system.from_files:
+        return "its [system] matrices are written inline (read from files, a lumped M is kept sparse)"
+    if scenario.system is not None and not is_diagonal(scenario.system.M):
+        return "M is not diagonal (the sparse methods need a lumped mass matrix)"
+    nonlinear = sum(e.law in ("cubic", "quadratic") for e in scenario.springs + scenario.dampers)
+    if nonlinear > SPARSE_NONLINEAR:
+        return f"it has {nonlinear} cubic springs and quadratic dampers (a sparse scene holds {SPARSE_NONLINEAR})"
+    return ("the scene has parts the sparse methods do not take (stops, friction, hysteretic springs, modal "
+            "[damping] or ground motion)")
 
 
 def dense_file_matrices(scenario: Scenario) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -133,9 +171,7 @@ def dense_file_matrices(scenario: Scenario) -> tuple[np.ndarray, np.ndarray, np.
     system = scenario.system
     n = len(system.dofs)
     if 3 * 8 * n * n > DENSE_FILE_BYTES:
-        why = ("M is not diagonal (the sparse methods need a lumped mass matrix)" if not is_diagonal(system.M)
-               else "the scene has parts the sparse methods do not take (stops, friction, hysteretic springs, "
-                    "modal [damping] or ground motion)")
+        why = _why_dense(scenario)
         raise ScenarioError(scenario.path, "system.M", f"{n} DOFs would be solved with dense matrices "
                             f"({3 * 8 * n * n / 1e9:.1f} GB) because {why}; the limit is "
                             f"{DENSE_FILE_BYTES / 1e9:.1f} GB")

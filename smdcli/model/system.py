@@ -27,8 +27,8 @@ from smdcli.model.checks import check_finite, check_forces, check_matrices_finit
 from smdcli.model.mass import mass_solve
 from smdcli.model.modes import RIGID_BODY, Modes, modal_eigenvalues, regime, signed
 from smdcli.model.nonsmooth import NonsmoothElement, check_initial_state, initial_stiffness, nonsmooth_elements
-from smdcli.model.sparse import (assembled, cheapest, dense_file_matrices, gershgorin_omega, is_sparse_scene,
-                                 lowest_modes, rows_times, symmetric)
+from smdcli.model.sparse import (assembled, check_dense_size, cheapest, dense_file_matrices, gershgorin_omega,
+                                 is_sparse_scene, lowest_modes, rows_times, symmetric)
 from smdcli.scenario import Scenario
 
 # A linear model whose decaying eigenvalues spread wider than this is stiff.
@@ -378,6 +378,7 @@ def build(scenario: Scenario) -> Model:
     index = {name: i for i, name in enumerate(dofs)}
     n = len(dofs)
     cubic = quadratic = None
+    check_dense_size(scenario)
     if scenario.system is not None:
         sys = scenario.system
         if is_sparse_scene(scenario):  # matrices from files, kept sparse

@@ -48,11 +48,7 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
     if not text.strip():
         raise ScenarioError(file, None, "is empty; a scenario needs at least [time] and one [[mass]] or [system]")
     text = text.removeprefix("\ufeff")  # a byte-order mark, as Windows editors save UTF-8
-    # A scene too large for memory is refused before the TOML parser reads it (tomllib takes 2 s on 60,000 masses):
-    # its [[mass]] headers counted in the text (a header in a multi-line string would count too; none is that long).
-    headers = len(re.findall(r"^[ \t]*\[\[[ \t]*mass[ \t]*\]\]", text, flags=re.M))
-    if headers > 1000:
-        _check_size(file, headers, matrix_form=False)
+    _refuse_many_samples_early(text, file)
     try:
         doc = tomllib.loads(text)
     except RecursionError:
@@ -118,18 +114,7 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
         if top.has("building") else None
     top.finish(_TOP_KEYS)
 
-    _check_size(file, len(dofs), system is not None)
-    if not math.isfinite(time.end - time.start):
-        raise ScenarioError(file, "time.end", f"expected a time span that is a finite number, found {time.end:g} - {time.start:g}")
-    # In floating point: a huge span over a small step is refused before it becomes an integer.
-    n_points = time.points if time.points is not None else (time.end - time.start) / time.step * (1 + 1e-12) + 1
-    if not n_points * max(len(dofs), 1) <= MAX_SAMPLES:
-        key = "time.points" if time.points is not None else "time.step"
-        raise ScenarioError(
-            file, key,
-            f"output grid of {n_points:.3g} points x {len(dofs)} DOF is too large "
-            f"(limit {MAX_SAMPLES:.0e} samples); use a larger step or fewer points",
-        )
+    n_points = _check_samples(file, time, len(dofs))
     step = (time.end - time.start) / max(n_points - 1, 1)
     for force in forces + ((ground_motion.shape,) if ground_motion else ()):
         problem = SHAPES[force.type].resolution_problem(force, time.start, time.end, step)
@@ -146,18 +131,42 @@ def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
     )
 
 
-DENSE_MATRICES = 12  # n x n doubles a linear solve holds at its peak (9.8 GB measured for 10,000 masses)
+def _check_samples(file: str, time: TimeSpec, dofs: int) -> float:
+    """The output grid's number of points, refused where points x DOFs is more than MAX_SAMPLES (x, v and a of
+    every point are held, written and read)."""
+    if not math.isfinite(time.end - time.start):
+        raise ScenarioError(file, "time.end", f"expected a time span that is a finite number, found {time.end:g} - {time.start:g}")
+    # In floating point: a huge span over a small step is refused before it becomes an integer.
+    n_points = time.points if time.points is not None else (time.end - time.start) / time.step * (1 + 1e-12) + 1
+    if not n_points * max(dofs, 1) <= MAX_SAMPLES:
+        key = "time.points" if time.points is not None else "time.step"
+        raise ScenarioError(
+            file, key,
+            f"output grid of {n_points:.3g} points x {dofs} DOF is too large "
+            f"(limit {MAX_SAMPLES:.0e} samples); use a larger step or fewer points",
+        )
+    return n_points
 
 
-def _check_size(file: str, n: int, matrix_form: bool) -> None:
-    """Refuse, before anything is assembled, a scene whose dense matrices could not fit in memory."""
-    from smdcli.resources import fits, physical_memory
+_TIME_TABLE = re.compile(r"^[ \t]*\[[ \t]*time[ \t]*\][^\n]*\n(?P<body>(?:(?![ \t]*\[)[^\n]*\n?)*)", flags=re.M)
+_MASS_HEADER = re.compile(r"^[ \t]*\[\[[ \t]*mass[ \t]*\]\]", flags=re.M)
 
-    needed = DENSE_MATRICES * 8.0 * n * n
-    if not fits(needed):
-        raise ScenarioError(file, "system.dofs" if matrix_form else "mass",
-                            f"{n} DOFs need about {needed / 2**30:.3g} GB for their dense matrices, more than half of "
-                            f"this machine's {physical_memory() / 2**30:.3g} GB; model fewer masses")
+
+def _refuse_many_samples_early(text: str, file: str) -> None:
+    """A scene whose output grid is too large, refused before the TOML parser reads it (tomllib takes 2 s on 60,000
+    masses): its [[mass]] headers counted in the text and its [time] table read alone, as the full parse would
+    (a header in a multi-line string would count too; none is that long). Where [time] is not a table of its own,
+    or does not read alone, the full parse judges."""
+    masses = len(_MASS_HEADER.findall(text))
+    found = _TIME_TABLE.search(text) if masses > 1000 else None
+    if found is None:
+        return
+    try:
+        table = tomllib.loads(found["body"])
+        time = _read_time(_Table(file, "time", table, _TIME_KEYS), file)
+    except (tomllib.TOMLDecodeError, ScenarioError, ValueError):
+        return
+    _check_samples(file, time, masses)
 
 
 def _refuse_control_characters(file: str, node, path: str) -> None:

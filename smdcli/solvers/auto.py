@@ -10,6 +10,7 @@ import dataclasses
 import numpy as np
 
 from smdcli.model import GROUND_DOF, Model
+from smdcli.model.sparse import gershgorin_rate
 from smdcli.result import Result
 from smdcli.solvers.base import Solver, Tolerances
 from smdcli.solvers.exact.linear import sparse_action
@@ -50,7 +51,7 @@ class Auto(Solver):
     """Closed form or exact for linear scenes; for the rest, explicit unless the trajectory proves stiff."""
 
     def solve(self, model: Model, grid: np.ndarray, tol: Tolerances) -> Result:
-        solver, reason = self.choose(model, grid)
+        solver, reason = self.choose(model, grid, tol.rtol)
         abandoned_s = 0.0  # an explicit attempt given up as stiff still cost its time
         if solver is None:  # nonlinear: try explicit with a stiffness watch
             nonlinear = f"nonlinear ({', '.join(model.nonlinear_paths)})"
@@ -83,23 +84,19 @@ class Auto(Solver):
             result = solve_nonsmooth(solver, model, grid, tol)
         else:
             result = solver.solve(model, grid, tol)
-            if model.is_sparse and result.success:  # what error it expects: its estimate's
+            if result.stats.method == "sparse_newmark" and result.success:  # what error it expects: its estimate's
                 reason += f" (estimated error {result.stats.stated_accuracy:.2g} of the peak, rtol {tol.rtol:g})"
         stats = dataclasses.replace(result.stats, requested_method=self.name, reason=reason,
                                     wall_time_s=result.stats.wall_time_s + abandoned_s)
         return result.changed(stats=stats)
 
-    def choose(self, model: Model, grid: np.ndarray) -> tuple[Solver | None, str]:
-        """The solver for a model on a grid and the reason, or (None, '') where the trajectory must decide."""
+    def choose(self, model: Model, grid: np.ndarray, rtol: float = Tolerances.rtol) -> tuple[Solver | None, str]:
+        """The solver for a model on a grid (at a run's rtol, which sets the Taylor series' order and so its stability)
+        and the reason, or (None, '') where the trajectory must decide."""
         if model.nonsmooth:
             return _nonsmooth_choice(model)
         if model.is_sparse:
-            kind = "linear" if model.is_linear else f"nonlinear ({', '.join(model.nonlinear_paths)})"
-            return get_solver("sparse_newmark"), (
-                f"{kind}, {model.n} DOFs, sparse: an exact modal solution would hold {model.n}^2 mode-shape entries "
-                f"({8 * model.n ** 2 / 2**30:.2g} GiB) and take longer (n^2 per output point); Newmark average "
-                "acceleration on the sparse matrices instead, one factorization reused across steps, extrapolated "
-                "over steps h, h/2, h/4 (Romberg) until its error estimate meets rtol")
+            return _sparse_choice(model, grid, rtol)
         if model.is_linear:
             # Stiffness does not matter to exact methods, but the user should know an integrator would feel it;
             # not at the price of a general eigenvalue problem larger than the exact solve (smd info computes it).
@@ -126,6 +123,36 @@ class Auto(Solver):
             return get_solver("DOP853"), (f"linear, but {_unheld(model)} has no exact integral; not stiff "
                               f"(stiffness ratio {model.stiffness_ratio:.3g}): DOP853 at the scenario's tolerances")
         return None, ""
+
+
+# The most steps an output step that stability may hold the Taylor series to for auto to give it a sparse scene: its
+# steps are at least span |lambda|max / boundary (Gershgorin's bound), where sparse Newmark's follow the motion's
+# accuracy alone. benchmarks/sparse_choice.py (docs/solvers.md): on 5,000-mass chains damped stiffly (C = K / 200) the
+# series is 3 to 7 times faster up to 11 steps an output step, slower at 29; on a stiff chain whose high modes ring
+# (k 1e6 N/m, c 0.5 N s/m: 2.6 steps an output step) it runs where Newmark's estimate misses rtol 1e-6 within its
+# 2 million steps.
+SPARSE_TAYLOR_STEPS = 16
+
+
+def _sparse_choice(model: Model, grid: np.ndarray, rtol: float) -> tuple[Solver, str]:
+    """A sparse scene's method: the Taylor series on the sparse rows where stability lets it take steps near the
+    output's size (at most SPARSE_TAYLOR_STEPS an output step), sparse Newmark otherwise; and why."""
+    kind = "linear" if model.is_linear else f"nonlinear ({', '.join(model.nonlinear_paths)})"
+    kind = f"{kind}, {model.n} DOFs, sparse: an exact modal solution would hold {model.n}^2 mode-shape entries " \
+           f"({8 * model.n ** 2 / 2**30:.2g} GiB) and take n^2 operations per output point"
+    unsupported = Taylor.unsupported(model)
+    rate = gershgorin_rate(model)
+    steps = rate * float(grid[-1] - grid[0]) / taylor_boundary(taylor_order(rtol)) / max(len(grid) - 1, 1)
+    stability = f"its stability (|lambda| at most {rate:.3g} 1/s) holds it to no fewer than {steps:.2g} steps an " \
+                "output step"
+    if unsupported is None and steps <= SPARSE_TAYLOR_STEPS:
+        return get_solver("taylor"), (
+            f"{kind}; compiled Taylor series on the sparse rows instead, its terms worked out only at the DOFs the "
+            f"motion has reached: {stability}, where Newmark's extrapolation takes at least 7")
+    why = f"no Taylor series for {unsupported}" if unsupported else f"for the Taylor series {stability}"
+    return get_solver("sparse_newmark"), (
+        f"{kind}; {why}: Newmark average acceleration on the sparse matrices instead, one factorization reused across "
+        "steps, extrapolated over steps h, h/2, h/4 (Romberg) until its error estimate meets rtol")
 
 
 def _nonsmooth_choice(model: Model) -> tuple[Solver, str]:

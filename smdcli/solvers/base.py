@@ -163,7 +163,7 @@ def divergence_bound(model: Model, grid: np.ndarray) -> float:
     if model.is_forced:
         loaded = np.flatnonzero(np.any(model.B != 0, axis=1))  # the other DOFs' forces are zero
         peak_force = finite_peak(model.forces(grid) @ model.B[loaded].T)
-        stiffness = np.abs(np.diag(model.K)).min(initial=0.0)
+        stiffness = np.abs(model.K.diagonal()).min(initial=0.0)  # dense or a sparse scene's CSR
         scale = max(scale, peak_force / stiffness if stiffness > 0 else peak_force * (grid[-1] - grid[0]) ** 2)
     return GROWTH_BOUND * scale
 

@@ -121,6 +121,13 @@ def row_peaks(time: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray,
     magnitude = np.abs(x)
     magnitude[~np.isfinite(magnitude)] = 0.0
     peaks = magnitude.max(axis=1) if N else np.zeros(rows)
+    live = np.flatnonzero(peaks > 0)
+    if N and len(live) < rows // 2:  # most histories at rest throughout (a wave's far DOFs): locate the others'
+        located = row_peaks(time, x[live], v[live], a[live], events, with_times)
+        peaks[live], when = (located[0], np.full(rows, time[0])) if with_times else (located, None)
+        if with_times:
+            when[live] = located[1]
+        return (peaks, when) if with_times else peaks
     when = time[magnitude.argmax(axis=1)] if N else np.zeros(rows)
     done = (lambda: (peaks, when)) if with_times else (lambda: peaks)
     if N < 3:

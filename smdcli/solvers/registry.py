@@ -95,7 +95,7 @@ METHODS = (
     _explicit("DOP853", "DOP853", 8, 6.0, "explicit Dormand-Prince 8(5,3), compiled", compare="adaptive"),
     Method("taylor", "Taylor series", "Taylor series of order 8-30 (by the tolerance), coefficients by recurrence, "
            "compiled; for smooth scenes with forces of every shape but a frequency sweep and an expression",
-           "integrators.taylor_series:Taylor"),
+           "integrators.taylor_series:Taylor", sparse=True),
     _stiff("Radau", "RADAU5", "Radau", "implicit Radau IIA, order 5, compiled (scipy's steps)", order=5,
            modes=("radau", ""), compare="adaptive"),
     _stiff("BDF", "NDF", "BDF", "implicit variable-order BDF/NDF, orders 1-5, compiled (scipy's steps)", order=5,
