@@ -138,3 +138,59 @@ def test_any_number_a_valid_scene_accepts_solves_or_fails_cleanly(tmp_path, stem
         simulate(source, tmp_path / "out", Options(plots=False))
     except SmdError as exc:
         assert exc.exit_code in (1, 2)
+
+
+# Lines of TOML, plain and not: what scenarios hold, and what the plain reader must hand to tomllib (escapes, literal
+# and multi-line strings, dotted and quoted keys, inline tables, underscores, leading zeros, CRLF, control characters,
+# duplicates, mixed and nested arrays, out-of-range integers, a missing value, text that is not TOML at all).
+PLAIN_LINES = st.sampled_from([
+    "[[mass]]", "[[ mass ]]", "[time]", "[ time ]", "[solver]", "[time]", "[[spring]]", "", "   ", "# comment",
+    'name = "m1"', "m = 1.0", "m = 1", "m = +2", "m = -0.0", "k = 1e3", "k = 2.5E-03", "k = 0", "x0 = 1.5  # m",
+    'connects = ["ground", "m1"]', 'connects = [ "m1" , "m2", ]', "values = [1, 2.5, -3e2]", "values = []",
+    "values = [1,2,]", "flag = true", "flag = false", 'law = "cubic"', 'title = "a\tb"', "name = \"m\u00e9\"",
+    'text = "\\u001b"', "text = 'literal'", 'text = """multi"""', "a.b = 1", '"quoted" = 1', "t = {a = 1}",
+    "n = 1_000", "n = 01", "n = 1.", "n = .5", "n = inf", "n = nan", "n = 0x10", "n = 99999999999999999999",
+    "n = 999999999999999999", 'mix = [1, "a"]', "nested = [[1], [2]]", "bools = [true]", "m =", "= 1",
+    "m = 1 2", "[[mass]", "[mass]]", "[a.b]", "d = 1979-05-27", "c = 1 # \x01", "m = 1.0\r", "end = 10.0",
+    "step = 0.01", "m = 1.0e+00", "k = -1E5", "x = [ ]", 'x = ["a""b"]', "x = [1 2]", "x = [,]",
+    "x = [1, [2]]", "\x7f = 1", "m\t=\t3"])
+
+
+@SETTINGS
+@given(st.lists(PLAIN_LINES, max_size=12), st.booleans())
+def test_the_plain_toml_reader_reads_what_tomllib_reads_or_hands_the_text_over(lines, final_newline):
+    """Where the plain reader gives a document it is tomllib's, to the type of every value; where tomllib refuses a
+    text, the plain reader gives None (tomllib's message is the user's)."""
+    from smdcli.scenario.plain_toml import loads_plain
+
+    text = "\n".join(lines) + ("\n" if final_newline else "")
+    plain = loads_plain(text)
+    try:
+        expected = tomllib.loads(text)
+    except tomllib.TOMLDecodeError:
+        assert plain is None, text
+        return
+    if plain is not None:
+        assert plain == expected and _types(plain) == _types(expected), text
+
+
+def _types(node):
+    """The document's shape with each value's type, so that 1 and 1.0 (equal in Python) differ."""
+    if isinstance(node, dict):
+        return {key: _types(value) for key, value in node.items()}
+    if isinstance(node, list):
+        return [_types(value) for value in node]
+    return type(node).__name__
+
+
+def test_the_plain_toml_reader_reads_every_bundled_plain_scenario_as_tomllib_does():
+    from smdcli.scenario.plain_toml import loads_plain
+
+    read = 0
+    for path in sorted(SCENARIOS.glob("*.toml")):
+        text = path.read_text()
+        plain = loads_plain(text)
+        if plain is not None:
+            read += 1
+            assert plain == tomllib.loads(text) and _types(plain) == _types(tomllib.loads(text)), path.name
+    assert read >= 30  # most are plain: 39 of 43 when this was written

@@ -13,8 +13,8 @@ import numpy as np
 from smdcli import __version__, provenance
 from smdcli.io.atomic import atomic_path
 from smdcli.model import Model
-from smdcli.model.accuracy import (acceleration_accuracy, derived_accuracy, evaluation_accuracy, matrix_accuracy,
-                                   modes_accuracy)
+from smdcli.model.accuracy import (acceleration_accuracy, derived_accuracy, evaluation_accuracy, loaded_force,
+                                   matrix_accuracy, modes_accuracy)
 from smdcli.model.nonsmooth import initial_stiffness
 from smdcli.result import Result
 from smdcli.scenario import Scenario
@@ -102,7 +102,7 @@ def write_simulation(path: Path, scenario: Scenario, model: Model, result: Resul
                     "acceleration": float(acceleration_accuracy(
                         model.M, model.C, model.K, result.stats.stated_accuracy, result.displacement,
                         result.velocity, result.acceleration, result.force)[0]),
-                    "force": evaluation_accuracy(model.applied_force, result.time) if model.is_forced else 0.0}
+                    "force": evaluation_accuracy(loaded_force(model), result.time) if model.is_forced else 0.0}
         for name, data, units in (
             ("displacement", result.displacement, "m"),
             ("velocity", result.velocity, "m/s"),

@@ -122,6 +122,13 @@ def _bounded(model) -> dict[str, float]:
             "shapes": float(min(shapes, np.inf)), "eigenvalues": float(np.sqrt(change) / max(eig, 1e-300))}
 
 
+def loaded_force(model: Model):
+    """The applied force at the DOFs a force acts on, as a function of time ((N, loaded DOFs)): the columns of the
+    (N, n) applied force that are not zero throughout (one of a 10,000-DOF chain's)."""
+    loaded = np.flatnonzero(np.any(model.B != 0, axis=1))
+    return lambda t: model.forces(t) @ model.B[loaded].T
+
+
 def evaluation_accuracy(evaluate, time: np.ndarray) -> float:
     """Values computed from the time alone (applied forces, a given ground motion): t is itself rounded, so a value
     is known to what moving t by its rounding changes (a sine's argument w t carries eps w t), times SAFETY.

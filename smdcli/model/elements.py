@@ -76,9 +76,11 @@ def incidence_matrix(elements, n: int):
     """D with D x = x_a - x_b for each element's ends (a, b) in order, the ground's end left out: dense where small
     or more than a tenth full, else CSR (sparse.cheapest's rule; built without scipy.sparse where dense, whose
     import is most of a small scene's start-up)."""
-    ends = [(i, node, sign) for i, e in enumerate(elements) for node, sign in ((e.a, 1.0), (e.b, -1.0)) if node >= 0]
-    rows, columns, signs = (np.array([end[j] for end in ends], dtype=float if j == 2 else int) for j in range(3))
-    if len(elements) < 64 or len(ends) > (len(elements) * n) // 10:
+    a, b = (np.array([getattr(e, end) for e in elements], dtype=int) for end in ("a", "b"))
+    index = np.arange(len(elements))
+    rows, columns = np.concatenate([index[a >= 0], index[b >= 0]]), np.concatenate([a[a >= 0], b[b >= 0]])
+    signs = np.concatenate([np.ones(np.count_nonzero(a >= 0)), -np.ones(np.count_nonzero(b >= 0))])
+    if len(elements) < 64 or len(rows) > (len(elements) * n) // 10:
         D = np.zeros((len(elements), n))
         np.add.at(D, (rows, columns), signs)
         return D

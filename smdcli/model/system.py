@@ -399,12 +399,11 @@ def build(scenario: Scenario) -> Model:
             # its one or two nodes, +1 and -1 (the ground has none): a 2x2 stamp, not a row of n per element
             ends = [(index[node], sign) for node, sign in zip(element.connects, (1.0, -1.0)) if node != GROUND]
             # a hysteretic spring stamps only the stiffness it always has (a bilinear spring's b k); its law the rest
-            coef = element.coef if element.nonsmooth is None else element.nonsmooth.linear_stiffness
+            coef = float(element.coef if element.nonsmooth is None else element.nonsmooth.linear_stiffness)
             rows, columns, values = stamps[element.kind]
-            with np.errstate(over="ignore", invalid="ignore"):  # an overflow is named by _check_finite below
-                for i, si in ends:
-                    for j, sj in ends:
-                        rows.append(i), columns.append(j), values.append(coef * si * sj)
+            for i, si in ends:  # coef * si * sj: +-coef (an overflow, inf, is named by check_finite below)
+                for j, sj in ends:
+                    rows.append(i), columns.append(j), values.append(coef if si == sj else -coef)
             if element.law == "cubic":
                 cubic_rows.append((incidence_row(element.connects, index, n), element.k3, element.path))
         sparse = is_sparse_scene(scenario)

@@ -10,6 +10,7 @@ import tomllib
 from pathlib import Path
 
 from smdcli.errors import ScenarioError
+from smdcli.scenario.plain_toml import loads_plain
 from smdcli.scenario.forces import _ANY_FORCE_KEYS, GROUND_KEYS, _read_force, _read_ground_motion
 from smdcli.scenario.options import (EXPECT_KEYS, FIT_KEYS, IDA_KEYS, OPTIMIZE_KEYS, SWEEP_KEYS, _read_expect,
                                      _read_fit, _read_ida, _read_optimize, _read_solver, _read_sweep)
@@ -50,7 +51,9 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
     text = text.removeprefix("\ufeff")  # a byte-order mark, as Windows editors save UTF-8
     _refuse_many_samples_early(text, file)
     try:
-        doc = tomllib.loads(text)
+        doc = loads_plain(text)  # a large scene's plain tables, three times faster; else None, and tomllib reads it
+        if doc is None:
+            doc = tomllib.loads(text)
     except RecursionError:
         raise ScenarioError(file, None, "invalid TOML: arrays or tables nested too deeply") from None
     except tomllib.TOMLDecodeError as exc:  # before ValueError, its base class: the parser's own words and line
@@ -65,12 +68,14 @@ def parse(text: str, file: str = "<scenario>") -> Scenario:
         raise ScenarioError(file, None, f"invalid TOML: {message}{column}", line=line) from None
     except ValueError as exc:  # Python refuses integer literals of more than 4300 digits
         raise ScenarioError(file, None, f"invalid TOML: a number literal too long ({str(exc).split(':')[0]})") from None
-    return parse_document(doc, text, file)
+    return parse_document(doc, text, file, decoded_from_text=True)
 
 
-def parse_document(doc: dict, text: str, file: str = "<scenario>") -> Scenario:
-    """Validate an already-decoded TOML document (a sweep member is one, edited)."""
-    _refuse_control_characters(file, doc, "")
+def parse_document(doc: dict, text: str, file: str = "<scenario>", decoded_from_text: bool = False) -> Scenario:
+    """Validate an already-decoded TOML document (a sweep member is one, edited; decoded_from_text: doc is text's
+    whole decoding, unedited)."""
+    if not (decoded_from_text and _MAY_DECODE_TO_CONTROL.search(text) is None):
+        _refuse_control_characters(file, doc, "")
     top = _Table(file, "", doc, _TOP_KEYS)
     title = top.string("title", "")
     description = top.string("description", "")
@@ -187,6 +192,10 @@ def _refuse_control_characters(file: str, node, path: str) -> None:
 
 
 _TEXT_HOLDERS = (dict, list, str)
+# What in a TOML text can decode to a control character: an escape, a multi-line string (line breaks), DEL or C1
+# (TOML refuses every other control character but the tab in its strings). A text with none of them holds none: its
+# walk (0.06 s on 30,000 tables) is skipped.
+_MAY_DECODE_TO_CONTROL = re.compile('\\\\|"""|\'\'\'|[\x7f-\x9f]')
 _CONTROL = re.compile("[\x00-\x08\x0a-\x1f\x7f-\x9f]")  # C0 but the tab, DEL, C1
 _CONTROL_MULTILINE = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f]")  # line breaks allowed too
 

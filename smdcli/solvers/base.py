@@ -14,6 +14,7 @@ from typing import Callable, ClassVar
 import numpy as np
 
 from smdcli.model import Model
+from smdcli.model.accuracy import loaded_force
 from smdcli.result import NonsmoothHistory, Result, SolverStats, finite_peak
 
 
@@ -161,8 +162,7 @@ def divergence_bound(model: Model, grid: np.ndarray) -> float:
     """GROWTH_BOUND times a size a bounded response stays within: initial state and static deflection."""
     scale = max(np.abs(model.x0).max(initial=0.0), np.abs(model.v0).max(initial=0.0), 1.0)
     if model.is_forced:
-        loaded = np.flatnonzero(np.any(model.B != 0, axis=1))  # the other DOFs' forces are zero
-        peak_force = finite_peak(model.forces(grid) @ model.B[loaded].T)
+        peak_force = finite_peak(loaded_force(model)(grid))  # the other DOFs' forces are zero
         stiffness = np.abs(model.K.diagonal()).min(initial=0.0)  # dense or a sparse scene's CSR
         scale = max(scale, peak_force / stiffness if stiffness > 0 else peak_force * (grid[-1] - grid[0]) ** 2)
     return GROWTH_BOUND * scale
