@@ -52,7 +52,7 @@ def solve(model: Model, grid: np.ndarray, method: str, tol: Tolerances, field: s
         result = result.changed(ground=history)
         notes += tuple(note for note in (record_end_note(model, grid), drift_note(model, history)) if note)
     explicit = not BY_NAME[method].stiff
-    if explicit and model.is_linear and model.is_stiff:
+    if explicit and model.is_linear and not model.is_sparse and model.is_stiff:  # a sparse scene's spread is unknown
         notes += (f"warning: this scene is stiff (stiffness ratio {model.stiffness_ratio:.3g}); "
                   f"the explicit {method} is held to tiny steps by stability: try 'exact', 'Radau' or 'auto'",)
     stats = result.stats
