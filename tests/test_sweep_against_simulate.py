@@ -151,3 +151,30 @@ def test_every_member_of_a_nonsmooth_scene_equals_simulate_of_its_scene(tmp_path
         peak = np.abs(reference.displacement).max()
         allowed = 10 * (reference.stats.stated_accuracy + float(result.stated_accuracy[s])) * peak
         assert np.abs(result.displacement[s] - reference.displacement).max() <= allowed, (law, parameter, s)
+
+
+def test_members_of_a_long_chain_are_solved_one_by_one_and_equal_simulate(tmp_path, cli):
+    """Above BATCHED_DOFS the batched recurrence's Python loop over (2n)^2 entries a step costs more than each member's
+    own exact solve (at 2,500 masses it did not finish in 10 minutes): 40 masses go one by one, each equal to
+    `simulate` of its scene; the terminal lists the first DOFs and the largest peak, not 40 of them a member."""
+    from test_large import chain
+
+    from smdcli.sweep import members
+
+    assert 40 > members.BATCHED_DOFS
+    text = chain(40, end=1.0, step=0.01)
+    path = tmp_path / "chain.toml"
+    path.write_text(text)
+    sc = scenario.load(path)
+    family = build_family(sc, read_spec(sc, {"parameter": ("spring[0].k",), "values": ("90, 110",)}))
+    result = solve_family(family)
+    assert "threads" in result.how or "process" in result.how, result.how
+    for s, k in enumerate((90.0, 110.0)):
+        member = tmp_path / f"k{s}.toml"
+        member.write_text(text.replace("k = 100.0", f"k = {k}", 1))
+        reference = simulate(member)
+        peak = np.abs(reference.displacement).max()
+        assert np.abs(result.displacement[s] - reference.displacement).max() <= 1e-11 * peak
+    shown = cli("sweep", path, "--param", "spring[0].k", "--values", "90,110", "--no-plots", "-o", tmp_path / "out")
+    assert shown.exit_code == 0, shown.output
+    assert "m5 = " in shown.stdout and "m6 = " not in shown.stdout and "(40 DOFs; the largest," in shown.stdout
