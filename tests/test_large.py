@@ -103,6 +103,19 @@ def test_auto_gives_a_sparse_scene_to_the_taylor_series_where_stability_allows_i
         assert peak_error(run.velocity, reference.velocity) <= run.stats.stated_accuracy
 
 
+@pytest.mark.parametrize("force, rayleigh", [("step", ""), ("sine", "[damping]\nalpha = 0.1\nbeta = 0.002")])
+def test_the_taylor_series_on_a_sparse_scene_across_a_force_jump_and_with_rayleigh_damping(sparse_from_ten, force,
+                                                                                           rayleigh):
+    """The series on the sparse rows restarts at a step force's jump between output points, and takes [damping]'s
+    Rayleigh C with the dampers': within what it states of the exact solution of the same scene made dense."""
+    _, model, grid = model_of(chain(40, force=force, rayleigh=rayleigh))
+    run = solve(model, grid, "auto", Tolerances(rtol=1e-8, atol=1e-12))
+    assert model.is_sparse and run.stats.method == "taylor" and run.success
+    reference = solve(model.dense(), grid, "exact", Tolerances())
+    assert peak_error(run.displacement, reference.displacement) <= run.stats.stated_accuracy
+    assert peak_error(run.velocity, reference.velocity) <= run.stats.stated_accuracy
+
+
 def test_a_force_jump_between_output_points_is_a_step_end(sparse_from_ten):
     _, model, grid = model_of(chain(20, force="step"))
     run = solve(model, grid, "sparse_newmark", Tolerances(rtol=1e-8, atol=1e-12))
