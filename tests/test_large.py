@@ -290,3 +290,21 @@ def test_a_chain_above_sparse_dofs_from_the_command_line(cli, tmp_path, monkeypa
     assert data["stiffness_ratio"] is None and len(data["modes"]) == 20 and data["auto"]["method"] == "taylor"
     refused = cli("info", scene, "--state-space", tmp_path / "ss.h5")
     assert refused.exit_code == 2 and "sparse scene" in refused.stderr and not (tmp_path / "ss.h5").exists()
+
+
+def test_the_response_plots_of_a_wave_draw_masses_it_reached(sparse_from_ten):
+    """A chain driven at one end for 1 s: the wave reaches the first few dozen of its 2,000 masses and leaves the rest
+    at exactly 0 (the series works only where it has reached). The response and phase figures draw 10 DOFs evenly
+    spaced among those that move, and say so, not 9 flat lines of masses it never reached."""
+    from smdcli.plots.response import phase_figure, response_figure
+
+    _, model, grid = model_of(chain(2000, end=1.0, step=0.001))
+    run = solve(model, grid, "taylor", Tolerances(rtol=1e-8, atol=1e-12))
+    moving = np.flatnonzero(np.any(run.displacement != 0, axis=0) | np.any(run.velocity != 0, axis=0))
+    assert np.array_equal(moving, np.arange(len(moving))) and 10 < len(moving) < 200
+    for figure in (response_figure(run, "chain"), phase_figure(run, "chain")):
+        title = " ".join(text.get_text() for text in figure.texts + [ax.title for ax in figure.axes])
+        assert f"10 of 2000 DOFs drawn, evenly spaced among the {len(moving)} that move" in title.replace("\n", " ")
+        drawn = {int(name[1:]) for ax in figure.axes for name in ax.get_legend_handles_labels()[1]
+                 if name.startswith("m")}
+        assert len(drawn) == 10 and max(drawn) == len(moving) - 1

@@ -56,13 +56,18 @@ MAX_DRAWN = 2000  # points per line: about two per pixel column of the axes
 MAX_DOFS_DRAWN = 10  # lines per axes that a reader can still tell apart (one per colour of the cycle)
 
 
-def drawn_dofs(n: int) -> tuple[np.ndarray, str]:
+def drawn_dofs(n: int, moving: np.ndarray | None = None) -> tuple[np.ndarray, str]:
     """The DOFs a figure draws, and a note for its title: all up to MAX_DOFS_DRAWN, else that many evenly spaced
-    from the first to the last (a 10,000-mass chain's 10,000 lines are one blot, and minutes of drawing)."""
+    from the first to the last (a 10,000-mass chain's 10,000 lines are one blot, and minutes of drawing), among the
+    `moving` ones where given (result.moving_columns: a wave's chain leaves most masses at 0, nine lines of ten
+    flat)."""
     if n <= MAX_DOFS_DRAWN:
         return np.arange(n), ""
-    picked = np.unique(np.linspace(0, n - 1, MAX_DOFS_DRAWN).round().astype(int))
-    return picked, f" ({len(picked)} of {n} DOFs drawn, evenly spaced; the HDF5 file holds every one)"
+    among = np.arange(n) if moving is None else np.asarray(moving)
+    picked = among[np.unique(np.linspace(0, len(among) - 1, MAX_DOFS_DRAWN).round().astype(int))] if len(among) \
+        else among
+    which = "" if moving is None else f" among the {len(among)} that move (the rest stay at 0)"
+    return picked, f" ({len(picked)} of {n} DOFs drawn, evenly spaced{which}; the HDF5 file holds every one)"
 
 
 def envelope(t: np.ndarray, y: np.ndarray, max_points: int = MAX_DRAWN) -> tuple[np.ndarray, np.ndarray]:

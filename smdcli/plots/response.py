@@ -8,7 +8,7 @@ import numpy as np
 
 from smdcli.plots.common import MAX_DRAWN, _figure, _wrap, drawn_dofs, envelope, legend_beside
 from smdcli.plots.sweep import _STYLES
-from smdcli.result import Result
+from smdcli.result import Result, moving_columns
 
 
 def _band(t: np.ndarray, y: np.ndarray, max_points: int = MAX_DRAWN):
@@ -92,7 +92,7 @@ def response_figure(result: Result, title: str):
     axes = fig.subplots(len(rows), 1, sharex=True, gridspec_kw={"height_ratios": heights})
     fig.subplots_adjust(left=0.1, right=0.97, top=0.9, bottom=0.07, hspace=0.12)
     window = _fast_window(result)
-    drawn, note = drawn_dofs(len(result.dofs))
+    drawn, note = drawn_dofs(len(result.dofs), _moving(result))
     colours = {j: f"C{i % 10}" for i, j in enumerate(drawn)}  # a force drawn in its DOF's colour
     shaded = {}
     for ax, (name, label) in zip(axes, rows):
@@ -192,9 +192,14 @@ def _zoom_inset(ax, result: Result, data: np.ndarray, window: tuple[float, float
     inset.set_facecolor("white")
 
 
+def _moving(result: Result) -> np.ndarray | None:
+    """The DOFs that move in the run, where most of many do not (result.moving_columns)."""
+    return moving_columns(result.displacement, result.velocity, result.acceleration)
+
+
 def phase_figure(result: Result, title: str):
     """Phase portrait of a run: velocity against displacement per DOF, start and direction marked."""
-    drawn, note = drawn_dofs(len(result.dofs))
+    drawn, note = drawn_dofs(len(result.dofs), _moving(result))
     _, x, v = result.with_events()  # a stick's corner, an impact's jump: the samples alone cut them
     curves = [(result.dofs[j], x[:, j], v[:, j]) for j in drawn]
     return portrait_figure(curves, f"{title}\nphase portrait{note}")
