@@ -74,13 +74,12 @@ def format_sensitivity(d: dict) -> str:
     lines = [f"{d['scenario']}: sensitivities of the peak displacement ({plural(len(d['parameters']), 'parameter')}, "
              f"{how})"]
     width = max(len(p["path"]) for p in d["parameters"])
-    from smdcli.commands.simulate import SHOWN
+    from smdcli.commands.simulate import SHOWN, listed
 
     items = list(d["peak_displacement"].items())
-    shown = items
-    if len(items) > SHOWN:  # a large model's DOFs are for --json or the file: the first few and the largest peak
-        first, largest = items[:SHOWN // 2], max(items, key=lambda item: item[1]["value"])
-        shown = first if largest in first else [*first, largest]
+    shown, largest = listed(items, lambda peak: peak["value"])
+    if largest is not None and largest not in shown:
+        shown = [*shown, largest]
     for dof, peak in shown:
         lines.append(f"  {dof}: peak |x| {peak['value']:.6g} m at t = {peak['time']:.6g} s")
         for p in d["parameters"]:

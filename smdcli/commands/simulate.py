@@ -191,9 +191,10 @@ def format_summary(data: dict) -> str:
     lines.append(f"  cost     {data['steps_accepted']} steps ({rejected} rejected), {data['nfev']} f evals, "
                  f"{data['njev']} Jacobians, {data['nlu']} LU; {data['wall_time_s'] * 1e3:.1f} ms")
     items = list(data["peak_displacement_m"].items())
-    peaks = ", ".join(f"{k} {v:.6g}" for k, v in (items if len(items) <= SHOWN else items[:SHOWN // 2]))
-    if len(items) > SHOWN:  # a large model's peaks are for --json or the HDF5 file, not a terminal
-        name, top = max(items, key=lambda kv: kv[1])
+    shown, largest = listed(items, lambda value: value)
+    peaks = ", ".join(f"{k} {v:.6g}" for k, v in shown)
+    if len(shown) < len(items):
+        name, top = largest
         peaks += f" m, ... ({len(items)} DOFs; the largest, {top:.6g} m, at {name}; --json lists every one)"
     else:
         peaks += " m"
@@ -309,6 +310,16 @@ def _listed(matrix) -> list | dict:
 
 
 SHOWN = 12  # DOFs, matrix rows and modes `smd info` writes out on a terminal; beyond, a summary
+
+
+def listed(items: list, size) -> tuple[list, tuple | None]:
+    """A terminal's list of a model's DOFs ((name, value) items): every one up to SHOWN; beyond (a large model's
+    are for --json or the file), the first SHOWN // 2 and the item of the largest size(value), that item also
+    returned (None where every one is listed or no value has a size: size gives None for those)."""
+    if len(items) <= SHOWN:
+        return items, None
+    sized = [item for item in items if size(item[1]) is not None]
+    return items[:SHOWN // 2], max(sized, key=lambda item: size(item[1])) if sized else None
 
 
 def format_info(d: dict) -> str:

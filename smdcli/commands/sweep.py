@@ -409,19 +409,18 @@ def format_summary(data: dict) -> str:
                      "the HDF5 file)")
     if "metric" in data:
         name = data["metric"]["name"]
-        from smdcli.commands.simulate import SHOWN
+        from smdcli.commands.simulate import listed
 
         for label, values in list(data["metric"]["per_member"].items())[:12]:
             unit = METRIC_UNITS[name]
             items = list(values.items())
+            shown, largest = listed(items, lambda value: value if value is not None and math.isfinite(value) else None)
             cells = ", ".join(f"{dof} = {value:.4g} {unit}" if value is not None and math.isfinite(value)
                               else f"{dof} = {'not settled' if name == 'settling_time' else 'n/a'}"
-                              for dof, value in (items if len(items) <= SHOWN else items[:SHOWN // 2]))
-            if len(items) > SHOWN:  # a large model's DOFs are for --json or the file: the first few and the largest
-                dof, top = max(((d, v) for d, v in items if v is not None and math.isfinite(v)),
-                               key=lambda item: item[1], default=(None, math.nan))
-                largest = f"; the largest, {top:.4g} {unit}, at {dof}" if dof is not None else ""
-                cells += f", ... ({len(items)} DOFs{largest}; --json lists every one)"
+                              for dof, value in shown)
+            if len(shown) < len(items):
+                top = f"; the largest, {largest[1]:.4g} {unit}, at {largest[0]}" if largest is not None else ""
+                cells += f", ... ({len(items)} DOFs{top}; --json lists every one)"
             lines.append(f"  {label}: {name} {cells}")
         if data["members"] > 12:
             lines.append(f"  ... {data['members'] - 12} more in the HDF5 file")
