@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from smdcli import scenario as scenario_mod
-from smdcli.analysis.signal_derivative import combined, signal_derivative
+from smdcli.analysis.signal_derivative import anchors, combined, signal_derivative
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import Model, build
 from smdcli.model.damping import modal_damping_derivative
@@ -45,7 +45,10 @@ from smdcli.sweep.family import STRUCTURAL, decoded, parameter_value, set_parame
 CENTRAL = (-2.0, -1.0, 1.0, 2.0)  # offsets in units of delta: exact for polynomials of degree 4 (its symmetry)
 FORWARD = (0.0, 1.0, 2.0, 3.0, 4.0)  # where p - delta is not a valid scene (a damper at c = 0): degree 4 too
 BACKWARD = (0.0, -1.0, -2.0, -3.0, -4.0)  # where p + delta is not (a kinetic friction force just below its static one)
-STEPS = (1e-3, 1e-4, 2e-5)  # relative deltas tried, largest first, until the stencil's error is rounding's
+# relative deltas tried, largest first, until the stencil's error is rounding's: the smallest for a generator's state
+# at a late time (a force's frequency over a long run, whose stencil error grows as (delta t)^4), each rounded to a
+# power of two, so that p + o delta is p's own number plus an exact one and an array affine in p differs exactly
+STEPS = (1e-3, 1e-4, 2e-5, 4e-6, 8e-7, 1.6e-7)
 _LINEAR_ELEMENT = re.compile(r"spring\[\d+\]\.k|damper\[\d+\]\.c")
 _LAW_KEY = re.compile(r"(?P<kind>spring|friction|stop)\[(?P<index>\d+)\]\.(?P<key>\w+)")  # a law's own key
 AFFINE_STEP = 1e-2  # relative step of an affine parameter's one difference: exact for any step; larger, less rounding
@@ -127,9 +130,10 @@ def _beside_law(law) -> tuple[float, float, float]:
     return law.elastic_stiffness, law.linear_stiffness, float(getattr(law, "belt_velocity", 0.0))
 
 
-def _model_arrays(model: Model, t_end: float) -> list[np.ndarray]:
+def _model_arrays(model: Model, t_end: float, flowed: bool = False) -> list[np.ndarray]:
     """Every array of a model a derivative is taken of: matrices, initial state, jumps, generators (with their
-    state at the run's end, where a frequency's stencil is least accurate)."""
+    state at the run's end, where a frequency's stencil is least accurate; flowed: at the anchor the exact
+    solver's ParameterDerivative flows it from)."""
     dense = model.dense()
     arrays = [dense.M, dense.C, dense.K, model.x0, model.v0]
     arrays += [np.concatenate([dx, dv]) for _, dx, dv in model.jumps]
@@ -138,7 +142,7 @@ def _model_arrays(model: Model, t_end: float) -> list[np.ndarray]:
         if isinstance(signal, Table):
             arrays.append(signal.v)
         elif exo is not None:
-            arrays += [exo.S, exo.g, signal.exo_state(t_end)]
+            arrays += [exo.S, exo.g, signal.exo_state(anchors(signal, np.array([t_end]))[0] if flowed else t_end)]
         else:
             arrays.append(np.atleast_1d(signal.value(np.array([t_end]))))
     return [np.asarray(a, dtype=float) for a in arrays]
@@ -155,10 +159,12 @@ def _structure(model: Model, grid: np.ndarray) -> tuple:
 
 
 def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str,
-               base_arrays: list[np.ndarray] | None = None, structure: tuple | None = None) -> Derivative:
+               base_arrays: list[np.ndarray] | None = None, structure: tuple | None = None,
+               flowed: bool = False) -> Derivative:
     """The model's derivative with respect to one parameter path (base_arrays: _model_arrays of base at the grid's
-    end, structure: _structure of base, where the caller has them); UsageError where the path is not a number of the
-    scene, or moves what has no derivative (a force's discontinuity in time, the model's structure)."""
+    end, structure: _structure of base, where the caller has them; flowed: the exact solver's, whose generators'
+    derivatives flow from their anchors); UsageError where the path is not a number of the scene, or moves what has
+    no derivative (a force's discontinuity in time, the model's structure)."""
     if path.startswith(_REFUSED) or path == "zeta":
         raise UsageError(f"--param {path}: not a parameter of the scene (the run's span, its solver and its "
                          "sweep are not differentiated; for zeta give the damper's c)")
@@ -166,11 +172,12 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
     scale = relative_size(value)
     structure = _structure(base, grid) if structure is None else structure
     t_end = float(grid[-1])
-    arrays = {id(base): (base, base_arrays or _model_arrays(base, t_end))}  # the model held: its id stays its own
+    # the model held: its id stays its own
+    arrays = {id(base): (base, base_arrays or _model_arrays(base, t_end, flowed))}
 
     def arrays_of(model: Model) -> list[np.ndarray]:
         if id(model) not in arrays:
-            arrays[id(model)] = (model, _model_arrays(model, t_end))
+            arrays[id(model)] = (model, _model_arrays(model, t_end, flowed))
         return arrays[id(model)][1]
 
     if affine(sc, base, path):
@@ -181,7 +188,7 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
             return found
     best = refused = None
     for relative in STEPS:
-        delta = relative * scale
+        delta = 2.0 ** round(math.log2(relative * scale))
         for offsets in (CENTRAL, FORWARD, BACKWARD):
             doubled = offsets + tuple(2 * o for o in offsets if 2 * o not in offsets)
             try:
@@ -398,13 +405,13 @@ def check_once(paths: list[str]) -> None:
 
 
 def model_derivatives(sc: Scenario, base: Model, grid: np.ndarray, paths: list[str],
-                      doc: dict | None = None) -> list[Derivative]:
+                      doc: dict | None = None, flowed: bool = False) -> list[Derivative]:
     """Each parameter's model derivative (paths as the sweep takes them; doc: the scenario's TOML document where the
-    caller has it); UsageError for a path given twice."""
+    caller has it; flowed: for the exact solver's augmented model); UsageError for a path given twice."""
     check_once(paths)
     doc = decoded(sc.text) if doc is None else doc  # decoded once per text; _scene_at copies before it edits
-    base_arrays, structure = _model_arrays(base, float(grid[-1])), _structure(base, grid)
-    return [derivative(sc, doc, base, grid, path, base_arrays, structure) for path in paths]
+    base_arrays, structure = _model_arrays(base, float(grid[-1]), flowed), _structure(base, grid)
+    return [derivative(sc, doc, base, grid, path, base_arrays, structure, flowed) for path in paths]
 
 
 def relative_size(value: float) -> float:

@@ -178,7 +178,7 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
         raise UsageError(f"{sc.path}: {plural(len(params), 'parameter')} of a {base.n}-DOF scene stack "
                          f"{(len(params) + 1) * base.n} DOFs; smd sensitivity takes at most {MAX_SIZE}")
     grid = time_grid(sc.time) if grid is None else np.asarray(grid, dtype=float)
-    derivatives = model_derivatives(sc, base, grid, list(params), doc)
+    derivatives = model_derivatives(sc, base, grid, list(params), doc, flowed=base.is_linear)
     n, P = base.n, len(derivatives)
     tol = Tolerances()
     run = dense = None

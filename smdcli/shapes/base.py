@@ -89,6 +89,11 @@ class Signal:
         """exo_state at each of the times t, (len(t), its size)."""
         return np.array([self.exo_state(float(time)) for time in t]).reshape(len(t), -1)
 
+    def phase_origin(self) -> float:
+        """Where the generator's state holds still as its frequency moves (the origin of its phase): 0, or the time a
+        shape's series counts from."""
+        return 0.0
+
     def derivative(self, start: float) -> Signal | None:
         """d/dt between the signal's jumps, for a run from `start` (None where it is zero); the jumps themselves
         are the caller's (value - value_left at the breakpoints)."""

@@ -52,6 +52,9 @@ class FourierSquare(Signal):
         derived.phase = self.phase + math.pi / 2
         return derived
 
+    def phase_origin(self):
+        return self.t0
+
     def harmonic_terms(self):
         w = self.harmonics * self.omega
         return w, np.asarray(self.coefs, dtype=float), self.phase - w * self.t0
