@@ -85,11 +85,13 @@ def shared_signal_recurrence(family: Family, grid: np.ndarray) -> tuple[np.ndarr
             forcing = np.zeros((FORCING_BLOCK, 2 * n, c))
             rows = [[np.ascontiguousarray(step[:, i, j]) for j in range(2 * n)] for i in range(2 * n)]
             term = np.empty(c)
+        made = -1  # the block of steps whose force terms `forcing` holds
         for k in range(N - 1):
             if uniform and k not in split_steps:
                 b = k % FORCING_BLOCK
-                if b == 0 and E:
-                    block = W[k:k + FORCING_BLOCK]
+                if k // FORCING_BLOCK != made and E:  # not only at b == 0: a block's first step may be a split one
+                    made = k // FORCING_BLOCK
+                    block = W[made * FORCING_BLOCK:(made + 1) * FORCING_BLOCK]
                     np.matmul(block, coupling, out=forcing.reshape(FORCING_BLOCK, -1)[:len(block)])
                 now, nxt = ys[k], ys[k + 1]
                 for i in range(2 * n):
