@@ -248,7 +248,7 @@ def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gr
 
 def _absolute(peak: np.ndarray, P: int, rtol: float) -> np.ndarray:
     """Absolute tolerances of [y, S] from the state's peaks: rtol of each component's peak, a thousandth of it."""
-    floor = np.maximum(peak, 1e-12 * max(peak.max(initial=0.0), 1e-300))
+    floor = np.maximum(peak, 1e-12 * max(peak.max(initial=0.0), 1e-150))  # a scene at rest: above zero still
     return np.concatenate([floor, np.repeat(floor, P)]) * rtol * 1e-3
 
 
