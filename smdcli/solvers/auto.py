@@ -13,7 +13,7 @@ from smdcli.model import GROUND_DOF, Model
 from smdcli.model.sparse import gershgorin_rate
 from smdcli.result import Result
 from smdcli.solvers.base import Solver, Tolerances
-from smdcli.solvers.exact.linear import sparse_action
+from smdcli.solvers.exact.linear import sparse_action, unheld
 from smdcli.solvers.exact.modal import modal_applies
 from smdcli.solvers.integrators.compiled import StiffnessDetected
 from smdcli.solvers.integrators.taylor_series import Taylor, taylor_boundary, taylor_order
@@ -35,13 +35,6 @@ def _loads(model: Model) -> str:
         parts.append(f"a {model.ground.kind} ground {model.ground.quantity}"
                      + (f" (restarted exactly at its {len(model.ground.jumps)} jump(s))" if model.ground.jumps else ""))
     return "with " + " and ".join(parts) if parts else "free response"
-
-
-def _unheld(model: Model) -> str:
-    """The forces without an exact integral, by path and type: 'force[0] (expression)'."""
-    held = [f"{path} ({kind})" for path, kind, s in zip(model.force_paths, model.force_types, model.signals)
-            if s.exo() is None]
-    return ", ".join(held)
 
 
 STIFFNESS_NOTE_DOFS = 200  # beyond, the reason names stiffness only where the symmetric solver gives it
@@ -118,9 +111,9 @@ class Auto(Solver):
                                      f"exponential), exact to rounding{stiff}")
                 return get_solver("exact"), f"linear time-invariant, {forced}: matrix exponential, exact to rounding{stiff}"
             if model.is_stiff:
-                return get_solver("Radau"), (f"linear, but {_unheld(model)} has no exact integral, and stiff "
+                return get_solver("Radau"), (f"linear, but {unheld(model)} has no exact integral, and stiff "
                                  f"(stiffness ratio {model.stiffness_ratio:.3g}): implicit Radau at the scenario's tolerances")
-            return get_solver("DOP853"), (f"linear, but {_unheld(model)} has no exact integral; not stiff "
+            return get_solver("DOP853"), (f"linear, but {unheld(model)} has no exact integral; not stiff "
                               f"(stiffness ratio {model.stiffness_ratio:.3g}): DOP853 at the scenario's tolerances")
         return None, ""
 
