@@ -31,7 +31,7 @@ from smdcli.solvers.events.decisions import impact, project
 from smdcli.solvers.events.piecewise import PiecewiseRun
 from smdcli.solvers.events.scene import Scene
 from smdcli.solvers.exact.flow import Flow
-from smdcli.solvers.exact.linear import first_order_hold
+from smdcli.solvers.exact.hold import first_order_hold
 
 GRAZING = 1e-9  # a crossing whose rate is below this share of the terms it sums is met tangentially: no dt*/dp
 # what the sensitivities are stated to, relative to each parameter's largest: the rounding of each event's time

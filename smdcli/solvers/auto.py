@@ -13,7 +13,8 @@ from smdcli.model import GROUND_DOF, Model
 from smdcli.model.sparse import gershgorin_rate
 from smdcli.result import Result
 from smdcli.solvers.base import Solver, Tolerances
-from smdcli.solvers.exact.linear import sparse_action, unheld
+from smdcli.solvers.exact.hold import unheld
+from smdcli.solvers.exact.linear import sparse_action
 from smdcli.solvers.exact.modal import modal_applies
 from smdcli.solvers.integrators.compiled import StiffnessDetected
 from smdcli.solvers.integrators.taylor_series import Taylor, taylor_boundary, taylor_order

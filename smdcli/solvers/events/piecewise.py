@@ -37,7 +37,7 @@ from smdcli.solvers.base import make_result
 from smdcli.solvers.events.batches import Batches
 from smdcli.solvers.events.crossings import Crossings
 from smdcli.solvers.exact.flow import Flow
-from smdcli.solvers.exact.linear import first_order_hold, hold_error
+from smdcli.solvers.exact.hold import first_order_hold, halved, held_reason, hold_error, hold_response_error
 from smdcli.solvers.events.decisions import accumulation, consistent, impact, project, remaining_flights, touch
 from smdcli.solvers.events.scene import TOUCH, Mode, Scene
 from smdcli.solvers.events.record import Outputs, step_integrals
@@ -391,10 +391,17 @@ def solve_exactly(name: str, model: Model, grid: np.ndarray) -> Result:
                             message=f"failed: {exc}", wall_time_s=time.perf_counter() - start)
         nan = np.full((len(grid), model.n), np.nan)
         return make_result(held_model, grid, nan, nan, stats, t_failed=float(grid[0]))
-    if held:
-        stated = max(stated, hold_error(model, grid, held))
+    reason = ""
+    if held and len(grid) > 1:
+        fine = halved(grid)
+        try:
+            stated = max(stated, hold_error(model, grid, held), hold_response_error(
+                x, lambda: solve_piecewise(first_order_hold(model, fine)[0], fine)[0]))
+        except PiecewiseFailed:
+            stated = max(stated, hold_error(model, grid, held))
         message += f"; first-order hold on the output grid for {', '.join(held)} (error O(step^2))"
-    stats = SolverStats(method=name, requested_method=name, reason="", nlu=0,
+        reason = held_reason(model, stated)
+    stats = SolverStats(method=name, requested_method=name, reason=reason, nlu=0,
                         steps_accepted=max(len(grid) - 1, 0), wall_time_s=time.perf_counter() - start,
                         message=message, stated_accuracy=stated)
     return make_result(held_model, grid, x, v, stats, acceleration=a, nonsmooth=history)

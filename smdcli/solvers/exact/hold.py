@@ -1,0 +1,87 @@
+"""Forces without an exact generator (a chirp, a formula: Signal.exo() is None) held linearly between samples, as
+the exact solver and the event-located integrators take them, and what the hold costs in accuracy and says.
+
+Must not import: sweep, io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from smdcli.model import Model
+from smdcli.shapes.table import Table
+
+
+def first_order_hold(model: Model, grid: np.ndarray) -> tuple[Model, tuple[str, ...]]:
+    """Replace forces without an exact form (Signal.exact false) by their piecewise-linear interpolant on the grid."""
+    held = tuple(path for path, s in zip(model.force_paths, model.signals) if s.exo() is None)
+    if not held:
+        return model, held
+    signals = tuple(s if s.exo() is not None else Table(grid, s.value(grid), "linear") for s in model.signals)
+    return dataclasses.replace(model, signals=signals), held
+
+
+FINEST_HOLD = 64  # samples of a held force per output step at most (the event-located integrators restart at each)
+
+
+def held_finely(model: Model, grid: np.ndarray, rtol: float) -> tuple[Model, float, int]:
+    """A nonsmooth scene's forces without an exact generator (a chirp, a formula) as tables the event-located
+    integrators can take (their scene propagates generators): sampled at a power-of-two fraction of the output step,
+    the coarsest whose linear hold errs by at most rtol of the force's peak (at most FINEST_HOLD to a step); the
+    model, the hold's error and the samples to a step (the model itself, 0 and 1 where every force has a generator)."""
+    held = tuple(path for path, s in zip(model.force_paths, model.signals) if s.exo() is None)
+    if not held or len(grid) < 2:
+        return model, 0.0, 1
+    per_step = 1
+    while True:
+        fine = np.linspace(grid[0], grid[-1], (len(grid) - 1) * per_step + 1)
+        error = hold_error(model, fine, held)
+        if error <= rtol or per_step >= FINEST_HOLD:
+            return first_order_hold(model, fine)[0], error, per_step
+        per_step *= 2
+
+
+def halved(grid: np.ndarray) -> np.ndarray:
+    """The grid with the midpoint of each step added: its points are the even ones."""
+    fine = np.empty(2 * len(grid) - 1)
+    fine[::2], fine[1::2] = grid, 0.5 * (grid[1:] + grid[:-1])
+    return fine
+
+
+def hold_response_error(x: np.ndarray, solved_on) -> float:
+    """The hold's error in the response, relative to its peak: the run again with the forces held on the grid halved
+    (solved_on(fine) -> its displacement), whose difference from the run is 3/4 of the run's error (O(step^2)). The
+    force's own relative gap (hold_error) understated it by up to 1.2x where the dynamics amplify what the hold
+    leaves out."""
+    finer = solved_on()[::2]
+    peak = max(float(np.abs(finer).max(initial=0.0)), 1e-300)
+    return min(1.0, 4.0 / 3.0 * float(np.abs(x - finer).max(initial=0.0)) / peak)
+
+
+def held_reason(model: Model, error: float) -> str:
+    """A requested exact run's reason where it held a force: not the registry's "exact to rounding", the hold's
+    error being the run's."""
+    return (f"requested: matrix exponential, but {unheld(model)} has no exact integral and is held linearly between "
+            f"output points: error about {error:.1e} of the peak, not rounding's ('auto' or 'DOP853' integrates it to "
+            "the tolerance)")
+
+
+def unheld(model: Model) -> str:
+    """The forces without an exact integral, by path and type: 'force[0] (expression)'."""
+    held = [f"{path} ({kind})" for path, kind, s in zip(model.force_paths, model.force_types, model.signals)
+            if s.exo() is None]
+    return ", ".join(held)
+
+
+def hold_error(model: Model, grid: np.ndarray, held: tuple[str, ...]) -> float:
+    """Relative size of the first-order hold's error: the held forces between grid points against their peak."""
+    middle = 0.5 * (grid[1:] + grid[:-1])
+    worst = 0.0
+    for path, signal in zip(model.force_paths, model.signals):
+        if path in held:
+            values = signal.value(grid)
+            gap = np.abs(signal.value(middle) - 0.5 * (values[1:] + values[:-1])).max(initial=0.0)
+            worst = max(worst, gap / max(np.abs(values).max(initial=0.0), 1e-300))
+    return min(1.0, worst)
