@@ -89,7 +89,7 @@ def scenes(draw):
     elif damping == "rayleigh":
         lines += ["[damping]", f"alpha = {draw(st.floats(0.0, 0.5))!r}", f"beta = {draw(st.floats(0.0, 0.002))!r}"]
     force = draw(st.sampled_from(["none", "sine", "step", "square", "table", "pulse", "ground_sine", "ground_record",
-                                  "ground_pulse"]))
+                                  "ground_pulse", "chirp", "fourier_square", "expression"]))
     on = draw(st.sampled_from(names))
     amplitude = draw(st.floats(0.5, 10.0))
     if force == "sine":
@@ -111,6 +111,16 @@ def scenes(draw):
                  f"duration = {draw(st.sampled_from([0.011, 0.05, 0.3333]))!r}"]
         where = ["[[force]]", f'on = "{on}"'] if force == "pulse" else ["[ground_motion]", 'quantity = "acceleration"']
         lines += where + pulse
+    elif force == "chirp":
+        lines += ["[[force]]", f'on = "{on}"', 'type = "chirp"', f"amplitude = {amplitude!r}",
+                  f"f0 = {draw(st.floats(0.5, 2.0))!r}", f"f1 = {draw(st.floats(2.0, 8.0))!r}", "t1 = 1.0"]
+    elif force == "fourier_square":
+        lines += ["[[force]]", f'on = "{on}"', 'type = "fourier_square"', f"amplitude = {amplitude!r}",
+                  f"period = {draw(st.sampled_from([0.3, 0.77]))!r}", f"terms = {draw(st.sampled_from([5, 15]))!r}",
+                  f"t0 = {draw(st.sampled_from([0.0, 0.2345]))!r}"]
+    elif force == "expression":
+        shape = draw(st.sampled_from(["sin(7*t)*exp(-t)", "abs(sin(5*t))", "t*heaviside(t - 0.3)"]))
+        lines += ["[[force]]", f'on = "{on}"', 'type = "expression"', f'expr = "{amplitude!r}*{shape}"']
     elif force == "ground_sine":
         lines += ["[ground_motion]", 'quantity = "acceleration"', 'type = "sine"', f"amplitude = {amplitude!r}",
                   f"omega = {draw(st.floats(2.0, 30.0))!r}"]
@@ -133,6 +143,12 @@ def solved(path, method):
         return None
 
 
+def reference_method(model) -> str:
+    """exact where the scene is linear between events and every force has an exact integral, else "reference"."""
+    exactly = (model.is_linear or model.is_piecewise_linear) and all(s.exo() is not None for s in model.signals)
+    return "exact" if exactly else "reference"
+
+
 def check_scene(text: str, tmp_path) -> None:
     import smdcli
     from smdcli.analysis.guards import suspicions
@@ -140,8 +156,9 @@ def check_scene(text: str, tmp_path) -> None:
     path = tmp_path / "scene.toml"
     path.write_text(text)
     model = smdcli.build(smdcli.load(path))
-    # the reference: exact where the scene is linear between events, else DOP853 two orders tighter
-    exact = solved(path, "exact" if model.is_linear or model.is_piecewise_linear else "reference")
+    # the reference: exact where the scene is linear between events and its forces have exact integrals (a chirp's or
+    # a formula's it holds linearly between samples, O(step^2)), else DOP853 two orders tighter
+    exact = solved(path, reference_method(model))
     if exact is None:
         return
     peak = max(float(np.abs(exact.displacement).max()), 1e-9)
@@ -271,7 +288,7 @@ def check_sensitivity(text: str, tmp_path) -> None:
 
     sc = scenario.parse(text, str(tmp_path / "scene.toml"))
     model = smdcli.build(sc)
-    method = "exact" if model.is_linear or model.is_piecewise_linear else "reference"
+    method = reference_method(model)
     for param in sensitivity_params(text):
         try:
             s = smdcli.sensitivity(sc, [param])
