@@ -420,6 +420,29 @@ end = 1.0
 step = 0.01
 [[mass]]
 name = "m0"
+m = 4.0
+x0 = 0.01
+v0 = 0.0
+[[spring]]
+connects = ["ground", "m0"]
+law = "elastoplastic"
+k = 50.0
+fy = 0.5
+[[stop]]
+connects = ["ground", "m0"]
+max = 0.015625
+restitution = 0.3
+[[force]]
+on = "m0"
+type = "sine"
+amplitude = 1.0
+omega = 2.0
+""")  # started at its yield point (x0 = fy / k): no derivative in k, where smd printed one 1.6e-3 off
+@example("""[time]
+end = 1.0
+step = 0.01
+[[mass]]
+name = "m0"
 m = 0.8125
 x0 = 0.0
 v0 = 0.0

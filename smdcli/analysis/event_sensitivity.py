@@ -210,6 +210,8 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
         n, E = self.n, self.scene.E
         S = np.zeros((self.P, self.scene.size))
         for i in range(self.P):
+            branches, internals = set(), {}  # the elements' starting modes and internal values at the stencil's points
+
             def initial(scene, c):
                 model = scene.model
                 z0 = np.zeros(scene.size)
@@ -217,8 +219,17 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
                 scene.reseed(z0, t)
                 d0, rate0 = scene.R @ model.x0, scene.R @ model.v0 + scene.belts
                 starts = [el.law.start(float(d0[e]), float(rate0[e])) for e, el in enumerate(scene.elements)]
+                branches.add(tuple(s.mode for s in starts))
+                internals[c] = np.array([value for s in starts for value in _values(s)])
                 return np.concatenate([z0] + [_values(s) for s in starts])
             flat = self.total(i, initial)
+            if len(branches) > 1 or _kinked(internals, np.array([v for s in states for v in _values(s)])):
+                # a start on the edge of two branches (deformed to its yield point exactly)
+                edge = [el.path for k, el in enumerate(self.scene.elements) if len({b[k] for b in branches}) > 1] or \
+                    [el.path for el, state in zip(self.scene.elements, states) if state.internal]
+                self.no_derivative(t, f"{', '.join(edge)} starts on the edge between two of its branches (within "
+                                      "the parameter's step: a spring deformed to its yield point), where the "
+                                      "response's derivatives on either side differ")
             S[i] = flat[:self.scene.size]
             at = self.scene.size
             for e in range(E):
@@ -315,6 +326,21 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
         self.carry_internal(states, after, z, S, self.events[before:])
         self.settle_checkpoint(t, z_after, S, after)
         return after, z_after
+
+
+def _kinked(internals: dict, nominal: np.ndarray) -> bool:
+    """Whether internal values at stencil points on either side of the nominal one (at 0) slope differently: by a
+    tenth or more, where a smooth dependence differs by about the step (1e-3), and a kink (the plastic deformation
+    of a spring started at its yield point: zero on one side) by all of it."""
+    left = [c for c in internals if c < 0]
+    right = [c for c in internals if c > 0]
+    if not left or not right or not len(nominal):
+        return False
+    cl, cr = max(left), min(right)
+    slope_left, slope_right = (nominal - internals[cl]) / -cl, (internals[cr] - nominal) / cr
+    size = np.maximum(np.abs(slope_left), np.abs(slope_right))
+    floor = 1e-9 * (np.abs(nominal) + 1e-300) / min(-cl, cr)
+    return bool(np.any((np.abs(slope_right - slope_left) > 0.1 * size) & (size > floor)))
 
 
 def _values(state: State) -> list[float]:
