@@ -10,8 +10,9 @@ sensitivity` must cost less, whichever way it is compared:
   derivative) against that forward run with its peaks located (a difference of the peaks needs each run's).
 
 The last rows are classically damped chains (wall.chain's), whose forward run is output-bound: each sensitivity
-has an output of its own and a coupling to the scene's state on top (its equations are driven by dA/dp x), so that
-where the outputs' cost dominates the fixed cost a run shares, P exact sensitivities cost more than P + 1 runs.
+has an output of its own and a coupling to the scene's state on top (its equations are driven by dA/dp x). From 64
+stacked DOFs ((P + 1) n) they are solved in modal coordinates (analysis/modal_sensitivity.py); below, by the dense
+stacked system, where the outputs' cost can outweigh the fixed cost a run shares.
 
 Median wall times in one process, interleaved, after a warm-up of each (the forward run with BLAS on one thread
 where the scene is small, as the sensitivities run it); the ratios against P + 1.
@@ -55,8 +56,11 @@ SCENES = [  # (scenario, its parameters)
     ("chain of 10 masses", ["spring[0].k"]),
     ("chain of 30 masses", ["spring[0].k"]),
     ("chain of 30 masses", ["spring[0].k", "damper[0].c"]),
-    # from 64 DOFs the forward run of a classically damped scene is in modal coordinates; the stacked system is not
+    # from 64 DOFs the forward run of a classically damped scene is in modal coordinates, and from 64 stacked DOFs
+    # ((P + 1) n) its sensitivities too
     ("chain of 100 masses", ["spring[0].k"]),
+    ("chain of 100 masses", ["spring[0].k", "damper[50].c", "mass.m99.m"]),
+    ("chain of 300 masses", ["spring[0].k"]),
 ]
 
 

@@ -282,6 +282,29 @@ def sensitivity_params(text: str) -> list[str]:
     return params
 
 
+def check_modal_sensitivity(sc, param: str, found, text: str) -> None:
+    """Where a linear scene is classically damped, its modal path (held on however small the scene) against the
+    sensitivity that answered: within ten times the stated errors of both."""
+    import smdcli
+    import smdcli.analysis.modal_sensitivity as modal_path
+
+    saved = modal_path.STACKED_DOFS
+    modal_path.STACKED_DOFS = 1
+    try:
+        modal = smdcli.sensitivity(sc, [param])
+    finally:
+        modal_path.STACKED_DOFS = saved
+    if modal.method != modal_path.MODAL_METHOD:
+        return  # not served: the stacked system answered both times
+    for quantity in ("displacement", "velocity", "acceleration"):
+        mine, theirs = getattr(modal, f"d_{quantity}")[0], getattr(found, f"d_{quantity}")[0]
+        largest = max(float(np.abs(theirs).max()), 1e-300)
+        allowed = 10 * (modal.accuracy[f"d_{quantity}"][0] + found.accuracy[f"d_{quantity}"][0]) * largest
+        error = float(np.abs(mine - theirs).max())
+        assert error <= allowed, (f"the modal path's d_{quantity} / d {param} differs by {error / largest:.3g} of its "
+                                  f"largest (allowed {allowed / largest:.3g})\n{text}")
+
+
 def check_sensitivity(text: str, tmp_path) -> None:
     """`smd sensitivity` of each of sensitivity_params against Richardson's extrapolation of central differences
     of the reference runs (exact, or DOP853 at rtol 1e-12) at steps h and 2h of 1e-4 of the value: within ten times
@@ -305,6 +328,8 @@ def check_sensitivity(text: str, tmp_path) -> None:
         value, d = float(s.value[0]), s.d_displacement[0]
         if np.abs(s.displacement).max() <= 1e-12:
             continue  # held still (friction, or nothing acts): smd says no DOF moves, its derivatives are rounding's
+        if model.is_linear:
+            check_modal_sensitivity(sc, param, s, text)
         h = 1e-4 * abs(value)
         runs = {}
         for offset in (-2, -1, 1, 2):

@@ -184,8 +184,7 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
     run = dense = None
     scales = np.array([relative_size(d.value) for d in derivatives])
     if base.is_linear:
-        values, stated = _linear(sc, base, derivatives, grid, tol)
-        method = METHOD
+        values, stated, method = _linear(sc, base, derivatives, grid, tol)
     else:
         if piecewise:
             blocks, stated, run = _events(base, derivatives, scales, grid)
@@ -306,15 +305,20 @@ def _split(blocks: dict, scales: np.ndarray) -> np.ndarray:
     return values
 
 
-def _linear(sc: Scenario, base, derivatives: list, grid: np.ndarray, tol: Tolerances) -> tuple[np.ndarray, float]:
-    """Each quantity's scene (N, n) and derivatives (P, N, n), as _split's one array, by the exact solver, and its
-    accuracy: on its dense and record-sample paths each read off the stacked state straight into its place
+def _linear(sc: Scenario, base, derivatives: list, grid: np.ndarray, tol: Tolerances) -> tuple[np.ndarray, float,
+                                                                                             str]:
+    """Each quantity's scene (N, n) and derivatives (P, N, n), as _split's one array, by the exact solver, its
+    accuracy and how they were obtained: on its dense and record-sample paths each read off the stacked state straight into its place
     (read_exactly; a derivative block reaches only itself, the scene and the forces: its products skip the rest);
     elsewhere (jumps, harmonics superposed, the modal or sparse paths, unequal steps) as blocks of the stacked
-    model's result."""
+    model's result; a classically damped scene in its modal coordinates (modal_sensitivity.py)."""
+    from smdcli.analysis.modal_sensitivity import MODAL_METHOD, modal_sensitivities
     from smdcli.solvers.exact.linear import read_exactly
 
     stacked, scales = augmented_model(base, derivatives)
+    modal = modal_sensitivities(base, stacked, scales, grid)
+    if modal is not None:  # a classically damped scene: its modes and each parameter's, side by side
+        return (*modal, MODAL_METHOD)
     P, n, N = len(derivatives), base.n, len(grid)
     values = np.empty((len(QUANTITIES), P + 1, N, n))
     total, reads = (P + 1) * n, []
@@ -336,7 +340,7 @@ def _linear(sc: Scenario, base, derivatives: list, grid: np.ndarray, tol: Tolera
         stated = solved[0]
     if not np.isfinite(values[0]).all():
         raise SolverFailed(f"{sc.path}: the sensitivity equations could not be solved: not finite")
-    return values, float(stated)
+    return values, float(stated), METHOD
 
 
 def _piecewise(base) -> bool:

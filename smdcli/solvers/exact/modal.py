@@ -33,13 +33,29 @@ def modal_applies(model: Model) -> bool:
             and model.proportional_damping and float(model.modes.natural_frequencies.min()) > 0)
 
 
-def solve_modal(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:
-    """Displacement and velocity (N, n) on the grid, the stated accuracy and a description."""
-    n, N = model.n, len(grid)
-    shapes = model.modes.shapes  # mass-normalized: Phi^T M Phi = I
+def modal_coefficients(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The mass-normalized shapes Phi (n, n) (Phi^T M Phi = I), each mode's squared frequency and damping (n,)."""
+    shapes = model.modes.shapes
     C, K, _ = model.sparse
     squared = (shapes * (K @ shapes)).sum(axis=0)  # Rayleigh quotients: w_i^2
     damping = (shapes * (C @ shapes)).sum(axis=0)  # the diagonal of Phi^T C Phi, all there is of it
+    return shapes, squared, damping
+
+
+def mode_propagators(A: np.ndarray, dt: float) -> np.ndarray:
+    """expm(A_i dt) for a stack of modes' augmented matrices A (n, s, s): one vectorized Pade evaluation, the stiff
+    modes' (||A_i dt||_1 past NEEDED_NORM, as in the dense path) in double-double."""
+    E = expm_stack(A * dt)
+    stiff = np.abs(A).sum(axis=1).max(axis=1) * dt > NEEDED_NORM
+    if stiff.any():
+        E[stiff] = expm_times(A[stiff], dt)
+    return E
+
+
+def solve_modal(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:
+    """Displacement and velocity (N, n) on the grid, the stated accuracy and a description."""
+    n, N = model.n, len(grid)
+    shapes, squared, damping = modal_coefficients(model)
     exos = [s.exo() for s in model.signals]
     m = sum(e.S.shape[0] for e in exos)
     size = 2 + m
@@ -65,10 +81,7 @@ def solve_modal(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray,
         if abs(dt - h) <= 8 * np.spacing(float(grid[-1])):  # the output step, but for the grid times' rounding
             dt = h
         if dt not in cache:
-            E = expm_stack(A * dt)
-            stiff = norms * dt > NEEDED_NORM  # as in the dense path: these modes' propagators in double-double
-            if stiff.any():
-                E[stiff] = expm_times(A[stiff], dt)
+            E = mode_propagators(A, dt)
             cache[dt] = (E[:, :2, :2], E[:, :2, 2:], E[0, 2:, 2:])
         return cache[dt]
 

@@ -1,0 +1,312 @@
+"""Sensitivities of a classically damped linear scene in its modal coordinates: the scene's modes and each
+parameter's stepped side by side, exactly, at O(n) a step for each mode and one matrix product over the run for
+their coupling, where the stacked system's dense exponential takes (2 (P + 1) n)^2 a step.
+
+The undamped mode shapes Phi (Phi^T M Phi = I) decouple the scene: q_k'' + d_k q_k' + w_k^2 q_k = (Phi^T B u)_k.
+A parameter's block x_i = Phi r_i (its scale times dx/dp_i; model_derivative.augmented_model) obeys the same
+oscillators, driven by the scene's modes through the parameter's model derivatives dM_i, dC_i, dK_i:
+
+    r_i'' + D r_i' + W r_i = alpha_i q + beta_i q' + Phi^T (B_i - dM_i M^-1 B) u
+    alpha_i = -(Phi^T dK_i Phi - Phi^T dM_i Phi W),  beta_i = -(Phi^T dC_i Phi - Phi^T dM_i Phi D)
+
+(the scene's q'' replaced by its own equation). Over an output step h the pair steps exactly:
+q+ = E q + G_q w, r+ = E r + F q + G_r w, where E holds each mode's 2 x 2 propagator and
+F_kj = alpha_kj F1_kj + beta_kj F2_kj, Fc_kj = int_0^h e^(L_k (h - s)) e2 e_c^T e^(L_j s) ds: e^(L_j s) as its
+Taylor series makes every Fc one product of two thin matrices (phi functions of each mode against powers of each
+mode), over a step short enough for the series and squared back to h where the modes are stiff. The forces'
+generator states w (w' = S w, reseeded from their closed forms at each output point) drive q through each mode's
+own augmented exponential, and r through it and through q: q's response from rest to w is Y e^(S s) w -
+e^(L s) Y w, Y the particular solution (L_k Y_k - Y_k S = -e2 b_k g, a small Sylvester equation per mode). The
+steps run in each mode's eigenvectors, where E is diagonal: a cumulative sum a block of steps at a time.
+
+It serves a uniform grid holding every force discontinuity, modes away from critical damping (their eigenvectors
+well conditioned) and forces away from resonance with a mode (Y well conditioned); elsewhere the caller takes the
+dense stacked system.
+
+Must not import: sweep, io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from smdcli.model import Model
+from smdcli.model.sparse import cheapest, rows_times
+from smdcli.solvers.base import stated_rounding
+from smdcli.solvers.exact.accurate_expm import NEEDED_NORM
+from smdcli.solvers.exact.modal import modal_coefficients, mode_propagators
+from smdcli.solvers.exact.sampled import BLOCK
+
+STACKED_DOFS = 64  # (P + 1) n from which this path costs less than the dense stacked system (30 masses: 60)
+LARGEST_GENERATOR = 8  # a force's generator size this path takes (a Fourier series' many harmonics: the dense one)
+MODAL_METHOD = ("exact, in modal coordinates: the scene's undamped modes and each parameter's, driven by the scene's "
+                "through the model's derivatives (-dM x'' - dC x' - dK x + B du/dp), stepped exactly output step by "
+                "output step (each mode's exponential, the modes' coupling summed as its series); the "
+                "model's derivatives taken on the assembled model (a five-point stencil in each parameter)")
+SERIES_RADIUS = 2.0  # |lambda| h up to which the modes' coupling is summed as its series
+SERIES_TERMS = 25  # its terms: 2^25 / 26! below 1e-19
+CONDITION = 1e4  # the largest condition of a mode's eigenvectors or of Y's equation this path accepts
+
+
+def modal_sensitivities(base: Model, stacked: Model, scales: np.ndarray,
+                        grid: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """Each quantity's scene and derivatives, as sensitivity._split's (quantities, P + 1, N, n) array, and the
+    stated accuracy; None where this path does not serve the scene (the caller solves the stacked system)."""
+    setup = _setup(base, stacked, grid)
+    if setup is None:
+        return None
+    shapes, squared, damping, h, exos = setup
+    n, P, N = base.n, len(scales), len(grid)
+    lam, vector_condition = _eigen(squared, damping)
+    gains, S, ends = _generators(exos)
+    m = S.shape[0]
+    Y, forcing_condition = _particular(lam, squared, damping, S, ends, shapes.T @ stacked.inputs[:n] @ gains)
+    if max(vector_condition, forcing_condition) > CONDITION:
+        return None
+    dM, dC, dK, columns, x0, v0 = _blocks(stacked, n, P)
+    mass_form = shapes.T @ base.dense().M
+    participation = shapes.T @ columns  # (P + 1, n, F): the forces' reach on each block's modes
+    alpha, beta = np.empty((P, n, n)), np.empty((P, n, n))
+    rows = np.empty((P + 1, n, m))  # each block's modes' forcing by w: the direct one, then r's through q's Y
+    rows[0] = participation[0] @ gains
+    direct = participation.copy()  # each block's modes' forcing by the forces
+    for i in range(P):
+        Gm, Gc, Gk = (_projected(shapes, d[i]) for d in (dM, dC, dK))
+        alpha[i], beta[i] = -(Gk - Gm * squared), -(Gc - Gm * damping)
+        direct[i + 1] -= Gm @ participation[0]  # Phi^T dM M^-1 B = Phi^T dM Phi Phi^T B
+        rows[i + 1] = direct[i + 1] @ gains + alpha[i] @ Y[:, 0] + beta[i] @ Y[:, 1]
+    A = np.zeros((P + 1, n, 2 + m, 2 + m))
+    A[:, :, 0, 1], A[:, :, 1, 0], A[:, :, 1, 1] = 1.0, -squared, -damping
+    A[:, :, 1, 2:] = rows
+    A[:, :, 2:, 2:] = S
+    flows = mode_propagators(A.reshape(-1, 2 + m, 2 + m), h).reshape(P + 1, n, 2 + m, 2 + m)
+    pairs = _coupling_flows(squared, damping, h)  # (2, n, 2, n, 2): [c, k, row, j, column]
+    coupling = alpha[:, :, None, :, None] * pairs[0] + beta[:, :, None, :, None] * pairs[1]  # F_i (P, n, 2, n, 2)
+    F = coupling.reshape(P, 2 * n, 2 * n)
+    G_q = flows[0, :, :2, 2:]  # (n, 2, m)
+    G_r = flows[1:, :, :2, 2:] - (F @ Y.reshape(2 * n, m)).reshape(P, n, 2, m)
+    w = np.concatenate([signal.exo_states(grid) for signal, _ in exos], axis=1)  # (N, m): just after each time
+    q, chain = _eigen_steps(lam, h, (w[:-1] @ G_q.reshape(2 * n, m).T).reshape(N - 1, n, 2),
+                            np.stack([mass_form @ base.x0, mass_form @ base.v0], axis=1))
+    flat = q.reshape(N, 2 * n)
+    forced = (flat[:-1] @ F.transpose(2, 0, 1).reshape(2 * n, P * 2 * n)
+              + w[:-1] @ G_r.transpose(3, 0, 1, 2).reshape(m, P * 2 * n)).reshape(N - 1, P, n, 2)
+    r, _ = _eigen_steps(lam, h, forced, np.stack([x0 @ mass_form.T, v0 @ mass_form.T], axis=2))
+    u = w @ gains.T  # (N, F) the forces at each time
+    values = np.empty((3, P + 1, N, n))
+    by = np.concatenate([[1.0], scales])
+    for block in range(P + 1):
+        state = q if block == 0 else r[:, block - 1]
+        to_dofs = shapes.T / by[block]
+        np.matmul(state[:, :, 0], to_dofs, out=values[0, block])
+        np.matmul(state[:, :, 1], to_dofs, out=values[1, block])
+    _accelerations(base, values, u, columns, dM, dC, dK, scales)
+    growth = max(float((np.sqrt(squared) + damping).max()) * h, 1.0)
+    accurate = growth > NEEDED_NORM  # the stiff modes' propagators came in double-double
+    stated = stated_rounding(2 * chain + N + n, 1.0 if accurate else growth) * max(vector_condition, forcing_condition)
+    return values, stated
+
+
+def _eigen_steps(lam: np.ndarray, h: float, forced: np.ndarray, start: np.ndarray) -> tuple:
+    """The modes' states (N, ..., n, 2) [q, q'] from y_(k+1) = E y_k + forced_k (E = V diag(e^(lam h)) V^-1, each
+    mode's exact step, V = [[1, 1], [lam+, lam-]]; forced (N - 1, ..., n, 2), start (..., n, 2)), in the modes'
+    eigenvectors: c = V^-1 y steps as c_(k+1) = e^(lam h) c_k + V^-1 forced_k, each component on its own, and
+    y = V c (q = c+ + c-, q' = lam+ c+ + lam- c-). An underdamped mode's c- is its c+'s conjugate: only c+ is
+    stepped. And the longest chain of dependent operations (the rounding's count)."""
+    under = lam[:, 0].imag != 0
+    modes, which = np.nonzero(~np.stack([np.zeros_like(under), under], axis=1))  # (k, +) each; (k, -) overdamped
+    gap = (lam[:, 1] - lam[:, 0])[modes]
+    first = np.where(which == 0, lam[modes, 1], -lam[modes, 0]) / gap  # row `which` of V^-1: (first, second)
+    second = np.where(which == 0, -1.0, 1.0) / gap
+
+    def to_eigen(y):  # (..., n, 2) -> (..., components)
+        return y[..., modes, 0] * first + y[..., modes, 1] * second
+    exponents = np.broadcast_to(lam[modes, which] * h, (*start.shape[:-2], len(modes))).reshape(-1)
+    c, chain = _diagonal_steps(exponents, to_eigen(forced).reshape(len(forced), -1),
+                               to_eigen(start).reshape(-1))
+    full = np.empty((len(c), *start.shape), dtype=complex)
+    full[..., modes, which] = c.reshape(len(c), *start.shape[:-2], len(modes))
+    full[..., under, 1] = full[..., under, 0].conj()
+    out = np.empty(full.shape)
+    out[..., 0] = (full[..., 0] + full[..., 1]).real
+    out[..., 1] = (full[..., 0] * lam[:, 0] + full[..., 1] * lam[:, 1]).real
+    return out, chain
+
+
+def _diagonal_steps(exponents: np.ndarray, forced: np.ndarray, start: np.ndarray) -> tuple[np.ndarray, int]:
+    """c_(k+1) = e^(exponent) c_k + forced_k from c_0 = start, component by component (complex): (steps + 1, S),
+    and the longest chain of dependent operations. In blocks of J steps: within a block c_(b, j) = mu^j c_b +
+    mu^(j - 1) sum_(l < j) mu^-l forced_(b, l) (a cumulative sum: numpy's loop, not Python's), the blocks' starts
+    one after another; J holds |mu|^-J, the sum's growth, within e."""
+    steps, size = forced.shape
+    decay = float(np.max(-exponents.real, initial=0.0))
+    J = int(max(1, min(BLOCK, steps, 1.0 / decay if decay > 0 else BLOCK)))
+    count = -(-steps // J)
+    padded = np.zeros((count * J, size), dtype=complex)
+    padded[:steps] = forced
+    padded = padded.reshape(count, J, size)
+    lags = np.arange(J + 1)[:, None] * exponents[None, :]
+    sums = np.cumsum(padded * np.exp(-lags[:J]), axis=1) * np.exp(lags[:J])  # after 1 .. J steps from rest
+    free = np.exp(lags[1:])  # mu^1 .. mu^J
+    starts = np.empty((count, size), dtype=complex)
+    starts[0] = start
+    for b in range(count - 1):
+        starts[b + 1] = free[-1] * starts[b] + sums[b, -1]
+    out = np.empty((count * J + 1, size), dtype=complex)
+    out[0] = start
+    out[1:] = (free[None] * starts[:, None, :] + sums).reshape(count * J, size)
+    return out[:steps + 1], J + count
+
+
+def _accelerations(base: Model, values: np.ndarray, u: np.ndarray, columns: np.ndarray, dM: np.ndarray,
+                   dC: np.ndarray, dK: np.ndarray, scales: np.ndarray) -> None:
+    """Each block's acceleration from its displacement and velocity, in place: M a = B u - C v - K x, a parameter's
+    block also driven by the scene's (- dM a - dC v - dK x), each matrix as it multiplies cheapest (a chain's
+    banded, a parameter's few entries: O(n) a time, not the modes' dense product)."""
+    C, K, Minv = base.sparse
+    x, v, a = values
+    a[0] = rows_times(u @ columns[0].T - rows_times(v[0], C.T) - rows_times(x[0], K.T), Minv.T)
+    for i, scale in enumerate(scales):
+        driven = u @ columns[i + 1].T / scale - rows_times(v[i + 1], C.T) - rows_times(x[i + 1], K.T)
+        for matrix, of in ((dM[i], a[0]), (dC[i], v[0]), (dK[i], x[0])):
+            if matrix.any():
+                driven -= rows_times(of, cheapest(matrix).T) / scale
+        a[i + 1] = rows_times(driven, Minv.T)
+
+
+def _projected(shapes: np.ndarray, matrix: np.ndarray) -> np.ndarray:
+    """Phi^T matrix Phi, through the rows and columns where the matrix has entries (an element's derivative: two)."""
+    rows, cols = np.flatnonzero(matrix.any(axis=1)), np.flatnonzero(matrix.any(axis=0))
+    if len(rows) > len(matrix) // 4 or len(cols) > len(matrix) // 4:
+        return shapes.T @ matrix @ shapes
+    return shapes[rows].T @ (matrix[np.ix_(rows, cols)] @ shapes[cols])
+
+
+def _setup(base: Model, stacked: Model, grid: np.ndarray):
+    """(Phi, squared frequencies, damping, the step, [(signal, exo)]) where this path serves, else None."""
+    N = len(grid)
+    if stacked.n < STACKED_DOFS or N < 3 or not base.is_linear or base.jumps or stacked.jumps:
+        return None
+    exos = [(signal, signal.exo()) for signal in stacked.signals]
+    if any(exo is None or exo.S.shape[0] > LARGEST_GENERATOR for _, exo in exos):
+        return None
+    if not base.proportional_damping or float(base.modes.natural_frequencies.min()) <= 0:
+        return None
+    h = (grid[-1] - grid[0]) / (N - 1)
+    if np.abs(np.diff(grid) - h).max() > 1e-9 * h:
+        return None
+    edges = stacked.breakpoints(float(grid[0]), float(grid[-1]))
+    nearest = grid[0] + np.rint((edges - grid[0]) / h) * h
+    if len(edges) and np.abs(nearest - edges).max() > 8 * np.spacing(float(np.abs(grid).max())) + 1e-9 * h:
+        return None  # a force's edge between output points: the step would hold it
+    shapes, squared, damping = modal_coefficients(base)
+    return shapes, squared, damping, h, exos
+
+
+def _blocks(stacked: Model, n: int, P: int):
+    """Each parameter's dM, dC, dK (P, n, n), the input columns per block (P + 1, n, F) and the blocks' initial
+    states (P, n) of x and v."""
+    def below(matrix):
+        return np.stack([matrix[(i + 1) * n:(i + 2) * n, :n] for i in range(P)])
+    dense = stacked.dense()
+    columns = stacked.inputs.reshape(P + 1, n, -1)
+    return (below(dense.M), below(dense.C), below(dense.K), columns, stacked.x0[n:].reshape(P, n),
+            stacked.v0[n:].reshape(P, n))
+
+
+def _generators(exos) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """The gains (F, m) from the generator states to the forces, their block-diagonal S (m, m) and each signal's
+    slice end."""
+    sizes = [exo.S.shape[0] for _, exo in exos]
+    ends = list(np.cumsum(sizes))
+    m = ends[-1] if ends else 0
+    gains, S = np.zeros((len(exos), m)), np.zeros((m, m))
+    for j, ((_, exo), end, size) in enumerate(zip(exos, ends, sizes)):
+        gains[j, end - size:end] = exo.g
+        S[end - size:end, end - size:end] = exo.S
+    return gains, S, ends
+
+
+def _eigen(squared: np.ndarray, damping: np.ndarray) -> tuple[np.ndarray, float]:
+    """Each mode's eigenvalues (n, 2), lam+- = -d / 2 +- sqrt(d^2 / 4 - w^2), and its eigenvectors' worst condition:
+    V = [[1, 1], [lam+, lam-]] degenerates at critical damping."""
+    root = np.sqrt(damping.astype(complex) ** 2 / 4 - squared)
+    lam = np.stack([-damping / 2 + root, -damping / 2 - root], axis=1)
+    # in the mode's own scale (w q, q'), V's condition: 1 / sqrt(1 - zeta^2) underdamped, about 2 overdamped
+    with np.errstate(divide="ignore"):
+        condition = float((2 * np.abs(lam).max(axis=1) / np.abs(lam[:, 1] - lam[:, 0])).max())
+    return lam, condition
+
+
+def _series_pair_flows(squared: np.ndarray, damping: np.ndarray, h: float) -> np.ndarray:
+    """The same Fc_kj as _pair_flows, where every mode's |lambda| h is at most SERIES_RADIUS: e^(L_j s) as its
+    Taylor series, int_0^h e^(L_k (h - s)) s^m / m! ds = h^(m + 1) phi_(m+1)(L_k h), so that
+    Fc_kj = h sum_m [phi_(m+1)(L_k h) e2] [e_c^T (L_j h)^m]: one product of (2 n, SERIES_TERMS) by (SERIES_TERMS,
+    2 n) per c, in real arithmetic, with no eigenvectors (critically damped modes alike)."""
+    n, terms = len(squared), SERIES_TERMS
+    powers = np.empty((2 * terms, n, 2))  # (L_k h)^i e2
+    powers[0, :, 0], powers[0, :, 1] = 0.0, 1.0
+    for i in range(1, 2 * terms):
+        powers[i, :, 0] = h * powers[i - 1, :, 1]
+        powers[i, :, 1] = -h * (squared * powers[i - 1, :, 0] + damping * powers[i - 1, :, 1])
+    index = np.arange(2 * terms)[:, None] + np.arange(terms)[None, :] + 1
+    inverse_factorials = np.array([1.0 / math.factorial(k) for k in range(3 * terms + 1)])[index]  # 1 / (i + m + 1)!
+    phis = h * (powers.reshape(2 * terms, 2 * n).T @ inverse_factorials)  # (2 n: k, row; m)
+    pairs = np.empty((2, 2 * n, 2 * n))
+    for c in range(2):
+        rows = np.zeros((terms, n, 2))  # e_c^T (L_j h)^m: [w0, w1] L = [-w^2 w1, w0 - d w1]
+        rows[0, :, c] = 1.0
+        for m in range(1, terms):
+            rows[m, :, 0] = -h * squared * rows[m - 1, :, 1]
+            rows[m, :, 1] = h * (rows[m - 1, :, 0] - damping * rows[m - 1, :, 1])
+        pairs[c] = phis @ rows.reshape(terms, 2 * n)
+    return pairs.reshape(2, n, 2, n, 2)
+
+
+def _coupling_flows(squared: np.ndarray, damping: np.ndarray, h: float) -> np.ndarray:
+    """Fc_kj = int_0^h e^(L_k (h - s)) e2 e_c^T e^(L_j s) ds for every pair of modes, as (c, k, row, j, column):
+    by the series over a step of h / 2^s that brings every |lambda| h within SERIES_RADIUS, then squared s times as
+    the exponential of [[L_j, 0], [e2 e_c^T, L_k]] squares (its lower-left block: F E_j + E_k F)."""
+    radius = float(np.sqrt(np.maximum(squared, damping ** 2)).max(initial=0.0)) * h  # |lambda| <= max(w, d)
+    halvings = max(0, math.ceil(math.log2(radius / SERIES_RADIUS))) if radius > SERIES_RADIUS else 0
+    step = h / 2 ** halvings
+    pairs = _series_pair_flows(squared, damping, step)
+    if halvings:
+        A = np.zeros((len(squared), 2, 2))
+        A[:, 0, 1], A[:, 1, 0], A[:, 1, 1] = 1.0, -squared, -damping
+        E = mode_propagators(A, step)
+        for _ in range(halvings):
+            pairs = (np.einsum("ckrjb,jbl->ckrjl", pairs, E, optimize=True)
+                     + np.einsum("kra,ckajl->ckrjl", E, pairs, optimize=True))
+            E = E @ E
+    return pairs
+
+
+def _particular(lam: np.ndarray, squared: np.ndarray, damping: np.ndarray, S: np.ndarray, ends: list[int],
+                forcing: np.ndarray) -> tuple[np.ndarray, float]:
+    """Y (n, 2, m): each mode's particular response to the generator states (L_k Y_k - Y_k S = -e2 forcing_k, one
+    small Sylvester equation per mode and signal), and how near resonance it is: the largest of |lambda| / |lambda -
+    mu| over the modes' eigenvalues lambda and the generators' mu (Y's condition, in the mode's own scale)."""
+    n, m = len(squared), S.shape[0]
+    Y = np.zeros((n, 2, m))
+    worst = 1.0
+    L = np.zeros((n, 2, 2))
+    L[:, 0, 1], L[:, 1, 0], L[:, 1, 1] = 1.0, -squared, -damping
+    start = 0
+    for end in ends:
+        s = end - start
+        block = S[start:end, start:end]
+        # vec (column by column) of L Y - Y S: (I_s kron L - S^T kron I_2) vec Y
+        operator = np.kron(np.eye(s), L) - np.kron(block.T, np.eye(2))[None]
+        rhs = np.zeros((n, 2, s))
+        rhs[:, 1] = -forcing[:, start:end]
+        solved = np.linalg.solve(operator, rhs.transpose(0, 2, 1).reshape(n, 2 * s, 1))
+        Y[:, :, start:end] = solved.reshape(n, s, 2).transpose(0, 2, 1)
+        mu = np.linalg.eigvals(block)[None, None, :]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            near = np.maximum(np.abs(lam[:, :, None]), np.abs(mu)) / np.abs(lam[:, :, None] - mu)
+        worst = max(worst, float(np.nan_to_num(near, nan=np.inf).max()))
+        start = end
+    return Y, worst
