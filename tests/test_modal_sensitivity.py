@@ -85,6 +85,8 @@ def test_a_chain_s_stiffness_sensitivity_matches_the_complex_step_of_its_state_t
     # stiff: |lambda| h up to 20, the modes' coupling summed over a sixteenth of the step and squared four times
     (["spring[0].k", "damper[3].c", "mass.m5.m"], "stiff", None),
     (["damping.alpha", "damping.beta", "spring[7].k", "mass.m2.m"], "[damping]\nalpha = 0.3\nbeta = 0.002\n", None),
+    # 15 of the 30 modes overdamped (beta's damping grows with frequency): both eigenvalues of each stepped
+    (["damping.beta", "spring[3].k", "mass.m7.m"], "[damping]\nalpha = 0.1\nbeta = 0.17\n", None),
     (["ground_motion.amplitude", "ground_motion.omega", "spring[1].k", "mass.m0.v0"],
      '[ground_motion]\nquantity = "acceleration"\ntype = "sine"\namplitude = 2.0\nomega = 7.0\n', None),
     (["spring[2].k", "force[0].amplitude"], "", 'type = "step"\namplitude = 3.0\nt0 = 0.5'),

@@ -120,16 +120,24 @@ def _eigen_steps(lam: np.ndarray, h: float, forced: np.ndarray, start: np.ndarra
     gap = (lam[:, 1] - lam[:, 0])[modes]
     first = np.where(which == 0, lam[modes, 1], -lam[modes, 0]) / gap  # row `which` of V^-1: (first, second)
     second = np.where(which == 0, -1.0, 1.0) / gap
+    every = len(modes) == len(lam)  # every mode underdamped: its c+ alone, no gather
 
     def to_eigen(y):  # (..., n, 2) -> (..., components)
+        if every:
+            return y[..., 0] * first + y[..., 1] * second
         return y[..., modes, 0] * first + y[..., modes, 1] * second
     exponents = np.broadcast_to(lam[modes, which] * h, (*start.shape[:-2], len(modes))).reshape(-1)
     c, chain = _diagonal_steps(exponents, to_eigen(forced).reshape(len(forced), -1),
                                to_eigen(start).reshape(-1))
-    full = np.empty((len(c), *start.shape), dtype=complex)
-    full[..., modes, which] = c.reshape(len(c), *start.shape[:-2], len(modes))
+    c = c.reshape(len(c), *start.shape[:-2], len(modes))
+    out = np.empty((len(c), *start.shape))
+    if every:  # y = 2 Re(c+ (1, lam+))
+        np.multiply(c.real, 2.0, out=out[..., 0])
+        np.multiply((c * lam[:, 0]).real, 2.0, out=out[..., 1])
+        return out, chain
+    full = np.empty(out.shape, dtype=complex)
+    full[..., modes, which] = c
     full[..., under, 1] = full[..., under, 0].conj()
-    out = np.empty(full.shape)
     out[..., 0] = (full[..., 0] + full[..., 1]).real
     out[..., 1] = (full[..., 0] * lam[:, 0] + full[..., 1] * lam[:, 1]).real
     return out, chain
@@ -148,7 +156,9 @@ def _diagonal_steps(exponents: np.ndarray, forced: np.ndarray, start: np.ndarray
     padded[:steps] = forced
     padded = padded.reshape(count, J, size)
     lags = np.arange(J + 1)[:, None] * exponents[None, :]
-    sums = np.cumsum(padded * np.exp(-lags[:J]), axis=1) * np.exp(lags[:J])  # after 1 .. J steps from rest
+    padded *= np.exp(-lags[:J])
+    sums = np.cumsum(padded, axis=1, out=padded)
+    sums *= np.exp(lags[:J])  # after 1 .. J steps from rest
     free = np.exp(lags[1:])  # mu^1 .. mu^J
     starts = np.empty((count, size), dtype=complex)
     starts[0] = start
@@ -156,7 +166,9 @@ def _diagonal_steps(exponents: np.ndarray, forced: np.ndarray, start: np.ndarray
         starts[b + 1] = free[-1] * starts[b] + sums[b, -1]
     out = np.empty((count * J + 1, size), dtype=complex)
     out[0] = start
-    out[1:] = (free[None] * starts[:, None, :] + sums).reshape(count * J, size)
+    blocks = out[1:].reshape(count, J, size)
+    np.multiply(free[None], starts[:, None, :], out=blocks)
+    blocks += sums
     return out[:steps + 1], J + count
 
 
