@@ -192,22 +192,15 @@ def check_scene(text: str, tmp_path) -> None:
     check_sensitivity(text, tmp_path)
 
 
-def _substantive(events, span: float, result) -> list:
+def _substantive(events, span: float) -> list:
     """(element, kind) of each event but the touches: an undamped spring swinging back to the very surface it left
     touches it, which one solver takes as no event and another as a yield and an unloading 1e-9 s apart (the
-    states agree to 1e-17 either way); and a spring at rest on its yield surface (started at x0 = fy / k under a
-    force that balances it), which one solver holds elastic and another yielded without flowing until it unloads."""
+    states agree to 1e-17 either way)."""
     kept = list(events)
-    peak = max(float(np.abs(result.displacement).max()), 1e-300)
-
-    def still(t0: float, t1: float) -> bool:
-        inside = (result.time >= t0) & (result.time <= t1)
-        x = result.displacement[inside]
-        return len(x) > 1 and float(np.abs(x - x[0]).max()) <= 1e-12 * peak
     i = 0
     while i + 1 < len(kept):
         (t0, e0, k0), (t1, e1, k1) = kept[i], kept[i + 1]
-        if e0 == e1 and (k0, k1) == ("yield", "unload") and (t1 - t0 <= 1e-6 * span or still(t0, t1)):
+        if e0 == e1 and (k0, k1) == ("yield", "unload") and t1 - t0 <= 1e-6 * span:
             del kept[i:i + 2]
         else:
             i += 1
@@ -224,8 +217,7 @@ def check_compiled_yielding(model, exact, text: str) -> None:
         return  # not its scene, or a mode it leaves to the general solver
     assert compiled.success, f"{compiled.stats.message}\n{text}"
     span = float(exact.time[-1] - exact.time[0])
-    assert _substantive(compiled.nonsmooth.events, span, compiled) == _substantive(exact.nonsmooth.events, span,
-                                                                                  exact), text
+    assert _substantive(compiled.nonsmooth.events, span) == _substantive(exact.nonsmooth.events, span), text
     peak = max(float(np.abs(exact.displacement).max()), 1e-9)
     difference = float(np.abs(compiled.displacement - exact.displacement).max())
     assert difference <= 1e-10 * peak + 10 * (compiled.stats.stated_accuracy + exact.stats.stated_accuracy) * peak, \
@@ -493,7 +485,8 @@ on = "m0"
 type = "square"
 amplitude = 0.5
 period = 0.3
-""")  # at rest on its yield surface for 0.15 s (the square wave balances k x0 = fy): exact yields without flowing
+""")  # at rest on its yield surface for 0.15 s (the square wave balances k x0 = fy): exact took rounding's wiggle of
+#   the guard there for a crossing, a yield without flow (0.02 s) and an unloading (0.15 s) the compiled kernel has not
 @example("""[time]
 end = 1.0
 step = 0.01

@@ -914,3 +914,42 @@ def test_a_force_without_a_generator_drives_a_nonsmooth_scene_to_the_tolerance(l
         held = solve(model, grid, "exact", Tolerances())
         assert "has no exact integral and is held linearly" in held.stats.reason
         assert np.abs(held.displacement - reference).max() / peak <= held.stats.stated_accuracy
+
+
+@pytest.mark.parametrize("law", ["elastoplastic", "bilinear"])
+def test_a_spring_at_rest_on_its_yield_surface_does_not_yield_until_it_moves(law):
+    """A spring started exactly at its yield point (x0 = fy / k) under a square wave that balances it: the mass sits
+    still for the first half period, then the force reverses and unloads it. The exact solver took the guard's
+    rounding there for a crossing (a yield at 0.02 s without flow, an unloading at 0.15 s); its events are now the
+    event-located DOP853's, the first yield at 0.31 s, and the mass stays at x0 to rounding until the force
+    reverses."""
+    hardening = "hardening = 0.05\n" if law == "bilinear" else ""
+    text = f"""[time]
+end = 1.0
+step = 0.01
+[[mass]]
+name = "m0"
+m = 0.5
+x0 = 0.01
+[[spring]]
+connects = ["ground", "m0"]
+law = "{law}"
+k = 50.0
+fy = 0.5
+{hardening}[[damper]]
+connects = ["ground", "m0"]
+c = 0.25
+[[force]]
+on = "m0"
+type = "square"
+amplitude = 0.5
+period = 0.3
+"""
+    _, model, grid = model_of(text)
+    exact = solve(model, grid, "exact", Tolerances())
+    reference = solve(model, grid, "DOP853", Tolerances(rtol=1e-10, atol=1e-13))
+    assert [e[1:] for e in exact.nonsmooth.events] == [e[1:] for e in reference.nonsmooth.events]
+    assert np.allclose([e[0] for e in exact.nonsmooth.events], [e[0] for e in reference.nonsmooth.events], atol=1e-7)
+    assert exact.nonsmooth.events[0][0] > 0.3
+    still = grid <= 0.15
+    assert np.abs(exact.displacement[still, 0] - 0.01).max() <= 1e-15

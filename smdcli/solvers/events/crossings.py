@@ -98,21 +98,21 @@ class Crossings:
         along = self._along(flow, mode, z0, row, const, h)
         value = lambda tau: s * along(tau)  # noqa: E731
         rate = lambda z: s * float(row @ (mode.A @ z + mode.b))  # noqa: E731
+        level = at_level(float(np.abs(row) @ np.abs(z0)), const)  # below it by no more: at it (a mass at rest there)
         lo, hi = None, h
         leaving = rate(z0) < 0
         if leaving and rate(flow.at(z0, mode.b, h)) > 0:  # one turn: the bottom where the slope changes sign
             lo = self._root(flow, mode, z0, row @ mode.A, float(row @ mode.b), 0.0, h)
-        if leaving and (lo is None or value(lo) >= 0):  # a rebound that lands again long before the samples
-            lo = next((tau for tau in h * 0.5 ** np.arange(1, 60) if value(tau) < 0), None)
+        if leaving and (lo is None or value(lo) >= -level):  # a rebound that lands again long before the samples
+            lo = next((tau for tau in h * 0.5 ** np.arange(1, 60) if value(tau) < -level), None)
             if lo is not None:
                 hi = next((tau for tau in lo * 2.0 ** np.arange(1, 60) if tau >= h or value(tau) >= 0), h)
                 hi = min(hi, h)
-        if lo is None or value(lo) >= 0:
+        if lo is None or value(lo) >= -level:
             taus = h * np.arange(1, RETURN_SAMPLES) / RETURN_SAMPLES
             values = np.array([value(tau) for tau in taus])
-            if values.min() >= 0:
-                end = value(h)
-                return 0.0 if end > at_level(float(np.abs(row) @ np.abs(z0)), const) else None
+            if values.min() >= -level:
+                return 0.0 if value(h) > level else None
             lo = float(taus[int(np.argmin(values))])
         return self._root(flow, mode, z0, row, const, lo, hi)
 
