@@ -156,6 +156,7 @@ FORCES = [
     'type = "pulse"\namplitude = {a}\nt0 = 0.1\nduration = 0.3\nshape = "half_sine"',
     'type = "table"\nt = [0.0, 0.5, 1.0, 1.5]\nvalues = [0.0, {a}, -{a}, 0.5]',
     'type = "table"\nt = [0.0, 0.5, 1.0, 1.5]\nvalues = [0.0, {a}, -{a}, 0.5]\ninterpolation = "previous"',
+    None,  # free vibration: no force at all
 ]
 
 
@@ -179,12 +180,17 @@ def test_random_classically_damped_chains_agree_on_both_paths(n, damping, force,
         if damping == "dampers":
             lines += ["[[damper]]", f'connects = ["{"ground" if i == 0 else f"m{i - 1}"}", "m{i}"]',
                       f"c = {0.004 * k!r}"]
-    lines += ["[[force]]", f'on = "m{n - 1}"', force.format(a=amplitude, w=omega)]
+    if force is None:  # free vibration from an initial state
+        lines = [line for line in lines if not line.startswith(("x0", "v0"))]
+        lines.insert(lines.index('name = "m0"') + 2, "x0 = 0.01\nv0 = 0.05")
+    else:
+        lines += ["[[force]]", f'on = "m{n - 1}"', force.format(a=amplitude, w=omega)]
     if damping == "rayleigh":
         lines += ["[damping]", "alpha = 0.4", "beta = 0.003"]
     elif damping == "modal":
         lines += ["[damping]", "modal = 0.03"]
-    params = [["spring[0].k"], [f"mass.m{n - 1}.m"], ["force[0].amplitude"],
+    scaled = "force[0].amplitude" if force and "amplitude" in force else "mass.m0.x0"  # a table has no amplitude
+    params = [["spring[0].k"], [f"mass.m{n - 1}.m"], [scaled],
               ["damper[0].c" if damping == "dampers" else f"spring[{n - 1}].k"]][which]
     sc = parse("\n".join(lines) + "\n", "chain.toml")
     saved = modal_path.STACKED_DOFS

@@ -87,7 +87,7 @@ def modal_sensitivities(base: Model, stacked: Model, scales: np.ndarray,
     F = coupling.reshape(P, 2 * n, 2 * n)
     G_q = flows[0, :, :2, 2:]  # (n, 2, m)
     G_r = flows[1:, :, :2, 2:] - (F @ Y.reshape(2 * n, m)).reshape(P, n, 2, m)
-    w = np.concatenate([signal.exo_states(grid) for signal, _ in exos], axis=1)  # (N, m): just after each time
+    w = np.concatenate([np.zeros((N, 0))] + [signal.exo_states(grid) for signal, _ in exos], axis=1)  # just after
     q, chain = _eigen_steps(lam, h, (w[:-1] @ G_q.reshape(2 * n, m).T).reshape(N - 1, n, 2),
                             np.stack([mass_form @ base.x0, mass_form @ base.v0], axis=1))
     flat = q.reshape(N, 2 * n)
