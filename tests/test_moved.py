@@ -107,6 +107,48 @@ def test_a_moved_amplitude_is_the_force_built_with_it():
     assert checked >= 10
 
 
+@pytest.mark.parametrize("force, keys", [
+    ('type = "sine"\namplitude = 2.0\nomega = 5.0\nphase = 0.3', ["omega", "phase"]),
+    ('type = "cosine"\namplitude = 2.0\nfrequency = 0.7', ["frequency"]),
+    ('type = "square"\namplitude = 1.5\nperiod = 0.8\nduty = 0.4', ["duty"]),
+    ('type = "fourier_square"\namplitude = 1.5\nperiod = 0.8\nterms = 5', ["period"]),
+    ('type = "chirp"\namplitude = 1.0\nf0 = 0.5\nf1 = 3.0\nt1 = 4.0', ["f0", "f1", "t1"]),
+])
+def test_a_moved_frequency_phase_or_sweep_is_the_force_built_with_it(force, keys):
+    """A force's frequency (as its scenario gives it: omega, frequency or period), phase, duty or chirp sweep moved:
+    the force's values over the run and its generator's state at the end are the built scene's, to 1e-13; the same
+    frequency moved as any of the three is one force; a key the force's type does not read is left to build."""
+    import math
+
+    from smdcli.model import time_grid
+    from smdcli.shapes.registry import SHAPES
+    from smdcli.sweep.family import decoded, parameter_value
+
+    sc, base, _ = model_of(one_dof(0.5, extra=f"[[force]]\non = \"m\"\n{force}\n"))
+    grid = time_grid(sc.time)
+    doc = decoded(sc.text)
+    for key in keys:
+        path = f"force[0].{key}"
+        value = 1.07 * parameter_value(doc, path, sc) + 0.01
+        fast = moved(base, sc, path, value)
+        built = build(scenario_with(sc, {path: value}))
+        assert fast is not None, path
+        assert _same(fast.signals[0].value(grid), built.signals[0].value(grid)) < 1e-13, path
+        if built.signals[0].exo() is not None:
+            end = float(grid[-1])
+            assert _same(fast.signals[0].exo_state(end), built.signals[0].exo_state(end)) < 1e-13, path
+    if sc.forces[0].omega is not None:
+        w = 1.1 * sc.forces[0].omega
+        as_omega = moved(base, sc, "force[0].omega", w).signals[0].value(grid)
+        for path, value in (("force[0].frequency", w / (2 * math.pi)), ("force[0].period", 2 * math.pi / w)):
+            if path.rpartition(".")[2] in SHAPES[sc.forces[0].type].fields:
+                assert _same(moved(base, sc, path, value).signals[0].value(grid), as_omega) < 1e-13, path
+            else:  # a sine has no period: build refuses it, and so does moved
+                assert moved(base, sc, path, value) is None, path
+    if "duty" not in keys:
+        assert moved(base, sc, "force[0].duty", 0.3) is None
+
+
 def test_a_moved_law_key_is_the_law_built_with_it():
     """A yielding, friction or stop element's own key (model_derivative._law_moved): where the model's matrices do
     not move with it, the law read again is the law build makes of the scenario with that number and the matrices

@@ -1,7 +1,7 @@
 """A linear scene's model with one number moved (a mass, a spring's k, a damper's c, an initial displacement or
-velocity, Rayleigh's alpha or beta, a force's amplitude), assembled from the model it was built as instead of from
-the scenario again: what a parameter's derivative takes at each point of its stencil, at a hundredth of a build's
-cost.
+velocity, Rayleigh's alpha or beta, a force's amplitude, frequency, phase, duty or sweep), assembled from the model
+it was built as instead of from the scenario again: what a parameter's derivative takes at each point of its
+stencil, at a hundredth of a build's cost.
 
 The numbers change where build would put them: a mass on M's diagonal, an element's k or c stamped between its
 two ends, [damping]'s part of C made again from the moved M and K or coefficient (Rayleigh's alpha M + beta K, or
@@ -14,6 +14,7 @@ Must not import: solvers, sweep, io, plots, commands, cli.
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 
 import numpy as np
@@ -23,25 +24,35 @@ from smdcli.model.elements import incidence_row
 from smdcli.model.system import Model
 from smdcli.scenario import Scenario
 from smdcli.shapes import build_signal
+from smdcli.shapes.registry import SHAPES
 
 _PATH = re.compile(r"mass(?:\.(?P<name>[^.\[\]]+)|\[(?P<index>\d+)\])\.(?P<field>m|x0|v0)"
                    r"|(?P<element>spring\[\d+\]\.k|damper\[\d+\]\.c)|damping\.(?P<rayleigh>alpha|beta)"
-                   r"|force\[(?P<force>\d+)\]\.amplitude")
+                   r"|force\[(?P<force>\d+)\]\.(?P<key>amplitude|omega|frequency|period|phase|duty|f0|f1|t1)")
 _NO_AMPLITUDE = ("table", "expression")  # force types whose amplitude is not what their numbers are made from
 
 
 def moved(model: Model, scenario: Scenario, path: str, value: float) -> Model | None:
     """The model with the number at path set to value (SI), or None where only build can say (a nonlinear scene, a
     [system] or sparse one, a path that is not a mass's, a linear spring's k, a linear damper's c, Rayleigh's
-    alpha or beta or a force's amplitude, a table's or an expression's amplitude)."""
+    alpha or beta or a force's number, a table's or an expression's)."""
     found = _PATH.fullmatch(path)
     if found is None or not model.is_linear or not model.element_form or model.is_sparse:
         return None
-    if found["force"] is not None:  # the force made again from its spec with the amplitude moved
+    if found["force"] is not None:  # the force made again from its spec with the number moved
         index = int(found["force"])
         if index >= len(scenario.forces) or scenario.forces[index].type in _NO_AMPLITUDE:
             return None
-        signal = build_signal(dataclasses.replace(scenario.forces[index], amplitude=value))
+        key, spec = found["key"], scenario.forces[index]
+        if key not in SHAPES[spec.type].fields:
+            return None  # a number this force's type does not read: build refuses it
+        if key in ("frequency", "period"):  # the spec holds them as omega, in rad/s
+            if value <= 0:
+                return None
+            key, value = "omega", 2 * math.pi * value if key == "frequency" else 2 * math.pi / value
+        if not isinstance(getattr(spec, key), float):
+            return None  # not given as a number (a field the reader resolves otherwise): build says what
+        signal = build_signal(dataclasses.replace(spec, **{key: value}))
         return dataclasses.replace(model, signals=model.signals[:index] + (signal,) + model.signals[index + 1:])
     if value < 0 or value == 0 and found["field"] == "m":
         return None  # not a scene: build refuses it, and the stencil turns one-sided
