@@ -17,6 +17,35 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
 
 
+def sensitivity_with(sc, params: list[str], stacked_dofs: int):
+    """smdcli.sensitivity with the modal path's threshold at stacked_dofs ((P + 1) n): 1 holds it on however small
+    the scene, a huge one holds it off (the dense stacked system answers)."""
+    import smdcli
+    import smdcli.analysis.modal_sensitivity as modal_path
+
+    saved = modal_path.STACKED_DOFS
+    modal_path.STACKED_DOFS = stacked_dofs
+    try:
+        return smdcli.sensitivity(sc, params)
+    finally:
+        modal_path.STACKED_DOFS = saved
+
+
+def assert_sensitivities_agree(found, reference, what: str = "") -> None:
+    """Each parameter's d_displacement, d_velocity and d_acceleration of two sensitivity runs within ten times the
+    sum of their stated errors, relative to the reference's largest."""
+    import numpy as np
+
+    for quantity in ("displacement", "velocity", "acceleration"):
+        for i in range(len(found.parameter)):
+            mine, theirs = getattr(found, f"d_{quantity}")[i], getattr(reference, f"d_{quantity}")[i]
+            largest = max(float(np.abs(theirs).max()), 1e-300)
+            allowed = 10 * (found.accuracy[f"d_{quantity}"][i] + reference.accuracy[f"d_{quantity}"][i]) * largest
+            error = float(np.abs(mine - theirs).max())
+            assert error <= allowed, (f"d_{quantity} / d {found.parameter[i]} differs by {error / largest:.3g} of its "
+                                      f"largest (allowed {allowed / largest:.3g})\n{what}")
+
+
 def bundled(name: str):
     """(scenario, model, grid) of a bundled scenario by stem."""
     sc = scenario.load(SCENARIOS / f"{name}.toml")

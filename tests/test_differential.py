@@ -277,24 +277,13 @@ def sensitivity_params(text: str) -> list[str]:
 def check_modal_sensitivity(sc, param: str, found, text: str) -> None:
     """Where a linear scene is classically damped, its modal path (held on however small the scene) against the
     sensitivity that answered: within ten times the stated errors of both."""
-    import smdcli
-    import smdcli.analysis.modal_sensitivity as modal_path
+    from conftest import assert_sensitivities_agree, sensitivity_with
+    from smdcli.analysis.modal_sensitivity import MODAL_METHOD
 
-    saved = modal_path.STACKED_DOFS
-    modal_path.STACKED_DOFS = 1
-    try:
-        modal = smdcli.sensitivity(sc, [param])
-    finally:
-        modal_path.STACKED_DOFS = saved
-    if modal.method != modal_path.MODAL_METHOD:
+    modal = sensitivity_with(sc, [param], 1)
+    if modal.method != MODAL_METHOD:
         return  # not served: the stacked system answered both times
-    for quantity in ("displacement", "velocity", "acceleration"):
-        mine, theirs = getattr(modal, f"d_{quantity}")[0], getattr(found, f"d_{quantity}")[0]
-        largest = max(float(np.abs(theirs).max()), 1e-300)
-        allowed = 10 * (modal.accuracy[f"d_{quantity}"][0] + found.accuracy[f"d_{quantity}"][0]) * largest
-        error = float(np.abs(mine - theirs).max())
-        assert error <= allowed, (f"the modal path's d_{quantity} / d {param} differs by {error / largest:.3g} of its "
-                                  f"largest (allowed {allowed / largest:.3g})\n{text}")
+    assert_sensitivities_agree(modal, found, f"the modal path\n{text}")
 
 
 def check_sensitivity(text: str, tmp_path) -> None:

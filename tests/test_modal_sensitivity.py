@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 import scipy.linalg
 
 import smdcli
-import smdcli.analysis.modal_sensitivity as modal_path
+from conftest import assert_sensitivities_agree, sensitivity_with
 from smdcli.analysis.model_derivative import augmented_model, model_derivatives
 from smdcli.analysis.modal_sensitivity import MODAL_METHOD, modal_sensitivities
 from smdcli.model import build, time_grid
@@ -39,12 +39,7 @@ def chain(n: int, k: float = 100.0, c: float = 0.5, force: str = 'type = "sine"\
 
 def dense(sc, params):
     """The sensitivities by the dense stacked system (the modal path held off)."""
-    saved = modal_path.STACKED_DOFS
-    modal_path.STACKED_DOFS = 10**9
-    try:
-        return smdcli.sensitivity(sc, params)
-    finally:
-        modal_path.STACKED_DOFS = saved
+    return sensitivity_with(sc, params, 10**9)
 
 
 def test_a_chain_s_stiffness_sensitivity_matches_the_complex_step_of_its_state_transition():
@@ -193,16 +188,6 @@ def test_random_classically_damped_chains_agree_on_both_paths(n, damping, force,
     params = [["spring[0].k"], [f"mass.m{n - 1}.m"], [scaled],
               ["damper[0].c" if damping == "dampers" else f"spring[{n - 1}].k"]][which]
     sc = parse("\n".join(lines) + "\n", "chain.toml")
-    saved = modal_path.STACKED_DOFS
-    modal_path.STACKED_DOFS = 1
-    try:
-        found = smdcli.sensitivity(sc, params)
-    finally:
-        modal_path.STACKED_DOFS = saved
-    reference = dense(sc, params)
+    found, reference = sensitivity_with(sc, params, 1), dense(sc, params)
     assert found.method == MODAL_METHOD
-    for quantity in ("displacement", "velocity", "acceleration"):
-        mine, theirs = getattr(found, f"d_{quantity}")[0], getattr(reference, f"d_{quantity}")[0]
-        largest = np.abs(theirs).max()
-        allowed = 10 * (found.accuracy[f"d_{quantity}"][0] + reference.accuracy[f"d_{quantity}"][0]) * largest
-        assert np.abs(mine - theirs).max() <= allowed, (params, quantity)
+    assert_sensitivities_agree(found, reference, str(params))

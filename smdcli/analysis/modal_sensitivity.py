@@ -36,7 +36,8 @@ from smdcli.model import Model
 from smdcli.model.sparse import cheapest, rows_times
 from smdcli.solvers.base import stated_rounding
 from smdcli.solvers.exact.accurate_expm import NEEDED_NORM
-from smdcli.solvers.exact.modal import modal_coefficients, mode_propagators
+from smdcli.model.modes import modal_eigenvalues
+from smdcli.solvers.exact.modal import modal_coefficients, mode_matrices, mode_propagators
 from smdcli.solvers.exact.sampled import BLOCK
 
 STACKED_DOFS = 64  # (P + 1) n from which this path costs less than the dense stacked system (30 masses: 60)
@@ -70,15 +71,14 @@ def modal_sensitivities(base: Model, stacked: Model, scales: np.ndarray,
     participation = shapes.T @ columns  # (P + 1, n, F): the forces' reach on each block's modes
     alpha, beta = np.empty((P, n, n)), np.empty((P, n, n))
     rows = np.empty((P + 1, n, m))  # each block's modes' forcing by w: the direct one, then r's through q's Y
-    rows[0] = participation[0] @ gains
     direct = participation.copy()  # each block's modes' forcing by the forces
+    rows[0] = direct[0] @ gains
     for i in range(P):
         Gm, Gc, Gk = (_projected(shapes, d[i]) for d in (dM, dC, dK))
         alpha[i], beta[i] = -(Gk - Gm * squared), -(Gc - Gm * damping)
         direct[i + 1] -= Gm @ participation[0]  # Phi^T dM M^-1 B = Phi^T dM Phi Phi^T B
         rows[i + 1] = direct[i + 1] @ gains + alpha[i] @ Y[:, 0] + beta[i] @ Y[:, 1]
-    A = np.zeros((P + 1, n, 2 + m, 2 + m))
-    A[:, :, 0, 1], A[:, :, 1, 0], A[:, :, 1, 1] = 1.0, -squared, -damping
+    A = np.repeat(mode_matrices(squared, damping, 2 + m)[None], P + 1, axis=0)
     A[:, :, 1, 2:] = rows
     A[:, :, 2:, 2:] = S
     flows = mode_propagators(A.reshape(-1, 2 + m, 2 + m), h).reshape(P + 1, n, 2 + m, 2 + m)
@@ -174,18 +174,17 @@ def _diagonal_steps(exponents: np.ndarray, forced: np.ndarray, start: np.ndarray
 
 def _accelerations(base: Model, values: np.ndarray, u: np.ndarray, columns: np.ndarray, dM: np.ndarray,
                    dC: np.ndarray, dK: np.ndarray, scales: np.ndarray) -> None:
-    """Each block's acceleration from its displacement and velocity, in place: M a = B u - C v - K x, a parameter's
-    block also driven by the scene's (- dM a - dC v - dK x), each matrix as it multiplies cheapest (a chain's
-    banded, a parameter's few entries: O(n) a time, not the modes' dense product)."""
-    C, K, Minv = base.sparse
+    """Each block's acceleration from its displacement and velocity, in place, by the scene's own M a = F - C v - K x
+    (Model.acceleration, each matrix as it multiplies cheapest): a parameter's block driven by B_i u and the scene's
+    - dM a - dC v - dK x (a parameter's few entries: O(n) a time, not the modes' dense product)."""
     x, v, a = values
-    a[0] = rows_times(u @ columns[0].T - rows_times(v[0], C.T) - rows_times(x[0], K.T), Minv.T)
+    a[0] = base.acceleration(x[0], v[0], u @ columns[0].T)
     for i, scale in enumerate(scales):
-        driven = u @ columns[i + 1].T / scale - rows_times(v[i + 1], C.T) - rows_times(x[i + 1], K.T)
+        driven = u @ columns[i + 1].T
         for matrix, of in ((dM[i], a[0]), (dC[i], v[0]), (dK[i], x[0])):
             if matrix.any():
-                driven -= rows_times(of, cheapest(matrix).T) / scale
-        a[i + 1] = rows_times(driven, Minv.T)
+                driven -= rows_times(of, cheapest(matrix).T)
+        a[i + 1] = base.acceleration(x[i + 1], v[i + 1], driven / scale)
 
 
 def _projected(shapes: np.ndarray, matrix: np.ndarray) -> np.ndarray:
@@ -244,8 +243,7 @@ def _generators(exos) -> tuple[np.ndarray, np.ndarray, list[int]]:
 def _eigen(squared: np.ndarray, damping: np.ndarray) -> tuple[np.ndarray, float]:
     """Each mode's eigenvalues (n, 2), lam+- = -d / 2 +- sqrt(d^2 / 4 - w^2), and its eigenvectors' worst condition:
     V = [[1, 1], [lam+, lam-]] degenerates at critical damping."""
-    root = np.sqrt(damping.astype(complex) ** 2 / 4 - squared)
-    lam = np.stack([-damping / 2 + root, -damping / 2 - root], axis=1)
+    lam = modal_eigenvalues(damping, squared).reshape(2, -1).T
     # in the mode's own scale (w q, q'), V's condition: 1 / sqrt(1 - zeta^2) underdamped, about 2 overdamped
     with np.errstate(divide="ignore"):
         condition = float((2 * np.abs(lam).max(axis=1) / np.abs(lam[:, 1] - lam[:, 0])).max())
@@ -253,7 +251,7 @@ def _eigen(squared: np.ndarray, damping: np.ndarray) -> tuple[np.ndarray, float]
 
 
 def _series_pair_flows(squared: np.ndarray, damping: np.ndarray, h: float) -> np.ndarray:
-    """The same Fc_kj as _pair_flows, where every mode's |lambda| h is at most SERIES_RADIUS: e^(L_j s) as its
+    """_coupling_flows' Fc_kj where every mode's |lambda| h is at most SERIES_RADIUS: e^(L_j s) as its
     Taylor series, int_0^h e^(L_k (h - s)) s^m / m! ds = h^(m + 1) phi_(m+1)(L_k h), so that
     Fc_kj = h sum_m [phi_(m+1)(L_k h) e2] [e_c^T (L_j h)^m]: one product of (2 n, SERIES_TERMS) by (SERIES_TERMS,
     2 n) per c, in real arithmetic, with no eigenvectors (critically damped modes alike)."""
@@ -286,9 +284,7 @@ def _coupling_flows(squared: np.ndarray, damping: np.ndarray, h: float) -> np.nd
     step = h / 2 ** halvings
     pairs = _series_pair_flows(squared, damping, step)
     if halvings:
-        A = np.zeros((len(squared), 2, 2))
-        A[:, 0, 1], A[:, 1, 0], A[:, 1, 1] = 1.0, -squared, -damping
-        E = mode_propagators(A, step)
+        E = mode_propagators(mode_matrices(squared, damping), step)
         for _ in range(halvings):
             pairs = (np.einsum("ckrjb,jbl->ckrjl", pairs, E, optimize=True)
                      + np.einsum("kra,ckajl->ckrjl", E, pairs, optimize=True))
@@ -304,8 +300,7 @@ def _particular(lam: np.ndarray, squared: np.ndarray, damping: np.ndarray, S: np
     n, m = len(squared), S.shape[0]
     Y = np.zeros((n, 2, m))
     worst = 1.0
-    L = np.zeros((n, 2, 2))
-    L[:, 0, 1], L[:, 1, 0], L[:, 1, 1] = 1.0, -squared, -damping
+    L = mode_matrices(squared, damping)
     start = 0
     for end in ends:
         s = end - start

@@ -308,10 +308,11 @@ def _split(blocks: dict, scales: np.ndarray) -> np.ndarray:
 def _linear(sc: Scenario, base, derivatives: list, grid: np.ndarray, tol: Tolerances) -> tuple[np.ndarray, float,
                                                                                              str]:
     """Each quantity's scene (N, n) and derivatives (P, N, n), as _split's one array, by the exact solver, its
-    accuracy and how they were obtained: on its dense and record-sample paths each read off the stacked state straight into its place
-    (read_exactly; a derivative block reaches only itself, the scene and the forces: its products skip the rest);
-    elsewhere (jumps, harmonics superposed, the modal or sparse paths, unequal steps) as blocks of the stacked
-    model's result; a classically damped scene in its modal coordinates (modal_sensitivity.py)."""
+    accuracy and how they were obtained (the method's text): a classically damped scene in its modal coordinates
+    (modal_sensitivity.py); else on the dense and record-sample paths each read off the stacked state straight into
+    its place (read_exactly; a derivative block reaches only itself, the scene and the forces: its products skip the
+    rest); elsewhere (jumps, harmonics superposed, the sparse paths, unequal steps) as blocks of the stacked model's
+    result."""
     from smdcli.analysis.modal_sensitivity import MODAL_METHOD, modal_sensitivities
     from smdcli.solvers.exact.linear import read_exactly
 

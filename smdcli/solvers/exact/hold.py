@@ -14,9 +14,14 @@ from smdcli.model import Model
 from smdcli.shapes.table import Table
 
 
+def held_paths(model: Model) -> tuple[str, ...]:
+    """The paths of the forces without an exact generator (Signal.exo() is None): those a hold stands in for."""
+    return tuple(path for path, s in zip(model.force_paths, model.signals) if s.exo() is None)
+
+
 def first_order_hold(model: Model, grid: np.ndarray) -> tuple[Model, tuple[str, ...]]:
     """Replace forces without an exact form (Signal.exact false) by their piecewise-linear interpolant on the grid."""
-    held = tuple(path for path, s in zip(model.force_paths, model.signals) if s.exo() is None)
+    held = held_paths(model)
     if not held:
         return model, held
     signals = tuple(s if s.exo() is not None else Table(grid, s.value(grid), "linear") for s in model.signals)
@@ -31,7 +36,7 @@ def held_finely(model: Model, grid: np.ndarray, rtol: float) -> tuple[Model, flo
     integrators can take (their scene propagates generators): sampled at a power-of-two fraction of the output step,
     the coarsest whose linear hold errs by at most rtol of the force's peak (at most FINEST_HOLD to a step); the
     model, the hold's error and the samples to a step (the model itself, 0 and 1 where every force has a generator)."""
-    held = tuple(path for path, s in zip(model.force_paths, model.signals) if s.exo() is None)
+    held = held_paths(model)
     if not held or len(grid) < 2:
         return model, 0.0, 1
     per_step = 1
@@ -77,7 +82,7 @@ def unheld(model: Model) -> str:
 
 def hold_error(model: Model, grid: np.ndarray, held: tuple[str, ...]) -> float:
     """Relative size of the first-order hold's error: the held forces between grid points against their peak."""
-    middle = 0.5 * (grid[1:] + grid[:-1])
+    middle = halved(grid)[1::2]
     worst = 0.0
     for path, signal in zip(model.force_paths, model.signals):
         if path in held:

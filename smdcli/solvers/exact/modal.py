@@ -42,6 +42,14 @@ def modal_coefficients(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return shapes, squared, damping
 
 
+def mode_matrices(squared: np.ndarray, damping: np.ndarray, size: int = 2) -> np.ndarray:
+    """Each mode's state matrix [[0, 1], [-w^2, -d]] (n, 2, 2), in the corner of a zero (n, size, size) for the
+    generators' states beside it."""
+    A = np.zeros((len(squared), size, size))
+    A[:, 0, 1], A[:, 1, 0], A[:, 1, 1] = 1.0, -squared, -damping
+    return A
+
+
 def mode_propagators(A: np.ndarray, dt: float) -> np.ndarray:
     """expm(A_i dt) for a stack of modes' augmented matrices A (n, s, s): one vectorized Pade evaluation, the stiff
     modes' (||A_i dt||_1 past NEEDED_NORM, as in the dense path) in double-double."""
@@ -59,10 +67,7 @@ def solve_modal(model: Model, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     exos = [s.exo() for s in model.signals]
     m = sum(e.S.shape[0] for e in exos)
     size = 2 + m
-    A = np.zeros((n, size, size))
-    A[:, 0, 1] = 1.0
-    A[:, 1, 0] = -squared
-    A[:, 1, 1] = -damping
+    A = mode_matrices(squared, damping, size)
     participation = shapes.T @ model.B  # (n, F): how much of force j reaches mode i
     blocks = []  # per signal: its slice of w
     col = 0
