@@ -193,3 +193,41 @@ def test_a_moved_law_key_is_the_law_built_with_it():
     assert {"Elastoplastic.fy", "Bilinear.fy", "Friction.force", "Friction.static", "Stop.restitution"} <= moved_keys, \
         moved_keys
     assert refused >= 5
+
+
+@pytest.mark.parametrize("name, extra", [
+    ("shear_frame_record", ""), ("elastoplastic_record", ""), ("friction_isolated_building", ""),
+    ("shear_frame_record", 'baseline = "linear"\nfilter = [0.1, 20.0]'), ("shear_frame_record", "hold = true"),
+    ("shear_frame_record", "scale = 0.7"),
+])
+def test_a_moved_record_scale_is_the_record_built_with_it(name, extra):
+    """A recorded ground acceleration's scale (model/moved.scaled_ground): the record's samples times the ratio are
+    the ones build reads and processes (a baseline's and a filter's processing is linear in them) over the run, held
+    or ended, to 1e-13, the rest of the model the base's; a record with a shift, or another ground motion, is left to
+    build."""
+    from smdcli import scenario
+    from smdcli.model import time_grid
+    from smdcli.model.moved import scaled_ground
+    from smdcli.sweep.family import decoded, parameter_value
+
+    base_sc = bundled(name)[0]
+    text = base_sc.text.replace('quantity = "acceleration"', f'quantity = "acceleration"\n{extra}')
+    sc = scenario.parse(text, str(base_sc.path))
+    base, grid = build(sc), time_grid(sc.time)
+    doc = decoded(sc.text)
+    now = parameter_value(doc, "ground_motion.scale", sc)
+    for value in (1.37 * now, -0.5 * now):
+        fast = scaled_ground(base, doc["ground_motion"], now, value)
+        built = build(scenario_with(sc, {"ground_motion.scale": value}))
+        assert fast is not None
+        for mine, theirs in zip(fast.signals, built.signals, strict=True):
+            assert _same(mine.value(grid), theirs.value(grid)) < 1e-13
+            assert _same(mine.value_left(grid), theirs.value_left(grid)) < 1e-13
+        assert fast.ground.acceleration is fast.signals[-1] and fast.ground.given.ended == built.ground.given.ended
+        assert fast.M is base.M and fast.K is base.K and fast.nonsmooth is base.nonsmooth
+    shifted = scenario.parse(text.replace('quantity = "acceleration"', 'quantity = "acceleration"\nshift = 0.01'),
+                             str(base_sc.path))
+    assert scaled_ground(build(shifted), decoded(shifted.text)["ground_motion"], now, 2.0) is None  # affine, not linear
+    assert scaled_ground(base, doc["ground_motion"], 0.0, 2.0) is None
+    sc, base, _ = bundled("quarter_car_bump")  # a ground displacement: its jumps move with it
+    assert scaled_ground(base, {}, 1.0, 2.0) is None

@@ -45,7 +45,8 @@ LARGEST_GENERATOR = 8  # a force's generator size this path takes (a Fourier ser
 MODAL_METHOD = ("exact, in modal coordinates: the scene's undamped modes and each parameter's, driven by the scene's "
                 "through the model's derivatives (-dM x'' - dC x' - dK x + B du/dp), stepped exactly output step by "
                 "output step (each mode's exponential, the modes' coupling summed as its series); the "
-                "model's derivatives taken on the assembled model (a five-point stencil in each parameter)")
+                "model's derivatives taken on the assembled model (one difference where it is affine in the parameter, "
+                "else a five-point stencil)")
 SERIES_RADIUS = 2.0  # |lambda| h up to which the modes' coupling is summed as its series
 SERIES_TERMS = 25  # its terms: 2^25 / 26! below 1e-19
 CONDITION = 1e4  # the largest condition of a mode's eigenvectors or of Y's equation this path accepts

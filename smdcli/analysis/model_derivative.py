@@ -34,7 +34,7 @@ from smdcli.analysis.signal_derivative import anchors, combined, signal_derivati
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import Model, build
 from smdcli.model.damping import modal_damping_derivative
-from smdcli.model.moved import moved
+from smdcli.model.moved import moved, scaled_ground
 from smdcli.model.nonsmooth import check_initial_state
 from smdcli.model.system import GROUND_DOF
 from smdcli.scenario import Scenario
@@ -92,6 +92,8 @@ class Derivative:
 def _scene_at(sc: Scenario, doc: dict, base: Model, path: str, value: float) -> Model:
     """The scene's model with the parameter at value: the base's moved where it can be, else built again."""
     shortcut = moved(base, sc, path, value)
+    if shortcut is None and path == "ground_motion.scale":  # a record's scene rebuilt reads its file again
+        shortcut = scaled_ground(base, doc["ground_motion"], parameter_value(doc, path, sc), value)
     if shortcut is None:
         shortcut = _law_moved(sc, doc, base, path, value)
     if shortcut is not None:
@@ -153,9 +155,11 @@ def _structure(model: Model, grid: np.ndarray) -> tuple:
     forces' kinds and discontinuities, the jumps' times, the generators' sizes."""
     t0, t1 = float(grid[0]), float(grid[-1])
     sizes = tuple(None if s.exo() is None else s.exo().S.shape for s in model.signals)
-    tables = tuple(tuple(s.t) if isinstance(s, Table) else () for s in model.signals)
+    # times as their bytes: a record's thousands of samples compared at once, not as a tuple of floats each
+    tables = tuple(np.asarray(s.t, dtype=float).tobytes() if isinstance(s, Table) else b"" for s in model.signals)
+    edges = np.asarray(model.breakpoints(t0, t1), dtype=float).tobytes()
     return (model.dofs, tuple(type(s).__name__ for s in model.signals), model.force_dofs,
-            tuple(model.breakpoints(t0, t1)), tuple(t for t, _, _ in model.jumps), sizes, tables, model.is_linear)
+            edges, tuple(t for t, _, _ in model.jumps), sizes, tables, model.is_linear)
 
 
 def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str,
@@ -180,7 +184,7 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
             arrays[id(model)] = (model, _model_arrays(model, t_end, flowed))
         return arrays[id(model)][1]
 
-    if affine(sc, base, path):
+    if affine(sc, base, path) or flowed and _harmonic_frequency(sc, path):
         return _affine_derivative(sc, doc, base, grid, path, value, scale, structure, arrays_of)
     if sc.damping is not None and sc.damping.modal:
         found = _modal_derivative(sc, doc, base, grid, path, value, scale, structure, arrays_of)
@@ -266,6 +270,13 @@ def affine(sc: Scenario, base: Model, path: str) -> bool:
     if STRUCTURAL.match(path):
         return not (sc.damping is not None and sc.damping.modal) and not (base.jumps and ".m" in path)
     return bool(re.fullmatch(r"damping\.(alpha|beta)|force\[\d+\]\.amplitude|ground_motion\.scale", path))
+
+
+def _harmonic_frequency(sc: Scenario, path: str) -> bool:
+    """Whether path is a sine's or cosine's frequency (omega or frequency): its generator's matrix is linear in it
+    and its state at the phase's origin does not move, so that the flowed model (ParameterDerivative's) is affine."""
+    found = re.fullmatch(r"force\[(\d+)\]\.(omega|frequency)", path)
+    return found is not None and int(found[1]) < len(sc.forces) and sc.forces[int(found[1])].type in ("sine", "cosine")
 
 
 def _affine_derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str, value: float,

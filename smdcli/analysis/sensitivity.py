@@ -39,8 +39,8 @@ EVENT_METHOD = ("exact, event to event: between events the scene and its sensiti
 MAX_SIZE = 3000  # DOFs of the stacked system, (P + 1) n: its dense exponential's memory and time
 METHOD = ("exact: the scene and its sensitivity equations (the same M, C and K driven by -dM x'' - dC x' - dK x + "
           "B du/dp) solved together by the matrix exponential; the model's derivatives taken on the assembled model "
-          "(a five-point stencil in each parameter, exact for polynomials of degree 4: every matrix, initial state "
-          "and force generator of a linear scene)")
+          "(one difference where every number of the model is affine in the parameter, else a five-point stencil, "
+          "exact for polynomials of degree 4: every matrix, initial state and force generator of a linear scene)")
 
 
 @dataclass

@@ -25,6 +25,7 @@ from smdcli.model.system import Model
 from smdcli.scenario import Scenario
 from smdcli.shapes import build_signal
 from smdcli.shapes.registry import SHAPES
+from smdcli.shapes.table import Table
 
 _PATH = re.compile(r"mass(?:\.(?P<name>[^.\[\]]+)|\[(?P<index>\d+)\])\.(?P<field>m|x0|v0)"
                    r"|(?P<element>spring\[\d+\]\.k|damper\[\d+\]\.c)|damping\.(?P<rayleigh>alpha|beta)"
@@ -88,6 +89,25 @@ def moved(model: Model, scenario: Scenario, path: str, value: float) -> Model | 
     M = model.M.copy()
     M[index, index] = value
     return _damped(model, scenario, M, model.C, model.K)
+
+
+def scaled_ground(model: Model, table: dict, current: float, value: float) -> Model | None:
+    """The model with its recorded ground acceleration's scale moved from current to value: the record's samples
+    times value / current (its processing, a baseline's and a filter's, is linear in them), where its table (the
+    scenario's [ground_motion], as decoded) adds no shift; None where build must say (another motion, a shift, a
+    scale of 0, a value that overflows)."""
+    ground = model.ground
+    if ground is None or not ground.record or ground.jumps or current == 0 or table.get("shift", 0) != 0:
+        return None
+    record = ground.acceleration
+    values = record.v * (value / current)
+    if not np.isfinite(values).all():
+        return None
+    scaled = Table(record.t, values, "previous" if record.previous else "linear", ended=record.ended)
+    signals = tuple(scaled if s is record else s for s in model.signals)
+    moved_ground = dataclasses.replace(ground, given=scaled if ground.given is record else ground.given,
+                                       acceleration=scaled)
+    return dataclasses.replace(model, signals=signals, ground=moved_ground)
 
 
 def _damped(model: Model, scenario: Scenario, M: np.ndarray, C: np.ndarray, K: np.ndarray, **changes) -> Model:
