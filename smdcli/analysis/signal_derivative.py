@@ -107,7 +107,7 @@ class ParameterDerivative(Signal):
         own, moved = S[:m, :m], S[m:, :m]
         if self._commute is None:
             scale = 1e-14 * np.abs(own).max() * np.abs(moved).max()
-            self._commute = bool(np.allclose(own @ moved, moved @ own, rtol=0.0, atol=scale))
+            self._commute = bool(np.abs(own @ moved - moved @ own).max() <= scale)
         if left or not self._commute:
             return None
         marks, which = anchor_marks(self.base, times, left)  # few anchors (a harmonic's one origin), many times
@@ -136,7 +136,7 @@ def anchor_marks(signal: Signal, times: np.ndarray, left: bool = False) -> tuple
         return times, np.zeros(0, dtype=int)
     origin = signal.phase_origin()
     edges = np.asarray(signal.breakpoints(min(float(times.min()), origin) - 1.0, float(times.max()) + 1.0), dtype=float)
-    marks = np.union1d(edges, [origin])
+    marks = np.union1d(edges, [origin]) if len(edges) else np.array([origin])  # a harmonic's: its origin alone
     i = np.searchsorted(marks, times, side="left" if left else "right") - 1
     if marks[0] == origin or i.min() >= 0:
         return marks, np.maximum(i, 0)
