@@ -74,6 +74,7 @@ class ModelArrays(NamedTuple):
     gd_qty: np.ndarray  # (G,) int: GUARD_D, GUARD_RATE, GUARD_TENSION or GUARD_INTERNAL
     gd_level: np.ndarray  # (G,)
     gd_dir: np.ndarray  # (G,) +1 or -1: the direction that ends the mode
+    gd_kink: np.ndarray  # (G,) int: 1 where it is a smooth law's kink (a restart, nothing else happens)
 
 
 def csr(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -162,4 +163,4 @@ def _smooth_scene(n: int) -> dict:
                 ns_R=np.zeros((0, n)), ns_belt=none, ns_held=ints, ns_stiff=none, ns_damp=none, ns_const=none,
                 ns_law=ints, ns_par=np.zeros((0, LAW_PARAMETERS)), ns_term=ints, ns_pd=none, ns_pc=none, ns_px=none,
                 h_lin=np.zeros((0, 2 * n)), h_f=np.zeros((0, n)), h_g=none, gd_el=ints, gd_qty=ints, gd_level=none,
-                gd_dir=ints)
+                gd_dir=ints, gd_kink=ints)

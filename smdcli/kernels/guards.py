@@ -241,6 +241,11 @@ def first_crossing(m, method, t_old, t_new, h, y_old, y_new, K, F, Q, mid, work,
     for g in range(G):
         s = m.gd_dir[g]
         level = m.gd_level[g]
+        # at its level to the rounding of its value, and of the time of the event that started the step (another
+        # guard's on the same quantity: a spring yielding where a stop is, their levels apart by rounding)
+        slope = values[0, G + g] if values[0, G + g] == values[0, G + g] else (values[1, g] - values[0, g]) / (
+            samples[1] - samples[0])
+        at = _rounding(values[0, g], level) + abs(slope) * 16 * np.spacing(abs(t_old))
         root = np.inf
         for i in range(INTERIOR + 1):
             if s * values[i, g] < 0 <= s * values[i + 1, g]:
@@ -262,14 +267,17 @@ def first_crossing(m, method, t_old, t_new, h, y_old, y_new, K, F, Q, mid, work,
                     root = np.inf
                 if root < np.inf:
                     break
-        # at its level to the rounding of its value, and of the time of the event that started the step (another
-        # guard's on the same quantity: a spring yielding where a stop is, their levels apart by rounding)
-        slope = values[0, G + g] if values[0, G + g] == values[0, G + g] else (values[1, g] - values[0, g]) / (
-            samples[1] - samples[0])
-        at = _rounding(values[0, g], level) + abs(slope) * 16 * np.spacing(abs(t_old))
         if root == np.inf and abs(values[0, g]) <= at and s * values[1, g] >= 0:
+            # a kink's dip must be deeper than the interpolant's rounding of its quantity over the step: a kink just
+            # taken whose quantity is flat there (a mass at rest until a force reaches it through two springs, v ~
+            # t^3) was taken again at each of thousands of such dips, 4.5e-16 s apart; a contact's is any dip (a
+            # rebound that rises less than rounding still lands)
+            noise = 0.0
+            if m.gd_kink[g]:
+                for i in range(INTERIOR + 2):
+                    noise = max(noise, _rounding(values[i, g], level))
             root = _return(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, when, row, dy, g,
-                           samples[1], values[1, g])
+                           samples[1], values[1, g], noise)
             if _fired_again(g, root, skip_guard, skip_t):
                 root = np.inf
         if root < t_stop or (fired < 0 and root <= t_new):
@@ -278,18 +286,19 @@ def first_crossing(m, method, t_old, t_new, h, y_old, y_new, K, F, Q, mid, work,
 
 
 @no_alloc
-def _return(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, when, row, dy, g, hi, f_hi):
+def _return(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, when, row, dy, g, hi, f_hi, noise):
     """Where guard g, at its level at t_old and past it again at hi, comes back to it after a dip below it too
     short for the samples to see (a light rebound landing again, a spring unloading and yielding again): the dip
     found by halving towards t_old, then the crossing located. If it never went below, it went on past its level
     from t_old: an event there (a stop met again at rest while another contact bounced); inf where it only stays
-    at its level to rounding (a spring on its yield surface held by a stuck contact)."""
+    at its level to rounding (a spring on its yield surface held by a stuck contact). noise: how far below its
+    level the interpolant's rounding puts it (a dip no deeper is none)."""
     s = m.gd_dir[g]
     tau = hi - t_old
     for _ in range(60):
         tau *= 0.5
         value = _at(m, method, t_old, h, y_old, y_new, K, F, Q, t_old + tau, mid, work, jwork, arg, when, row, dy, g)
-        if s * value < 0:
+        if s * value < -noise:
             if f_hi == 0:
                 return hi
             return _root(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, when, row, dy, g,

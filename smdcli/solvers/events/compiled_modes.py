@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from smdcli.elements.base import SMOOTH_NONE
+from smdcli.elements.base import KINK, SMOOTH_NONE
 from smdcli.kernels.arrays import (GUARD_D, GUARD_INTERNAL, GUARD_RATE, GUARD_TENSION, LAW_PARAMETERS, ModelArrays,
                                    csr)
 from smdcli.kernels import tableaus
@@ -70,9 +70,10 @@ def mode_arrays(base: ModelArrays, scene, mode, states) -> ModelArrays:
         par[e, LAW_PARAMETERS - 1] = part.start - 2 * n  # the first internal variable's place in q
         term[e] = ACCUMULATED.index(compiled.term) if compiled.term else -1
         pd[e], pc[e], px[e] = compiled.pd, compiled.pc, compiled.px
-    el, qty, level, direction = [], [], [], []
+    el, qty, level, direction, kink = [], [], [], [], []
     for e, guard, _, _ in mode.guards:
         el.append(e)
+        kink.append(int(guard.kind == KINK))
         level.append(guard.level)
         direction.append(guard.direction)
         if guard.quantity.startswith("internal:"):
@@ -88,7 +89,8 @@ def mode_arrays(base: ModelArrays, scene, mode, states) -> ModelArrays:
         f_const=np.ascontiguousarray(mode.g, dtype=float), ground_row=P @ np.ones(n), ns_held=held, ns_stiff=stiff,
         ns_damp=damp,
         ns_const=const, ns_law=law, ns_par=par, ns_term=term, ns_pd=pd, ns_pc=pc, ns_px=px, h_lin=h_lin, h_f=h_f, h_g=h_g,
-        gd_el=ints(el), gd_qty=ints(qty), gd_level=np.array(level, dtype=float), gd_dir=ints(direction))
+        gd_el=ints(el), gd_qty=ints(qty), gd_level=np.array(level, dtype=float), gd_dir=ints(direction),
+        gd_kink=ints(kink))
 
 
 class CompiledModes:
@@ -106,6 +108,20 @@ class CompiledModes:
         self.rows_t = np.full((N, E), np.nan)
         self.counts, self.floats = np.zeros(5, dtype=np.int64), np.zeros(5)
         self.work = np.zeros(work_size(self.base))
+        self._cuts = self._cut_index = None
+
+    def cut_index(self, cuts) -> tuple[np.ndarray, np.ndarray]:
+        """The cuts' times, and for each cut the first at or after it where the ground jumps (else the last): once
+        per run, where each event's advance walked the rest of the cuts (a sampled force's 6,400 over 1 s, at each
+        of thousands of events: most of a run's time)."""
+        if self._cuts is not cuts:
+            jumps = np.array([jump is not None for _, jump in cuts] + [True])
+            jumps[-2] = True  # the last cut ends every walk
+            after = np.flatnonzero(jumps)
+            self._cuts = cuts
+            self._cut_index = (np.array([c[0] for c in cuts], dtype=float),
+                               after[np.searchsorted(after, np.arange(len(cuts)))])
+        return self._cut_index
 
     def advance(self, states, t: float, y: np.ndarray, cuts, segment: int, k: int, outputs):
         """EventDriver.advance by the compiled kernel: the mode integrated from (t, y) to the next jump of the
@@ -133,13 +149,14 @@ class CompiledModes:
                     skip_guard = g
             if driver.kinks_left == skip_t:
                 skip_guard = SKIP_EVERY_KINK
-        # on through the force discontinuities (a restart each, in the kernel) up to the next jump of the ground
-        last = min(segment + 1, len(cuts) - 1)
+        # on through the force discontinuities (a restart each, in the kernel) up to the next jump of the ground;
         # where something is held, back at each discontinuity: a force's jump may pass a stuck contact's breakaway
         # or pull a stop away, and the modes are decided there (EventDriver.cross_break)
-        while last + 1 < len(cuts) and cuts[last][1] is None and mode.hold is None:
-            last += 1
-        times = np.array([c[0] for c in cuts[segment:last + 1]] or [t, t], dtype=float)
+        cut_times, next_jump = self.cut_index(cuts)
+        last = min(segment + 1, len(cuts) - 1)
+        if mode.hold is None:
+            last = int(next_jump[last])
+        times = cut_times[segment:last + 1] if segment <= last else np.array([t, t], dtype=float)
         spacing = driver.held_spacing(mode)
         if spacing:  # restarts that bound the steps where nothing moves but the forces on what holds it
             times = np.union1d(times, np.arange(t + spacing, times[-1], spacing))

@@ -257,7 +257,10 @@ class EventDriver(PiecewiseRun):
             slope = (values[1, j] - values[0, j]) / (times[1] - times[0])  # for the rounding of the time it started
             at = at_level(abs(values[0, j] + guard.level), guard.level) + abs(slope) * 16 * np.spacing(abs(t0))
             if root is None and abs(values[0, j]) <= at and s * values[1, j] >= 0:
-                root = _return(value, s, guard.level, t0, times[1], values[1, j])
+                # a kink's dip deeper than the interpolant's rounding over the step (kernels.guards.first_crossing's)
+                noise = max(at_level(abs(f + guard.level), guard.level) for f in values[:, j]) if guard.kind == KINK \
+                    else 0.0
+                root = _return(value, s, guard.level, t0, times[1], values[1, j], noise)
                 root = None if root is None or fired_again(root) else root
             if root is not None and (best is None or root < best[0]):
                 best = (root, e, guard)
@@ -278,16 +281,16 @@ class EventDriver(PiecewiseRun):
                 values.append(table[g.quantity][e] - g.level)
         return np.array(values)
 
-def _return(value, s: float, level: float, t0: float, hi: float, f_hi: float) -> float | None:
-    """Where a guard at its level at t0 and past it again at hi comes back to it after a dip below it too short for
-    the samples to see (a light rebound landing again): the dip found by halving towards t0, then the crossing
-    located; t0 where it went on past its level instead, None where it only stays at it to rounding (as
-    smdcli.kernels.guards._return)."""
+def _return(value, s: float, level: float, t0: float, hi: float, f_hi: float, noise: float = 0.0) -> float | None:
+    """Where a guard at its level at t0 and past it again at hi comes back to it after a dip below it (deeper than
+    noise) too short for the samples to see (a light rebound landing again): the dip found by halving towards t0,
+    then the crossing located; t0 where it went on past its level instead, None where it only stays at it to
+    rounding (as smdcli.kernels.guards._return)."""
     tau = hi - t0
     for _ in range(60):
         tau *= 0.5
         f = value(t0 + tau)
-        if s * f < 0:
+        if s * f < -noise:
             return hi if f_hi == 0 else event_root(value, t0 + tau, hi, hi - t0 - tau)
     return t0 if s * f_hi > at_level(abs(f_hi + level), level) else None
 
