@@ -191,7 +191,7 @@ def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gr
         return np.concatenate([flow.f(t, y), (flow.jacobian(t, y) @ S + parameter_rates(t, y)).ravel()])
 
     cuts = np.concatenate([[grid[0]], model.breakpoints(float(grid[0]), float(grid[-1])), [grid[-1]]])
-    if COMPILED:
+    if COMPILED and all(signal.exo() is not None for signal in model.signals):  # an expression's force: solve_ivp's
         y, S, rates, d_rates = compiled_sensitivities(flow, points, weights, y0, s0, grid, cuts, rtol)
         if advance is not None:
             advance(len(grid))
