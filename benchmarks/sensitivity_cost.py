@@ -52,6 +52,12 @@ SCENES = [  # (scenario, its parameters)
     ("coulomb_free_decay", ["spring[0].k"]),
     ("stick_slip_belt", ["friction[0].force", "friction[0].static", "spring[0].k"]),
     ("vibro_impact_gap", ["stop[0].restitution", "spring[0].k"]),
+    # a force's frequency (its derivative a signal of its own, t cos wt) and a record's scale
+    ("one_dof_harmonic", ["force[0].omega"]),
+    ("two_dof_forced", ["force[0].omega"]),
+    ("three_dof_forced", ["force[0].omega"]),
+    ("five_storey_building", ["ground_motion.scale"]),
+    ("shear_frame_record", ["ground_motion.scale"]),
     # wall.chain's: a classically damped chain, whose forward run is output-bound (its cost grows as the output)
     ("chain of 10 masses", ["spring[0].k"]),
     ("chain of 30 masses", ["spring[0].k"]),
