@@ -47,6 +47,14 @@ def smooth_refusal(model: Model) -> str | None:
                     "nonlinear terms: sensitivities of such a mix are not yet built (linear scenes; yielding, "
                     "Coulomb friction and stop scenes; and cubic springs, quadratic dampers and Bouc-Wen springs "
                     "each are)")
+    unheld = next(((path, kind) for path, kind, signal in zip(model.force_paths, model.force_types, model.signals)
+                   if signal.exo() is None), None)
+    if unheld is not None and model.nonsmooth:
+        # the compiled kernel takes each force by its generator; solve_ivp's run, restarted at each kink, took over
+        # five minutes on a Bouc-Wen frame whose kinks begin at its start
+        return (f"{unheld[0]} ({unheld[1]}) has no exact generator, which the sensitivity equations of "
+                f"{model.nonsmooth[0].path} ({model.nonsmooth[0].law.name}) need; give the force as a shape (sine, "
+                "table, ...) or take differences of runs (smd sweep)")
     return None
 
 
@@ -191,7 +199,7 @@ def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gr
         return np.concatenate([flow.f(t, y), (flow.jacobian(t, y) @ S + parameter_rates(t, y)).ravel()])
 
     cuts = np.concatenate([[grid[0]], model.breakpoints(float(grid[0]), float(grid[-1])), [grid[-1]]])
-    if COMPILED and all(signal.exo() is not None for signal in model.signals):  # an expression's force: solve_ivp's
+    if COMPILED:
         y, S, rates, d_rates = compiled_sensitivities(flow, points, weights, y0, s0, grid, cuts, rtol)
         if advance is not None:
             advance(len(grid))
