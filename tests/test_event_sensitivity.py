@@ -307,3 +307,53 @@ def test_a_spring_started_at_its_yield_point_has_no_derivative_in_its_stiffness(
             for sign in (1, -1)]
     reference = (runs[0] - runs[1]) / (2 * h)
     assert np.abs(s.d_displacement[0] - reference).max() <= 1e-6 * np.abs(reference).max()
+
+
+STOP_UNDER_A_FORMULA = """
+[time]
+end = 3.0
+step = 0.01
+[[mass]]
+name = "m0"
+m = 4.71
+x0 = -0.02
+[[mass]]
+name = "m1"
+m = 2.96
+x0 = -0.02
+[[spring]]
+connects = ["ground", "m0"]
+k = 78.2
+[[spring]]
+connects = ["m0", "m1"]
+k = 246.0
+[[damper]]
+connects = ["m0", "m1"]
+c = 0.14
+[[stop]]
+connects = ["ground", "m0"]
+max = 0.012
+restitution = 0.3
+[[force]]
+on = "m0"
+type = "expression"
+expr = "6.06 * sin(7 * t) * exp(-t)"
+"""
+
+
+def test_a_stop_scene_under_a_formula_states_what_holding_the_formula_costs():
+    """A formula has no generator for the exponentials: it is held linearly 64 samples an output step, run again at
+    32, and a third of the difference, doubled, is stated. Held on the output grid alone (the differential tests at
+    random seeds drew it) the sensitivity was 1.7e-2 off and stated 1e-9. Against differences of DOP853 (which reads
+    the formula at t) on the samples away from the impacts: within the stated accuracy, itself below 1e-4 (measured
+    4e-6 of the largest, stated 8e-6)."""
+    sc, _, _ = model_of(STOP_UNDER_A_FORMULA, "stop_formula.toml")
+    paths = ["spring[0].k", "stop[0].restitution"]
+    s = smdcli.sensitivity(sc, paths)
+    assert "force[0] held linearly between 64 samples an output step" in s.method
+    want = dop853_differences(sc, s, paths)
+    keep = away_from_events(sc, s)
+    for i, path in enumerate(paths):
+        largest = np.abs(want[path]).max()
+        error = np.abs(s.d_displacement[i][keep] - want[path][keep]).max() / largest
+        assert error <= s.accuracy["d_displacement"][i] <= 1e-4, (path, error, s.accuracy["d_displacement"][i])

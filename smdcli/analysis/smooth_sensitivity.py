@@ -47,14 +47,6 @@ def smooth_refusal(model: Model) -> str | None:
                     "nonlinear terms: sensitivities of such a mix are not yet built (linear scenes; yielding, "
                     "Coulomb friction and stop scenes; and cubic springs, quadratic dampers and Bouc-Wen springs "
                     "each are)")
-    unheld = next(((path, kind) for path, kind, signal in zip(model.force_paths, model.force_types, model.signals)
-                   if signal.exo() is None), None)
-    if unheld is not None and model.nonsmooth:
-        # the compiled kernel takes each force by its generator; solve_ivp's run, restarted at each kink, took over
-        # five minutes on a Bouc-Wen frame whose kinks begin at its start
-        return (f"{unheld[0]} ({unheld[1]}) has no exact generator, which the sensitivity equations of "
-                f"{model.nonsmooth[0].path} ({model.nonsmooth[0].law.name}) need; give the force as a shape (sine, "
-                "table, ...) or take differences of runs (smd sweep)")
     return None
 
 

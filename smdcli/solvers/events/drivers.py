@@ -65,25 +65,12 @@ def solve_nonsmooth(solver: Solver, model: Model, grid: np.ndarray, tol: Toleran
     from smdcli.solvers.events.return_mapping import solve_return_mapping
 
     entry = BY_NAME[solver.name]
-    if entry.events:
-        from smdcli.solvers.exact.hold import held_finely, unheld
-
-        held, hold, per_step = held_finely(model, grid, tol.rtol or 1e-6)
-        run = lambda tol: solve_events(held, grid, tol, solver.name)  # noqa: E731
+    if entry.events:  # forces are read at t: a chirp or an expression as exactly as a sine
+        run = lambda tol: solve_events(model, grid, tol, solver.name)  # noqa: E731
         if not tol.balance:
-            result = run(tol)
-        else:
-            result, used, looser = meet_balance(run, tol)
-            result = estimate_error(run, result, used, looser)
-        if held is model:
-            return result
-        # the run is the held force's: its hold's error is the run's too, and said
-        stats = result.stats
-        said = (f"{unheld(model)} has no exact generator: sampled {per_step} times an output step and held linearly "
-                f"between samples (error {hold:.1e} of its peak)")
-        return result.changed(stats=dataclasses.replace(
-            stats, stated_accuracy=max(stats.stated_accuracy, hold) if math.isfinite(stats.stated_accuracy) else hold,
-            message=f"{stats.message}; {said}"), notes=(*result.notes, f"note: {said}"))
+            return run(tol)
+        result, used, looser = meet_balance(run, tol)
+        return estimate_error(run, result, used, looser)
     if entry.return_mapping:
         return solve_return_mapping(model, grid, tol, solver)
     if entry.family == "exact":

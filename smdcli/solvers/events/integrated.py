@@ -55,9 +55,10 @@ def ode_solver_class(name: str):
 class EventDriver(PiecewiseRun):
     """An OdeSolver, mode by mode, events located on its interpolant."""
 
+    scene_class = SmoothScene
+
     def __init__(self, model: Model, grid: np.ndarray, tol: Tolerances, name: str):
         super().__init__(model, grid)
-        self.scene = SmoothScene(model)
         self.tol, self.name = tol, name
         self.kernel_method = compiled_modes(name)  # None: an OdeSolver stepped from Python
         self.cls = ode_solver_class(name) if self.kernel_method is None else None

@@ -53,9 +53,11 @@ class PiecewiseFailed(Exception):
 class PiecewiseRun(Crossings, Batches):
     """One exact event-driven run over an output grid."""
 
+    scene_class = Scene
+
     def __init__(self, model: Model, grid: np.ndarray):
         self.model, self.grid = model, grid
-        self.scene = Scene(model)
+        self.scene = self.scene_class(model)
         self.n = model.n
         self.N = len(grid)
         self.flows: dict[tuple, Flow] = {}

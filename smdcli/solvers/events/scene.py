@@ -81,6 +81,8 @@ class Mode:
 class Scene:
     """The fixed part of a nonsmooth model: matrices, element rows, and the force generators' blocks."""
 
+    forces_at_t = False  # a subclass that reads its forces at t takes forces without a generator (an empty block)
+
     def __init__(self, model: Model):
         self.model = model
         self.n = model.n
@@ -90,13 +92,15 @@ class Scene:
         self.belts = np.array([e.belt for e in self.elements], dtype=float)
         self.Minv = model.Minv
         exos = [s.exo() for s in model.signals]
+        if not self.forces_at_t and None in exos:
+            raise AssertionError(f"{model.source}: a force without a generator reached an exact scene (held first)")
         self.exos = exos
-        self.size = 2 * self.n + sum(e.S.shape[0] for e in exos)
         blocks, col = [], 2 * self.n
         for signal, exo in zip(model.signals, exos):
-            m = exo.S.shape[0]
+            m = exo.S.shape[0] if exo is not None else 0  # none: the force is read at t (forces_at_t)
             blocks.append((col, col + m, signal, exo))
             col += m
+        self.size = col
         self.blocks = blocks
         self._modes: dict = {}
 
@@ -134,7 +138,8 @@ class Scene:
         Fz = np.zeros((n, s))
         Fz[:, :n], Fz[:, n:2 * n] = -Kt, -Ct
         for (lo, hi, _, exo), column in zip(self.blocks, model.B.T):
-            Fz[:, lo:hi] = np.outer(column, exo.g)
+            if exo is not None:
+                Fz[:, lo:hi] = np.outer(column, exo.g)
         held = tuple(e for e, p in enumerate(pieces) if p.held)
         MF, Mg = self.Minv @ Fz, self.Minv @ g
         tension_rows = np.zeros((E, s))
@@ -156,7 +161,8 @@ class Scene:
         A[:n, n:2 * n] = np.eye(n)
         A[n:2 * n] = acc_z
         for lo, hi, _, exo in self.blocks:
-            A[lo:hi, lo:hi] = exo.S
+            if exo is not None:
+                A[lo:hi, lo:hi] = exo.S
         b = np.zeros(s)
         b[n:2 * n] = acc_g
         d_rows = np.zeros((E, s))

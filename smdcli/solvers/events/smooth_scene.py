@@ -17,6 +17,8 @@ from smdcli.solvers.events.scene import Scene
 class SmoothScene(Scene):
     """A scene whose modes carry smooth nonlinear forces and internal differential equations: y = [x, v, q]."""
 
+    forces_at_t = True
+
     def __init__(self, model: Model):
         super().__init__(model)
         self.q_slices = []

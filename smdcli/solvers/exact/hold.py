@@ -1,5 +1,5 @@
 """Forces without an exact generator (a chirp, a formula: Signal.exo() is None) held linearly between samples, as
-the exact solver and the event-located integrators take them, and what the hold costs in accuracy and says.
+the exact solvers take them, and what the hold costs in accuracy and says.
 
 Must not import: sweep, io, plots, commands, cli.
 """
@@ -26,26 +26,6 @@ def first_order_hold(model: Model, grid: np.ndarray) -> tuple[Model, tuple[str, 
         return model, held
     signals = tuple(s if s.exo() is not None else Table(grid, s.value(grid), "linear") for s in model.signals)
     return dataclasses.replace(model, signals=signals), held
-
-
-FINEST_HOLD = 64  # samples of a held force per output step at most (the event-located integrators restart at each)
-
-
-def held_finely(model: Model, grid: np.ndarray, rtol: float) -> tuple[Model, float, int]:
-    """A nonsmooth scene's forces without an exact generator (a chirp, a formula) as tables the event-located
-    integrators can take (their scene propagates generators): sampled at a power-of-two fraction of the output step,
-    the coarsest whose linear hold errs by at most rtol of the force's peak (at most FINEST_HOLD to a step); the
-    model, the hold's error and the samples to a step (the model itself, 0 and 1 where every force has a generator)."""
-    held = held_paths(model)
-    if not held or len(grid) < 2:
-        return model, 0.0, 1
-    per_step = 1
-    while True:
-        fine = np.linspace(grid[0], grid[-1], (len(grid) - 1) * per_step + 1)
-        error = hold_error(model, fine, held)
-        if error <= rtol or per_step >= FINEST_HOLD:
-            return first_order_hold(model, fine)[0], error, per_step
-        per_step *= 2
 
 
 def halved(grid: np.ndarray) -> np.ndarray:
