@@ -152,6 +152,8 @@ class CarriedSensitivities:
             at = segments == j
             S_out[:len(grid)][at] = Zs[at, s:].reshape(-1, P, s)
             rates_out[:len(grid)][at] = (Zs[at] @ big[s:].T + forcing[s:]).reshape(-1, P, s)
+        edged = list(self.edges)
+        S_out[:, edged], rates_out[:, edged] = np.nan, np.nan
         return S_out, rates_out
 
     def _stepped(self, Z: np.ndarray, t_c: float, times: np.ndarray, checkpoint: tuple, augmented) -> np.ndarray | None:
@@ -183,6 +185,7 @@ class CarriedSensitivities:
         S = Z[len(z_c):].reshape(self.P, len(z_c))
         if self.undefined_from is not None and t >= self.undefined_from[0]:
             S = np.full_like(S, np.nan)
+        S[list(self.edges)] = np.nan
         return Z[:len(z_c)], S
 
     def rates_at(self, t: float, left: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -202,6 +205,9 @@ class CarriedSensitivities:
         if self.undefined_from is not None and t >= self.undefined_from[0]:
             for q in out:
                 q[len(z_c):] = np.nan
+        for i in self.edges:
+            for q in out:
+                q[len(z_c) * (i + 1):len(z_c) * (i + 2)] = np.nan
         return out
 
     def at(self, t: float) -> np.ndarray:

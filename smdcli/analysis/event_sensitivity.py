@@ -79,6 +79,9 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
         self.checkpoints: list[tuple] = []  # (t, z, S, states, dq) at the start, each event and each break
         self.moves: dict[float, np.ndarray] = {}  # each event's time -> its scaled derivatives scale_i dt*/dp_i
         self.undefined_from: tuple[float, str] | None = None
+        # parameters whose own step moves the start across an element's edge (a spring deformed to its yield point
+        # exactly, the stiffness moved): they alone have no derivative, from the start; the others do
+        self.edges: dict[int, str] = {}
         self._augmented: dict = {}
         self._flows: dict[bytes, Flow] = {}  # the augmented flows, by their matrix
         self._seeds: dict[float, tuple] = {}  # (sensitivities', state's) generators reseeded at a break, by its time
@@ -224,12 +227,14 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
                 return np.concatenate([z0] + [_values(s) for s in starts])
             flat = self.total(i, initial)
             if len(branches) > 1 or _kinked(internals, np.array([v for s in states for v in _values(s)])):
-                # a start on the edge of two branches (deformed to its yield point exactly)
+                # a start on the edge of two branches (deformed to its yield point exactly): carried as zeros, read
+                # as nan (outputs, state_at, rates_at)
                 edge = [el.path for k, el in enumerate(self.scene.elements) if len({b[k] for b in branches}) > 1] or \
                     [el.path for el, state in zip(self.scene.elements, states) if state.internal]
-                self.no_derivative(t, f"{', '.join(edge)} starts on the edge between two of its branches (within "
-                                      "the parameter's step: a spring deformed to its yield point), where the "
-                                      "response's derivatives on either side differ")
+                self.edges[i] = (f"{', '.join(edge)} starts on the edge between two of its branches (within the "
+                                 "parameter's step: a spring deformed to its yield point), where the response's "
+                                 "derivatives on either side differ")
+                flat = np.zeros_like(flat)
             S[i] = flat[:self.scene.size]
             at = self.scene.size
             for e in range(E):

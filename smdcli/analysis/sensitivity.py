@@ -224,6 +224,8 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
     if run is not None and run.undefined_from is not None:
         when, why = run.undefined_from
         notes.append(f"from t = {when:.9g} s the response has no derivative ({why}): written as nan")
+    for i, why in (run.edges.items() if run is not None else ()):
+        notes.append(f"the response has no derivative in {params[i]} ({why}): written as nan")
     events = jump_times(base, grid) if run is None else np.array([e[0] for e in run.events], dtype=float)
     peaks, at = located_peaks(grid, nominal["displacement"], nominal["velocity"], nominal["acceleration"], events,
                               with_times=True)
