@@ -360,8 +360,13 @@ def _events(base, derivatives: list, scales: np.ndarray, grid: np.ndarray) -> tu
     """The same blocks for a piecewise-linear scene, exact event to event (event_sensitivity.py), its stated
     accuracy and the run (its sensitivities between samples, and where they stop existing)."""
     from smdcli.analysis.event_sensitivity import event_sensitivities
+    from smdcli.solvers.events.piecewise import PiecewiseFailed
 
-    x, v, a, S, d_a, run, stated = event_sensitivities(base, derivatives, scales, grid)
+    try:
+        x, v, a, S, d_a, run, stated = event_sensitivities(base, derivatives, scales, grid)
+    except PiecewiseFailed as failed:  # the exact run's own failure (events that do not settle at one instant)
+        raise SolverFailed(f"{base.source}: the exact event-to-event sensitivities failed: {failed}; differences of "
+                           "runs by an event-located integrator (smd sweep --method DOP853) can stand in") from None
     n = base.n
 
     def stacked(nominal, derived):  # (N, n) and (N, P, n) -> (N, P + 1, n)

@@ -76,6 +76,14 @@ class Auto(Solver):
             from smdcli.solvers.events.drivers import solve_nonsmooth
 
             result = solve_nonsmooth(solver, model, grid, tol)
+            if not result.success and solver.name == "exact" and "do not settle" in result.stats.message:
+                # events the exact flow cannot order at one instant (impacts accumulating on a stop while the
+                # spring beside it yields and unloads at each): the integrators locate them one by one, and rest
+                failed = result.stats.message
+                solver, how = _event_integrator(model)
+                abandoned_s = result.stats.wall_time_s
+                result = solve_nonsmooth(solver, model, grid, tol)
+                reason = f"{reason}; but exact {failed}, so {how}"
         else:
             result = solver.solve(model, grid, tol)
             if result.stats.method == "sparse_newmark" and result.success:  # what error it expects: its estimate's
@@ -157,14 +165,22 @@ def _nonsmooth_choice(model: Model) -> tuple[Solver, str]:
     if model.is_piecewise_linear and all(s.exo() is not None for s in model.signals):
         return get_solver("exact"), (f"piecewise linear ({laws}), {_loads(model) if model.is_forced or model.ground else 'free'}: "
                          "exact between events, each event located on the exact flow to rounding")
+    solver, how = _event_integrator(model)
+    if solver.name == "DOP853":
+        return solver, f"nonsmooth ({laws}), not linear between events: {how}"
+    return solver, f"nonsmooth ({laws}); {how}"
+
+
+def _event_integrator(model: Model) -> tuple[Solver, str]:
+    """The ODE method that takes a nonsmooth scene event to event, and how (after the scene's description)."""
     stiff = [e.path for e in model.nonsmooth if e.law.stiff]
     uncompiled = [e.path for e in model.nonsmooth if not e.law.compiled]
     if uncompiled:  # scipy's pair, stepped from Python: the compiled ones cannot evaluate its tension
         solver = get_solver("scipy:Radau" if stiff else "scipy:DOP853")
-        return solver, (f"nonsmooth ({laws}); {', '.join(uncompiled)} has no compiled kernel: {solver.name}, each "
-                        "event located on its interpolant, restarted there")
+        return solver, (f"{', '.join(uncompiled)} has no compiled kernel: {solver.name}, each event located on its "
+                        "interpolant, restarted there")
     if stiff:
-        return get_solver("Radau"), (f"nonsmooth ({laws}); {', '.join(stiff)} stiff where it saturates or sticks: "
-                                     "implicit Radau, each event located on its interpolant, restarted there")
-    return get_solver("DOP853"), (f"nonsmooth ({laws}), not linear between events: DOP853 at the scenario's "
-                                  "tolerances, each event located on its interpolant, restarted there")
+        return get_solver("Radau"), (f"{', '.join(stiff)} stiff where it saturates or sticks: implicit Radau, each "
+                                     "event located on its interpolant, restarted there")
+    return get_solver("DOP853"), ("DOP853 at the scenario's tolerances, each event located on its interpolant, "
+                                  "restarted there")
