@@ -31,7 +31,7 @@ from smdcli.solvers.events.decisions import impact, project
 from smdcli.solvers.events.piecewise import PiecewiseRun
 from smdcli.solvers.events.scene import Scene
 from smdcli.solvers.exact.flow import Flow
-from smdcli.solvers.exact.hold import first_order_hold, held_paths, hold_error
+from smdcli.solvers.exact.hold import first_order_hold, held_paths, hold_error, subdivided
 
 GRAZING = 1e-9  # a crossing whose rate is below this share of the terms it sums is met tangentially: no dt*/dp
 # what the sensitivities are stated to, relative to each parameter's largest: the rounding of each event's time
@@ -82,6 +82,7 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
         # parameters whose own step moves the start across an element's edge (a spring deformed to its yield point
         # exactly, the stiffness moved): they alone have no derivative, from the start; the others do
         self.edges: dict[int, str] = {}
+        self.held = ""  # how a force without a generator was held (event_sensitivities), if one was
         self._augmented: dict = {}
         self._flows: dict[bytes, Flow] = {}  # the augmented flows, by their matrix
         self._seeds: dict[float, tuple] = {}  # (sensitivities', state's) generators reseeded at a break, by its time
@@ -370,7 +371,6 @@ def event_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gri
     per_step = _held_samples(model, grid, held) if held and len(grid) > 1 else 1
     x, v, a, S, d_a, run = _sampled_run(model, derivatives, scales, grid, per_step)
     stated = run.stated(len(run.events))
-    run.held = ""
     if per_step > 1:
         n = model.n
         xc, vc, ac, Sc, d_ac, _ = _sampled_run(model, derivatives, scales, grid, per_step // 2)
@@ -399,24 +399,15 @@ def _held_samples(model: Model, grid: np.ndarray, held: tuple[str, ...]) -> int:
     the force's peak, at most FINEST_HOLD and HELD_ROWS rows."""
     per_step = 2
     while per_step < FINEST_HOLD and 2 * per_step * (len(grid) - 1) <= HELD_ROWS and \
-            hold_error(model, _sampled(grid, per_step), held) > HOLD_TARGET:
+            hold_error(model, subdivided(grid, per_step), held) > HOLD_TARGET:
         per_step *= 2
     return per_step
-
-
-def _sampled(grid: np.ndarray, per_step: int) -> np.ndarray:
-    """The grid with per_step - 1 evenly spaced points added in each step: its points are every per_step-th."""
-    if per_step == 1:
-        return grid
-    fraction = np.arange(per_step) / per_step
-    fine = (grid[:-1, None] + (grid[1:] - grid[:-1])[:, None] * fraction).ravel()
-    return np.append(fine, grid[-1])
 
 
 def _sampled_run(model: Model, derivatives: list, scales: np.ndarray, grid: np.ndarray, per_step: int):
     """The event-driven run with the forces held on the grid sampled per_step times a step, read on the grid:
     (x, v, a, S, dA, the run)."""
-    fine = _sampled(grid, per_step)
+    fine = subdivided(grid, per_step)
     run = EventSensitivityRun(first_order_hold(model, fine)[0], fine, derivatives, scales)
     x, v, a, _ = run.run()
     n = model.n

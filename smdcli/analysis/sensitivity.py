@@ -25,6 +25,7 @@ from smdcli.model import Model, build, time_grid
 from smdcli.scenario import Scenario
 from smdcli.resources import small_blas
 from smdcli.solvers.base import Tolerances
+from smdcli.solvers.exact.hold import held_paths
 from smdcli.solvers.ground import across_jumps
 from smdcli.solvers.peaks import jump_times, located_peaks, quintic_each
 from smdcli.solvers.registry import get_solver
@@ -166,7 +167,7 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
     # a linear scene is solved exactly with its forces' generators; a force without one (a chirp, a formula) is read
     # at t by the smooth sensitivity equations (held on the output grid, its error was the hold's: 7e-4 on a decaying
     # sine at 100 samples a second)
-    linear = base.is_linear and all(signal.exo() is not None for signal in base.signals)
+    linear = base.is_linear and not held_paths(base)
     if piecewise:
         from smdcli.analysis.event_sensitivity import EVENT_ERROR
     if not base.is_linear:

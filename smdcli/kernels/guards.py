@@ -241,11 +241,6 @@ def first_crossing(m, method, t_old, t_new, h, y_old, y_new, K, F, Q, mid, work,
     for g in range(G):
         s = m.gd_dir[g]
         level = m.gd_level[g]
-        # at its level to the rounding of its value, and of the time of the event that started the step (another
-        # guard's on the same quantity: a spring yielding where a stop is, their levels apart by rounding)
-        slope = values[0, G + g] if values[0, G + g] == values[0, G + g] else (values[1, g] - values[0, g]) / (
-            samples[1] - samples[0])
-        at = _rounding(values[0, g], level) + abs(slope) * 16 * np.spacing(abs(t_old))
         root = np.inf
         for i in range(INTERIOR + 1):
             if s * values[i, g] < 0 <= s * values[i + 1, g]:
@@ -267,6 +262,11 @@ def first_crossing(m, method, t_old, t_new, h, y_old, y_new, K, F, Q, mid, work,
                     root = np.inf
                 if root < np.inf:
                     break
+        # at its level to the rounding of its value, and of the time of the event that started the step (another
+        # guard's on the same quantity: a spring yielding where a stop is, their levels apart by rounding)
+        slope = values[0, G + g] if values[0, G + g] == values[0, G + g] else (values[1, g] - values[0, g]) / (
+            samples[1] - samples[0])
+        at = _rounding(values[0, g], level) + abs(slope) * 16 * np.spacing(abs(t_old))
         if root == np.inf and abs(values[0, g]) <= at and s * values[1, g] >= 0:
             # a kink's dip must be deeper than the interpolant's rounding of its quantity over the step: a kink just
             # taken whose quantity is flat there (a mass at rest until a force reaches it through two springs, v ~

@@ -109,6 +109,22 @@ def _may_reach(e, side, mode, dp, kc, fyc, cD, cR, lam, w, beta0, beta1, h, G0, 
 
 
 @inlined
+def _rise(e, side, mode, dp, kc, fyc, cD, cR, lam, w, beta0, beta1, lo, hi, level, probe):
+    """Where in [lo, hi] the guard, below its level at lo and at or past it at hi, reaches it: by bisection, to
+    rounding of the time (the end of the bracket at or past it)."""
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid <= lo or mid >= hi:
+            break
+        advance(lam, w, beta0, beta1, mid, probe)
+        if _guard(e, side, mode, dp, kc, fyc, cD, cR, lam, probe, beta0, beta1, mid)[0] >= level:
+            hi = mid
+        else:
+            lo = mid
+    return hi
+
+
+@inlined
 def _crossing(e, side, mode, dp, kc, fyc, cD, cR, lam, w, w1, beta0, beta1, h, probe):
     """Where in (0, h] the guard first rises past its level (to rounding of the time), or -1: bracketed by its sign
     at the step's ends, or at the top of its hump where its slope turns from rising to falling. The level is raised
@@ -137,17 +153,7 @@ def _crossing(e, side, mode, dp, kc, fyc, cD, cR, lam, w, w1, beta0, beta1, h, p
             hi = top
     if hi < 0.0:
         return -1.0
-    lo = 0.0
-    for _ in range(200):  # G(lo) < level <= G(hi)
-        mid = 0.5 * (lo + hi)
-        if mid <= lo or mid >= hi:
-            break
-        advance(lam, w, beta0, beta1, mid, probe)
-        if _guard(e, side, mode, dp, kc, fyc, cD, cR, lam, probe, beta0, beta1, mid)[0] >= level:
-            hi = mid
-        else:
-            lo = mid
-    return hi
+    return _rise(e, side, mode, dp, kc, fyc, cD, cR, lam, w, beta0, beta1, 0.0, hi, level, probe)
 
 
 @inlined
@@ -183,17 +189,7 @@ def _return(e, side, mode, dp, kc, fyc, cD, cR, lam, w, w1, beta0, beta1, h, pro
     if min(bottom, lowest) >= -level:
         return -1.0  # at its surface to rounding throughout: no excursion, no return
     lo = top if bottom < lowest else h * at / RETURN_SAMPLES
-    hi = h
-    for _ in range(200):  # G(lo) < level <= G(hi)
-        mid = 0.5 * (lo + hi)
-        if mid <= lo or mid >= hi:
-            break
-        advance(lam, w, beta0, beta1, mid, probe)
-        if _guard(e, side, mode, dp, kc, fyc, cD, cR, lam, probe, beta0, beta1, mid)[0] >= level:
-            hi = mid
-        else:
-            lo = mid
-    return hi
+    return _rise(e, side, mode, dp, kc, fyc, cD, cR, lam, w, beta0, beta1, lo, h, level, probe)
 
 
 @kernel

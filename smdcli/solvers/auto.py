@@ -74,9 +74,10 @@ class Auto(Solver):
                           f"(h*|lambda| = {stiff.rho:.2f}); implicit Radau with the analytic Jacobian")
         elif model.nonsmooth:
             from smdcli.solvers.events.drivers import solve_nonsmooth
+            from smdcli.solvers.events.piecewise import UNSETTLED
 
             result = solve_nonsmooth(solver, model, grid, tol)
-            if not result.success and solver.name == "exact" and "do not settle" in result.stats.message:
+            if not result.success and solver.name == "exact" and UNSETTLED in result.stats.message:
                 # events the exact flow cannot order at one instant (impacts accumulating on a stop while the
                 # spring beside it yields and unloads at each): the integrators locate them one by one, and rest
                 failed = result.stats.message

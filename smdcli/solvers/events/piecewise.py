@@ -50,6 +50,9 @@ class PiecewiseFailed(Exception):
     """A scene the event-driven solver cannot advance (chattering at one instant)."""
 
 
+UNSETTLED = "do not settle"  # the failure of events that cannot be ordered at one instant (auto goes on from it)
+
+
 class PiecewiseRun(Crossings, Batches):
     """One exact event-driven run over an output grid."""
 
@@ -135,7 +138,7 @@ class PiecewiseRun(Crossings, Batches):
                 if t_event == last_event_time:
                     at_same_time += 1
                     if at_same_time > MAX_EVENTS_AT_ONE_TIME:
-                        raise PiecewiseFailed(f"events at t = {t_event:.6g} s do not settle "
+                        raise PiecewiseFailed(f"events at t = {t_event:.6g} s {UNSETTLED} "
                                               f"({self.events[-1][1]} {self.events[-1][2]} again and again)")
                 else:
                     at_same_time, last_event_time = 0, t_event

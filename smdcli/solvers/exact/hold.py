@@ -30,9 +30,17 @@ def first_order_hold(model: Model, grid: np.ndarray) -> tuple[Model, tuple[str, 
 
 def halved(grid: np.ndarray) -> np.ndarray:
     """The grid with the midpoint of each step added: its points are the even ones."""
-    fine = np.empty(2 * len(grid) - 1)
-    fine[::2], fine[1::2] = grid, 0.5 * (grid[1:] + grid[:-1])
-    return fine
+    return subdivided(grid, 2)
+
+
+def subdivided(grid: np.ndarray, per_step: int) -> np.ndarray:
+    """The grid with per_step - 1 evenly spaced points added in each step (per_step a power of two: the fractions,
+    and a midpoint's 0.5 a + 0.5 b, are exact): its points are every per_step-th."""
+    if per_step == 1 or len(grid) < 2:
+        return np.asarray(grid, dtype=float)
+    fraction = np.arange(per_step) / per_step
+    fine = (grid[:-1, None] * (1.0 - fraction) + grid[1:, None] * fraction).ravel()
+    return np.append(fine, grid[-1])
 
 
 def hold_response_error(x: np.ndarray, solved_on) -> float:
