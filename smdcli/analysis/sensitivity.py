@@ -23,7 +23,7 @@ from smdcli.analysis.model_derivative import augmented_model, model_derivatives,
 from smdcli.errors import SolverFailed, UsageError
 from smdcli.model import Model, build, time_grid
 from smdcli.scenario import Scenario
-from smdcli.resources import small_blas
+from smdcli.resources import keep_freed_memory, small_blas
 from smdcli.solvers.base import Tolerances
 from smdcli.solvers.exact.hold import held_paths
 from smdcli.solvers.ground import across_jumps
@@ -149,6 +149,7 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
     import scipy.linalg  # noqa: F401  the solvers' own imports, before the clock: a process pays them once, and
     import scipy.sparse  # noqa: F401  forward_time_s, timed after, would not
 
+    keep_freed_memory()
     with small_blas(2 * (len(params) + 1) * len(sc.dof_names)):
         start = time.perf_counter()
         found = _sensitivity(sc, params, grid, peaks, advance, built)

@@ -30,6 +30,7 @@ class ParameterDerivative(Signal):
     def __init__(self, base: Signal, points: list[Signal], weights: np.ndarray):
         self.base, self.points, self.weights = base, points, weights
         self._exo = self._flows = self._commute = None
+        self._still: dict[bytes, bool] = {}  # whether dw holds still at these anchors, by the anchors' bytes
 
     def value(self, t):
         if not self.flows():
@@ -111,7 +112,10 @@ class ParameterDerivative(Signal):
         if left or not self._commute:
             return None
         marks, which = anchor_marks(self.base, times, left)  # few anchors (a harmonic's one origin), many times
-        if combined(self.weights, [s.exo_states(marks) for s in self.points]).any():
+        still = self._still.get(key := marks.tobytes())
+        if still is None:  # asked once per anchors: a run asks at every block's start and for the grid's forces
+            still = self._still[key] = not combined(self.weights, [s.exo_states(marks) for s in self.points]).any()
+        if not still:
             return None
         return self.base.exo_states(times), times - marks[which], moved
 
