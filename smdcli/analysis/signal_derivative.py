@@ -185,6 +185,8 @@ def _proportion(base: np.ndarray, other: np.ndarray) -> float | None:
 
 
 def _same_signal(a: Signal, b: Signal) -> bool:
+    if a is b:  # a model moved along another parameter keeps its forces (model/moved.py)
+        return True
     ea, eb = a.exo(), b.exo()
     if ea is None or eb is None:
         return a is b or (type(a) is type(b) and vars(a).keys() == vars(b).keys() and all(
