@@ -122,19 +122,26 @@ def _eigen_steps(lam: np.ndarray, h: float, forced: np.ndarray, start: np.ndarra
     first = np.where(which == 0, lam[modes, 1], -lam[modes, 0]) / gap  # row `which` of V^-1: (first, second)
     second = np.where(which == 0, -1.0, 1.0) / gap
     every = len(modes) == len(lam)  # every mode underdamped: its c+ alone, no gather
-
-    def to_eigen(y):  # (..., n, 2) -> (..., components)
-        if every:
-            return y[..., 0] * first + y[..., 1] * second
-        return y[..., modes, 0] * first + y[..., modes, 1] * second
-    exponents = np.broadcast_to(lam[modes, which] * h, (*start.shape[:-2], len(modes))).reshape(-1)
-    c, chain = _diagonal_steps(exponents, to_eigen(forced).reshape(len(forced), -1),
-                               to_eigen(start).reshape(-1))
-    c = c.reshape(len(c), *start.shape[:-2], len(modes))
-    out = np.empty((len(c), *start.shape))
-    if every:  # y = 2 Re(c+ (1, lam+))
+    lead, steps = start.shape[:-2], len(forced)
+    exponents = np.broadcast_to(lam[modes, which] * h, (*lead, len(modes))).reshape(-1)
+    J = _block(exponents, steps)
+    c = np.empty((1 + -(-steps // J) * J, len(exponents)), dtype=complex)  # the start, then whole blocks of steps
+    into = c[1:steps + 1].reshape(steps, *lead, len(modes))
+    if every:  # V^-1 y written in place: forced's two columns times V^-1's row, no complex copies between
+        np.multiply(forced[..., 0], first, out=into)
+        into += forced[..., 1] * second
+        c[0] = (start[..., 0] * first + start[..., 1] * second).reshape(-1)
+    else:
+        into[...] = forced[..., modes, 0] * first + forced[..., modes, 1] * second
+        c[0] = (start[..., modes, 0] * first + start[..., modes, 1] * second).reshape(-1)
+    c[steps + 1:] = 0.0
+    chain = _diagonal_steps(exponents, c, J)
+    c = c[:steps + 1].reshape(steps + 1, *lead, len(modes))
+    out = np.empty((steps + 1, *start.shape))
+    if every:  # y = 2 Re(c+ (1, lam+)), from c's real and imaginary parts
         np.multiply(c.real, 2.0, out=out[..., 0])
-        np.multiply((c * lam[:, 0]).real, 2.0, out=out[..., 1])
+        np.multiply(c.real, 2.0 * lam[:, 0].real, out=out[..., 1])
+        out[..., 1] -= c.imag * (2.0 * lam[:, 0].imag)
         return out, chain
     full = np.empty(out.shape, dtype=complex)
     full[..., modes, which] = c
@@ -144,33 +151,33 @@ def _eigen_steps(lam: np.ndarray, h: float, forced: np.ndarray, start: np.ndarra
     return out, chain
 
 
-def _diagonal_steps(exponents: np.ndarray, forced: np.ndarray, start: np.ndarray) -> tuple[np.ndarray, int]:
-    """c_(k+1) = e^(exponent) c_k + forced_k from c_0 = start, component by component (complex): (steps + 1, S),
-    and the longest chain of dependent operations. In blocks of J steps: within a block c_(b, j) = mu^j c_b +
-    mu^(j - 1) sum_(l < j) mu^-l forced_(b, l) (a cumulative sum: numpy's loop, not Python's), the blocks' starts
-    one after another; J holds |mu|^-J, the sum's growth, within e."""
-    steps, size = forced.shape
+def _block(exponents: np.ndarray, steps: int) -> int:
+    """Steps a block of _diagonal_steps takes: at most BLOCK and the run, and so few that |mu|^-J, the growth of its
+    sums, stays within e."""
     decay = float(np.max(-exponents.real, initial=0.0))
-    J = int(max(1, min(BLOCK, steps, 1.0 / decay if decay > 0 else BLOCK)))
-    count = -(-steps // J)
-    padded = np.zeros((count * J, size), dtype=complex)
-    padded[:steps] = forced
-    padded = padded.reshape(count, J, size)
-    lags = np.arange(J + 1)[:, None] * exponents[None, :]
-    padded *= np.exp(-lags[:J])
-    sums = np.cumsum(padded, axis=1, out=padded)
-    sums *= np.exp(lags[:J])  # after 1 .. J steps from rest
-    free = np.exp(lags[1:])  # mu^1 .. mu^J
-    starts = np.empty((count, size), dtype=complex)
-    starts[0] = start
-    for b in range(count - 1):
-        starts[b + 1] = free[-1] * starts[b] + sums[b, -1]
-    out = np.empty((count * J + 1, size), dtype=complex)
-    out[0] = start
-    blocks = out[1:].reshape(count, J, size)
-    np.multiply(free[None], starts[:, None, :], out=blocks)
-    blocks += sums
-    return out[:steps + 1], J + count
+    return int(max(1, min(BLOCK, steps, 1.0 / decay if decay > 0 else BLOCK)))
+
+
+def _diagonal_steps(exponents: np.ndarray, c: np.ndarray, J: int) -> int:
+    """c_(k+1) = mu c_k + forced_k (mu = e^(exponent)), component by component (complex), in place: c (1 + whole
+    blocks of J steps, S) holds c_0, then forced_0, forced_1, ... (zeros past the run), and leaves c_0, c_1, ....
+    Within a block c_(b, j) = mu^j (mu c_b + sum_(l <= j) mu^-l forced_(b, l)): the sums row by row (numpy's
+    cumsum over this axis takes twice as long), the blocks' starts one after another. The longest chain of
+    dependent operations."""
+    blocks = c[1:].reshape(-1, J, c.shape[1])
+    grow = np.exp(np.arange(J)[:, None] * exponents[None, :])  # mu^0 .. mu^(J - 1)
+    blocks *= 1.0 / grow
+    for j in range(1, J):
+        blocks[:, j] += blocks[:, j - 1]
+    mu = np.exp(exponents)
+    starts = np.empty((len(blocks), c.shape[1]), dtype=complex)
+    starts[0] = c[0]
+    for b in range(len(blocks) - 1):
+        starts[b + 1] = grow[-1] * (mu * starts[b] + blocks[b, -1])
+    starts *= mu
+    blocks += starts[:, None, :]
+    blocks *= grow
+    return J + len(blocks)
 
 
 def _accelerations(base: Model, values: np.ndarray, u: np.ndarray, columns: np.ndarray, dM: np.ndarray,
@@ -255,25 +262,40 @@ def _series_pair_flows(squared: np.ndarray, damping: np.ndarray, h: float) -> np
     """_coupling_flows' Fc_kj where every mode's |lambda| h is at most SERIES_RADIUS: e^(L_j s) as its
     Taylor series, int_0^h e^(L_k (h - s)) s^m / m! ds = h^(m + 1) phi_(m+1)(L_k h), so that
     Fc_kj = h sum_m [phi_(m+1)(L_k h) e2] [e_c^T (L_j h)^m]: one product of (2 n, SERIES_TERMS) by (SERIES_TERMS,
-    2 n) per c, in real arithmetic, with no eigenvectors (critically damped modes alike)."""
+    2 n) per c, in real arithmetic, with no eigenvectors (critically damped modes alike). Both factors are read off
+    the powers of each mode's L h: (L_k h)^i e2 their second columns, e_c^T (L_j h)^m their rows."""
     n, terms = len(squared), SERIES_TERMS
-    powers = np.empty((2 * terms, n, 2))  # (L_k h)^i e2
-    powers[0, :, 0], powers[0, :, 1] = 0.0, 1.0
-    for i in range(1, 2 * terms):
-        powers[i, :, 0] = h * powers[i - 1, :, 1]
-        powers[i, :, 1] = -h * (squared * powers[i - 1, :, 0] + damping * powers[i - 1, :, 1])
+    powers = _mode_powers(mode_matrices(squared, damping) * h, 2 * terms)  # (2 terms, n, 2, 2)
     index = np.arange(2 * terms)[:, None] + np.arange(terms)[None, :] + 1
     inverse_factorials = np.array([1.0 / math.factorial(k) for k in range(3 * terms + 1)])[index]  # 1 / (i + m + 1)!
-    phis = h * (powers.reshape(2 * terms, 2 * n).T @ inverse_factorials)  # (2 n: k, row; m)
+    phis = h * (powers[:, :, :, 1].reshape(2 * terms, 2 * n).T @ inverse_factorials)  # (2 n: k, row; m)
     pairs = np.empty((2, 2 * n, 2 * n))
     for c in range(2):
-        rows = np.zeros((terms, n, 2))  # e_c^T (L_j h)^m: [w0, w1] L = [-w^2 w1, w0 - d w1]
-        rows[0, :, c] = 1.0
-        for m in range(1, terms):
-            rows[m, :, 0] = -h * squared * rows[m - 1, :, 1]
-            rows[m, :, 1] = h * (rows[m - 1, :, 0] - damping * rows[m - 1, :, 1])
-        pairs[c] = phis @ rows.reshape(terms, 2 * n)
+        pairs[c] = phis @ powers[:terms, :, c, :].reshape(terms, 2 * n)
     return pairs.reshape(2, n, 2, n, 2)
+
+
+def _mode_powers(M: np.ndarray, count: int) -> np.ndarray:
+    """M^0 .. M^(count - 1) of each mode's 2 x 2 matrix M (n, 2, 2), by doubling: (count, n, 2, 2)."""
+    out = np.empty((count, *M.shape))
+    out[0] = np.eye(2)
+    done = 1
+    while done < count:
+        more = min(done, count - done)
+        _times_2x2(out[:more], _times_2x2(out[done - 1], M, np.empty(M.shape)), out[done:done + more])
+        done += more
+    return out
+
+
+def _times_2x2(A: np.ndarray, B: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """A @ B for stacks of 2 x 2 matrices, entry by entry (numpy's matmul pays a call's work per 2 x 2)."""
+    a00, a01, a10, a11 = A[..., 0, 0], A[..., 0, 1], A[..., 1, 0], A[..., 1, 1]
+    b00, b01, b10, b11 = B[..., 0, 0], B[..., 0, 1], B[..., 1, 0], B[..., 1, 1]
+    out[..., 0, 0] = a00 * b00 + a01 * b10
+    out[..., 0, 1] = a00 * b01 + a01 * b11
+    out[..., 1, 0] = a10 * b00 + a11 * b10
+    out[..., 1, 1] = a10 * b01 + a11 * b11
+    return out
 
 
 def _coupling_flows(squared: np.ndarray, damping: np.ndarray, h: float) -> np.ndarray:

@@ -17,3 +17,11 @@ def mass_solve(M: np.ndarray, A: np.ndarray) -> np.ndarray:
     if np.count_nonzero(M) == np.count_nonzero(diagonal):
         return A / diagonal[..., :, None]
     return np.linalg.solve(M, A)
+
+
+def reciprocal_masses(M) -> np.ndarray | None:
+    """Each DOF's 1 / m where M is diagonal (every element-form scene; a sparse scene's M always), else None."""
+    masses = M.diagonal()
+    if isinstance(M, np.ndarray) and np.count_nonzero(M) != np.count_nonzero(masses):
+        return None
+    return 1.0 / masses

@@ -24,7 +24,7 @@ from smdcli.model.elements import GROUND, Element, Incidence, elements_of, incid
 from smdcli.shapes import Signal, build_signal
 from smdcli.model.ground import MAX_JUMPS, GroundMotion, ground_motion, state_jumps
 from smdcli.model.checks import check_finite, check_forces, check_matrices_finite
-from smdcli.model.mass import mass_solve
+from smdcli.model.mass import mass_solve, reciprocal_masses
 from smdcli.model.modes import RIGID_BODY, Modes, modal_eigenvalues, regime, signed
 from smdcli.model.nonsmooth import NonsmoothElement, check_initial_state, initial_stiffness, nonsmooth_elements
 from smdcli.model.sparse import (assembled, check_dense_size, cheapest, dense_file_matrices, gershgorin_omega,
@@ -241,7 +241,8 @@ class Model:
         rest = force - rows_times(v, C.T) - rows_times(x, K.T)
         if not self.is_linear:
             rest = rest - self.nonlinear_force(x, v)
-        return rows_times(rest, Minv.T)
+        inverse = reciprocal_masses(self.M)  # a diagonal M's: a product by each 1 / m, not by M^-1
+        return rest * inverse if inverse is not None else rows_times(rest, Minv.T)
 
     # ----------------------------------------------------------------- modes
     @cached_property
