@@ -7,7 +7,8 @@ scene, against the compiled kernel `smd ida` runs it with), every run's own phys
 (analysis.guards: dissipation never decreasing, friction within its static force, stops never passed, yield surfaces
 never exceeded, the energy balance), the CLI's file against the API, and the export against the file, a sweep of
 the first spring's k (its law's k where it is hysteretic) against simulate of each member, and the sensitivities to
-that k and to the force's amplitude and frequency against differences of the reference runs. Agreement within the
+that k, to the force's amplitude and frequency and to one more of the scene's numbers (every one of them with
+SMD_DIFFERENTIAL_EVERY_PARAMETER=1) against differences of the reference runs. Agreement within the
 stated accuracies, or a reported failure (a solver that says it failed, a run marked suspect): never a silent
 difference.
 
@@ -259,10 +260,16 @@ def check_sweep(text: str, tmp_path) -> None:
         assert difference <= allowed, f"sweep member {s} differs from simulate by {difference / peak:.3g}\n{text}"
 
 
+EVERY_PARAMETER = bool(os.environ.get("SMD_DIFFERENTIAL_EVERY_PARAMETER"))
+
+
 def sensitivity_params(text: str) -> list[str]:
-    """What check_sensitivity differentiates: the first spring's k (its law's), and the force's amplitude and
-    frequency where it has them."""
+    """What check_sensitivity differentiates: the first spring's k (its law's), the force's amplitude and
+    frequency where it has them, and one more of the scene's numbers, chosen by the text (a mass, a damper, a
+    law's yield force or shape, a friction's forces, a stop's gap or restitution, an initial state, Rayleigh's
+    coefficients); every one of them with SMD_DIFFERENTIAL_EVERY_PARAMETER=1."""
     import tomllib
+    import zlib
 
     doc = tomllib.loads(text)
     params = ["spring[0].k"]
@@ -271,7 +278,14 @@ def sensitivity_params(text: str) -> list[str]:
         given = given[0] if isinstance(given, list) else given
         if isinstance(given, dict):
             params += [f"{where}.{key}" for key in ("amplitude", "omega") if key in given]
-    return params
+    mass, spring = doc["mass"][0], doc["spring"][0]
+    others = ["mass[0].m"] + [f"mass[0].{key}" for key in ("x0", "v0") if mass.get(key)]
+    others += [f"spring[0].{key}" for key in ("fy", "hardening", "beta", "k3") if isinstance(spring.get(key), float)]
+    others += ["damper[0].c"] if "damper" in doc else []
+    others += ["friction[0].force", "friction[0].static"] if "friction" in doc else []
+    others += ["stop[0].max", "stop[0].restitution"] if "stop" in doc else []
+    others += [f"damping.{key}" for key in ("alpha", "beta") if doc.get("damping", {}).get(key)]
+    return params + (others if EVERY_PARAMETER else [others[zlib.crc32(text.encode()) % len(others)]])
 
 
 def check_modal_sensitivity(sc, param: str, found, text: str) -> None:
@@ -308,7 +322,8 @@ def check_sensitivity(text: str, tmp_path) -> None:
     an event passes between the runs; rows said to have no derivative (nan) are not compared."""
     import smdcli
     from smdcli import scenario
-    from smdcli.errors import SolverFailed, UsageError
+    from smdcli.analysis.model_derivative import relative_size
+    from smdcli.errors import ScenarioError, SolverFailed, UsageError
     from smdcli.sweep.family import scenario_with
 
     sc = scenario.parse(text, str(tmp_path / "scene.toml"))
@@ -327,12 +342,15 @@ def check_sensitivity(text: str, tmp_path) -> None:
             continue  # held still (friction, or nothing acts): smd says no DOF moves, its derivatives are rounding's
         if model.is_linear:
             check_modal_sensitivity(sc, param, s, text)
-        h = 1e-4 * abs(value)
+        h = 1e-4 * relative_size(value)  # the stencil's scale: a value of 5e-324 is differenced as zero is
         runs = {}
-        for offset in (-2, -1, 1, 2):
-            member = tmp_path / f"sensitivity{offset}.toml"
-            member.write_text(scenario_with(sc, {param: value + offset * h}).text)
-            runs[offset] = solved(member, method)
+        try:
+            for offset in (-2, -1, 1, 2):
+                member = tmp_path / f"sensitivity{offset}.toml"
+                member.write_text(scenario_with(sc, {param: value + offset * h}).text)
+                runs[offset] = solved(member, method)
+        except ScenarioError:
+            continue  # a step crosses the parameter's limit (a static force at its kinetic one): no central difference
         if any(r is None or r.stats.suspect for r in runs.values()):
             continue  # reported
         counts = {len(r.nonsmooth.events) if r.nonsmooth is not None else 0 for r in runs.values()}

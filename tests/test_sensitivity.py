@@ -739,6 +739,29 @@ def test_a_nonlinear_scene_shows_its_progress_on_a_terminal_and_none_when_piped(
     assert piped.returncode == 0 and piped.stderr == "", piped.stderr
 
 
+@pytest.mark.parametrize("scene", [
+    "[[force]]\non = \"m0\"\ntype = \"sine\"\namplitude = 1.0\nomega = 3.0\n",
+    "[[stop]]\nconnects = [\"ground\", \"m0\"]\nmax = 0.02\nrestitution = 0.7\n"
+    "[[force]]\non = \"m0\"\ntype = \"step\"\namplitude = 2.0\nt0 = 0.2345\n",
+])
+@pytest.mark.parametrize("tiny", [5e-324, 1.1e-308, 1e-200, 1e-100])
+def test_a_parameter_next_to_zero_is_differenced_as_zero_is(scene, tiny):
+    """Rayleigh's beta at 5e-324 or 1.1e-308 (values hypothesis drew): a step relative to it is no number (its
+    difference was divided by zero, or a stop scene's flows met an infinite matrix: tracebacks); at 1e-200 or 1e-100
+    beside alpha M, a step of 1e-2 of it was lost in C's rounding, and the derivative was zero, stated exact. Below
+    1e-154 a parameter's stencil is scaled as zero's, and an affine parameter's step is one that moves the model by
+    1e-2 of itself. The response hardly moves with beta there, so its derivative is the one at beta = 0."""
+    text = ("[time]\nend = 1.0\nstep = 0.01\n[[mass]]\nname = \"m0\"\nm = 1.0\n[[spring]]\n"
+            "connects = [\"ground\", \"m0\"]\nk = 50.0\n[damping]\nalpha = 0.1\nbeta = {}\n" + scene)
+    at_zero = smdcli.sensitivity(scenario.parse(text.format(0.0), "zero.toml"), ["damping.beta"])
+    near = smdcli.sensitivity(scenario.parse(text.format(repr(tiny)), "tiny.toml"), ["damping.beta"])
+    largest = np.abs(at_zero.d_displacement).max()
+    assert largest > 0
+    # against the run at zero's accuracy: the tiny value's own is stated relative to beta dx/dbeta, itself tiny
+    stated = at_zero.accuracy["d_displacement"][0]
+    assert np.abs(near.d_displacement - at_zero.d_displacement).max() <= 10 * stated * largest
+
+
 def test_a_small_scene_runs_blas_on_one_thread_and_gives_the_threads_back():
     """numpy's and scipy's OpenBLAS pools contend on small products (a fit 2.4x slower on two cores): a small scene's
     sensitivities and fits run them on one thread, and the limits are as they were after; a large one is left alone."""

@@ -31,6 +31,7 @@ import numpy as np
 
 from smdcli import scenario as scenario_mod
 from smdcli.analysis.signal_derivative import anchors, combined, signal_derivative
+from smdcli.analysis.step_scale import relative_size, wider_scale
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import Model, build
 from smdcli.model.damping import modal_damping_derivative
@@ -190,6 +191,7 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
         found = _modal_derivative(sc, doc, base, grid, path, value, scale, structure, arrays_of)
         if found is not None:
             return found
+    scale, _ = _step_scale(sc, doc, base, grid, path, value, scale, structure, arrays_of)
     best = refused = None
     for relative in STEPS:
         delta = 2.0 ** round(math.log2(relative * scale))
@@ -281,9 +283,28 @@ def _harmonic_frequency(sc: Scenario, path: str) -> bool:
 
 def _affine_derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str, value: float,
                        scale: float, structure: tuple, arrays_of) -> Derivative:
-    """An affine parameter's derivative: one difference over a step of AFFINE_STEP of it, exact up to rounding."""
-    other, delta = _moved_once(sc, doc, base, grid, path, value, scale, structure)
+    """An affine parameter's derivative: one difference over a step of AFFINE_STEP of _step_scale's scale, exact up
+    to rounding."""
+    scale, moved = _step_scale(sc, doc, base, grid, path, value, scale, structure, arrays_of)
+    other, delta = moved or _moved_once(sc, doc, base, grid, path, value, scale, structure)  # None: says why
     return _difference(path, value, delta, base, other, arrays_of)
+
+
+def _step_scale(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str, value: float, scale: float,
+                structure: tuple, arrays_of) -> tuple[float, tuple | None]:
+    """The scale a parameter's steps are taken in, and (the scene a step of AFFINE_STEP of it away, the step): |p|,
+    or step_scale.wider_scale's where such a step moves the model by too little and one that wide is a scene;
+    (|p|, None) where no scene is a step away (the stencil finds its own side)."""
+    try:
+        moved = _moved_once(sc, doc, base, grid, path, value, scale, structure)
+    except ScenarioError:
+        return scale, None
+    wider = wider_scale(arrays_of(base), arrays_of(moved[0]), moved[1])
+    try:
+        return (wider, _moved_once(sc, doc, base, grid, path, value, wider, structure)) if wider > scale else \
+            (scale, moved)
+    except ScenarioError:
+        return scale, moved
 
 
 def _moved_once(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str, value: float, scale: float,
@@ -423,8 +444,3 @@ def model_derivatives(sc: Scenario, base: Model, grid: np.ndarray, paths: list[s
     doc = decoded(sc.text) if doc is None else doc  # decoded once per text; _scene_at copies before it edits
     base_arrays, structure = _model_arrays(base, float(grid[-1]), flowed), _structure(base, grid)
     return [derivative(sc, doc, base, grid, path, base_arrays, structure, flowed) for path in paths]
-
-
-def relative_size(value: float) -> float:
-    """|p|, or 1 at p = 0: the scale a sensitivity is normalized by (p dx/dp)."""
-    return abs(value) if value != 0 and math.isfinite(value) else 1.0
