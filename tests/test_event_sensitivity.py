@@ -323,6 +323,68 @@ def test_a_spring_started_at_its_yield_point_has_no_derivative_in_its_stiffness(
     assert np.abs(s.d_displacement[0] - reference).max() <= 1e-6 * np.abs(reference).max()
 
 
+HELD_AT_BREAKAWAY = """
+[time]
+end = 1.0
+step = 0.01
+[[mass]]
+name = "m0"
+m = 1.0
+x0 = X0
+[[spring]]
+connects = ["ground", "m0"]
+k = 50.0
+[[friction]]
+connects = ["ground", "m0"]
+force = 0.5
+static = 1.0
+[[stop]]
+connects = ["ground", "m0"]
+max = 0.03125
+restitution = 0.3
+[[force]]
+on = "m0"
+type = "table"
+t = [0.0, 0.3, 0.61, 1.0]
+values = [0.0, 1.0, -0.5, 0.0]
+"""
+
+
+def test_a_contact_held_at_its_breakaway_force_has_no_derivative_across_it():
+    """Found by the random-seed differential tests. x0 = -0.02 holds the contact at its breakaway (k x0 = static)
+    with the force growing: it slips at once, where a softer spring holds a while, so the one-sided derivatives in k
+    differ (smd printed the right-hand one, 0.24 of the response's largest off central differences, with no word).
+    x0 = 0: the force reaches the breakaway only at the table's corner, where it turns back; a larger corner slips
+    there. Both now nan with a note, for the parameters that move the contact's force off its breakaway only."""
+    from smdcli import scenario
+
+    start = scenario.parse(HELD_AT_BREAKAWAY.replace("X0", "-0.02"), "start.toml")
+    paths = ["spring[0].k", "mass.m0.m", "mass.m0.x0"]
+    s = smdcli.sensitivity(start, paths)
+    assert np.isnan(s.d_displacement[[0, 2]]).all()
+    assert [note.split(" (")[0] for note in s.notes] == [f"the response has no derivative in {path}"
+                                                         for path in (paths[0], paths[2])]
+    assert all("friction[0] starts on the edge" in note for note in s.notes)
+    # the mass does not move the contact's force at the start: its derivative exists (measured 1.2e-9 off)
+    mass = smdcli.sensitivity(start, ["mass.m0.m"])
+    assert not mass.notes
+    reference = dop853_differences(start, mass, ["mass.m0.m"])["mass.m0.m"]
+    near = away_from_events(start, mass)
+    for given in (mass.d_displacement[0], s.d_displacement[1]):
+        assert np.abs(given[near] - reference[near]).max() <= 1e-6 * np.abs(reference).max()
+
+    corner = scenario.parse(HELD_AT_BREAKAWAY.replace("X0", "0.0"), "corner.toml")
+    assert np.abs(smdcli.simulate(corner, method="exact").displacement).max() == 0.0  # held through the corner
+    s = smdcli.sensitivity(corner, ["force[0].values[1]"])
+    after = s.time >= 0.3
+    assert np.isnan(s.d_displacement[0][after]).all() and (s.d_displacement[0][~after] == 0.0).all()
+    assert any("friction[0] reaches its slip at t = 0.3 s, just where the force turns" in note for note in s.notes)
+    # a corner a thousandth lower holds; its derivative (zero: nothing moves) is given
+    lower = scenario.parse(HELD_AT_BREAKAWAY.replace("X0", "0.0").replace("1.0, -0.5", "0.999, -0.5"), "lower.toml")
+    s = smdcli.sensitivity(lower, ["force[0].values[1]"])
+    assert (s.d_displacement[0] == 0.0).all() and not s.notes[:-1]
+
+
 STOP_UNDER_A_FORMULA = """
 [time]
 end = 3.0

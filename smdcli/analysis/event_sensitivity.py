@@ -25,6 +25,7 @@ import numpy as np
 from smdcli.elements.base import KINK, RATE
 from smdcli.elements import State
 from smdcli.analysis.event_carry import CarriedSensitivities
+from smdcli.analysis.event_edges import GRAZE, breakaway_margins, internal_values, kinked, on_breakaway
 from smdcli.analysis.signal_derivative import combined
 from smdcli.model import Model
 from smdcli.solvers.events.decisions import impact, project
@@ -38,7 +39,6 @@ GRAZING = 1e-9  # a crossing whose rate is below this share of the terms it sums
 # divided by its crossing rate is not bounded a priori; differences of the exact runs agree to 6e-11 - 3e-10 (their
 # own error) on yielding, stick-slip, impacts and a bilinear frame
 EVENT_ERROR = 1e-9
-GRAZE = 1e-9  # a guard's top within this share of its terms below its level: a near miss, no derivative from it
 SUPPORTED = ("elastoplastic", "bilinear", "coulomb", "stop")  # the laws whose events carry their sensitivities
 
 
@@ -196,6 +196,10 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
             self.settle_checkpoint(t, z, S, states)
         return found
 
+    def kink_slack(self, size: np.ndarray, const: np.ndarray) -> np.ndarray:
+        # a guard within GRAZE of its level at a kink: touched_at_break decides on the step path
+        return GRAZE * (np.maximum(size, self.v_scale) + np.abs(const))
+
     def turn_margin(self, guard, row, const, z0) -> float:
         # a near miss inside a batch too: the step-by-step path takes that step, where first_crossing sees it
         return GRAZE * self._graze_scale(guard, row, const, z0)
@@ -207,6 +211,7 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
         return max(size, self.v_scale) if guard.quantity == RATE else size
 
     def start(self, states, z: np.ndarray, t: float):
+        held_margins = breakaway_margins(self.scene, states, z)  # before the start's decisions
         before = len(self.events)
         states, z = super().start(states, z, t)
         if any(kind == "impact" for _, _, kind in self.events[before:]):
@@ -215,6 +220,7 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
         S = np.zeros((self.P, self.scene.size))
         for i in range(self.P):
             branches, internals = set(), {}  # the elements' starting modes and internal values at the stencil's points
+            margins = {}  # the held contacts' forces less their breakaway at the stencil's points
 
             def initial(scene, c):
                 model = scene.model
@@ -224,17 +230,21 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
                 d0, rate0 = scene.R @ model.x0, scene.R @ model.v0 + scene.belts
                 starts = [el.law.start(float(d0[e]), float(rate0[e])) for e, el in enumerate(scene.elements)]
                 branches.add(tuple(s.mode for s in starts))
-                internals[c] = np.array([value for s in starts for value in _values(s)])
-                return np.concatenate([z0] + [_values(s) for s in starts])
+                margins[c] = breakaway_margins(scene, starts, z0)
+                internals[c] = np.array([value for s in starts for value in internal_values(s)])
+                return np.concatenate([z0] + [internal_values(s) for s in starts])
             flat = self.total(i, initial)
-            if len(branches) > 1 or _kinked(internals, np.array([v for s in states for v in _values(s)])):
-                # a start on the edge of two branches (deformed to its yield point exactly): carried as zeros, read
-                # as nan (outputs, state_at, rates_at)
-                edge = [el.path for k, el in enumerate(self.scene.elements) if len({b[k] for b in branches}) > 1] or \
+            held_at_breakaway = on_breakaway(margins, held_margins, self.scene)
+            if len(branches) > 1 or kinked(internals, np.array([v for s in states for v in internal_values(s)])) or \
+                    held_at_breakaway:
+                # a start on the edge of two branches (deformed to its yield point exactly, held at its breakaway):
+                # carried as zeros, read as nan (outputs, state_at, rates_at)
+                edge = held_at_breakaway or \
+                    [el.path for k, el in enumerate(self.scene.elements) if len({b[k] for b in branches}) > 1] or \
                     [el.path for el, state in zip(self.scene.elements, states) if state.internal]
                 self.edges[i] = (f"{', '.join(edge)} starts on the edge between two of its branches (within the "
-                                 "parameter's step: a spring deformed to its yield point), where the response's "
-                                 "derivatives on either side differ")
+                                 "parameter's step: a spring deformed to its yield point, a contact held at its "
+                                 "breakaway force), where the response's derivatives on either side differ")
                 flat = np.zeros_like(flat)
             S[i] = flat[:self.scene.size]
             at = self.scene.size
@@ -325,6 +335,7 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
 
     def cross_break(self, states, z: np.ndarray, t: float, jump):
         self.advance(t, z)
+        self.touched_at_break(states, z, t)
         S = self.checkpoints[-1][2]
         before = len(self.events)
         after, z_after = super().cross_break(states, z, t, jump)
@@ -334,24 +345,22 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
         return after, z_after
 
 
-def _kinked(internals: dict, nominal: np.ndarray) -> bool:
-    """Whether internal values at stencil points on either side of the nominal one (at 0) slope differently: by a
-    tenth or more, where a smooth dependence differs by about the step (1e-3), and a kink (the plastic deformation
-    of a spring started at its yield point: zero on one side) by all of it."""
-    left = [c for c in internals if c < 0]
-    right = [c for c in internals if c > 0]
-    if not left or not right or not len(nominal):
-        return False
-    cl, cr = max(left), min(right)
-    slope_left, slope_right = (nominal - internals[cl]) / -cl, (internals[cr] - nominal) / cr
-    size = np.maximum(np.abs(slope_left), np.abs(slope_right))
-    floor = 1e-9 * (np.abs(nominal) + 1e-300) / min(-cl, cr)
-    return bool(np.any((np.abs(slope_right - slope_left) > 0.1 * size) & (size > floor)))
-
-
-def _values(state: State) -> list[float]:
-    """A state's internal variables in name order."""
-    return [float(state.internal[name]) for name in sorted(state.internal)]
+    def touched_at_break(self, states, z: np.ndarray, t: float) -> None:
+        """A guard that reaches its level just where the force has a kink or a jump (a contact's force touching its
+        breakaway as the force turns back): on one side of the parameter's step an event there, on the other none or
+        one at another crossing rate, so that the response has no derivative from t."""
+        if self.undefined_from is not None:
+            return
+        mode = self.scene.mode(states)
+        rate_of_z = mode.A @ z + mode.b  # the left limits: the generators not reseeded yet
+        for e, guard, row, const in mode.guards:
+            value = guard.direction * float(row @ z + const)
+            slope = guard.direction * float(row @ rate_of_z)
+            if abs(value) <= GRAZE * self._graze_scale(guard, row, const, z) and \
+                    slope > GRAZING * float(np.abs(row) @ np.abs(rate_of_z)):
+                self.no_derivative(t, f"{self.scene.elements[e].path} reaches its {guard.kind} at t = {t:.6g} s, "
+                                   "just where the force turns or jumps: its derivatives on either side differ")
+                return
 
 
 HOLD_TARGET = 1e-10  # a held force's gap between samples, of its peak, that needs no finer samples

@@ -31,7 +31,7 @@ import numpy as np
 
 from smdcli import scenario as scenario_mod
 from smdcli.analysis.signal_derivative import anchors, combined, signal_derivative
-from smdcli.analysis.step_scale import relative_size, wider_scale
+from smdcli.analysis.step_scale import block_scales, relative_size, wider_scale
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import Model, build
 from smdcli.model.damping import modal_damping_derivative
@@ -83,6 +83,7 @@ class Derivative:
     weights: np.ndarray
     error: float
     offsets: tuple[float, ...] = ()  # each model's offset from the value, in units of delta
+    scale: float = 0.0  # what its steps were scaled by (a sensitivity block holds scale dx/dp): |p| where 0
 
     def of(self, read) -> np.ndarray:
         """d/dp of a model's array read(model), combined over the stencil (as differences from its first point: the
@@ -219,7 +220,7 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
             # each array that changes with p (one that does not is the same number at every point: no rounding)
             error = max(float(np.abs(a - b).max(initial=0.0)) for a, b in zip(near, far)) / 15 / largest
             rounding = _rounding([arrays_of(models[o]) for o in doubled], weights, largest)
-        found = Derivative(path, value, delta, [models[o] for o in offsets], weights, error + rounding, offsets)
+        found = Derivative(path, value, delta, [models[o] for o in offsets], weights, error + rounding, offsets, scale)
         if best is None or found.error < best.error:
             best = found
         if error <= rounding:
@@ -287,7 +288,7 @@ def _affine_derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, p
     to rounding."""
     scale, moved = _step_scale(sc, doc, base, grid, path, value, scale, structure, arrays_of)
     other, delta = moved or _moved_once(sc, doc, base, grid, path, value, scale, structure)  # None: says why
-    return _difference(path, value, delta, base, other, arrays_of)
+    return dataclasses.replace(_difference(path, value, delta, base, other, arrays_of), scale=scale)
 
 
 def _step_scale(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str, value: float, scale: float,
@@ -363,7 +364,7 @@ def augmented_model(base: Model, derivatives: list[Derivative]) -> tuple[Model, 
     base = base.dense()
     n, P = base.n, len(derivatives)
     size = (P + 1) * n
-    scales = np.array([relative_size(d.value) for d in derivatives])
+    scales = block_scales(derivatives)
     M, C, K = (np.zeros((size, size)) for _ in range(3))
     x0, v0 = np.zeros(size), np.zeros(size)
     for block in range(P + 1):

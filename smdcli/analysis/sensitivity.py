@@ -19,7 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from smdcli.analysis.model_derivative import augmented_model, model_derivatives, relative_size
+from smdcli.analysis.model_derivative import augmented_model, model_derivatives
+from smdcli.analysis.step_scale import block_scales
 from smdcli.errors import SolverFailed, UsageError
 from smdcli.model import Model, build, time_grid
 from smdcli.scenario import Scenario
@@ -188,7 +189,7 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
     n, P = base.n, len(derivatives)
     tol = Tolerances()
     run = dense = None
-    scales = np.array([relative_size(d.value) for d in derivatives])
+    scales = block_scales(derivatives)
     if linear:
         values, stated, method = _linear(sc, base, derivatives, grid, tol)
     else:

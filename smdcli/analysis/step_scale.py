@@ -41,3 +41,10 @@ def relative_size(value: float) -> float:
     """|p|, or 1 at p = 0 and below SMALLEST_SCALE: the scale a sensitivity is normalized by (p dx/dp) and its
     stencil's steps are taken in."""
     return abs(value) if SMALLEST_SCALE <= abs(value) < math.inf else 1.0
+
+
+def block_scales(derivatives) -> np.ndarray:
+    """What each parameter's sensitivity block is scaled by (model_derivative's Derivatives): the scale its steps
+    were taken in (a Rayleigh beta of 1e-100, stepped in a scale of 1, carries 1 dx/dbeta, not 1e-100 dx/dbeta far
+    below the rounding of the response beside it)."""
+    return np.array([d.scale or relative_size(d.value) for d in derivatives])

@@ -150,6 +150,13 @@ def _check_samples(file: str, time: TimeSpec, dofs: int) -> float:
             f"output grid of {n_points:.3g} points x {dofs} DOF is too large "
             f"(limit {MAX_SAMPLES:.0e} samples); use a larger step or fewer points",
         )
+    spacing = time.step if time.step is not None else (time.end - time.start) / (time.points - 1)
+    resolvable = 4 * math.ulp(max(abs(time.start), abs(time.end)))  # distinct times, each step kept to a quarter
+    if not spacing > resolvable:
+        key = "time.step" if time.step is not None else "time.points"
+        raise ScenarioError(file, key, f"expected samples at least {resolvable:.3g} s apart (what times near "
+                                       f"{max(abs(time.start), abs(time.end)):g} s can tell apart), found "
+                                       f"{spacing:.3g} s between them")
     return n_points
 
 

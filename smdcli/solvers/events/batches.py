@@ -39,6 +39,11 @@ class Batches:
         fewest, most = BATCH_STEPS
         return min(most, max(fewest, 2 ** int(math.log2(BATCH_VALUES / (GAUSS_POINTS * self.scene.size)))))
 
+    def kink_slack(self, size: np.ndarray, const: np.ndarray) -> np.ndarray:
+        """How near its level a guard's value at a kink of the force ends a batch (size: the terms it sums): its
+        rounding."""
+        return at_level(size, const)
+
     def batch(self, flow: Flow, mode: Mode, states, z: np.ndarray, t: float, k: int, breaks, b_next: int,
               h_out: float, outputs):
         """Up to self.batch_steps output steps of h_out from (t, z) in this mode, stopped before the first step where a guard
@@ -114,6 +119,10 @@ class Batches:
                             break
                 turning = below & (g1 < 0) & (slope0 > 0) & (slope1 < 0)
                 may_end = below & ((g1 >= 0) | turning)
+                if reseed:  # a guard at its level where a kink turns the force: the step path decides it there
+                    at_kink = np.isin(np.arange(chunk.start, chunk.stop), list(reseed))
+                    slack = self.kink_slack(np.abs(stops) @ abs_rows.T, consts[:n_guards])
+                    may_end |= below & at_kink[:, None] & (g1 >= -slack)
                 for i in np.flatnonzero(may_end.any(axis=1)):  # a turn whose top stays below: no event
                     if chunk.start + int(i) >= clear:
                         break

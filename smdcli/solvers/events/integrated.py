@@ -100,6 +100,11 @@ class EventDriver(PiecewiseRun):
             y, t_reached, event, failure, k = advance(states, t, y, cuts, segment, k, outputs)
             if failure:
                 break
+            if event is not None and event[2].kind == "slip" and segment + 1 < len(cuts) \
+                    and event[0] == cuts[segment + 1][0]:
+                # a stuck contact's force reaches its breakaway just where the force has a kink or a jump: whether
+                # it slips is decided with the right limits (the force may turn back there), as exact decides it
+                event = None
             if event is not None:
                 t_event, element, guard = event
                 if guard.kind == KINK and self.fired is not None and self.fired[0] == t_event and \

@@ -1,0 +1,56 @@
+"""Where a sensitivity run starts on the edge between two branches of an element (a spring deformed to its yield
+point, a contact held at its breakaway force): the parameters whose step moves the start across it have no
+derivative there (event_sensitivity.py).
+
+Must not import: io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from smdcli.elements import State
+from smdcli.solvers.events.scene import Scene
+
+GRAZE = 1e-9  # a guard's top within this share of its terms below its level: a near miss, no derivative from it
+
+
+def breakaway_margins(scene: Scene, states, z: np.ndarray) -> np.ndarray:
+    """Each stuck contact's force less its breakaway (0 for every other element), in these states at z."""
+    from smdcli.elements.friction import STICK
+
+    _, _, tension, _ = scene.evaluate(states, z)
+    return np.array([abs(float(tension[e])) - el.law.static
+                     if el.kind == "friction" and states[e].mode == STICK and el.law.regularization is None else 0.0
+                     for e, el in enumerate(scene.elements)])
+
+
+def on_breakaway(margins: dict, nominal: np.ndarray, scene: Scene) -> list[str]:
+    """The contacts that start held at their breakaway force (within GRAZE of it) and that the parameter's step
+    moves off it: on one side each breaks away at once, on the other it holds a while."""
+    sizes = np.array([el.law.static if el.kind == "friction" else 0.0 for el in scene.elements])
+    on = (np.abs(nominal) <= GRAZE * sizes) & (sizes > 0)
+    moved = np.zeros(len(sizes), dtype=bool)
+    for m in margins.values():
+        moved |= on & (np.abs(m - nominal) > GRAZE * sizes)
+    return [el.path for el, edge in zip(scene.elements, moved) if edge]
+
+
+def kinked(internals: dict, nominal: np.ndarray) -> bool:
+    """Whether internal values at stencil points on either side of the nominal one (at 0) slope differently: by a
+    tenth or more, where a smooth dependence differs by about the step (1e-3), and a kink (the plastic deformation
+    of a spring started at its yield point: zero on one side) by all of it."""
+    left = [c for c in internals if c < 0]
+    right = [c for c in internals if c > 0]
+    if not left or not right or not len(nominal):
+        return False
+    cl, cr = max(left), min(right)
+    slope_left, slope_right = (nominal - internals[cl]) / -cl, (internals[cr] - nominal) / cr
+    size = np.maximum(np.abs(slope_left), np.abs(slope_right))
+    floor = 1e-9 * (np.abs(nominal) + 1e-300) / min(-cl, cr)
+    return bool(np.any((np.abs(slope_right - slope_left) > 0.1 * size) & (size > floor)))
+
+
+def internal_values(state: State) -> list[float]:
+    """A state's internal variables in name order."""
+    return [float(state.internal[name]) for name in sorted(state.internal)]
