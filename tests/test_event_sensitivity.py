@@ -365,6 +365,11 @@ def test_a_contact_held_at_its_breakaway_force_has_no_derivative_across_it():
     assert [note.split(" (")[0] for note in s.notes] == [f"the response has no derivative in {path}"
                                                          for path in (paths[0], paths[2])]
     assert all("friction[0] starts on the edge" in note for note in s.notes)
+    from smdcli.plots.sensitivity import sensitivity_figure  # nan draws no line: its legend says why
+
+    labels = sensitivity_figure(s).axes[0].get_legend_handles_labels()[1]
+    assert labels[1:] == ["spring[0].k (p = 50): no derivative", "mass.m0.m (p = 1)",
+                          "mass.m0.x0 (p = -0.02): no derivative"]
     # the mass does not move the contact's force at the start: its derivative exists (measured 1.2e-9 off)
     mass = smdcli.sensitivity(start, ["mass.m0.m"])
     assert not mass.notes

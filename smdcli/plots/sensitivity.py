@@ -34,8 +34,12 @@ def sensitivity_figure(s):
         ax.plot(*envelope(s.time, s.displacement[:, i]), color="0.8", lw=1.0, label="x (nominal)")
         for p, path in enumerate(s.parameter):
             scale = s.value[p] if s.value[p] != 0 else 1.0
-            ax.plot(*envelope(s.time, scale * s.d_displacement[p, :, i]), lw=1.2, color=f"C{p % 10}",
-                    label=f"{path} (p = {s.value[p]:.4g})" if s.value[p] != 0 else f"{path} (per unit, p = 0)")
+            label = f"{path} (p = {s.value[p]:.4g})" if s.value[p] != 0 else f"{path} (per unit, p = 0)"
+            undefined = np.isnan(s.d_displacement[p, :, i])
+            if undefined.any():  # nan, no line: the notes say why
+                label += ": no derivative" if undefined.all() else \
+                    f": no derivative from {s.time[np.argmax(undefined)]:.4g} s"
+            ax.plot(*envelope(s.time, scale * s.d_displacement[p, :, i]), lw=1.2, color=f"C{p % 10}", label=label)
         ax.set_ylabel(f"{s.dof[i]}\np dx/dp [m]")
         ax.grid(True, alpha=0.3)
     axes[-1].set_xlabel("Time [s]")
