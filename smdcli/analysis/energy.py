@@ -258,7 +258,7 @@ def _closed_form(model: Model, result: Result) -> tuple[np.ndarray, np.ndarray]:
         on = np.abs(grid[k] - edges) <= 1e-9 * h
         np.maximum.at(after, k[on], edges[on])
     for lo, hi, signal in blocks:
-        z[:, lo:hi] = [signal.exo_state(t) for t in after]
+        z[:, lo:hi] = signal.exo_states(after)
     z = z @ Tinv.T
     events = _events(model, grid, h)
     inside = {k for k, t, _ in events if t is not None}

@@ -156,32 +156,31 @@ def record_intensity(times: np.ndarray, acceleration: np.ndarray, im: Intensity,
 
 
 def solved(sc, edp: Demand):
-    """One run of a record at a scale: a yielding frame's on the compiled exact kernel (solvers.events.yielding: the
-    same events and states as the general exact solver, 100 times faster, no energy balance; the absolute
-    accelerations' peaks located on its solution); any other scene as `smd simulate` solves it. SolverFailed where
-    the run fails (a diverging, collapsing frame)."""
-    import smdcli
+    """One run of a record at a scale, with what its EDP and collapse read (element forces, storeys), not its energy
+    balance: a yielding frame's on the compiled exact kernel (solvers.events.yielding: the same events and states as
+    the general exact solver, 100 times faster; the absolute accelerations' peaks located on its solution); any
+    other scene as `smd simulate` solves it. SolverFailed where the run fails (a diverging, collapsing frame)."""
+    from smdcli.analysis.forces import element_forces
+    from smdcli.model import build, time_grid
+    from smdcli.solvers.run import failure_message, solve_scenario
 
+    model, grid = build(sc), time_grid(sc.time)
+    result = None
     if sc.solver.method in ("auto", "exact"):
-        from smdcli.model import build, time_grid
         from smdcli.solvers.events.yielding import solve_yielding
-        from smdcli.solvers.run import failure_message
 
-        model = build(sc)
-        result = solve_yielding(model, time_grid(sc.time), locate_acceleration=edp.kind == "peak_acceleration")
-        if result is not None:
-            if not result.success:
-                raise SolverFailed(failure_message(sc, model, result), result=result)
-            from smdcli.analysis.forces import element_forces
+        result = solve_yielding(model, grid, locate_acceleration=edp.kind == "peak_acceleration")
+    if result is None:
+        result = solve_scenario(sc, model, grid, None, None, None)
+    if not result.success:
+        raise SolverFailed(failure_message(sc, model, result), result=result)
+    result = result.changed(origin=(sc, model), elements=element_forces(model, result.displacement, result.velocity,
+                                                                        result.nonsmooth))
+    if sc.building is not None:
+        from smdcli.analysis.storeys import storeys
 
-            result = result.changed(origin=(sc, model), elements=element_forces(
-                model, result.displacement, result.velocity, result.nonsmooth))
-            if sc.building is not None:
-                from smdcli.analysis.storeys import storeys
-
-                result = result.changed(storeys=storeys(result, sc.building))
-            return result
-    return smdcli.simulate(sc)
+        result = result.changed(storeys=storeys(result, sc.building))
+    return result
 
 
 def demand(result, edp: Demand) -> float:

@@ -317,18 +317,25 @@ def _arrays(flow: _Flow):
 
 def _resumed(grid: np.ndarray, y: np.ndarray, S: np.ndarray, rhs, rtol: float, flow: _Flow, parameter_rates,
              cuts: np.ndarray):
-    """rates_at for a compiled run: (y', dy'/dp * scale) at any time, integrated in Python from the output time
-    before it (the state is continuous: left and right limits differ only in the forces, read at t)."""
+    """rates_at for a compiled run: (y', dy'/dp * scale) at any time, on the dense output of a Python DOP853 run over
+    the output step that holds it, from the step's start (the state is continuous: left and right limits differ only
+    in the forces, read at t). A peak's search asks for many times in one step: each step is integrated once."""
     from scipy.integrate import solve_ivp
 
     size, P = y.shape[1], S.shape[2]
     atol = _absolute(np.abs(y).max(axis=0), P, rtol)
+    steps = {}  # output step k -> its dense output
 
     def rates_at(t: float, left: bool = False) -> tuple[np.ndarray, np.ndarray]:
         k = min(max(int(np.searchsorted(grid, t, side="right")) - 1, 0), len(grid) - 1)
         Y = np.concatenate([y[k], S[k].ravel()])
         if t > grid[k]:
-            Y = solve_ivp(rhs, (float(grid[k]), t), Y, method="DOP853", rtol=rtol, atol=atol).y[:, -1]
+            dense = steps.get(k)
+            if dense is None or t > dense.t_max:
+                end = max(float(grid[min(k + 1, len(grid) - 1)]), t)
+                dense = steps[k] = solve_ivp(rhs, (float(grid[k]), end), Y, method="DOP853", rtol=rtol, atol=atol,
+                                             dense_output=True).sol
+            Y = dense(t)
         y_t, S_t = Y[:size], Y[size:].reshape(size, P)
         return flow.f(t, y_t), flow.jacobian(t, y_t) @ S_t + parameter_rates(t, y_t)
     rates_at.breaks = cuts[1:-1]

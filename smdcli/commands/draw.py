@@ -65,7 +65,7 @@ def animate(path: str | Path, out: str | Path, fps: int = 20, seconds: float | N
     n = len(plan.names)
     fig = _figure(figsize=(1.6 + 1.9 * n, 2.2), dpi=80)
     ax = fig.add_axes((0.0, 0.0, 1.0, 0.86))
-    images = []
+    images, palette = [], None
     from PIL import Image
 
     with bar("drawing frames", len(t), progress) as advance:
@@ -77,9 +77,11 @@ def animate(path: str | Path, out: str | Path, fps: int = 20, seconds: float | N
             fig.text(0.02, 0.93, f"t = {t[k]:7.2f} s", fontsize=9, family="monospace")
             fig.text(0.98, 0.93, f"displacements x {scale:.3g}", fontsize=8, ha="right", color="0.35")
             fig.canvas.draw()
-            rgba = np.asarray(fig.canvas.buffer_rgba())
-            images.append(Image.fromarray(rgba[..., :3]).quantize(colors=32, method=Image.Quantize.MEDIANCUT,
-                                                                  dither=0))
+            rgb = np.asarray(fig.canvas.buffer_rgba())[..., :3]
+            if palette is None:  # the first frame's 32 colours for every frame: the same artists move
+                palette = _Palette(Image.fromarray(rgb).quantize(colors=32, method=Image.Quantize.MEDIANCUT,
+                                                                 dither=Image.Dither.NONE))
+            images.append(palette.image(rgb))
             advance(1)
     gif = out_dir / f"{sc.stem}.gif"
     with atomic_path(gif) as tmp:
@@ -88,3 +90,28 @@ def animate(path: str | Path, out: str | Path, fps: int = 20, seconds: float | N
     size = gif.stat().st_size
     return gif, {"frames": len(images), "fps": fps, "scale": scale, "bytes": size, "start": float(t[0]),
                  "end": float(t[-1])}
+
+
+class _Palette:
+    """A frame's colours mapped to a palette's nearest, exactly, each colour looked up once (PIL's own mapping
+    reads a white background as 252, 252, 252) and remembered: a frame in a fifth of a millisecond where choosing
+    its own 32 colours took 7 ms."""
+
+    def __init__(self, first):
+        self.colors = np.array(first.getpalette()[:96], dtype=float).reshape(-1, 3)
+        self.index = np.full(1 << 24, 255, dtype=np.uint8)  # 24-bit colour -> palette index; 255: not met yet
+
+    def image(self, rgb: np.ndarray):
+        """The (h, w, 3) frame as a paletted image."""
+        from PIL import Image
+
+        codes = (rgb[..., 0].astype(np.uint32) << 16) | (rgb[..., 1].astype(np.uint32) << 8) | rgb[..., 2]
+        found = self.index[codes]
+        new = np.unique(codes[found == 255])
+        if len(new):
+            colors = np.stack([new >> 16, (new >> 8) & 255, new & 255], axis=1).astype(float)
+            self.index[new] = ((colors[:, None, :] - self.colors[None]) ** 2).sum(axis=2).argmin(axis=1)
+            found = self.index[codes]
+        image = Image.fromarray(found, mode="P")
+        image.putpalette(self.colors.astype(np.uint8).ravel().tolist())
+        return image

@@ -114,30 +114,51 @@ def _contact_label(e) -> str:
     return f"stop{e.index + 1}, {law.contact}\n{limits}"
 
 
-def _friction_pad(ax, x0: float, x1: float, y: float, color) -> None:
+class _Pen:
+    """The drawing's lines, added as one LineCollection per style (colour, width, zorder) by finish(): an animation
+    frame's forty lines as a few artists (a Line2D each took a millisecond to make and another to draw)."""
+
+    def __init__(self, ax):
+        self.ax, self.strokes = ax, {}
+
+    def line(self, xs, ys, color, width: float, zorder: float = 2.0) -> None:
+        """A polyline through (xs, ys), drawn as a plot line of that colour and width."""
+        self.strokes.setdefault((color, width, zorder), []).append(np.column_stack([xs, ys]))
+
+    def finish(self) -> None:
+        """Add the lines to the axes (their ends and joins as a plot line's: projecting caps, round joins)."""
+        from matplotlib.collections import LineCollection
+
+        for (color, width, zorder), paths in self.strokes.items():
+            self.ax.add_collection(LineCollection(paths, colors=color, linewidths=width, zorder=zorder,
+                                                  capstyle="projecting", joinstyle="round"), autolim=False)
+        self.strokes = {}
+
+
+def _friction_pad(pen, x0: float, x1: float, y: float, color) -> None:
     """A friction contact: a shoe pressed on a hatched sliding surface."""
     from matplotlib.patches import Rectangle
 
     mid = 0.5 * (x0 + x1)
     width = min(0.2, 0.5 * (x1 - x0))
     h = 0.035
-    ax.plot([x0, mid - width / 2], [y, y], color=color, lw=1.4)
-    ax.add_patch(Rectangle((mid - width / 2, y - h), width, 2 * h, facecolor="white", edgecolor=color, lw=1.4,
+    pen.line([x0, mid - width / 2], [y, y], color, 1.4)
+    pen.ax.add_patch(Rectangle((mid - width / 2, y - h), width, 2 * h, facecolor="white", edgecolor=color, lw=1.4,
                            hatch="////", zorder=2))
-    ax.plot([mid - width / 2 - 0.03, mid + width / 2 + 0.03], [y - h - 0.012] * 2, color=color, lw=2.0)
-    ax.plot([mid + width / 2, x1], [y - h - 0.012, y - h - 0.012], color=color, lw=1.4)
-    ax.plot([x1, x1], [y - h - 0.012, y], color=color, lw=1.4)
+    pen.line([mid - width / 2 - 0.03, mid + width / 2 + 0.03], [y - h - 0.012] * 2, color, 2.0)
+    pen.line([mid + width / 2, x1], [y - h - 0.012, y - h - 0.012], color, 1.4)
+    pen.line([x1, x1], [y - h - 0.012, y], color, 1.4)
 
 
-def _stop_gap(ax, x0: float, x1: float, y: float, color) -> None:
+def _stop_gap(pen, x0: float, x1: float, y: float, color) -> None:
     """A stop: two plates facing across the clearance."""
     mid = 0.5 * (x0 + x1)
     gap = min(0.08, 0.3 * (x1 - x0))
     h = 0.05
-    ax.plot([x0, mid - gap / 2], [y, y], color=color, lw=1.4)
-    ax.plot([mid - gap / 2] * 2, [y - h, y + h], color=color, lw=2.4)
-    ax.plot([mid + gap / 2] * 2, [y - h, y + h], color=color, lw=2.4)
-    ax.plot([mid + gap / 2, x1], [y, y], color=color, lw=1.4)
+    pen.line([x0, mid - gap / 2], [y, y], color, 1.4)
+    pen.line([mid - gap / 2] * 2, [y - h, y + h], color, 2.4)
+    pen.line([mid + gap / 2] * 2, [y - h, y + h], color, 2.4)
+    pen.line([mid + gap / 2, x1], [y, y], color, 1.4)
 
 
 def _force_label(f) -> str:
@@ -168,17 +189,17 @@ def _zigzag(x0: float, x1: float, y: float, turns: int = 6, height: float = 0.04
     return np.concatenate([[x0], xs, [x1]]), np.concatenate([[y], ys, [y]])
 
 
-def _dashpot(ax, x0: float, x1: float, y: float, color) -> None:
+def _dashpot(pen, x0: float, x1: float, y: float, color) -> None:
     """A damper: rod, open cylinder and piston."""
     mid = 0.5 * (x0 + x1)
     width = min(0.18, 0.45 * (x1 - x0))
     h = 0.04
-    ax.plot([x0, mid - width / 2], [y, y], color=color, lw=1.4)
-    ax.plot([mid - width / 2, mid + width / 2, mid + width / 2, mid - width / 2],
-            [y + h, y + h, y - h, y - h], color=color, lw=1.4)
+    pen.line([x0, mid - width / 2], [y, y], color, 1.4)
+    pen.line([mid - width / 2, mid + width / 2, mid + width / 2, mid - width / 2],
+            [y + h, y + h, y - h, y - h], color, 1.4)
     piston = mid
-    ax.plot([piston, piston], [y - 0.8 * h, y + 0.8 * h], color=color, lw=2.2)
-    ax.plot([piston, x1], [y, y], color=color, lw=1.4)
+    pen.line([piston, piston], [y - 0.8 * h, y + 0.8 * h], color, 2.2)
+    pen.line([piston, x1], [y, y], color, 1.4)
 
 
 def draw(ax, plan: Layout, displacement: np.ndarray | None = None, scale: float = 1.0, labels: bool = True,
@@ -195,14 +216,15 @@ def draw(ax, plan: Layout, displacement: np.ndarray | None = None, scale: float 
     ax.set_ylim(-0.75, 0.75)
     ax.set_aspect("equal")
     ax.axis("off")
+    pen = _Pen(ax)
     shift = scale * ground
     for wall, x in (("left", -WALL_GAP + shift), ("right", (n - 1) * SPACING + WALL_GAP + shift)):
         if getattr(plan, f"{wall}_wall"):
-            ax.plot([x, x], [-0.42, 0.42], color="k", lw=2.5)
+            pen.line([x, x], [-0.42, 0.42], "k", 2.5)
             sign = -1 if wall == "left" else 1
             for y in np.linspace(-0.4, 0.4, 9):
-                ax.plot([x, x + sign * 0.07], [y, y + 0.05], color="k", lw=0.8)
-    ax.plot([-WALL_GAP, (n - 1) * SPACING + WALL_GAP], [-half - 0.02] * 2, color="0.75", lw=0.8, zorder=0)
+                pen.line([x, x + sign * 0.07], [y, y + 0.05], "k", 0.8)
+    pen.line([-WALL_GAP, (n - 1) * SPACING + WALL_GAP], [-half - 0.02] * 2, "0.75", 0.8, zorder=0)
     # Lanes: elements sharing a gap are spread above and below the centre line.
     lanes: dict[tuple, int] = {}
     offsets = (0.09, -0.09, 0.0, 0.15, -0.15)
@@ -217,21 +239,22 @@ def draw(ax, plan: Layout, displacement: np.ndarray | None = None, scale: float 
         y = 0.3 + 0.1 * lane if skips else offsets[lane % len(offsets)]
         if skips:  # over the masses in between: rise from the blocks' tops
             x0, x1 = _node_x(e.a, positions), _node_x(e.b, positions)
-            ax.plot([x0, x0], [half, y], color=color, lw=1.0)
-            ax.plot([x1, x1], [half, y], color=color, lw=1.0)
+            pen.line([x0, x0], [half, y], color, 1.0)
+            pen.line([x1, x1], [half, y], color, 1.0)
         if e.kind == "spring":
             xs, ys = _zigzag(x0, x1, y)
-            ax.plot(xs, ys, color=color, lw=1.4)
+            pen.line(xs, ys, color, 1.4)
         elif e.kind == "friction":
-            _friction_pad(ax, x0, x1, y, color)
+            _friction_pad(pen, x0, x1, y, color)
         elif e.kind == "stop":
-            _stop_gap(ax, x0, x1, y, color)
+            _stop_gap(pen, x0, x1, y, color)
         else:
-            _dashpot(ax, x0, x1, y, color)
+            _dashpot(pen, x0, x1, y, color)
         if labels:  # below the row, a lower lane's label is under the floor line, not across it
             ax.text(0.5 * (x0 + x1), y + 0.06 if y >= 0 else -half - 0.05, e.label, ha="center",
                     va="bottom" if y >= 0 else "top", fontsize=7 if len(e.label) <= 30 else 6, color=color,
                     linespacing=1.1)
+    pen.finish()
     for i, x in enumerate(positions):
         ax.add_patch(Rectangle((x - half, -half), BLOCK, BLOCK, facecolor="#9ecae1", edgecolor="k", lw=1.3, zorder=3))
         text = plan.names[i] + (f"\n{plan.masses[i]:g} kg" if labels else "")

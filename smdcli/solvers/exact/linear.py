@@ -346,17 +346,17 @@ def propagate(model: Model, grid: np.ndarray, readouts) -> tuple[float, str]:
             done += more
     reads, merged = _reads(readouts, powers, n, N)
 
-    def reseed(z: np.ndarray, t: float) -> None:
-        for lo, hi, signal in blocks:
-            z[lo:hi] = signal.exo_state(t)
-
+    segs = segments(model, grid)
+    # the generators' states at every segment's start, in one call each (a record's thousands of segments)
+    seeds = [(lo, hi, signal.exo_states(np.array([ta for ta, _ in segs], dtype=float))) for lo, hi, signal in blocks]
     z = np.zeros(size)
     z[:n], z[n:2 * n] = model.x0, model.v0
     k = 0  # next grid index to fill
     n_expm = 1
-    for seg_index, (ta, tb) in enumerate(segs := segments(model, grid)):
+    for seg_index, (ta, tb) in enumerate(segs):
         last = seg_index == len(segs) - 1
-        reseed(z, ta)
+        for lo, hi, states in seeds:
+            z[lo:hi] = states[seg_index]
         t_cur = ta
         stop = N if last else int(np.searchsorted(grid, tb, side="left"))
         if k < stop:
