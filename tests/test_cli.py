@@ -32,6 +32,7 @@ def test_every_book_scenario_is_bundled():
     assert sorted(p.stem for p in ALL) == sorted(BOOK + STUDIES + SWEEPS + GROUND + NONSMOOTH + ANALYSES)
 
 
+@pytest.mark.slow
 def test_every_scenario_runs_in_one_batch(tmp_path, cli):
     result = cli("simulate", *ALL, "-o", tmp_path, "--no-plots", "--json")
     assert result.exit_code == 0, result.output

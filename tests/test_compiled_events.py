@@ -214,6 +214,7 @@ def test_a_spring_yields_through_a_ground_jump_alike_in_every_solver():
     assert abs(fine.nonsmooth.energy["hysteretic"][-1] - hysteretic[-1]) <= 1e-5 * hysteretic[-1]
 
 
+@pytest.mark.slow
 def test_a_smooth_law_without_a_kernel_code_is_refused_by_the_compiled_methods_and_auto_steps_it_with_scipy(
         monkeypatch, cli, tmp_path):
     """A law whose tension is not linear between events and that names no kernel code (Law.kernel_piece's default)

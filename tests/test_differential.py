@@ -779,6 +779,7 @@ def test_each_scene_once_found_agrees_or_says_why(text, tmp_path):
     check_scene(text, tmp_path)
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(scenes())
 def test_exact_and_integrators_agree_or_say_why(text):
@@ -786,6 +787,7 @@ def test_exact_and_integrators_agree_or_say_why(text):
     _check_drawn(text)
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(scenes())
 def test_exact_and_integrators_agree_or_say_why_on_other_scenes(text):

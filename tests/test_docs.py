@@ -71,6 +71,7 @@ def test_the_pages_show_runnable_commands():
                                                  "draw", "animate", "diff", "export"}
 
 
+@pytest.mark.slow
 def test_every_command_shown_runs(tmp_path):
     """Each command of the README, then of each docs/ page, in order, in one folder that holds the repository's
     scenarios, records and tests, as a user at the repository root would: later commands read what earlier ones

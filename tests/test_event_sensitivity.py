@@ -442,6 +442,7 @@ def test_a_stop_scene_under_a_formula_states_what_holding_the_formula_costs():
         assert s.accuracy["d_displacement"][i] <= 1e-4
 
 
+@pytest.mark.slow
 def test_a_stop_scene_under_a_formula_is_fitted_from_data_its_formula_read_at_t():
     """Noise-free displacements of the stop scene under its formula by DOP853 at rtol 1e-13 (the formula read at t):
     its two springs from 1.3 and 0.7 times their values, to 1e-8 (measured 7e-12 and 9e-13; with the finely held run

@@ -383,6 +383,7 @@ def test_thread_pools_end_or_raise_whenever_an_interrupt_lands(pool):
     assert _python_prints(code) == ["finished", "interrupted"]
 
 
+@pytest.mark.slow
 def test_no_interrupt_is_lost_at_any_point_of_a_run_under_load(tmp_path):
     """SIGINT or SIGTERM at many points of a whole run (start-up, imports, solve, HDF5, plots), with every core
     busy: a signal that lands before the run's files are committed always gives exit 130 or 143, no temporary
@@ -457,6 +458,7 @@ def test_a_signal_ignored_at_start_stays_ignored():
     assert _python_prints(code) == ["None", "True"]
 
 
+@pytest.mark.slow
 def test_interrupted_sweeps_never_print_a_traceback(tmp_path):
     """Ctrl-C at random moments of a multi-threaded sweep (solver threads, the writer thread, chunk waits): the one
     line and exit 130, never a traceback or a thread's "Exception in worker" (an interrupt raised inside a lock's

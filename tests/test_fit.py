@@ -104,6 +104,7 @@ def test_the_bouc_wen_benchmark_s_physical_parameters_are_recovered_to_1e_6():
     assert error <= 1e-6 and run.solves < 50
 
 
+@pytest.mark.slow
 def test_the_bundled_bouc_wen_multisine_test_is_identified_within_its_intervals():
     """The bundled pair (scenarios/bouc_wen_benchmark_fit.toml, its [fit] table and its data: 1 s of the benchmark's
     multisine, the displacement in mm with 1 % noise) from its start 30 % off: converged, every 95 % interval holding
@@ -246,6 +247,7 @@ def test_the_cli_writes_the_contract_and_a_scene_that_runs(cli, tmp_path):
     assert (tmp_path / "short" / "one_fit.h5").exists()
 
 
+@pytest.mark.slow
 def test_a_fit_steps_back_from_points_that_are_no_scene_and_says_when_it_explains_nothing():
     """The stick-slip belt from a kinetic friction force 30 % off (2.6 N for 2 N): the trust region's first step
     puts it above the 3 N breakaway force, which is no scene: that point is stepped back from (it used to end the

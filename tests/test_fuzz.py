@@ -120,6 +120,7 @@ FIELDS = [(stem, path) for stem, doc in sorted(DOCS.items()) if stem != "bouc_we
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(st.sampled_from(FIELDS), st.one_of(st.sampled_from(EDGES), st.sampled_from(INTEGERS),
                                           st.floats(allow_nan=False, allow_infinity=False)))
+@pytest.mark.slow
 @example(field=("bouncing_ball", ("force", 0, "amplitude")), number=HUGE)  # 1.8e308 N on 0.1 kg: an inf in A
 @example(field=("two_dof_frequency_response", ("mass", 0, "m")), number=8.553704136823383e-250)  # |A| dt overflows
 @example(field=("two_mass_stiff_chain", ("spring", 1, "k")), number=1.7976931348623157e+308)  # A's column sum: inf

@@ -337,6 +337,7 @@ def test_kernels_run_as_plain_python_without_the_compiler():
     assert float(done.stdout) < 1e-6
 
 
+@pytest.mark.slow
 def test_a_first_run_says_it_is_compiling(tmp_path):
     """With an empty kernel cache, smd says why it pauses (once), then runs; the next run is silent. ode113 needs
     only the right-hand side's kernels (10 s to compile on CI's machine, where the default method's take a minute)."""

@@ -752,6 +752,7 @@ def test_bad_hysteretic_springs_friction_and_stops_are_one_line_input_errors(tab
 # ------------------------------------------------------------------------------ compare-solvers and phase
 
 
+@pytest.mark.slow
 def test_compare_solvers_on_the_bouncing_ball_charts_which_methods_fail_and_where(cli, tmp_path):
     import json
 

@@ -27,6 +27,7 @@ def _lsim_peak(time, acceleration, period, zeta, finer):
     return np.abs(y).max()
 
 
+@pytest.mark.slow
 def test_spectrum_of_the_shipped_record_matches_lsim_on_a_20x_finer_grid():
     """Every 20th of 200 periods (0.01-10 s) x 3 of the 5 damping ratios: within 1e-3 of lsim on a 20x finer grid
     (whose own sampling misses short periods' peaks by up to 4e-4); two short periods within 2e-5 of a 400x finer

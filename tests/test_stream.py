@@ -156,8 +156,8 @@ ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
 
 def _big_sweep(tmp_path, *extra: str) -> list[str]:
-    """`smd sweep` of 2,400 fixed-step members (12 chunks, a few seconds) as a command line, -o still to add."""
-    scene = write(tmp_path, one_dof(0.5, end=10.0, step=0.001))
+    """`smd sweep` of 2,400 fixed-step members (12 chunks, about 10 s) as a command line, -o still to add."""
+    scene = write(tmp_path, one_dof(0.5, end=2.5, step=0.001))
     return [sys.executable, "-m", "smdcli", "sweep", str(scene), "--param", "damper[0].c", "--values",
             "linspace(0.1, 20, 300)", "--param", "spring[0].k", "--values", "linspace(10, 100, 8)", "--keep",
             "metrics", "--no-plots", "--quiet", "--method", "rk4", *extra]
@@ -191,6 +191,7 @@ def whole_big_sweep(tmp_path_factory):
 
 
 # the two tests of the big sweep on one worker: its module fixture (half a minute) runs once, not once per worker
+@pytest.mark.slow
 @pytest.mark.xdist_group("big_sweep")
 def test_a_sweep_killed_with_sigkill_is_finished_by_resume_with_the_same_data(cli, tmp_path, whole_big_sweep):
     """SIGKILL halfway (no handler runs): the partial file on disk is what --resume finishes."""
@@ -231,6 +232,7 @@ def test_an_unreachable_scheduler_is_a_usage_error(cli, tmp_path):
     assert not list(tmp_path.glob("*.h5"))
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("big_sweep")
 def test_a_cluster_sweep_stopped_by_sigterm_says_one_line_and_resumes_on_the_cluster(cli, tmp_path,
                                                                                     whole_big_sweep):

@@ -163,6 +163,7 @@ def test_it_leaves_to_the_general_solver_what_it_does_not_solve():
     assert applies(model) and solve_yielding(model, time_grid(undamped.time)) is None
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("record", ["record_03.AT2", "record_09.csv"])
 def test_a_campaign_is_the_one_the_general_solver_gives(record, cli, tmp_path, monkeypatch):
     """smd ida of the bundled frame under a record (two, each a test): every run's IM, EDP and collapse, and the

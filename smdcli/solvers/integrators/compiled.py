@@ -157,10 +157,13 @@ def _entry(family: str):
 KERNEL_FAMILIES = ("erk", "fixed", "stiff", "radau", "bdf", "rhs", "modes:events", "modes:radau", "modes:bdf",
                    "modes:stiff", "return_mapping", "banded", "taylor", "yielding", "sensitivity")
 _warmed: set[str] = set()
-# two chains of kernel families that share compiled parts, each compiled in a child process of its own (3.8 minutes
-# for both on a 2-core machine, measured 2026-11-29; stiff alone took 139 s, radau 71 s, bdf 63 s, erk 59 s)
-COMPILE_CHAINS = (("stiff", "modes:stiff", "erk", "rhs", "modes:events", "fixed", "banded"),
-                  ("radau", "modes:radau", "bdf", "modes:bdf", "taylor", "return_mapping", "yielding", "sensitivity"))
+# two chains of kernel families that share compiled parts, each compiled in a child process of its own, about equal
+# (on a 2-core Intel Xeon, 2026-12-01: stiff 127 s, erk 28, modes:events 36, fixed 18, banded 9, yielding 51;
+# radau 80, bdf 55, taylor 45, return_mapping 15, sensitivity 92; with yielding and return_mapping in the second
+# chain it took 347 s to the first's 218)
+COMPILE_CHAINS = (("stiff", "modes:stiff", "erk", "rhs", "modes:events", "fixed", "banded", "yielding",
+                   "return_mapping"),
+                  ("radau", "modes:radau", "bdf", "modes:bdf", "taylor", "sensitivity"))
 
 
 def compile_side_by_side(families=KERNEL_FAMILIES) -> None:
