@@ -160,8 +160,8 @@ def test_an_animation_frame_moves_the_wall_with_the_ground():
     for ground in (0.0, 0.05):
         ax = _figure().add_subplot()
         draw(ax, plan, [0.0, 0.0], scale=2.0, labels=False, ground=ground)
-        thick = [line for line in ax.get_lines() if line.get_linewidth() == 2.5]  # the wall's post
-        walls.append(thick[0].get_xdata()[0])
+        thick = [lines for lines in ax.collections if list(lines.get_linewidths()) == [2.5]]  # the wall's post
+        walls.append(thick[0].get_segments()[0][0, 0])
     assert walls[0] == pytest.approx(SPACING + WALL_GAP) and walls[1] - walls[0] == pytest.approx(2.0 * 0.05)
 
 
