@@ -99,6 +99,7 @@ class _Palette:
 
     def __init__(self, first):
         self.colors = np.array(first.getpalette()[:96], dtype=float).reshape(-1, 3)
+        self.palette = self.colors.astype(np.uint8).ravel().tolist()  # as putpalette takes it
         self.index = np.full(1 << 24, 255, dtype=np.uint8)  # 24-bit colour -> palette index; 255: not met yet
 
     def image(self, rgb: np.ndarray):
@@ -113,5 +114,5 @@ class _Palette:
             self.index[new] = ((colors[:, None, :] - self.colors[None]) ** 2).sum(axis=2).argmin(axis=1)
             found = self.index[codes]
         image = Image.fromarray(found, mode="P")
-        image.putpalette(self.colors.astype(np.uint8).ravel().tolist())
+        image.putpalette(self.palette)
         return image

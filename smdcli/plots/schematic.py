@@ -143,8 +143,8 @@ def _friction_pad(pen, x0: float, x1: float, y: float, color) -> None:
     width = min(0.2, 0.5 * (x1 - x0))
     h = 0.035
     pen.line([x0, mid - width / 2], [y, y], color, 1.4)
-    pen.ax.add_patch(Rectangle((mid - width / 2, y - h), width, 2 * h, facecolor="white", edgecolor=color, lw=1.4,
-                           hatch="////", zorder=2))
+    pen.ax.add_patch(Rectangle((mid - width / 2, y - h), width, 2 * h, facecolor="white", edgecolor=color,
+                               lw=1.4, hatch="////", zorder=2))
     pen.line([mid - width / 2 - 0.03, mid + width / 2 + 0.03], [y - h - 0.012] * 2, color, 2.0)
     pen.line([mid + width / 2, x1], [y - h - 0.012, y - h - 0.012], color, 1.4)
     pen.line([x1, x1], [y - h - 0.012, y], color, 1.4)
@@ -196,7 +196,7 @@ def _dashpot(pen, x0: float, x1: float, y: float, color) -> None:
     h = 0.04
     pen.line([x0, mid - width / 2], [y, y], color, 1.4)
     pen.line([mid - width / 2, mid + width / 2, mid + width / 2, mid - width / 2],
-            [y + h, y + h, y - h, y - h], color, 1.4)
+             [y + h, y + h, y - h, y - h], color, 1.4)
     piston = mid
     pen.line([piston, piston], [y - 0.8 * h, y + 0.8 * h], color, 2.2)
     pen.line([piston, x1], [y, y], color, 1.4)
