@@ -7,7 +7,9 @@ sensitivity` must cost less, whichever way it is compared:
   what a fit takes) against one forward run (the scene built from its scenario and solved on the same grid by the
   same solver, with its result);
 - with the peaks: the whole of `smdcli.sensitivity` (also each DOF's peak located between samples and its
-  derivative) against that forward run with its peaks located (a difference of the peaks needs each run's).
+  derivative) against that forward run with its peaks located (a difference of the peaks needs each run's);
+- against the API: the whole of `smdcli.sensitivity` against `smdcli.simulate` (the run a finite difference through
+  smd's API takes: the solve with the element forces and the energy balance smd attaches to every run).
 
 The last rows are classically damped chains (wall.chain's), whose forward run is output-bound: each sensitivity
 has an output of its own and a coupling to the scene's state on top (its equations are driven by dA/dp x). From 64
@@ -85,12 +87,13 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=15)
     args = parser.parse_args()
     print(f"{'scene':<21} {'P':>2} {'histories':>10} {'run':>9} {'ratio':>6}   {'with peaks':>10} {'run':>9} "
-          f"{'ratio':>6} {'P + 1':>6}")
+          f"{'ratio':>6}   {'simulate':>9} {'ratio':>6} {'P + 1':>6}")
     for name, params in SCENES:
         sc = _scene(name)
         found = smdcli.sensitivity(sc, params)  # warm-up: imports, compiled kernels' loading
         _forward_time(sc, found.time)
-        histories, whole, forward, peaks = [], [], [], []
+        smdcli.simulate(sc)
+        histories, whole, forward, peaks, api = [], [], [], [], []
         for _ in range(args.repeats):
             begin = time.perf_counter()
             sensitivity(sc, params, peaks=False)
@@ -104,12 +107,15 @@ def main() -> None:
             begin = time.perf_counter()
             located_peaks(found.time, found.displacement, found.velocity, found.acceleration, found.event_times)
             peaks.append(time.perf_counter() - begin)
-        h, s, f, p = (statistics.median(q) for q in (histories, whole, forward, peaks))
+            begin = time.perf_counter()
+            smdcli.simulate(sc)
+            api.append(time.perf_counter() - begin)
+        h, s, f, p, a = (statistics.median(q) for q in (histories, whole, forward, peaks, api))
         print(f"{name:<21} {len(params):>2} {h * 1e3:7.1f} ms {f * 1e3:6.2f} ms {h / f:5.1f}x   {s * 1e3:7.1f} ms "
-              f"{(f + p) * 1e3:6.2f} ms {s / (f + p):5.1f}x {len(params) + 1:>6}")
+              f"{(f + p) * 1e3:6.2f} ms {s / (f + p):5.1f}x   {a * 1e3:6.2f} ms {s / a:5.1f}x {len(params) + 1:>6}")
     print(f"(medians of {args.repeats}, interleaved; histories: the sensitivities without the peaks against a forward "
-          "run; with peaks: with them, against a forward run and its located peaks; a finite difference takes P + 1 "
-          "runs)")
+          "run; with peaks: with them, against a forward run and its located peaks; simulate: the whole against "
+          "smdcli.simulate; a finite difference takes P + 1 runs)")
 
 
 if __name__ == "__main__":
