@@ -261,15 +261,12 @@ def _closed_form(model: Model, result: Result) -> tuple[np.ndarray, np.ndarray]:
         z[:, lo:hi] = signal.exo_states(after)
     z = z @ Tinv.T
     events = _events(model, grid, h)
-    regular = np.ones(N, dtype=bool)  # the steps with nothing inside them, by their ends
-    regular[0] = False
+    regular = np.arange(N) > 0  # the steps with nothing inside them, by their ends
     regular[[k for k, t, _ in events if t is not None]] = False
     step = np.zeros((2, N))  # each step's dissipated and input energy, booked at its end
     _, (Wd, Wp) = integrals(h)
-    start = z[np.flatnonzero(regular) - 1]
-    # each row's form s^T W s as (s W) . s: one matrix product (einsum's three-index loop took 8 ms of a 30-DOF run)
-    step[0, regular] = np.einsum("ki,ki->k", start @ Wd, start)
-    step[1, regular] = np.einsum("ki,ki->k", start @ Wp, start)
+    start = z[np.flatnonzero(regular) - 1]  # each s^T W s as (s W) . s: einsum's "ki,ij,kj" took 8 ms at 30 DOFs
+    step[:, regular] = [np.einsum("ki,ki->k", start @ W, start) for W in (Wd, Wp)]
     by_step: dict[int, list] = {}
     for k, t, jump in events:
         by_step.setdefault(k, []).append((t, jump))
