@@ -394,7 +394,7 @@ def test_two_parameter_cli_writes_a_heat_map(cli, tmp_path):
 
 @pytest.mark.parametrize("args, message", [
     (["--param", "damper[0].c", "--values", "0:1:-1"], "--values: expected numbers"),
-    (["--param", "damper[9].c", "--values", "1"], "has no entry [9]"),
+    (["--param", "damper[9].c", "--values", "1"], "has no entry [9] (the scenario has damper[0] only)"),
     (["--param", "zeta", "--values", "0.1", "--frequency", "0:5:1", "--normalized"], None),
     (["--values", "1"], "expected one value spec per parameter"),
     (["--frequency", "0:1:1", "--normalized"], None),

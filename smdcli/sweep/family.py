@@ -94,10 +94,7 @@ def _located(doc: dict, path: str) -> tuple[Any, str | int, float]:
         node, walked = _descend(node, step, path, walked)
     last = steps[-1]
     if isinstance(last, int):
-        _not_a_file(node, path, walked)
-        if not isinstance(node, list) or last >= len(node):
-            raise UsageError(f"--param {path}: {walked} has no entry [{last}]")
-        current = node[last]
+        current = _entry(node, last, path, walked)
     else:
         if not isinstance(node, dict):
             raise UsageError(f"--param {path}: {walked or 'the file'} is not a table")
@@ -115,12 +112,19 @@ def _not_a_file(node: Any, path: str, walked: str) -> None:
                          f"write {walked} inline to vary an entry")
 
 
+def _entry(node: Any, index: int, path: str, walked: str) -> Any:
+    """node[index], or a UsageError saying how many entries there are."""
+    _not_a_file(node, path, walked)
+    if not isinstance(node, list) or index >= len(node):
+        count = len(node) if isinstance(node, list) else 0
+        there = f"{walked}[0] .. {walked}[{count - 1}]" if count > 1 else f"{walked}[0] only" if count else "none"
+        raise UsageError(f"--param {path}: {walked} has no entry [{index}] (the scenario has {there})")
+    return node[index]
+
+
 def _descend(node: Any, step: str | int, path: str, walked: str) -> tuple[Any, str]:
     if isinstance(step, int):
-        _not_a_file(node, path, walked)
-        if not isinstance(node, list) or step >= len(node):
-            raise UsageError(f"--param {path}: {walked} has no entry [{step}]")
-        return node[step], f"{walked}[{step}]"
+        return _entry(node, step, path, walked), f"{walked}[{step}]"
     if isinstance(node, list):  # mass.m1: the table of that name
         named = [t for t in node if isinstance(t, dict) and t.get("name") == step]
         if not named:
