@@ -27,7 +27,7 @@ from smdcli.kernels.arrays import CUBIC_SPRING
 from smdcli.kernels.compiler import inlined, kernel, no_alloc
 from smdcli.kernels.erk import (DOP853, MAX_FACTOR, MIN_FACTOR, NOT_FINITE, OK, SAFETY, STEP_BUDGET,
                                 TOO_SMALL_STEP, _error_norm, axpy, assign, hermite_crossing, reversal, scaled_rms)
-from smdcli.kernels.rhs import state_rhs_inlined
+from smdcli.kernels.rhs import state_rhs, state_rhs_inlined
 
 STAGES = tableaus.DOP853_STAGES
 KINK_MARGIN = 1e-8  # how far past a kink (a fraction of the step) a step ends: past it for sure, its branch held
@@ -162,35 +162,37 @@ def first_crossing(r0, r1, d0, d1, first):
     return first
 
 
-@no_alloc
+@inlined
 def augmented_rates(m, models, weights, owner, ratios, moves, g, t, y, left, dy, work, J, dwork, f, signs):
     """dy = [f(t, y); J S + df/dp] for y = [state; S row-major (s, P)], J on the sides `signs` holds (branches);
     models: the stencil's first len(weights) of a padded tuple (compiler.model_tuple); where moves[j], model j
     moves M and its accelerations' difference from the scene's enters as M^-1 M_j (a_j - a) (ratios[j] = M^-1 M_j:
     the stencil's combination is then M^-1 (dF/dp - dM/dp a), the forces' stencil, not the accelerations'); f, J,
     dwork and g (n) are scratch.
-    Compiled without reference counting: with it, every read of a model's arrays was counted (a solve of the
-    Bouc-Wen benchmark's window with five parameters took 101 ms, now 37). The right-hand sides and the Jacobian
-    inlined (numba's inliner, not LLVM's): a call into another compiled library passes a model's 44 arrays member
-    by member, and the kernel as numba loads it from its cache, where nothing is inlined across libraries, took
-    the Bouc-Wen benchmark's fit 2.3 times as long as in the process that compiled it."""
+    Inlined (numba's inliner, not LLVM's) at one call site of _march, which numba compiles without reference
+    counting: counted, every read of a model's arrays cost an atomic increment and decrement; called, it was handed
+    the stencil's models array by array at every stage (as numba loads a kernel from its cache nothing is inlined
+    across libraries). The scene's and the stencil's right-hand sides are one inlined copy, the model chosen by j."""
     n = m.n
     size = 2 * n + m.ns_q + m.ns_acc
     s = 2 * n + m.ns_q
     P = (len(y) - size) // s
-    state_rhs_inlined(m, t, y[:size], left, dy[:size], work, J)  # J is untouched at this length
-    if P == 0:
-        return  # the state alone (the first pass that sets the tolerances): no J
-    exact_jacobian(m, y, J, dwork, signs)
-    for i in range(s):
-        for p in range(P):
-            total = 0.0
-            for c in range(s):
-                if J[i, c] != 0.0:
-                    total += J[i, c] * y[size + c * P + p]
-            dy[size + i * P + p] = total
-    for j in range(len(weights)):
-        state_rhs_inlined(models[j], t, y[:size], left, f, work, J)
+    for j in range(-1, len(weights)):  # the scene's model, then the stencil's: one inlined right-hand side for all
+        model = m if j < 0 else models[j]
+        state_rhs_inlined(model, t, y[:size], left, f, work, J)  # J is untouched at this length
+        if j < 0:
+            assign(dy[:size], f)
+            if P == 0:
+                return  # the state alone (the first pass that sets the tolerances): no J
+            exact_jacobian(m, y, J, dwork, signs)
+            for i in range(s):
+                for p in range(P):
+                    total = 0.0
+                    for c in range(s):
+                        if J[i, c] != 0.0:
+                            total += J[i, c] * y[size + c * P + p]
+                    dy[size + i * P + p] = total
+            continue
         p, w = owner[j], weights[j]
         if moves[j]:
             for i in range(n):
@@ -218,48 +220,73 @@ def integrate(m, models, weights, owner, ratios, moves, y0, grid, cuts, rtol, at
     err, err3 = np.zeros(size_all), np.zeros(size_all)
     J, dwork, f, g = np.zeros((s, s)), np.zeros((n, s)), np.zeros(2 * n + m.ns_q + m.ns_acc), np.zeros(n)
     signs, now = np.ones((len(m.ns_belt), 2)), np.ones((len(m.ns_belt), 2))
-    y = y0.copy()
-    out[0] = y
-    augmented_rates(m, models, weights, owner, ratios, moves, g, grid[0], y, False, rates[0], work, J, dwork, f, signs)
-    branches(m, y, rates[0], signs)
-    augmented_rates(m, models, weights, owner, ratios, moves, g, grid[0], y, False, rates[0], work, J, dwork, f, signs)
+    return _march(m, models, weights, owner, ratios, moves, y0.copy(), grid, cuts, rtol, atol, max_steps, out, rates,
+                  work, counts, K, arg, y_new, scale, err, err3, J, dwork, f, g, signs, now)
+
+
+@no_alloc
+def _march(m, models, weights, owner, ratios, moves, y, grid, cuts, rtol, atol, max_steps, out, rates, work, counts,
+           K, arg, y_new, scale, err, err3, J, dwork, f, g, signs, now):
+    """integrate's steps, on the scratch it made: compiled without reference counting, which the stages' inlined
+    right-hand sides would otherwise pay on every read of a model's arrays. The stages have one call site, inlined
+    (a call handed over the stencil's models, array by array, and took a third of the time): a step's first stage is
+    taken anew (fresh) at a segment's start and past a kink, as a pass of the stage loop that takes no step, and an
+    output's rate wanted at a cut (pending) is the next segment's first (at the last cut: one more segment, empty)."""
+    size_all = len(y)
+    size = 2 * m.n + m.ns_q + m.ns_acc
+    assign(out[0], y)
+    state_rhs(m, grid[0], y[:size], False, K[0][:size], work, J)  # the state's rates say the branches
+    branches(m, y, K[0], signs)
+    pending = 0  # rates[0]: the first segment's first stage
     k = 1
     exponent = -1.0 / 8.0
-    for seg in range(len(cuts) - 1):
-        ta, t_end = cuts[seg], cuts[seg + 1]
-        mid = 0.5 * (ta + t_end)
+    h_abs = 0.0
+    for seg in range(len(cuts)):
+        ta = cuts[seg]
+        t_end = cuts[seg + 1] if seg + 1 < len(cuts) else ta
+        mid = 0.5 * (ta + t_end) if seg + 1 < len(cuts) else np.inf  # the empty last one: the end's right limit
         t = ta
-        augmented_rates(m, models, weights, owner, ratios, moves, g, t, y, t >= mid, K[0], work, J, dwork, f, signs)
-        counts[0] += 1
-        if seg == 0:  # later segments go on at the pace the last one reached: a force's kink needs no new start
-            for i in range(size_all):
-                scale[i] = atol[i] + abs(y[i]) * rtol
-            d0, d1 = scaled_rms(y, scale), scaled_rms(K[0], scale)
-            h_abs = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
-        while t < t_end:
+        fresh = True
+        while t < t_end or fresh:
             target = grid[k] if k < len(grid) and grid[k] < t_end else t_end
             min_step = 10 * abs(np.nextafter(t, np.inf) - t)
             rejected = False
             landed = 0
             while True:
-                if h_abs < min_step:
+                if not fresh and h_abs < min_step:
                     return TOO_SMALL_STEP
-                t_new = min(t + h_abs, target)
+                t_new = t if fresh else min(t + h_abs, target)
                 h = t_new - t
-                for st in range(1, STAGES):
+                for st in range(0 if fresh else 1, 1 if fresh else STAGES + 1):
                     assign(arg, y)
-                    for j in range(st):
-                        if A[st, j] != 0.0:
-                            axpy(h * A[st, j], K[j], arg)
-                    ts = t + C[st] * h
-                    augmented_rates(m, models, weights, owner, ratios, moves, g,
-                                    ts, arg, ts >= mid, K[st], work, J, dwork, f, signs)
-                assign(y_new, y)
-                for st in range(STAGES):
-                    if B[st] != 0.0:
-                        axpy(h * B[st], K[st], y_new)
-                augmented_rates(m, models, weights, owner, ratios, moves, g,
-                                t_new, y_new, t_new >= mid, K[STAGES], work, J, dwork, f, signs)
+                    ts = t
+                    if st == STAGES:  # the step's end (y_new), whose rate starts the next step
+                        ts = t_new
+                        for j in range(STAGES):
+                            if B[j] != 0.0:
+                                axpy(h * B[j], K[j], arg)
+                    elif st > 0:
+                        ts = t + C[st] * h
+                        for j in range(st):
+                            if A[st, j] != 0.0:
+                                axpy(h * A[st, j], K[j], arg)
+                    augmented_rates(m, models, weights, owner, ratios, moves, g, ts, arg, ts >= mid, K[st], work, J,
+                                    dwork, f, signs)
+                if fresh:
+                    fresh = False
+                    counts[0] += 1
+                    if pending >= 0:
+                        assign(rates[pending], K[0])
+                        pending = -1
+                    if h_abs == 0.0:  # later segments go on at the pace the first reached: a force's kink needs none
+                        for i in range(size_all):
+                            scale[i] = atol[i] + abs(y[i]) * rtol
+                        d0, d1 = scaled_rms(y, scale), scaled_rms(K[0], scale)
+                        h_abs = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+                    if t >= t_end:
+                        break
+                    continue
+                assign(y_new, arg)
                 counts[0] += STAGES
                 at = kink(m, y, y_new, K[0], K[STAGES], h)
                 if at < 1.0 - 2 * KINK_MARGIN and landed < LANDINGS:
@@ -282,6 +309,8 @@ def integrate(m, models, weights, owner, ratios, moves, y0, grid, cuts, rtol, at
                 h_abs = abs(h) * max(MIN_FACTOR, SAFETY * error ** exponent)
                 rejected = True
                 counts[2] += 1
+            if t >= t_end:
+                break  # the last cut's lone first stage: no step
             counts[1] += 1
             if counts[1] > max_steps:
                 return STEP_BUDGET
@@ -292,18 +321,15 @@ def integrate(m, models, weights, owner, ratios, moves, y0, grid, cuts, rtol, at
             assign(y, y_new)
             assign(K[0], K[STAGES])
             branches(m, y, K[0], now)
-            if not np.array_equal(now, signs):  # a kink crossed: the next step's branch, its first stage again
-                signs[:, :] = now
-                augmented_rates(m, models, weights, owner, ratios, moves, g,
-                                t, y, t >= mid, K[0], work, J, dwork, f, signs)
-                counts[0] += 1
+            for e in range(len(now)):
+                if now[e, 0] != signs[e, 0] or now[e, 1] != signs[e, 1]:
+                    fresh = t < t_end  # a kink crossed: the next step's branch, its first stage again (a cut's anyway)
+                signs[e, 0], signs[e, 1] = now[e, 0], now[e, 1]
             if k < len(grid) and t == grid[k]:
-                out[k] = y
-                if t >= mid:  # the step's last stage took the left limit at a cut: the output's rate is the right
-                    augmented_rates(m, models, weights, owner, ratios, moves, g,
-                                    t, y, False, rates[k], work, J, dwork, f, signs)
-                    counts[0] += 1
-                else:
+                assign(out[k], y)
+                if fresh or t >= t_end:  # a new branch's rate; at a cut the right limit, where the step took the left
+                    pending = k
+                else:  # inside a segment the force's two limits are one
                     assign(rates[k], K[0])
                 k += 1
     return OK
