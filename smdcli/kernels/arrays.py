@@ -138,7 +138,7 @@ def _build(model: Model) -> ModelArrays:
         f_dof=np.array(model.force_dofs, dtype=np.int64).reshape(len(rows)),
         f_par=par,
         f_ptr=np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
-        f_data=np.array([x for _, _, data, _ in rows for x in data], dtype=float),
+        f_data=np.concatenate([np.zeros(0), *(np.asarray(data, dtype=float) for _, _, data, _ in rows)]),
         f_cptr=np.concatenate([[0], np.cumsum(code_sizes)]).astype(np.int64),
         f_code=np.array([c for _, _, _, codes in rows for c in codes], dtype=np.int64),
         **_smooth_scene(model.n),

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Sequence
 
 import numpy as np
 
@@ -121,8 +121,9 @@ class Signal:
         shape that has no last sample."""
         return self
 
-    def kernel_row(self) -> tuple[int, list[float], list[float], list[int]]:
-        """(kind, parameters, packed data, expression opcodes): the row smdcli.kernels.forces evaluates."""
+    def kernel_row(self) -> tuple[int, list[float], Sequence[float], list[int]]:
+        """(kind, parameters, packed data (a list or an array), expression opcodes): the row smdcli.kernels.forces
+        evaluates."""
         raise NotImplementedError
 
 

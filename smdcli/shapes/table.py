@@ -100,4 +100,4 @@ class Table(Signal):
 
     def kernel_row(self):
         times, values = self.kernel_knots()
-        return (TABLE_PREVIOUS if self.previous else TABLE_LINEAR), [], [*times, *values], []
+        return (TABLE_PREVIOUS if self.previous else TABLE_LINEAR), [], np.concatenate([times, values]), []
