@@ -20,8 +20,8 @@ from smdcli.model import Model
 from smdcli.result import Result, SolverStats
 from smdcli.solvers.base import MAX_STEPS, Solver, Tolerances, cuts, divergence_bound, make_result
 
-COMPILING_NOTE = ("smd: compiling kernels, once per install (about half a minute; later runs load them from numba's "
-                  "cache)")
+COMPILING_NOTE = ("smd: compiling kernels, once per install (half a minute to two, by what the scene needs; later "
+                  "runs load them from numba's cache)")
 _announced = False
 
 
