@@ -51,6 +51,23 @@ class PiecewiseFailed(Exception):
 
 
 UNSETTLED = "do not settle"  # the failure of events that cannot be ordered at one instant (auto goes on from it)
+MAX_EVENTS_IN_AN_INSTANT = 2_000  # events within INSTANT output steps of the first: a chatter no step resolves
+INSTANT = 1e-6
+
+
+def piled(window: tuple, t_event: float, h_out: float) -> tuple:
+    """(the first event's time, the events so far) of the events piling up within INSTANT output steps, after one at
+    t_event: a yield force far below the displacement's rounding yields and unloads 1e-13 s apart without end."""
+    start, count = window
+    if start is not None and t_event - start <= INSTANT * h_out:
+        return start, count + 1
+    return t_event, 1
+
+
+def chatter(window: tuple, events: list) -> str:
+    """What a failure says of events piled up (piled's window; the run's events, the last of them the element's)."""
+    return f"{window[1]} events within {events[-1][0] - window[0]:.2g} s ({events[-1][1]} {events[-1][2]} again " \
+           "and again)"
 
 
 class PiecewiseRun(Crossings, Batches):
@@ -105,7 +122,7 @@ class PiecewiseRun(Crossings, Batches):
         b_next = 0
         self.whole_steps = np.abs(np.diff(grid) - h_out) <= 1e-9 * h_out  # grid steps of h_out, by their ends
         k = 1
-        at_same_time, last_event_time = 0, None
+        at_same_time, last_event_time, window = 0, None, (None, 0)
         while k < self.N:
             mode = scene.mode(states)
             flow = self.flow(mode, t)
@@ -142,6 +159,9 @@ class PiecewiseRun(Crossings, Batches):
                                               f"({self.events[-1][1]} {self.events[-1][2]} again and again)")
                 else:
                     at_same_time, last_event_time = 0, t_event
+                window = piled(window, t_event, h_out)
+                if window[1] > MAX_EVENTS_IN_AN_INSTANT:
+                    raise PiecewiseFailed(f"events at t = {t_event:.6g} s {UNSETTLED}: {chatter(window, self.events)}")
                 t = t_event
                 states, z = self.apply(states, z, t, element, guard.kind)
                 if lands and tau == step:  # the event is on the target: the target is passed after it
