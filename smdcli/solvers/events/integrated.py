@@ -32,8 +32,7 @@ from smdcli.result import NonsmoothHistory, Result, SolverStats
 from smdcli.solvers.base import MAX_STEPS, Tolerances, divergence_bound, diverged, force_function, make_result
 from smdcli.solvers.events.compiled_modes import ACCUMULATED, CompiledModes, compiled_modes
 from smdcli.solvers.events.scene import at_level, event_root
-from smdcli.solvers.events.piecewise import (MAX_EVENTS_AT_ONE_TIME, MAX_EVENTS_IN_AN_INSTANT, PiecewiseRun,
-                                             chatter, piled)
+from smdcli.solvers.events.piecewise import PiecewiseRun, Pileup
 from smdcli.solvers.events.record import stored_energies
 from smdcli.solvers.events.smooth_scene import SmoothScene
 from smdcli.solvers.registry import BY_NAME, OWN_SOLVERS
@@ -92,8 +91,7 @@ class EventDriver(PiecewiseRun):
             self.compiled = CompiledModes(self, len(y))
         k, segment = 1, 0
         failure, t_reached = None, t
-        same, last, window = 0, None, (None, 0)
-        h_out = float(grid[-1] - grid[0]) / max(len(grid) - 1, 1)
+        pileup = Pileup(float(grid[-1] - grid[0]) / max(len(grid) - 1, 1))
         while k < len(grid) and failure is None:
             while segment + 1 < len(cuts) and cuts[segment + 1][0] <= t:
                 segment += 1
@@ -113,14 +111,8 @@ class EventDriver(PiecewiseRun):
                         self.fired[2].kind == KINK:
                     self.kinks_left = t_event  # a second kink at one instant: each only left there
                 self.fired = event
-                same = same + 1 if t_event == last else 0
-                last = t_event
-                if same > MAX_EVENTS_AT_ONE_TIME:
-                    failure = f"events at t = {t_event:.6g} s do not settle"
-                    break
-                window = piled(window, t_event, h_out)
-                if window[1] > MAX_EVENTS_IN_AN_INSTANT:
-                    failure = f"events at t = {t_event:.6g} s do not settle: {chatter(window, self.events)}"
+                failure = pileup.add(t_event, self.events)
+                if failure:
                     break
                 t = t_event
                 scene.now = t

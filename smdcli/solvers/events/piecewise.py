@@ -55,19 +55,31 @@ MAX_EVENTS_IN_AN_INSTANT = 2_000  # events within INSTANT output steps of the fi
 INSTANT = 1e-6
 
 
-def piled(window: tuple, t_event: float, h_out: float) -> tuple:
-    """(the first event's time, the events so far) of the events piling up within INSTANT output steps, after one at
-    t_event: a yield force far below the displacement's rounding yields and unloads 1e-13 s apart without end."""
-    start, count = window
-    if start is not None and t_event - start <= INSTANT * h_out:
-        return start, count + 1
-    return t_event, 1
+class Pileup:
+    """Events that do not let a run go on: more than MAX_EVENTS_AT_ONE_TIME at one instant, or more than
+    MAX_EVENTS_IN_AN_INSTANT within INSTANT output steps of the first (a yield force far below the displacement's
+    rounding yields and unloads 1e-13 s apart without end)."""
 
+    def __init__(self, h_out: float):
+        self.span = INSTANT * h_out
+        self.last, self.same = None, 0  # the last event's time, the events at it after the first
+        self.start, self.count = None, 0  # the window's first event's time, the events in it
 
-def chatter(window: tuple, events: list) -> str:
-    """What a failure says of events piled up (piled's window; the run's events, the last of them the element's)."""
-    return f"{window[1]} events within {events[-1][0] - window[0]:.2g} s ({events[-1][1]} {events[-1][2]} again " \
-           "and again)"
+    def add(self, t: float, events: list) -> str | None:
+        """Why the events, one more at t, do not settle (events: the run's, the last naming the element); None while
+        they may."""
+        self.same = self.same + 1 if t == self.last else 0
+        self.last = t
+        if self.start is not None and t - self.start <= self.span:
+            self.count += 1
+        else:
+            self.start, self.count = t, 1
+        what = f" ({events[-1][1]} {events[-1][2]} again and again)" if events else ""
+        if self.same > MAX_EVENTS_AT_ONE_TIME:
+            return f"events at t = {t:.6g} s {UNSETTLED}{what}"
+        if self.count > MAX_EVENTS_IN_AN_INSTANT:
+            return f"events at t = {t:.6g} s {UNSETTLED}: {self.count} events within {t - self.start:.2g} s{what}"
+        return None
 
 
 class PiecewiseRun(Crossings, Batches):
@@ -122,7 +134,7 @@ class PiecewiseRun(Crossings, Batches):
         b_next = 0
         self.whole_steps = np.abs(np.diff(grid) - h_out) <= 1e-9 * h_out  # grid steps of h_out, by their ends
         k = 1
-        at_same_time, last_event_time, window = 0, None, (None, 0)
+        pileup = Pileup(h_out)
         while k < self.N:
             mode = scene.mode(states)
             flow = self.flow(mode, t)
@@ -152,16 +164,9 @@ class PiecewiseRun(Crossings, Batches):
                 self.integrate(flow, mode, states, z, tau, keep=False)
                 t_event = t + tau if tau < step or not lands else target
                 z = flow.at(z, mode.b, tau)
-                if t_event == last_event_time:
-                    at_same_time += 1
-                    if at_same_time > MAX_EVENTS_AT_ONE_TIME:
-                        raise PiecewiseFailed(f"events at t = {t_event:.6g} s {UNSETTLED} "
-                                              f"({self.events[-1][1]} {self.events[-1][2]} again and again)")
-                else:
-                    at_same_time, last_event_time = 0, t_event
-                window = piled(window, t_event, h_out)
-                if window[1] > MAX_EVENTS_IN_AN_INSTANT:
-                    raise PiecewiseFailed(f"events at t = {t_event:.6g} s {UNSETTLED}: {chatter(window, self.events)}")
+                unsettled = pileup.add(t_event, self.events)
+                if unsettled:
+                    raise PiecewiseFailed(unsettled)
                 t = t_event
                 states, z = self.apply(states, z, t, element, guard.kind)
                 if lands and tau == step:  # the event is on the target: the target is passed after it
