@@ -1,6 +1,6 @@
 """Differential tests that cross the features: random small scenes drawn from every element law (linear, elastoplastic,
 bilinear, Clough, Iwan, Bouc-Wen, cubic springs, quadratic dampers, Coulomb friction with its static force above or
-at its kinetic one, rigid stops), force type (sine, step, square, table, the four shock pulses), damping form
+at its kinetic one, regularized friction, rigid stops), force type (sine, step, square, table, the four shock pulses), damping form
 (dampers, Rayleigh, modal), support motion (a sine, a shock pulse, a record shorter than the run) and initial state.
 For each: `exact` against an implicit and an explicit integrator at tight tolerance (and, for a yielding frame's
 scene, against the compiled kernel `smd ida` runs it with), every run's own physics
@@ -49,7 +49,7 @@ def scenes(draw):
                   f"v0 = {draw(st.sampled_from([0.0, 0.0, 0.1, -0.2]))!r}"]
     nodes = ["ground"] + names
     law_used = draw(st.sampled_from(["linear", "elastoplastic", "bilinear", "friction", "stop", "friction+stop",
-                                     "bouc_wen", "cubic", "quadratic", "iwan", "clough"]))
+                                     "bouc_wen", "cubic", "quadratic", "iwan", "clough", "friction_tanh"]))
     for i in range(n):
         pair = f'connects = ["{nodes[i]}", "{nodes[i + 1]}"]'
         k = draw(st.floats(50.0, 400.0))
@@ -80,8 +80,12 @@ def scenes(draw):
         pair = (f'connects = ["ground", "{names[-1]}"]' if where == "ground"
                 else f'connects = ["{names[0]}", "{names[1]}"]')
         kinetic = draw(st.floats(0.2, 2.0))
-        static = kinetic * draw(st.sampled_from([1.0, 1.3, 2.0]))
-        lines += ["[[friction]]", pair, f"force = {kinetic!r}", f"static = {static!r}"]
+        if law_used == "friction_tanh":  # regularized: smooth, no stick
+            lines += ["[[friction]]", pair, f"force = {kinetic!r}",
+                      f"regularization = {draw(st.sampled_from([1e-3, 1e-2]))!r}"]
+        else:
+            static = kinetic * draw(st.sampled_from([1.0, 1.3, 2.0]))
+            lines += ["[[friction]]", pair, f"force = {kinetic!r}", f"static = {static!r}"]
     if "stop" in law_used:
         gap = draw(st.floats(0.012, 0.05))  # beyond every x0 drawn: a start past it is refused
         lines += ["[[stop]]", f'connects = ["ground", "{names[0]}"]', f"max = {gap!r}",
@@ -284,7 +288,8 @@ def sensitivity_params(text: str) -> list[str]:
     others = ["mass[0].m"] + [f"mass[0].{key}" for key in ("x0", "v0") if mass.get(key)]
     others += [f"spring[0].{key}" for key in ("fy", "hardening", "beta", "k3") if isinstance(spring.get(key), float)]
     others += ["damper[0].c"] if "damper" in doc else []
-    others += ["friction[0].force", "friction[0].static"] if "friction" in doc else []
+    others += [f"friction[0].{key}" for key in ("force", "static", "regularization") if key in doc.get("friction",
+                                                                                                        [{}])[0]]
     others += ["stop[0].max", "stop[0].restitution"] if "stop" in doc else []
     others += [f"damping.{key}" for key in ("alpha", "beta") if doc.get("damping", {}).get(key)]
     return params + (others if EVERY_PARAMETER else [others[zlib.crc32(text.encode()) % len(others)]])

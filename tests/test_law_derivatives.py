@@ -114,3 +114,28 @@ def test_every_registered_law_gives_its_force_derivatives():
     classes = {type(law) for law in LAWS}
     registered = set(SPRING_LAWS.values()) | set(TABLES.values())
     assert registered <= classes, registered - classes
+
+
+@pytest.mark.parametrize("law", [law for law in LAWS if law.smooth_jacobian(law.start(0.0, 0.1), 0.0, 0.1)],
+                         ids=lambda law: f"{type(law).__name__}")
+def test_a_smooth_law_s_jacobian_is_the_slope_of_its_force(law):
+    """smooth_jacobian's tension slopes (the piece's linear parts aside: the sensitivity equations stamp those into
+    K and C) against central differences of the whole force in d and d', the mode and internal variables held, at
+    rates across the range and near zero (a regularized friction's slope F / r there)."""
+    rng = np.random.default_rng(11)
+    checked = 0
+    for state, d, rate in states_of(law, rng):
+        for at in (rate, 1e-3 * rate):
+            found = law.smooth_jacobian(state, d, at)
+            if found is None:
+                continue
+            piece = law.piece(state)
+            slopes = (law.linear_stiffness + piece.stiffness + found[0][0], piece.damping + found[0][1])
+            for which, value in enumerate(slopes):
+                h = 1e-6 * max(abs((d, at)[which]), 1e-3)
+                moved_by = lambda step: (d + step, at) if which == 0 else (d, at + step)  # noqa: E731
+                reference = (whole_force(law, state, *moved_by(h)) - whole_force(law, state, *moved_by(-h))) / (2 * h)
+                assert value == pytest.approx(reference, rel=1e-6, abs=1e-9 * abs(reference) + 1e-9), \
+                    (state, d, at, which)
+                checked += 1
+    assert checked >= 40

@@ -53,7 +53,7 @@ def event_refusal(model: Model) -> str | None:
         if not law.piecewise_linear or law.name not in SUPPORTED:
             return (f"{element.path} ({getattr(law, 'law_name', law.name)}): sensitivities of this law are not yet "
                     "built (linear scenes, elastoplastic and bilinear springs, Coulomb friction, stops, cubic "
-                    "springs, quadratic dampers and Bouc-Wen springs are)")
+                    "springs, quadratic dampers, Bouc-Wen springs and regularized friction are)")
     if model.cubic is not None or model.quadratic is not None:
         return ("cubic springs or quadratic dampers beside yielding, friction or stops: sensitivities of such a mix are "
                 "not yet built")

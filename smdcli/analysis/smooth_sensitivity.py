@@ -1,6 +1,6 @@
-"""Sensitivities of a smooth nonlinear scene (cubic springs, quadratic dampers, Bouc-Wen springs): the forward
-sensitivity equations s' = J(t, y) s + df/dp integrated beside the state y = [x, v, q] (q the laws' internal
-variables), the error controlled on state and sensitivities together.
+"""Sensitivities of a smooth nonlinear scene (cubic springs, quadratic dampers, Bouc-Wen springs, regularized
+friction): the forward sensitivity equations s' = J(t, y) s + df/dp integrated beside the state y = [x, v, q] (q the
+laws' internal variables), the error controlled on state and sensitivities together.
 
 By the compiled kernel (smdcli.kernels.sensitivity: DOP853, restarted at the forces' discontinuities, every kink of
 a law landed on: a step ends just past it, on the branch of J it started on); a stencil model that moves M enters
@@ -45,8 +45,8 @@ def smooth_refusal(model: Model) -> str | None:
                 law.smooth_jacobian(state, 0.0, 0.0) is None:
             return (f"{element.path} ({getattr(law, 'law_name', law.name)}) changes mode at events beside smooth "
                     "nonlinear terms: sensitivities of such a mix are not yet built (linear scenes; yielding, "
-                    "Coulomb friction and stop scenes; and cubic springs, quadratic dampers and Bouc-Wen springs "
-                    "each are)")
+                    "Coulomb friction and stop scenes; and cubic springs, quadratic dampers, Bouc-Wen springs and "
+                    "regularized friction each are)")
     return None
 
 

@@ -126,7 +126,7 @@ class Friction(Law):
         out = {"force": 0.0, "static": 0.0, "viscous": rate, "belt_velocity": self.viscous}
         if state.mode == SMOOTH:
             x = rate / self.regularization
-            sech2 = 1.0 / math.cosh(x) ** 2 if abs(x) < 350 else 0.0
+            sech2 = _sech2(x)
             out.update(force=math.tanh(x), regularization=-self.force * sech2 * x / self.regularization)
             out["belt_velocity"] += self.force * sech2 / self.regularization
             return out
@@ -140,6 +140,13 @@ class Friction(Law):
                    stribeck_velocity=sign * (self.static - self.force) * e * 2 * ratio**2 / vs)
         out["belt_velocity"] += sign * (self.static - self.force) * e * (-2 * ratio / vs)
         return out
+
+    def smooth_jacobian(self, state: State, d: float, rate: float):
+        # regularized: T = F tanh(d'/r) (c d' is in the piece's damping) has no internal state; stick and slip have
+        # none to give (Coulomb's sensitivities are event to event, Stribeck's not built)
+        if state.mode != SMOOTH:
+            return None
+        return (0.0, self.force * _sech2(rate / self.regularization) / self.regularization), ()
 
     def event(self, state: State, kind: str, d: float, rate: float, tension: float) -> State:
         if kind == "slip":
@@ -168,3 +175,8 @@ class Friction(Law):
             return KernelPiece(term="friction", pd=self.viscous, pc=sign * self.force)
         return KernelPiece(SMOOTH_STRIBECK, (sign, self.force, self.static, self.stribeck_velocity), "friction",
                            self.viscous)
+
+
+def _sech2(x: float) -> float:
+    """sech(x)^2, 0 where cosh overflows (|x| past 350: below the smallest double anyway)."""
+    return 1.0 / math.cosh(x) ** 2 if abs(x) < 350 else 0.0
