@@ -261,13 +261,22 @@ def _in_blocks(reads: list, k: int, stop: int, z: np.ndarray, powers: np.ndarray
         starts[b] = z
         z = powers[min(J, count - b * J) - 1] @ z
     for read, columns, out in reads:
-        r, known = out.shape[1], starts[:, columns]
+        r, known = out.shape[1], _on_columns(starts, columns, axis=1)
         if whole:
             np.matmul(known[:whole], read.reshape(J * r, len(columns)).T,
                       out=out[k:k + whole * J].reshape(whole, J * r))
         if rest:
             out[k + whole * J:stop] = (read[:rest].reshape(rest * r, len(columns)) @ known[whole]).reshape(rest, r)
     return z
+
+
+def _on_columns(array: np.ndarray, columns: np.ndarray, axis: int) -> np.ndarray:
+    """array's entries at columns along axis: a slice where they run unbroken (a scene's read reaches every entry of
+    the state, and numpy's gather along the last axis is slow: a 30-mass chain's dense run 2.27 ms with it, 2.08
+    without, minima of 60), else a gather."""
+    if len(columns) and columns[-1] - columns[0] == len(columns) - 1:
+        return array[(slice(None),) * axis + (slice(int(columns[0]), int(columns[-1]) + 1),)]
+    return array.take(columns, axis=axis)
 
 
 def _reads(readouts: list, powers: np.ndarray, n: int, N: int) -> tuple[list, list]:
@@ -297,7 +306,8 @@ def _reads(readouts: list, powers: np.ndarray, n: int, N: int) -> tuple[list, li
         picked = np.concatenate([np.arange(starts[i], starts[i] + sizes[i]) for i in group])
         columns = np.flatnonzero(reaching[group[0]])
         lo, hi = int(picked[0]), int(picked[-1]) + 1  # consecutive readouts (a block's x, v, a): a slice, not a copy
-        read = (read_all[:, lo:hi] if hi - lo == len(picked) else read_all[:, picked]).take(columns, axis=2)
+        read = read_all[:, lo:hi] if hi - lo == len(picked) else read_all[:, picked]
+        read = np.ascontiguousarray(_on_columns(read, columns, axis=2))  # once: each segment's blocks reshape it
         out = readouts[group[0]][2] if len(group) == 1 else np.empty((N, len(picked)))
         if len(group) > 1:
             merged.append((out, [readouts[i][2] for i in group]))
