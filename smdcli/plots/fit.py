@@ -31,7 +31,10 @@ def fit_figure(run):
         top.plot(*envelope(t, test.measured.channels[channel]), color="0.7", lw=3.0, label="measured")
         top.plot(*envelope(t, fitted[channel]), color=f"C{k % 10}", lw=0.8, label="fitted")
         top.set_ylabel(f"{name}\n[{unit}]", fontsize=8)
-        top.legend(fontsize=8, loc="upper right")
+        if k == 0:  # above the first panel, over no line (a dense record leaves no corner free): grey measured,
+            # the channel's colour fitted, in every panel
+            top.legend(fontsize=8, loc="lower right", bbox_to_anchor=(1.0, 1.0), ncol=2, frameon=False,
+                       borderaxespad=0.1)
         residual = fitted[channel] - test.measured.channels[channel]
         bottom.plot(*envelope(t, residual), color="C3", lw=0.8)
         bottom.set_ylabel("residual", fontsize=8)
