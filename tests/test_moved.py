@@ -165,11 +165,11 @@ def test_a_moved_frequency_phase_or_sweep_is_the_force_built_with_it(force, keys
 
 
 def test_a_moved_law_key_is_the_law_built_with_it():
-    """A yielding, friction or stop element's own key (model_derivative._law_moved): where the model's matrices do
+    """A yielding, friction or stop element's own key (law_keys.law_moved): where the model's matrices do
     not move with it, the law read again is the law build makes of the scenario with that number and the matrices
     are the base's; where they move (a spring's k, a hardening, a Bouc-Wen alpha) or the belt does, it is left to
     build; a value that is no scene is refused as build refuses it."""
-    from smdcli.analysis.model_derivative import _law_moved
+    from smdcli.analysis.law_keys import law_moved
     from smdcli.errors import ScenarioError
     from smdcli.sweep.family import decoded, parameter_value
 
@@ -191,7 +191,7 @@ def test_a_moved_law_key_is_the_law_built_with_it():
                     except ScenarioError:
                         built = None
                     try:
-                        fast = _law_moved(sc, doc, base, path, value)
+                        fast = law_moved(sc, doc, base, path, value)
                     except ScenarioError:
                         assert built is None, (name, path, value)
                         refused += 1

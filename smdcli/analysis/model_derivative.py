@@ -30,16 +30,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from smdcli import scenario as scenario_mod
+from smdcli.analysis.law_keys import law_key, law_moved
 from smdcli.analysis.signal_derivative import anchors, combined, signal_derivative
 from smdcli.analysis.step_scale import block_scales, relative_size, wider_scale
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.model import Model, build
 from smdcli.model.damping import modal_damping_derivative
 from smdcli.model.moved import moved, scaled_ground
-from smdcli.model.nonsmooth import check_initial_state
 from smdcli.model.system import GROUND_DOF
 from smdcli.scenario import Scenario
-from smdcli.scenario.structure import read_law
 from smdcli.shapes.table import Table
 from smdcli.sweep.family import STRUCTURAL, decoded, parameter_value, set_parameter
 
@@ -51,7 +50,6 @@ BACKWARD = (0.0, -1.0, -2.0, -3.0, -4.0)  # where p + delta is not (a kinetic fr
 # power of two, so that p + o delta is p's own number plus an exact one and an array affine in p differs exactly
 STEPS = (1e-3, 1e-4, 2e-5, 4e-6, 8e-7, 1.6e-7)
 _LINEAR_ELEMENT = re.compile(r"spring\[\d+\]\.k|damper\[\d+\]\.c")
-_LAW_KEY = re.compile(r"(?P<kind>spring|friction|stop)\[(?P<index>\d+)\]\.(?P<key>\w+)")  # a law's own key
 AFFINE_STEP = 1e-2  # relative step of an affine parameter's one difference: exact for any step; larger, less rounding
 EPS = np.finfo(float).eps
 ROUNDING = 16  # units of rounding in a model's number (a generator's state at a late time: sin(w t) of a large w t)
@@ -97,41 +95,12 @@ def _scene_at(sc: Scenario, doc: dict, base: Model, path: str, value: float) -> 
     if shortcut is None and path == "ground_motion.scale":  # a record's scene rebuilt reads its file again
         shortcut = scaled_ground(base, doc["ground_motion"], parameter_value(doc, path, sc), value)
     if shortcut is None:
-        shortcut = _law_moved(sc, doc, base, path, value)
+        shortcut = law_moved(sc, doc, base, path, value)
     if shortcut is not None:
         return shortcut
     member = copy.deepcopy(doc)
     set_parameter(member, path, value)
     return build(scenario_mod.parse_document(member, sc.text, sc.path))  # the text only names the scenario's source
-
-
-def _law_moved(sc: Scenario, doc: dict, base: Model, path: str, value: float) -> Model | None:
-    """The scene with a key of a yielding, friction or stop element's law at value where nothing but the law reads
-    it (a yield force, a friction force, a stop's gap or restitution): the law read again from its table by the
-    scenario reader's own checks (ScenarioError where the value is no scene), the base's matrices kept. None where
-    the matrices or the belt move with the key (a spring's k or hardening, a belt's speed): build says then. A
-    record's scene is six builds faster (each reads its record again)."""
-    found = _LAW_KEY.fullmatch(path)
-    if found is None:
-        return None
-    kind, index, key = found["kind"], int(found["index"]), found["key"]
-    element = next((e for e in base.nonsmooth if e.path == f"{kind}[{index}]"), None)
-    if element is None or key not in type(element.law).keys:
-        return None
-    item = dict(doc[kind][index])
-    item[key] = float(value)
-    law = read_law(sc.path, kind, index, item)
-    if _beside_law(law) != _beside_law(element.law):
-        return None
-    nonsmooth = tuple(dataclasses.replace(e, law=law) if e is element else e for e in base.nonsmooth)
-    check_initial_state(sc, nonsmooth, base.x0)
-    return dataclasses.replace(base, nonsmooth=nonsmooth)
-
-
-def _beside_law(law) -> tuple[float, float, float]:
-    """What of a law the model holds outside it: the stiffness stamped into K, the one [damping] sees at rest, the
-    belt's speed under a contact (model.nonsmooth's belt)."""
-    return law.elastic_stiffness, law.linear_stiffness, float(getattr(law, "belt_velocity", 0.0))
 
 
 def _model_arrays(model: Model, t_end: float, flowed: bool = False) -> list[np.ndarray]:
@@ -179,7 +148,8 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
         raise UsageError(f"--param {path}: not a parameter of the scene (the run's span, its solver and its "
                          "sweep are not differentiated; for zeta give the damper's c)")
     value = parameter_value(doc, path, sc)
-    scale = relative_size(value)
+    element, key = law_key(base, path)  # a law's key may move its force on a finer scale than its own size
+    scale = min(relative_size(value), (element and element.law.key_scale(key)) or math.inf)
     structure = _structure(base, grid) if structure is None else structure
     t_end = float(grid[-1])
     # the model held: its id stays its own

@@ -69,10 +69,10 @@ class _Flow:
             start += len(element.law.ode_states)
         self.q = start - 2 * n
         self.Kt, self.Ct, self.g = model.K.copy(), model.C.copy(), np.zeros(n)
-        for row, piece in zip(self.R, self.pieces):  # a mode's linear part, as Scene assembles it
+        for row, piece, belt in zip(self.R, self.pieces, self.belts):  # a mode's linear part, as Scene assembles it
             self.Kt += piece.stiffness * np.outer(row, row)
             self.Ct += piece.damping * np.outer(row, row)
-            self.g -= piece.constant * row
+            self.g -= (piece.constant + piece.damping * belt) * row  # a viscous part acts on d' = R v + belt
         self.smooth = model.cubic is not None or model.quadratic is not None
 
     def initial(self) -> np.ndarray:
