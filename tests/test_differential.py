@@ -80,9 +80,12 @@ def scenes(draw):
         pair = (f'connects = ["ground", "{names[-1]}"]' if where == "ground"
                 else f'connects = ["{names[0]}", "{names[1]}"]')
         kinetic = draw(st.floats(0.2, 2.0))
-        if law_used == "friction_tanh":  # regularized: smooth, no stick
+        if law_used == "friction_tanh":  # regularized: smooth, no stick; a viscous part, a belt under a ground contact
             lines += ["[[friction]]", pair, f"force = {kinetic!r}",
-                      f"regularization = {draw(st.sampled_from([1e-3, 1e-2]))!r}"]
+                      f"regularization = {draw(st.sampled_from([1e-3, 1e-2]))!r}",
+                      f"viscous = {draw(st.sampled_from([0.0, 0.1]))!r}"]
+            if where == "ground":
+                lines.append(f"belt_velocity = {draw(st.sampled_from([0.2, -0.05, 0.0]))!r}")
         else:
             static = kinetic * draw(st.sampled_from([1.0, 1.3, 2.0]))
             lines += ["[[friction]]", pair, f"force = {kinetic!r}", f"static = {static!r}"]
@@ -288,8 +291,8 @@ def sensitivity_params(text: str) -> list[str]:
     others = ["mass[0].m"] + [f"mass[0].{key}" for key in ("x0", "v0") if mass.get(key)]
     others += [f"spring[0].{key}" for key in ("fy", "hardening", "beta", "k3") if isinstance(spring.get(key), float)]
     others += ["damper[0].c"] if "damper" in doc else []
-    others += [f"friction[0].{key}" for key in ("force", "static", "regularization") if key in doc.get("friction",
-                                                                                                        [{}])[0]]
+    others += [f"friction[0].{key}" for key in ("force", "static", "regularization", "viscous", "belt_velocity")
+               if key in doc.get("friction", [{}])[0]]
     others += ["stop[0].max", "stop[0].restitution"] if "stop" in doc else []
     others += [f"damping.{key}" for key in ("alpha", "beta") if doc.get("damping", {}).get(key)]
     return params + (others if EVERY_PARAMETER else [others[zlib.crc32(text.encode()) % len(others)]])

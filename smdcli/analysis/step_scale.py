@@ -30,6 +30,8 @@ def wider_scale(before: list[np.ndarray], after: list[np.ndarray], delta: float,
     force, builds none again)."""
     rebuilt = [(float(np.abs(b - a).max(initial=0.0)), float(np.abs(a).max(initial=0.0)))
                for a, b in zip(before, after) if a is not b and a.shape == b.shape]
+    if any(move > 0 and held == 0 for move, held in rebuilt):
+        return 0.0  # an array that was zero moved by the whole step (a belt's speed from 0, widened: 5 % off)
     moved = [(move, held) for move, held in rebuilt if move > 0 and held > 0]
     if not moved:
         return WIDEST_STEP / share if any(held > 0 for _, held in rebuilt) else 0.0
