@@ -27,6 +27,7 @@ from smdcli.elements import State
 from smdcli.analysis.event_carry import CarriedSensitivities
 from smdcli.analysis.event_edges import GRAZE, breakaway_margins, internal_values, kinked, on_breakaway
 from smdcli.analysis.signal_derivative import combined
+from smdcli.analysis.smooth_sensitivity import ANSWERED
 from smdcli.model import Model
 from smdcli.solvers.events.decisions import impact, project
 from smdcli.solvers.events.piecewise import PiecewiseRun
@@ -52,8 +53,7 @@ def event_refusal(model: Model) -> str | None:
         law = element.law
         if not law.piecewise_linear or law.name not in SUPPORTED:
             return (f"{element.path} ({getattr(law, 'law_name', law.name)}): sensitivities of this law are not yet "
-                    "built (linear scenes, elastoplastic and bilinear springs, Coulomb friction, stops, cubic "
-                    "springs, quadratic dampers, Bouc-Wen springs and regularized friction are)")
+                    f"built (built: {ANSWERED})")
     if model.cubic is not None or model.quadratic is not None:
         return ("cubic springs or quadratic dampers beside yielding, friction or stops: sensitivities of such a mix are "
                 "not yet built")

@@ -195,7 +195,8 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
             error = max(float(np.abs(a - b).max(initial=0.0)) for a, b in zip(near, far)) / 15 / largest
             rounding = _rounding([arrays_of(models[o]) for o in doubled], weights, largest)
         found = Derivative(path, value, delta, [models[o] for o in offsets], weights, error + rounding, offsets, scale)
-        best = found if best is None or found.error < best.error else best
+        if best is None or found.error < best.error:
+            best = found
         if error <= rounding:
             break
     if best is None:
