@@ -30,9 +30,9 @@ import time
 from pathlib import Path
 
 import smdcli
-from smdcli.analysis.sensitivity import _forward_time, sensitivity
+from smdcli.analysis.sensitivity import sensitivity
+from smdcli.analysis.sensitivity_cost import forward_time
 from smdcli.resources import small_blas
-from smdcli.solvers.peaks import located_peaks
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = [  # (scenario, its parameters)
@@ -91,7 +91,7 @@ def main() -> None:
     for name, params in SCENES:
         sc = _scene(name)
         found = smdcli.sensitivity(sc, params)  # warm-up: imports, compiled kernels' loading
-        _forward_time(sc, found.time)
+        forward_time(sc, found.time)
         smdcli.simulate(sc)
         histories, whole, forward, peaks, api = [], [], [], [], []
         for _ in range(args.repeats):
@@ -103,16 +103,14 @@ def main() -> None:
             whole.append(time.perf_counter() - begin)
             # at its best: BLAS as the sensitivities run it, one thread on a small scene
             with small_blas(2 * len(sc.dof_names)):
-                forward.append(_forward_time(sc, found.time))
-            begin = time.perf_counter()
-            located_peaks(found.time, found.displacement, found.velocity, found.acceleration, found.event_times)
-            peaks.append(time.perf_counter() - begin)
+                forward.append(forward_time(sc, found.time))
+                peaks.append(forward_time(sc, found.time, peaks=True))
             begin = time.perf_counter()
             smdcli.simulate(sc)
             api.append(time.perf_counter() - begin)
         h, s, f, p, a = (statistics.median(q) for q in (histories, whole, forward, peaks, api))
-        print(f"{name:<21} {len(params):>2} {h * 1e3:7.1f} ms {f * 1e3:6.2f} ms {h / f:5.1f}x   {s * 1e3:7.1f} ms "
-              f"{(f + p) * 1e3:6.2f} ms {s / (f + p):5.1f}x   {a * 1e3:6.2f} ms {s / a:5.1f}x {len(params) + 1:>6}")
+        print(f"{name:<21} {len(params):>2} {h * 1e3:7.1f} ms {f * 1e3:6.2f} ms {h / f:5.2f}x   {s * 1e3:7.1f} ms "
+              f"{p * 1e3:6.2f} ms {s / p:5.2f}x   {a * 1e3:6.2f} ms {s / a:5.2f}x {len(params) + 1:>6}")
     print(f"(medians of {args.repeats}, interleaved; histories: the sensitivities without the peaks against a forward "
           "run; with peaks: with them, against a forward run and its located peaks; simulate: the whole against "
           "smdcli.simulate; a finite difference takes P + 1 runs)")

@@ -315,6 +315,19 @@ def test_the_file_layout_units_and_json(cli, tmp_path):
     assert (tmp_path / "two_dof_forced_sensitivity.png").stat().st_size > 10_000
 
 
+def test_the_cost_s_two_clocks_leave_out_the_loading_of_code(monkeypatch):
+    """wall_time_s (the sensitivities) and forward_time_s (one forward run with its peaks, as a difference takes
+    it) time the work, not the loading of code a process pays once (imports, compiled kernels): a load that took
+    0.3 s shows in neither."""
+    from smdcli.analysis import sensitivity as module
+
+    loads = []
+    monkeypatch.setattr(module, "load_code", lambda base: (loads.append(base), time.sleep(0.3)))
+    found = module.sensitivity(smdcli.load(SCENARIOS / "one_dof_underdamped.toml"), ["spring[0].k"], timed=True)
+    assert len(loads) == 2  # the untimed rehearsal's, then the timed run's
+    assert 0 < found.wall_time_s < 0.3 and 0 < found.forward_time_s < 0.3
+
+
 @pytest.mark.parametrize("args, message", [
     (("scenarios/two_dof_forced.toml", "--param", "spring[7].k"), "spring[7]"),
     (("scenarios/two_dof_forced.toml", "--param", "time.end"), "not a parameter of the scene"),

@@ -13,6 +13,13 @@ from smdcli.errors import SolverFailed
 MAX_STEPS = 10**7
 
 
+def warm_kernel() -> None:
+    """Load the compiled sensitivity kernel from numba's cache (or compile it, saying so), before any clock starts."""
+    from smdcli.solvers.integrators.compiled import warm
+
+    warm("sensitivity")
+
+
 def run_sensitivities(base, stencil: list, start: np.ndarray, grid: np.ndarray, cuts: np.ndarray, rtol: float,
                       atol: np.ndarray, source: str) -> tuple[np.ndarray, np.ndarray]:
     """(y, y') (N, len(start)) from start over the grid, restarting at the cuts: base the scene's kernel arrays,
@@ -21,9 +28,9 @@ def run_sensitivities(base, stencil: list, start: np.ndarray, grid: np.ndarray, 
     from smdcli.kernels import sensitivity as kernel
     from smdcli.kernels.compiler import model_tuple
     from smdcli.kernels.rhs import work_size
-    from smdcli.solvers.integrators.compiled import failure_text, warm
+    from smdcli.solvers.integrators.compiled import failure_text
 
-    warm("sensitivity")
+    warm_kernel()
     models = model_tuple([arrays for _, _, arrays, _ in stencil], base)
     out, rates = np.full((len(grid), len(start)), np.nan), np.full((len(grid), len(start)), np.nan)
     ratios = np.zeros((len(stencil), base.n, base.n))

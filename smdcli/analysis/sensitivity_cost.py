@@ -1,0 +1,64 @@
+"""What P sensitivities cost, on the clock `smd sensitivity --json` reports: the code a scene's run takes loaded
+before any clock starts, and one forward run of the scene timed as each of a finite difference's P + 1 runs takes it.
+
+Must not import: io, plots, commands, cli.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from smdcli.model import Model, build
+from smdcli.scenario import Scenario
+from smdcli.solvers.base import Tolerances
+from smdcli.solvers.exact.hold import held_paths
+from smdcli.solvers.ground import across_jumps
+from smdcli.solvers.peaks import result_peaks
+from smdcli.solvers.registry import get_solver
+
+
+def load_code(base: Model) -> None:
+    """Load the code the scene's sensitivities and its forward run take (modules; the compiled sensitivity kernel from
+    numba's cache) before the clock: a process loads it once, and simulate's clock leaves its loading out too (a
+    one-DOF scene's first sensitivity in a process took 30 ms, 25 of them imports). base: a scene smd takes."""
+    import smdcli.analysis.modal_sensitivity  # noqa: F401
+    import smdcli.solvers.dispatch  # noqa: F401
+    import smdcli.solvers.exact.linear  # noqa: F401
+
+    if base.is_linear and not held_paths(base):
+        return
+    if base.is_piecewise_linear:
+        import scipy.optimize  # noqa: F401  an event's root (brentq)
+
+        import smdcli.analysis.event_sensitivity  # noqa: F401
+        import smdcli.solvers.events.piecewise  # noqa: F401
+        return
+    from smdcli.analysis.smooth_sensitivity import COMPILED
+
+    if COMPILED:
+        from smdcli.solvers.events.compiled_modes import mode_arrays  # noqa: F401
+        from smdcli.solvers.events.smooth_scene import SmoothScene  # noqa: F401
+        from smdcli.solvers.sensitivity_run import warm_kernel
+
+        warm_kernel()
+
+
+def forward_time(sc: Scenario, grid: np.ndarray, peaks: bool = False) -> float:
+    """Seconds of one forward run of the scene alone, as each of a finite difference's P + 1 runs takes it: the scene
+    built (at a moved parameter it is another scene) and solved on the grid (exact, or auto's for a nonlinear scene),
+    both with their results, and with `peaks` each DOF's peak located (a difference of the peaks needs every run's);
+    what the P sensitivities are measured against."""
+    from smdcli.solvers.dispatch import solve
+
+    start = time.perf_counter()
+    base = build(sc)
+    if base.is_linear:
+        exact = get_solver("exact")
+        result = across_jumps(lambda piece, times: exact.solve(piece, times, Tolerances()), base.dense(), grid)
+    else:
+        result = solve(base, grid, "auto", Tolerances())
+    if peaks:
+        result_peaks(result)
+    return time.perf_counter() - start
