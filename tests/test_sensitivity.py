@@ -907,6 +907,37 @@ def test_sensitivities_take_their_arrays_pages_from_what_the_process_freed():
     assert int(done.stdout) < 80, done.stdout
 
 
+def test_pages_faulted_in_before_a_clock_are_the_next_arrays_pages():
+    """resources.fault_in: 24 MB touched and freed in a fresh process, a 16 MB array written after meets no page
+    fault (0 here) where it met hundreds without (518): what a timed sensitivity's rehearsal does so
+    that its clock, like the forward run's after it, starts on pages the process holds. A process of its own."""
+    import ctypes
+    import subprocess
+    import sys
+
+    try:
+        ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError, TypeError):
+        pytest.skip("not glibc: its malloc settings are not there to set")
+    script = (
+        "import resource, sys\n"
+        "import numpy as np\n"
+        "from smdcli.resources import fault_in, keep_freed_memory\n"
+        "keep_freed_memory()\n"
+        "if sys.argv[1] == 'in':\n"
+        "    fault_in(24 * 2**20)\n"
+        "before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt\n"
+        "a = np.ones(2 * 2**20)\n"
+        "print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)\n")
+    faults = {}
+    for how in ("in", "fresh"):
+        done = subprocess.run([sys.executable, "-c", script, how], capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr
+        faults[how] = int(done.stdout)
+    # a fault a page, or one a huge page where the kernel maps those (518 on this machine's fresh process)
+    assert faults["in"] < 10 and faults["fresh"] > 4 * max(faults["in"], 1), faults
+
+
 def test_a_kink_on_a_step_start_takes_the_run_again_up_to_it(monkeypatch):
     """scipy's solve_ivp refuses its own dense output (`ts` must be strictly increasing) where a terminal event's
     root falls on a step's start (the Bouc-Wen benchmark's multisine met one at t = 1.679 s: a traceback after

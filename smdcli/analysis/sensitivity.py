@@ -25,7 +25,7 @@ from smdcli.analysis.step_scale import block_scales
 from smdcli.errors import SolverFailed, UsageError
 from smdcli.model import Model, build, time_grid
 from smdcli.scenario import Scenario
-from smdcli.resources import keep_freed_memory, small_blas
+from smdcli.resources import HEAP_KEPT, fault_in, keep_freed_memory, small_blas
 from smdcli.solvers.base import Tolerances
 from smdcli.solvers.exact.hold import held_paths
 from smdcli.solvers.ground import across_jumps
@@ -184,7 +184,10 @@ def _rehearse(sc: Scenario, params: list[str], grid: np.ndarray | None) -> None:
         times = time_grid(sc.time) if grid is None else np.asarray(grid, dtype=float)
         _sensitivity(sc, params, times[:2], True, None, (None, base))
     except Exception:  # noqa: BLE001  the timed run meets it again and says it
-        pass
+        return
+    # the run's arrays (the scene's and each parameter's x, v and a, a few working copies of them) on pages the
+    # process has touched, as the forward run timed after finds them
+    fault_in(min(HEAP_KEPT // 2, 4 * 8 * len(QUANTITIES) * (len(params) + 1) * len(times) * base.n + 2**23))
 
 
 def _refuse(sc: Scenario, params: list[str], base: Model) -> None:
