@@ -877,19 +877,25 @@ def test_a_small_scene_runs_blas_on_one_thread_and_gives_the_threads_back():
         assert blas_threads() == before
 
 
-def test_sensitivities_take_their_arrays_pages_from_what_the_process_freed():
-    """A sensitivity repeated in one process (a fit's) takes its arrays' pages from what the last run freed: on
-    glibc, a 30-mass chain's third run in a fresh process met 790 page faults (a fresh page each, from the system),
-    where the runs before it freed as many (a 300-mass chain's: 10,700 faults, over a quarter of its time). A
-    process of its own: one that has held large arrays before (pytest's) keeps its pages anyway."""
+def _skip_without_glibc() -> None:
+    """Skip where the C library is not glibc: its malloc settings are not there to set."""
     import ctypes
-    import subprocess
-    import sys
 
     try:
         ctypes.CDLL(None).mallopt
     except (OSError, AttributeError, TypeError):
         pytest.skip("not glibc: its malloc settings are not there to set")
+
+
+def test_sensitivities_take_their_arrays_pages_from_what_the_process_freed():
+    """A sensitivity repeated in one process (a fit's) takes its arrays' pages from what the last run freed: on
+    glibc, a 30-mass chain's third run in a fresh process met 790 page faults (a fresh page each, from the system),
+    where the runs before it freed as many (a 300-mass chain's: 10,700 faults, over a quarter of its time). A
+    process of its own: one that has held large arrays before (pytest's) keeps its pages anyway."""
+    import subprocess
+    import sys
+
+    _skip_without_glibc()
     script = (
         "import resource, sys\n"
         "sys.path.insert(0, '.')\n"
@@ -911,14 +917,10 @@ def test_pages_faulted_in_before_a_clock_are_the_next_arrays_pages():
     """resources.fault_in: 24 MB touched and freed in a fresh process, a 16 MB array written after meets no page
     fault (0 here) where it met hundreds without (518): what a timed sensitivity's rehearsal does so
     that its clock, like the forward run's after it, starts on pages the process holds. A process of its own."""
-    import ctypes
     import subprocess
     import sys
 
-    try:
-        ctypes.CDLL(None).mallopt
-    except (OSError, AttributeError, TypeError):
-        pytest.skip("not glibc: its malloc settings are not there to set")
+    _skip_without_glibc()
     script = (
         "import resource, sys\n"
         "import numpy as np\n"
