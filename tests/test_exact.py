@@ -391,3 +391,25 @@ def test_reads_of_the_same_entries_taken_together_give_each_reads_values(stem, p
     model = build(sc)
     reference = solve(model, together.time, "DOP853", Tolerances(rtol=1e-11, atol=1e-14))
     assert np.abs(together.displacement - reference.displacement).max() <= 1e-8 * np.abs(reference.displacement).max()
+
+
+def test_the_dense_path_s_acceleration_is_the_equation_of_motion_with_each_force_at_its_time():
+    """A sine and a cosine are read off their generators' states (g w, beside the structure's rows), a square wave
+    and a delayed step are evaluated (a jump's sample its right limit): at every sample, on jumps too, the
+    acceleration is M^-1 (B u(t) - C v - K x) with u evaluated, to 1e-13 of its peak, on a non-classical 6-mass
+    chain."""
+    from smdcli.solvers.exact import linear
+
+    forces = force_block("sine", on="m0", amplitude=10.0, omega=5.0) + \
+        force_block("cosine", on="m3", amplitude=4.0, omega=23.0, phase=0.3) + \
+        force_block("square", on="m5", amplitude=3.0, period=0.37, t0=0.05) + \
+        force_block("step", on="m2", amplitude=-2.0, t0=1.25)
+    _, model, grid = model_of(_chain(6, 2.0, 0.0, forces))
+    dense = model.dense()
+    solved = linear.solve_dense(dense, grid)
+    n = model.n
+    u = model.forces(grid)
+    expected = np.hstack([solved.x, solved.v]) @ dense.state_matrix[n:].T + u @ dense.input_matrix[n:].T
+    assert np.abs(solved.acceleration - expected).max() <= 1e-13 * np.abs(expected).max()
+    on_jumps = np.isin(np.round(grid, 9), np.round(0.05 + 0.185 * np.arange(30), 9))
+    assert on_jumps.sum() >= 5  # samples on the square wave's jumps: right limits, as the signal gives them

@@ -210,13 +210,19 @@ def read_exactly(model: Model, grid: np.ndarray, readouts: list) -> tuple[float,
     return stated, message
 
 
-def _add_forces(model: Model, grid: np.ndarray, readouts: list) -> None:
-    """out += u G^T for the readouts that read the forces (u the signals' values on the grid)."""
+def _add_forces(model: Model, grid: np.ndarray, readouts: list, evaluated: list[int] | None = None) -> None:
+    """out += u G^T for the readouts that read the forces (u the signals' values on the grid; evaluated: the signals
+    that are, where not all)."""
     inputs = [(G, out) for _, G, out in readouts if G is not None and G.any()]
-    if inputs:
-        values = model.forces(grid)
+    if evaluated is None:
+        evaluated = list(range(len(model.signals)))
+    evaluated = [j for j in evaluated if any(G[:, j].any() for G, _ in inputs)]
+    if evaluated:
+        values = np.empty((len(grid), len(evaluated)))
+        for column, j in enumerate(evaluated):
+            values[:, column] = model.signals[j].value(grid)
         for G, out in inputs:
-            out += values @ G.T
+            out += values @ G[:, evaluated].T
 
 
 def _uniform_runs(grid: np.ndarray) -> list[tuple[int, int]]:
@@ -279,11 +285,12 @@ def _on_columns(array: np.ndarray, columns: np.ndarray, axis: int) -> np.ndarray
     return array.take(columns, axis=axis)
 
 
-def _reads(readouts: list, powers: np.ndarray, n: int, N: int) -> tuple[list, list]:
+def _reads(readouts: list, powers: np.ndarray, n: int, N: int, signal_rows: np.ndarray) -> tuple[list, list]:
     """propagate's reads: (rows R, R times the powers on the state's entries that reach them (J, r, columns), those
     columns, the (N, r) output), the readouts that reach the same entries taken as one read where their outputs
     together are small (a small scene's cost is its numpy calls: a 1-DOF sensitivity's six readouts are two reads);
-    and each such read's (combined output, the readouts' outputs) to copy out after."""
+    and each such read's (combined output, the readouts' outputs) to copy out after. signal_rows (signals, size):
+    the forces read off their generators' states, g w (zero rows: the forces evaluated after)."""
     sizes = [len(R) for R, _, _ in readouts]
     starts = np.cumsum([0, *sizes[:-1]]).astype(int)
     size = powers.shape[1]
@@ -291,6 +298,9 @@ def _reads(readouts: list, powers: np.ndarray, n: int, N: int) -> tuple[list, li
     # sensitivity block: its own, the scene's, the forces')
     rows = np.zeros((sum(sizes), size))
     rows[:, :2 * n] = np.vstack([R for R, _, _ in readouts])
+    for (_, G, _), first, count in zip(readouts, starts, sizes):
+        if G is not None:
+            rows[first:first + count] += G @ signal_rows
     read_all = np.matmul(rows, powers)  # (J, reads' rows, size)
     reaching = np.logical_or.reduceat(read_all.any(axis=0), starts, axis=0)  # (readouts, size)
     groups, filling = [], {}  # filling: the group being filled for each set of entries, and its rows so far
@@ -354,7 +364,15 @@ def propagate(model: Model, grid: np.ndarray, readouts) -> tuple[float, str]:
             more = min(done, J - done)
             np.matmul(powers[:more], powers[done - 1], out=powers[done:done + more])
             done += more
-    reads, merged = _reads(readouts, powers, n, N)
+    # a force smooth over the run (no breakpoint: a sine, a frequency's derivative) read off its generator's state
+    # with the structure's, g w, not evaluated at every time (a third of a frequency's sensitivity on one DOF); one
+    # with breakpoints is evaluated, a sample on a jump its right limit as the signal gives it
+    smooth = [not len(signal.breakpoints(float(grid[0]), float(grid[-1]))) for _, _, signal in blocks]
+    signal_rows = np.zeros((len(blocks), size))
+    for j, (first, last, signal) in enumerate(blocks):
+        if smooth[j]:
+            signal_rows[j, first:last] = signal.exo().g
+    reads, merged = _reads(readouts, powers, n, N, signal_rows)
 
     segs = segments(model, grid)
     # the generators' states at every segment's start at once (a record's thousands of segments)
@@ -389,7 +407,7 @@ def propagate(model: Model, grid: np.ndarray, readouts) -> tuple[float, str]:
         for out in outs:
             out[:] = combined[:, first:first + out.shape[1]]
             first += out.shape[1]
-    _add_forces(model, grid, readouts)
+    _add_forces(model, grid, readouts, [j for j, read in enumerate(smooth) if not read])
     stated = stated_rounding(N + len(segs) + n_expm, 1.0 if accurate else growth)
     message = (f"ok: {plural(len(segs), 'force segment')}, {plural(len(cache), 'matrix exponential')} "
                f"of size {size}" + (" in double-double (a stiff scene)" if accurate else ""))
