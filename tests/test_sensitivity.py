@@ -328,6 +328,21 @@ def test_the_cost_s_two_clocks_leave_out_the_loading_of_code(monkeypatch):
     assert 0 < found.wall_time_s < 0.3 and 0 < found.forward_time_s < 0.3
 
 
+def test_a_short_run_s_seconds_are_the_median_of_repeats_and_a_long_run_is_timed_once():
+    """smd compare's rule for the cost's two clocks: a run under TIME_ONCE_S is repeated to REPEATS timings and
+    their median taken (the first of a fresh process is its CPU's warm-up as much as its work); a longer one is its
+    own time."""
+    from smdcli.analysis.sensitivity_cost import REPEATS, median_time
+    from smdcli.solvers.base import TIME_ONCE_S
+
+    again = iter([0.001, 0.0012, 0.0011, 0.0013, 9.0])
+    assert median_time(0.004, lambda: next(again)) == pytest.approx(0.0012)  # 0.004 (the first) and four more
+    assert next(again) == 9.0 and REPEATS == 5
+    assert median_time(2 * TIME_ONCE_S, lambda: pytest.fail("a long run is not repeated")) == 2 * TIME_ONCE_S
+    short_then_long = iter([3 * TIME_ONCE_S])
+    assert median_time(0.001, lambda: next(short_then_long)) == pytest.approx((0.001 + 3 * TIME_ONCE_S) / 2)
+
+
 @pytest.mark.parametrize("args, message", [
     (("scenarios/two_dof_forced.toml", "--param", "spring[7].k"), "spring[7]"),
     (("scenarios/two_dof_forced.toml", "--param", "time.end"), "not a parameter of the scene"),

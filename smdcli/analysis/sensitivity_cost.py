@@ -1,18 +1,21 @@
 """What P sensitivities cost, on the clock `smd sensitivity --json` reports: the code a scene's run takes loaded
-before any clock starts, and one forward run of the scene timed as each of a finite difference's P + 1 runs takes it.
+before any clock starts, one forward run of the scene timed as each of a finite difference's P + 1 runs takes it, and
+a short run's seconds as the median of repeats (smd compare's rule).
 
 Must not import: io, plots, commands, cli.
 """
 
 from __future__ import annotations
 
+import statistics
 import time
+from collections.abc import Callable
 
 import numpy as np
 
 from smdcli.model import Model, build
 from smdcli.scenario import Scenario
-from smdcli.solvers.base import Tolerances
+from smdcli.solvers.base import TIME_ONCE_S, Tolerances
 from smdcli.solvers.exact.hold import held_paths
 from smdcli.solvers.ground import across_jumps
 from smdcli.solvers.peaks import result_peaks
@@ -62,3 +65,16 @@ def forward_time(sc: Scenario, grid: np.ndarray, peaks: bool = False) -> float:
     if peaks:
         result_peaks(result)
     return time.perf_counter() - start
+
+
+REPEATS = 5  # a short run's timings, whose median is its seconds
+
+
+def median_time(first: float, again: Callable[[], float]) -> float:
+    """The median of a run's seconds and up to REPEATS - 1 more of it, taken while each lasts under TIME_ONCE_S (smd
+    compare's rule: a longer run's noise is a small share of it; a run of milliseconds is its noise and its CPU's
+    warm-up, the first of a 51-sample one-DOF scene's a third slower than those after)."""
+    times = [first]
+    while len(times) < REPEATS and times[-1] <= TIME_ONCE_S:
+        times.append(again())
+    return statistics.median(times)

@@ -24,7 +24,7 @@ from smdcli.model import Model
 from smdcli.progress import bar, silent
 from smdcli.result import Result
 from smdcli.scenario import Scenario
-from smdcli.solvers.base import Tolerances, stated_tolerance
+from smdcli.solvers.base import TIME_ONCE_S, Tolerances, stated_tolerance
 from smdcli.solvers.registry import EXACT_NAMES, method_problem, names
 from smdcli.commands.compare_nonsmooth import (NONSMOOTH_RTOLS, VARIANTS, cannot_represent, nonsmooth_defaults,
                                                refusals, run_energy, smoothed, split_variant, verdict)
@@ -37,7 +37,6 @@ ATOL_PER_RTOL = 1e-3
 STEP_BUDGET = 200_000  # for methods driven from Python (scipy's): about 200 us a step
 NONSMOOTH_STEP_BUDGET = 20_000  # on a nonsmooth scene, where a step count past this is the failure to chart
 COMPILED_STEP_BUDGET = 50_000_000  # for compiled methods, about 1 us a step: ode23s at rtol 1e-10 takes ~15 million
-TIME_ONCE_S = 0.2  # runs longer than this are timed once, not repeated: their noise is a small share of them
 
 
 @dataclass

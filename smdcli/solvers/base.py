@@ -21,6 +21,7 @@ from smdcli.result import NonsmoothHistory, Result, SolverStats, finite_peak
 # A state larger than this (relative to the initial and forced scale) has diverged.
 GROWTH_BOUND = 1e8
 MAX_STEPS = 2_000_000
+TIME_ONCE_S = 0.2  # runs longer than this are timed once, not repeated: their noise is a small share of them
 
 
 @dataclass(frozen=True)
