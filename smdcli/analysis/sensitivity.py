@@ -69,7 +69,7 @@ class Sensitivity:
     method: str = METHOD
     model_error: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (P,) the stencil's estimated error
     wall_time_s: float = 0.0
-    forward_time_s: float = 0.0  # one forward run of the scene (sensitivity_cost.forward_time's), for the cost's comparison
+    forward_time_s: float = 0.0  # a forward run of the scene (sensitivity_cost.forward_time), for the comparison
     notes: tuple[str, ...] = ()
     outputs: list[Path] = field(default_factory=list)
     model: object = None  # the scene's Model
@@ -145,10 +145,11 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
     """The sensitivities of a linear, piecewise-linear (yielding, friction, stops) or smooth nonlinear scene's response
     to each parameter path (the sweep's paths), on the scenario's output grid or on `grid` (any increasing times
     from the scenario's start); `timed`: one forward run of the scene alone (built, solved and, with `peaks`, its
-    peaks located) is timed after it (forward_time_s), for the cost's comparison (wall_time_s's: neither clock holds
-    the loading of code: sensitivity_cost.py); without `peaks` the peaks and their derivatives are left out (nan:
-    a fit reads the histories only); advance(count): a progress bar's, over the output times of a smooth scene's
-    integration; built: the scenario's TOML document and model, where the caller has them (a fit's trial point)."""
+    peaks located) is timed after it (forward_time_s), for the cost's comparison with wall_time_s (neither clock
+    holds the loading of code, and a short run is the median of repeats: sensitivity_cost.py); without `peaks` the
+    peaks and their derivatives are left out (nan: a fit reads the histories only); advance(count): a progress
+    bar's, over the output times of a smooth scene's integration; built: the scenario's TOML document and model,
+    where the caller has them (a fit's trial point)."""
     import scipy.linalg  # noqa: F401  the solvers' own imports, before the clock: a process pays them once, and
     import scipy.sparse  # noqa: F401  forward_time_s, timed after, would not
 

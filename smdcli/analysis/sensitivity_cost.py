@@ -21,6 +21,8 @@ from smdcli.solvers.ground import across_jumps
 from smdcli.solvers.peaks import result_peaks
 from smdcli.solvers.registry import get_solver
 
+REPEATS = 5  # a short run's timings, whose median is its seconds
+
 
 def load_code(base: Model) -> None:
     """Load the code the scene's sensitivities and its forward run take (modules; the compiled sensitivity kernel from
@@ -65,9 +67,6 @@ def forward_time(sc: Scenario, grid: np.ndarray, peaks: bool = False) -> float:
     if peaks:
         result_peaks(result)
     return time.perf_counter() - start
-
-
-REPEATS = 5  # a short run's timings, whose median is its seconds
 
 
 def median_time(first: float, again: Callable[[], float]) -> float:
