@@ -93,7 +93,7 @@ def main() -> None:
         found = smdcli.sensitivity(sc, params)  # warm-up: imports, compiled kernels' loading
         forward_time(sc, found.time)
         smdcli.simulate(sc)
-        histories, whole, forward, peaks, api = [], [], [], [], []
+        histories, whole, forward, with_peaks, api = [], [], [], [], []
         for _ in range(args.repeats):
             begin = time.perf_counter()
             sensitivity(sc, params, peaks=False)
@@ -104,11 +104,11 @@ def main() -> None:
             # at its best: BLAS as the sensitivities run it, one thread on a small scene
             with small_blas(2 * len(sc.dof_names)):
                 forward.append(forward_time(sc, found.time))
-                peaks.append(forward_time(sc, found.time, peaks=True))
+                with_peaks.append(forward_time(sc, found.time, peaks=True))
             begin = time.perf_counter()
             smdcli.simulate(sc)
             api.append(time.perf_counter() - begin)
-        h, s, f, p, a = (statistics.median(q) for q in (histories, whole, forward, peaks, api))
+        h, s, f, p, a = (statistics.median(q) for q in (histories, whole, forward, with_peaks, api))
         print(f"{name:<21} {len(params):>2} {h * 1e3:7.1f} ms {f * 1e3:6.2f} ms {h / f:5.2f}x   {s * 1e3:7.1f} ms "
               f"{p * 1e3:6.2f} ms {s / p:5.2f}x   {a * 1e3:6.2f} ms {s / a:5.2f}x {len(params) + 1:>6}")
     print(f"(medians of {args.repeats}, interleaved; histories: the sensitivities without the peaks against a forward "

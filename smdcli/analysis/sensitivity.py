@@ -186,7 +186,8 @@ def _timed_again(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
 def _rehearse(sc: Scenario, params: list[str], grid: np.ndarray | None) -> None:
     """The sensitivities on the grid's first two times, untimed: the code's first use in the process (its loading and
     the caches it fills: a one-DOF scene's first run took 13 ms after its imports, the next 3 ms) before the clock,
-    as the forward run timed after finds it. A failure is the timed run's to report."""
+    as the forward run timed after finds it. A model of its own: the timed run's computes its own matrices (the
+    state matrix, cached on the model, is part of the work). A failure is the timed run's to report."""
     try:
         base = build(sc)
         _refuse(sc, params, base)
