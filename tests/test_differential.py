@@ -327,7 +327,7 @@ def check_sensitivity(text: str, tmp_path) -> None:
     """`smd sensitivity` of each of sensitivity_params against Richardson's extrapolation of central differences
     of the reference runs (exact, or DOP853 at rtol 1e-12) at steps h and 2h of 1e-4 of the value: within ten times
     the larger of the stated accuracy and the reference's own error (the two extrapolations' difference and the
-    runs' error over h). Refusals (Iwan, Clough, a scene mixing events with smooth terms) are one line; where an
+    runs' error over h). Refusals (Stribeck friction, a scene mixing events with smooth terms) are one line; where an
     event appears or vanishes within the steps the differences mean nothing and are not compared, nor are the samples
     an event passes between the runs; rows said to have no derivative (nan) are not compared."""
     import smdcli

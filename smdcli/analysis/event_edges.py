@@ -51,6 +51,31 @@ def kinked(internals: dict, nominal: np.ndarray) -> bool:
     return bool(np.any((np.abs(slope_right - slope_left) > 0.1 * size) & (size > floor)))
 
 
+def continuous(internal: dict) -> dict[str, float]:
+    """An internal state's numbers that move with the parameters, by name: its real numbers, and each entry of a
+    pair of them (a Clough spring's Mahin-Bertero point (d, T)) as name[j]; not its flags and labels (which
+    branch a line leads to, whether it runs back), which a small step leaves as they are."""
+    found = {}
+    for name, value in internal.items():
+        if isinstance(value, tuple):
+            found.update((f"{name}[{j}]", float(v)) for j, v in enumerate(value))
+        elif isinstance(value, (int, float)) and not isinstance(value, bool):
+            found[name] = float(value)
+    return found
+
+
+def with_continuous(internal: dict, values: dict[str, float]) -> dict:
+    """The internal state with its numbers (continuous's names) set to values, its flags and labels as they are."""
+    out = dict(internal)
+    for name, value in internal.items():
+        if isinstance(value, tuple):
+            out[name] = tuple(values.get(f"{name}[{j}]", v) for j, v in enumerate(value))
+        elif name in values:
+            out[name] = values[name]
+    return out
+
+
 def internal_values(state: State) -> list[float]:
-    """A state's internal variables in name order."""
-    return [float(state.internal[name]) for name in sorted(state.internal)]
+    """A state's internal numbers (continuous's) in name order."""
+    numbers = continuous(state.internal)
+    return [numbers[name] for name in sorted(numbers)]

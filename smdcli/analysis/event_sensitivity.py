@@ -25,7 +25,8 @@ import numpy as np
 from smdcli.elements.base import KINK, RATE
 from smdcli.elements import State
 from smdcli.analysis.event_carry import CarriedSensitivities
-from smdcli.analysis.event_edges import GRAZE, breakaway_margins, internal_values, kinked, on_breakaway
+from smdcli.analysis.event_edges import (GRAZE, breakaway_margins, continuous, internal_values, kinked,
+                                           on_breakaway, with_continuous)
 from smdcli.analysis.signal_derivative import combined
 from smdcli.analysis.smooth_sensitivity import ANSWERED
 from smdcli.model import Model
@@ -40,7 +41,8 @@ GRAZING = 1e-9  # a crossing whose rate is below this share of the terms it sums
 # divided by its crossing rate is not bounded a priori; differences of the exact runs agree to 6e-11 - 3e-10 (their
 # own error) on yielding, stick-slip, impacts and a bilinear frame
 EVENT_ERROR = 1e-9
-SUPPORTED = ("elastoplastic", "bilinear", "coulomb", "stop")  # the laws whose events carry their sensitivities
+# the laws whose events carry their sensitivities
+SUPPORTED = ("elastoplastic", "bilinear", "clough", "iwan", "coulomb", "stop")
 
 
 class NotDifferentiable(Exception):
@@ -99,8 +101,9 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
         """The states with their internal variables moved c times their scaled sensitivities to parameter i (dq: as
         a checkpoint kept them; the run's current ones by default)."""
         dq = self.dq if dq is None else dq
-        return [State(s.mode, {name: value + c * float(dq[e][name][i]) if name in dq[e] else value
-                               for name, value in s.internal.items()}) for e, s in enumerate(states)]
+        return [State(s.mode, with_continuous(s.internal, {name: value + c * float(dq[e][name][i])
+                                                           for name, value in continuous(s.internal).items()
+                                                           if name in dq[e]})) for e, s in enumerate(states)]
 
     def augmented(self, states, dq: list) -> tuple[Flow, np.ndarray, np.ndarray]:
         """The flow of [z; S] in these states with these internal sensitivities, its forcing and its matrix: the mode
@@ -249,7 +252,7 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
             S[i] = flat[:self.scene.size]
             at = self.scene.size
             for e in range(E):
-                for name in sorted(states[e].internal):
+                for name in sorted(continuous(states[e].internal)):
                     self.dq[e].setdefault(name, np.zeros(self.P))[i] = flat[at]
                     at += 1
         self.settle_checkpoint(t, z, S, states)
@@ -321,15 +324,25 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
                 self.no_derivative(recorded[0][0] if recorded else 0.0,
                                    f"{path} changes its internal variables by several events at one instant")
                 return
-            names = sorted(new.internal)
+            numbers = continuous(new.internal)
+            names = sorted(numbers)
             for i in range(self.P):
                 def event(scene, c, i=i):
                     shifted = self.shifted(before, i, c)
                     d, rate, tension, _ = scene.evaluate(shifted, z + c * moved[i])
                     law = scene.elements[e].law
                     made = law.event(shifted[e], kinds[0], float(d[e]), float(rate[e]), float(tension[e]))
-                    return [made.internal[name] for name in names]
-                values = self.total(i, event)
+                    if made.mode != new.mode or sorted(continuous(made.internal)) != names or \
+                            with_continuous(made.internal, numbers) != new.internal:
+                        raise NotDifferentiable
+                    numbers_made = continuous(made.internal)
+                    return [numbers_made[name] for name in names]
+                try:
+                    values = self.total(i, event)
+                except NotDifferentiable:  # the event leads elsewhere within the parameter's step (a line's target)
+                    self.no_derivative(recorded[0][0], f"{path}'s {kinds[0]} leads to another branch within the "
+                                       "parameter's step: its derivatives on either side differ")
+                    return
                 for name, value in zip(names, values):
                     self.dq[e].setdefault(name, np.zeros(self.P))[i] = value
 

@@ -93,6 +93,9 @@ class Law:
     # keys its tension, internal rates and start are affine in (a smooth law's): one difference is their exact
     # derivative, where a sensitivity otherwise takes a five-point stencil of models
     affine_keys: ClassVar[tuple[str, ...]] = ()
+    # its events' new internal variables affine in the state and old ones (a plastic deformation d - T / k): where
+    # every law's are, a linear spring's k or damper's c moves the scene affinely, one difference its derivative
+    affine_events: ClassVar[bool] = True
     holds_impulse: ClassVar[bool] = True  # held, it carries an impact's impulse (a bounded force cannot: friction)
     capacity: ClassVar[float | None] = None  # the most force it holds (a stuck contact's breakaway); None: unbounded
 

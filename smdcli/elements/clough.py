@@ -49,6 +49,7 @@ class Clough(Law):
     keys: ClassVar[tuple[str, ...]] = ("k", "fy", "hardening")
     internal_names: ClassVar[tuple[str, ...]] = ("peak_positive", "peak_negative")
     units: ClassVar[dict[str, str]] = {"k": "N/m", "fy": "N", "hardening": "1"}
+    affine_events: ClassVar[bool] = False  # a reloading line's slope is a quotient of its ends
 
     @classmethod
     def read(cls, t) -> "Clough":
