@@ -37,6 +37,20 @@ def chain(n: int, k: float = 100.0, c: float = 0.5, force: str = 'type = "sine"\
     return "\n".join(lines) + "\n" + extra
 
 
+def assert_within_1e_11(found, reference, params: list[str]) -> None:
+    """x, v and a and each parameter's derivatives of two runs within 1e-11 of each one's largest, the derivatives
+    also within ten times both stated errors."""
+    for quantity in ("displacement", "velocity", "acceleration"):
+        mine, theirs = getattr(found, quantity), getattr(reference, quantity)
+        assert np.abs(mine - theirs).max() <= 1e-11 * np.abs(theirs).max(), quantity
+        mine, theirs = getattr(found, f"d_{quantity}"), getattr(reference, f"d_{quantity}")
+        for i, param in enumerate(params):
+            largest = np.abs(theirs[i]).max()
+            error = np.abs(mine[i] - theirs[i]).max()
+            stated = found.accuracy[f"d_{quantity}"][i] + reference.accuracy[f"d_{quantity}"][i]
+            assert error <= min(1e-11, 10 * stated) * largest, (param, quantity, error / largest, stated)
+
+
 def dense(sc, params):
     """The sensitivities by the dense stacked system (the modal path held off)."""
     return sensitivity_with(sc, params, 10**9)
@@ -98,16 +112,30 @@ def test_the_modal_path_agrees_with_the_dense_stacked_system(params, extra, forc
     sc = parse(text, "chain.toml")
     found, reference = smdcli.sensitivity(sc, params), dense(sc, params)
     assert found.method == MODAL_METHOD and reference.method != MODAL_METHOD
-    for quantity in ("displacement", "velocity", "acceleration"):
-        mine, theirs = getattr(found, quantity), getattr(reference, quantity)
-        assert np.abs(mine - theirs).max() <= 1e-11 * np.abs(theirs).max(), quantity
-        mine, theirs = getattr(found, f"d_{quantity}"), getattr(reference, f"d_{quantity}")
-        for i, param in enumerate(params):
-            largest = np.abs(theirs[i]).max()
-            error = np.abs(mine[i] - theirs[i]).max()
-            stated = found.accuracy[f"d_{quantity}"][i] + reference.accuracy[f"d_{quantity}"][i]
-            assert error <= min(1e-11, 10 * stated) * largest, (param, quantity, error / largest, stated)
+    assert_within_1e_11(found, reference, params)
     assert np.allclose(found.d_peak_displacement, reference.d_peak_displacement, rtol=1e-9, atol=1e-12)
+
+
+def test_a_long_chain_s_element_parameters_couple_its_modes_through_thin_factors(monkeypatch):
+    """120 masses: an element's stiffness, a damper and a mass each move alpha and beta by a matrix of rank one or
+    two, so that the modes' coupling over a step is a product of thin factors (2 r T columns, not 2n): against the
+    dense stacked system within 1e-11 of each one's largest and both stated errors; a force's amplitude, which
+    moves neither, couples nothing."""
+    import smdcli.analysis.modal_sensitivity as modal_path
+
+    taken = []
+
+    def spied(*args):
+        couple = coupling(*args)
+        taken.append(couple.kinds)
+        return couple
+    coupling = modal_path._coupling
+    monkeypatch.setattr(modal_path, "_coupling", spied)
+    params = ["spring[0].k", "damper[3].c", "mass.m5.m", "force[0].amplitude"]
+    sc = parse(chain(120, end=1.0), "chain.toml")
+    found, reference = smdcli.sensitivity(sc, params), dense(sc, params)
+    assert found.method == MODAL_METHOD and taken == [("thin",) * 4]
+    assert_within_1e_11(found, reference, params)
 
 
 def refusal_of(text: str, params: list[str]):

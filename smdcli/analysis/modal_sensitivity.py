@@ -13,7 +13,10 @@ oscillators, driven by the scene's modes through the parameter's model derivativ
 q+ = E q + G_q w, r+ = E r + F q + G_r w, where E holds each mode's 2 x 2 propagator and
 F_kj = alpha_kj F1_kj + beta_kj F2_kj, Fc_kj = int_0^h e^(L_k (h - s)) e2 e_c^T e^(L_j s) ds: e^(L_j s) as its
 Taylor series makes every Fc one product of two thin matrices (phi functions of each mode against powers of each
-mode), over a step short enough for the series and squared back to h where the modes are stiff. The forces'
+mode), over a step short enough for the series and squared back to h where the modes are stiff. Where the series
+spans the whole step and a parameter moves alpha and beta by a matrix of small rank r (an element's stiffness or
+damper: Phi^T e e^T Phi, rank one; a mass: two), F itself is a product of thin factors of 2 r T columns (T the
+series' terms), and F q costs O(n r T) a step instead of O(n^2). The forces'
 generator states w (w' = S w, reseeded from their closed forms at each output point) drive q through each mode's
 own augmented exponential, and r through it and through q: q's response from rest to w is Y e^(S s) w -
 e^(L s) Y w, Y the particular solution (L_k Y_k - Y_k S = -e2 b_k g, a small Sylvester equation per mode). The
@@ -29,6 +32,7 @@ Must not import: sweep, io, plots, commands, cli.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -70,29 +74,29 @@ def modal_sensitivities(base: Model, stacked: Model, scales: np.ndarray,
     dM, dC, dK, columns, x0, v0 = _blocks(stacked, n, P)
     mass_form = shapes.T @ base.dense().M
     participation = shapes.T @ columns  # (P + 1, n, F): the forces' reach on each block's modes
-    alpha, beta = np.empty((P, n, n)), np.empty((P, n, n))
+    pairs = []  # each parameter's alpha and beta, each as factors (left, right) or (the matrix, None)
     rows = np.empty((P + 1, n, m))  # each block's modes' forcing by w: the direct one, then r's through q's Y
     direct = participation.copy()  # each block's modes' forcing by the forces
     rows[0] = direct[0] @ gains
     for i in range(P):
-        Gm, Gc, Gk = (_projected(shapes, d[i]) for d in (dM, dC, dK))
-        alpha[i], beta[i] = -(Gk - Gm * squared), -(Gc - Gm * damping)
-        direct[i + 1] -= Gm @ participation[0]  # Phi^T dM M^-1 B = Phi^T dM Phi Phi^T B
-        rows[i + 1] = direct[i + 1] @ gains + alpha[i] @ Y[:, 0] + beta[i] @ Y[:, 1]
+        Gm, Gc, Gk = (_projected_factors(shapes, d[i]) for d in (dM, dC, dK))
+        pair = _thin_pair(Gm, Gc, Gk, squared, damping) or (
+            (-(_product(Gk) - _product(Gm) * squared), None), (-(_product(Gc) - _product(Gm) * damping), None))
+        pairs.append(pair)
+        direct[i + 1] -= _times(Gm, participation[0])  # Phi^T dM M^-1 B = Phi^T dM Phi Phi^T B
+        rows[i + 1] = direct[i + 1] @ gains + _times(pair[0], Y[:, 0]) + _times(pair[1], Y[:, 1])
     A = np.repeat(mode_matrices(squared, damping, 2 + m)[None], P + 1, axis=0)
     A[:, :, 1, 2:] = rows
     A[:, :, 2:, 2:] = S
     flows = mode_propagators(A.reshape(-1, 2 + m, 2 + m), h).reshape(P + 1, n, 2 + m, 2 + m)
-    pairs = _coupling_flows(squared, damping, h)  # (2, n, 2, n, 2): [c, k, row, j, column]
-    coupling = alpha[:, :, None, :, None] * pairs[0] + beta[:, :, None, :, None] * pairs[1]  # F_i (P, n, 2, n, 2)
-    F = coupling.reshape(P, 2 * n, 2 * n)
+    couple = _coupling(squared, damping, h, pairs)  # X (rows, 2n) -> X F_i^T (rows, P, 2n)
     G_q = flows[0, :, :2, 2:]  # (n, 2, m)
-    G_r = flows[1:, :, :2, 2:] - (F @ Y.reshape(2 * n, m)).reshape(P, n, 2, m)
+    G_r = flows[1:, :, :2, 2:] - couple(Y.reshape(2 * n, m).T).transpose(1, 2, 0).reshape(P, n, 2, m)
     w = np.concatenate([np.zeros((N, 0))] + [signal.exo_states(grid) for signal, _ in exos], axis=1)  # just after
     q, chain = _eigen_steps(lam, h, (w[:-1] @ G_q.reshape(2 * n, m).T).reshape(N - 1, n, 2),
                             np.stack([mass_form @ base.x0, mass_form @ base.v0], axis=1))
     flat = q.reshape(N, 2 * n)
-    forced = (flat[:-1] @ F.transpose(2, 0, 1).reshape(2 * n, P * 2 * n)
+    forced = (couple(flat[:-1]).reshape(N - 1, P * 2 * n)
               + w[:-1] @ G_r.transpose(3, 0, 1, 2).reshape(m, P * 2 * n)).reshape(N - 1, P, n, 2)
     r, _ = _eigen_steps(lam, h, forced, np.stack([x0 @ mass_form.T, v0 @ mass_form.T], axis=2))
     u = w @ gains.T  # (N, F) the forces at each time
@@ -195,12 +199,75 @@ def _accelerations(base: Model, values: np.ndarray, u: np.ndarray, columns: np.n
         a[i + 1] = base.acceleration(x[i + 1], v[i + 1], driven / scale)
 
 
-def _projected(shapes: np.ndarray, matrix: np.ndarray) -> np.ndarray:
-    """Phi^T matrix Phi, through the rows and columns where the matrix has entries (an element's derivative: two)."""
+def _projected_factors(shapes: np.ndarray, matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """Phi^T matrix Phi as (left (n, r), right (r, n)), through the r rows and the columns where the matrix has
+    entries (an element's derivative: two, or none); (Phi^T matrix Phi, None) where it has entries in many."""
     rows, cols = np.flatnonzero(matrix.any(axis=1)), np.flatnonzero(matrix.any(axis=0))
     if len(rows) > len(matrix) // 4 or len(cols) > len(matrix) // 4:
-        return shapes.T @ matrix @ shapes
-    return shapes[rows].T @ (matrix[np.ix_(rows, cols)] @ shapes[cols])
+        return shapes.T @ matrix @ shapes, None
+    return shapes[rows].T, matrix[np.ix_(rows, cols)] @ shapes[cols]
+
+
+def _product(factors: tuple[np.ndarray, np.ndarray | None]) -> np.ndarray:
+    """The matrix _projected_factors' factors stand for."""
+    left, right = factors
+    return left if right is None else left @ right
+
+
+def _times(factors: tuple[np.ndarray, np.ndarray | None], X: np.ndarray) -> np.ndarray:
+    """The factors' matrix times X, through the thin factors where there are two."""
+    left, right = factors
+    return left @ X if right is None else left @ (right @ X)
+
+
+def _thin_pair(Gm: tuple, Gc: tuple, Gk: tuple, squared: np.ndarray, damping: np.ndarray) -> tuple | None:
+    """alpha = -(Gk - Gm W) and beta = -(Gc - Gm D) as thin factors ((left, right), (left, right)), each left
+    (n, r) and right (r, n), where every projection came in factors; else None."""
+    if any(right is None for _, right in (Gm, Gc, Gk)):
+        return None
+    (Lm, Rm), (Lc, Rc), (Lk, Rk) = Gm, Gc, Gk
+    return ((np.hstack([Lk, Lm]), np.vstack([-Rk, Rm * squared])),
+            (np.hstack([Lc, Lm]), np.vstack([-Rc, Rm * damping])))
+
+
+def _coupling(squared: np.ndarray, damping: np.ndarray, h: float, pairs: list) -> Callable[[np.ndarray], np.ndarray]:
+    """X (rows, 2n) -> X F_i^T for every parameter (rows, P, 2n), F_i = alpha_i Fc_0 + beta_i Fc_1 entry by entry
+    (_coupling_flows' pair flows; pairs: each parameter's alpha and beta as modal_sensitivities holds them). Where
+    the series sums Fc over the whole step, Fc_c = phis rows_c, a product of thin matrices (T = SERIES_TERMS), and a
+    parameter's alpha and beta come in thin factors of rank r (an element's stiffness, damper or mass: one or two),
+    F_i is U V^T of 2 r T columns: X V U^T costs 8 n r T a row, not the dense F_i's 8 n^2 (a 1000-mass chain's
+    three parameters: most of the run, 1.25 of its 2.5 s)."""
+    n, P = len(squared), len(pairs)
+    factors = _series_factors(squared, damping, h) if _halvings(squared, damping, h) == 0 else None
+    parts = []  # per parameter: ("dense", F_i (2n, 2n)) or ("thin", U (2n, R), V (2n, R))
+    flows = None
+    for i in range(P):
+        pair = pairs[i]
+        thin = all(right is not None for _, right in pair)
+        if factors is not None and thin and sum(left.shape[1] for left, _ in pair) * SERIES_TERMS < n // 2:
+            phis, powers = factors  # (n, 2, T), (2, T, n, 2)
+            U = np.concatenate([(left[:, None, :, None] * phis[:, :, None, :]).reshape(2 * n, -1)
+                                for left, _ in pair], axis=1)
+            V = np.concatenate([(right.T[:, None, :, None] * powers[c].transpose(1, 2, 0)[:, :, None, :]
+                                 ).reshape(2 * n, -1) for c, (_, right) in enumerate(pair)], axis=1)
+            parts.append(("thin", U, V))
+            continue
+        if flows is None:
+            flows = _coupling_flows(squared, damping, h)  # (2, n, 2, n, 2): [c, k, row, j, column]
+        alpha, beta = (_product(factors_of) for factors_of in pair)
+        F = alpha[:, None, :, None] * flows[0] + beta[:, None, :, None] * flows[1]
+        parts.append(("dense", F.reshape(2 * n, 2 * n)))
+
+    def couple(X: np.ndarray) -> np.ndarray:
+        out = np.empty((len(X), P, 2 * n))
+        for i, part in enumerate(parts):
+            if part[0] == "thin":
+                np.matmul(X @ part[2], part[1].T, out=out[:, i])
+            else:
+                np.matmul(X, part[1].T, out=out[:, i])
+        return out
+    couple.kinds = tuple(part[0] for part in parts)  # how each parameter's coupling is taken, for the tests
+    return couple
 
 
 def _setup(base: Model, stacked: Model, grid: np.ndarray):
@@ -264,15 +331,23 @@ def _series_pair_flows(squared: np.ndarray, damping: np.ndarray, h: float) -> np
     Fc_kj = h sum_m [phi_(m+1)(L_k h) e2] [e_c^T (L_j h)^m]: one product of (2 n, SERIES_TERMS) by (SERIES_TERMS,
     2 n) per c, in real arithmetic, with no eigenvectors (critically damped modes alike). Both factors are read off
     the powers of each mode's L h: (L_k h)^i e2 their second columns, e_c^T (L_j h)^m their rows."""
+    n = len(squared)
+    phis, rows = _series_factors(squared, damping, h)
+    pairs = np.empty((2, 2 * n, 2 * n))
+    for c in range(2):
+        pairs[c] = phis.reshape(2 * n, SERIES_TERMS) @ rows[c].reshape(SERIES_TERMS, 2 * n)
+    return pairs.reshape(2, n, 2, n, 2)
+
+
+def _series_factors(squared: np.ndarray, damping: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """_series_pair_flows' two thin factors: h phi_(m+1)(L_k h) e2 (n, 2, T: k, row; m) and e_c^T (L_j h)^m
+    (2, T, n, 2: c; m; j, column), Fc = their product over m."""
     n, terms = len(squared), SERIES_TERMS
     powers = _mode_powers(mode_matrices(squared, damping) * h, 2 * terms)  # (2 terms, n, 2, 2)
     index = np.arange(2 * terms)[:, None] + np.arange(terms)[None, :] + 1
     inverse_factorials = np.array([1.0 / math.factorial(k) for k in range(3 * terms + 1)])[index]  # 1 / (i + m + 1)!
     phis = h * (powers[:, :, :, 1].reshape(2 * terms, 2 * n).T @ inverse_factorials)  # (2 n: k, row; m)
-    pairs = np.empty((2, 2 * n, 2 * n))
-    for c in range(2):
-        pairs[c] = phis @ powers[:terms, :, c, :].reshape(terms, 2 * n)
-    return pairs.reshape(2, n, 2, n, 2)
+    return phis.reshape(n, 2, terms), np.moveaxis(powers[:terms], 2, 0)
 
 
 def _mode_powers(M: np.ndarray, count: int) -> np.ndarray:
@@ -302,8 +377,7 @@ def _coupling_flows(squared: np.ndarray, damping: np.ndarray, h: float) -> np.nd
     """Fc_kj = int_0^h e^(L_k (h - s)) e2 e_c^T e^(L_j s) ds for every pair of modes, as (c, k, row, j, column):
     by the series over a step of h / 2^s that brings every |lambda| h within SERIES_RADIUS, then squared s times as
     the exponential of [[L_j, 0], [e2 e_c^T, L_k]] squares (its lower-left block: F E_j + E_k F)."""
-    radius = float(np.sqrt(np.maximum(squared, damping ** 2)).max(initial=0.0)) * h  # |lambda| <= max(w, d)
-    halvings = max(0, math.ceil(math.log2(radius / SERIES_RADIUS))) if radius > SERIES_RADIUS else 0
+    halvings = _halvings(squared, damping, h)
     step = h / 2 ** halvings
     pairs = _series_pair_flows(squared, damping, step)
     if halvings:
@@ -313,6 +387,12 @@ def _coupling_flows(squared: np.ndarray, damping: np.ndarray, h: float) -> np.nd
                      + np.einsum("kra,ckajl->ckrjl", E, pairs, optimize=True))
             E = E @ E
     return pairs
+
+
+def _halvings(squared: np.ndarray, damping: np.ndarray, h: float) -> int:
+    """Halvings of h that bring every mode's |lambda| h within SERIES_RADIUS."""
+    radius = float(np.sqrt(np.maximum(squared, damping ** 2)).max(initial=0.0)) * h  # |lambda| <= max(w, d)
+    return max(0, math.ceil(math.log2(radius / SERIES_RADIUS))) if radius > SERIES_RADIUS else 0
 
 
 def _particular(lam: np.ndarray, squared: np.ndarray, damping: np.ndarray, S: np.ndarray, ends: list[int],
