@@ -219,3 +219,26 @@ def test_random_classically_damped_chains_agree_on_both_paths(n, damping, force,
     found, reference = sensitivity_with(sc, params, 1), dense(sc, params)
     assert found.method == MODAL_METHOD
     assert_sensitivities_agree(found, reference, str(params))
+
+
+def test_past_the_dense_limit_a_classically_damped_scene_is_answered_in_modal_coordinates(monkeypatch):
+    """More stacked DOFs than the dense exponential takes (MAX_SIZE, here lowered to 100: 3 parameters of 40 masses
+    stack 160) are answered where the modal path serves, equal to the dense stacked system's answer; refused in one
+    line where it does not (a damper at one end only: not classical), and where its run would not fit in memory."""
+    import smdcli.analysis.sensitivity_limits as limits
+    from smdcli.errors import UsageError
+
+    params = ["spring[0].k", "damper[3].c", "mass.m5.m"]
+    sc = parse(chain(40, end=1.0), "chain.toml")
+    reference = dense(sc, params)
+    monkeypatch.setattr(limits, "MAX_SIZE", 100)
+    found = smdcli.sensitivity(sc, params)
+    assert found.method == MODAL_METHOD
+    assert_within_1e_11(found, reference, params)
+    one_end = chain(40, c=0.0, end=1.0).replace('[[force]]', '[[damper]]\nconnects = ["m38", "m39"]\nc = 0.5\n[[force]]')
+    with pytest.raises(UsageError, match=r"3 parameters of a 40-DOF scene stack 160 DOFs; smd sensitivity takes at "
+                                         r"most 100 \(beyond, a classically damped scene in modal coordinates\)"):
+        smdcli.sensitivity(parse(one_end, "one_end.toml"), ["spring[0].k", "damper[0].c", "mass.m5.m"])
+    monkeypatch.setattr(limits, "fits", lambda needed: False)
+    with pytest.raises(UsageError, match=r"need about .* GB in modal coordinates"):
+        smdcli.sensitivity(sc, params)

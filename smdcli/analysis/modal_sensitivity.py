@@ -270,6 +270,13 @@ def _coupling(squared: np.ndarray, damping: np.ndarray, h: float, pairs: list) -
     return couple
 
 
+def may_serve(base: Model) -> bool:
+    """Whether this path may take the scene (_setup decides, with its parameters and grid): linear, classically
+    damped, every force with a small generator."""
+    return (base.is_linear and not base.jumps and base.proportional_damping
+            and all(s.exo() is not None and s.exo().S.shape[0] <= LARGEST_GENERATOR for s in base.signals))
+
+
 def _setup(base: Model, stacked: Model, grid: np.ndarray):
     """(Phi, squared frequencies, damping, the step, [(signal, exo)]) where this path serves, else None."""
     N = len(grid)

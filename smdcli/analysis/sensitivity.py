@@ -21,6 +21,7 @@ import numpy as np
 
 from smdcli.analysis.model_derivative import augmented_model, model_derivatives
 from smdcli.analysis.sensitivity_cost import forward_time, load_code, median_time
+from smdcli.analysis.sensitivity_limits import refuse, refuse_large
 from smdcli.analysis.step_scale import block_scales
 from smdcli.errors import SolverFailed, UsageError
 from smdcli.model import Model, build, time_grid
@@ -39,7 +40,6 @@ EVENT_METHOD = ("exact, event to event: between events the scene and its sensiti
                 "state's jump across it (the saltation), internal variables (plastic deformation) carried with "
                 "their own sensitivities; the model's derivatives taken on the assembled scene (a five-point "
                 "stencil in each parameter)")
-MAX_SIZE = 3000  # DOFs of the stacked system, (P + 1) n: its dense exponential's memory and time
 METHOD = ("exact: the scene and its sensitivity equations (the same M, C and K driven by -dM x'' - dC x' - dK x + "
           "B du/dp) solved together by the matrix exponential; the model's derivatives taken on the assembled model "
           "(one difference where every number of the model is affine in the parameter, else a five-point stencil, "
@@ -162,7 +162,7 @@ def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None,
         start = time.perf_counter()
         doc, base = built if built is not None else (None, build(sc))
         building = time.perf_counter() - start
-        _refuse(sc, params, base)
+        refuse(sc, params, base)
         load_code(base)
         start = time.perf_counter()
         found = _sensitivity(sc, params, grid, peaks, advance, (doc, base))
@@ -190,7 +190,7 @@ def _rehearse(sc: Scenario, params: list[str], grid: np.ndarray | None) -> None:
     state matrix, cached on the model, is part of the work). A failure is the timed run's to report."""
     try:
         base = build(sc)
-        _refuse(sc, params, base)
+        refuse(sc, params, base)
         load_code(base)
         times = time_grid(sc.time) if grid is None else np.asarray(grid, dtype=float)
         _sensitivity(sc, params, times[:2], True, None, (None, base))
@@ -201,23 +201,6 @@ def _rehearse(sc: Scenario, params: list[str], grid: np.ndarray | None) -> None:
     # (a one-DOF scene's first sensitivity, 51 samples in 2 ms, read 2.3-3.4 forward runs with them, 2.1-2.6
     # without, in eight fresh processes each)
     fault_in(min(HEAP_KEPT // 2, 4 * 8 * len(QUANTITIES) * (len(params) + 1) * len(times) * base.n))
-
-
-def _refuse(sc: Scenario, params: list[str], base: Model) -> None:
-    """UsageError where the scene's sensitivities are not given: a law whose sensitivities are not built, more stacked
-    DOFs than MAX_SIZE."""
-    if not base.is_linear:
-        from smdcli.analysis.event_sensitivity import event_refusal
-        from smdcli.analysis.smooth_sensitivity import smooth_refusal
-
-        refusal = event_refusal(base) if base.is_piecewise_linear else smooth_refusal(base)
-        if refusal:
-            raise UsageError(f"{sc.path}: {refusal}")
-    if (len(params) + 1) * base.n > MAX_SIZE:
-        from smdcli.text import plural
-
-        raise UsageError(f"{sc.path}: {plural(len(params), 'parameter')} of a {base.n}-DOF scene stack "
-                         f"{(len(params) + 1) * base.n} DOFs; smd sensitivity takes at most {MAX_SIZE}")
 
 
 def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks: bool, advance,
@@ -371,11 +354,13 @@ def _linear(sc: Scenario, base, derivatives: list, grid: np.ndarray, tol: Tolera
     from smdcli.analysis.modal_sensitivity import MODAL_METHOD, modal_sensitivities
     from smdcli.solvers.exact.linear import read_exactly
 
+    P, n, N = len(derivatives), base.n, len(grid)
+    refuse_large(sc, P, n, N)
     stacked, scales = augmented_model(base, derivatives)
     modal = modal_sensitivities(base, stacked, scales, grid)
     if modal is not None:  # a classically damped scene: its modes and each parameter's, side by side
         return (*modal, MODAL_METHOD)
-    P, n, N = len(derivatives), base.n, len(grid)
+    refuse_large(sc, P, n)  # past MAX_SIZE: the dense stacked system's exponential cannot take it
     values = np.empty((len(QUANTITIES), P + 1, N, n))
     total, reads = (P + 1) * n, []
     rates, inputs = stacked.state_matrix[total:], stacked.input_matrix[total:]
