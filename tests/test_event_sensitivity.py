@@ -493,4 +493,3 @@ def test_a_stop_scene_under_a_formula_is_fitted_from_data_its_formula_read_at_t(
     run = fit([make_test(start, data, None, None)], ["spring[0].k", "spring[1].k"])
     assert run.converged, run.message
     assert np.abs(run.estimate / [78.2, 246.0] - 1).max() <= 1e-8
-

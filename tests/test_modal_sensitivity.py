@@ -125,12 +125,11 @@ def test_a_long_chain_s_element_parameters_couple_its_modes_through_thin_factors
 
     taken = []
 
-    def spied(*args):
-        couple = coupling(*args)
-        taken.append(couple.kinds)
-        return couple
-    coupling = modal_path._coupling
-    monkeypatch.setattr(modal_path, "_coupling", spied)
+    class Spied(modal_path._Coupling):
+        def __init__(self, *args):
+            super().__init__(*args)
+            taken.append(tuple(kind for kind, *_ in self.parts))
+    monkeypatch.setattr(modal_path, "_Coupling", Spied)
     params = ["spring[0].k", "damper[3].c", "mass.m5.m", "force[0].amplitude"]
     sc = parse(chain(120, end=1.0), "chain.toml")
     found, reference = smdcli.sensitivity(sc, params), dense(sc, params)

@@ -332,11 +332,11 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
                     d, rate, tension, _ = scene.evaluate(shifted, z + c * moved[i])
                     law = scene.elements[e].law
                     made = law.event(shifted[e], kinds[0], float(d[e]), float(rate[e]), float(tension[e]))
-                    if made.mode != new.mode or sorted(continuous(made.internal)) != names or \
-                            with_continuous(made.internal, numbers) != new.internal:
+                    # another branch, other flags or other numbers' names than the nominal event's: no derivative
+                    if made.mode != new.mode or with_continuous(made.internal, numbers) != new.internal:
                         raise NotDifferentiable
-                    numbers_made = continuous(made.internal)
-                    return [numbers_made[name] for name in names]
+                    made_numbers = continuous(made.internal)
+                    return [made_numbers[name] for name in names]
                 try:
                     values = self.total(i, event)
                 except NotDifferentiable:  # the event leads elsewhere within the parameter's step (a line's target)

@@ -32,7 +32,6 @@ Must not import: sweep, io, plots, commands, cli.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 
 import numpy as np
 
@@ -89,7 +88,7 @@ def modal_sensitivities(base: Model, stacked: Model, scales: np.ndarray,
     A[:, :, 1, 2:] = rows
     A[:, :, 2:, 2:] = S
     flows = mode_propagators(A.reshape(-1, 2 + m, 2 + m), h).reshape(P + 1, n, 2 + m, 2 + m)
-    couple = _coupling(squared, damping, h, pairs)  # X (rows, 2n) -> X F_i^T (rows, P, 2n)
+    couple = _Coupling(squared, damping, h, pairs)  # X (rows, 2n) -> X F_i^T (rows, P, 2n)
     G_q = flows[0, :, :2, 2:]  # (n, 2, m)
     G_r = flows[1:, :, :2, 2:] - couple(Y.reshape(2 * n, m).T).transpose(1, 2, 0).reshape(P, n, 2, m)
     w = np.concatenate([np.zeros((N, 0))] + [signal.exo_states(grid) for signal, _ in exos], axis=1)  # just after
@@ -230,62 +229,60 @@ def _thin_pair(Gm: tuple, Gc: tuple, Gk: tuple, squared: np.ndarray, damping: np
             (np.hstack([Lc, Lm]), np.vstack([-Rc, Rm * damping])))
 
 
-def _coupling(squared: np.ndarray, damping: np.ndarray, h: float, pairs: list) -> Callable[[np.ndarray], np.ndarray]:
+class _Coupling:
     """X (rows, 2n) -> X F_i^T for every parameter (rows, P, 2n), F_i = alpha_i Fc_0 + beta_i Fc_1 entry by entry
     (_coupling_flows' pair flows; pairs: each parameter's alpha and beta as modal_sensitivities holds them). Where
     the series sums Fc over the whole step, Fc_c = phis rows_c, a product of thin matrices (T = SERIES_TERMS), and a
     parameter's alpha and beta come in thin factors of rank r (an element's stiffness, damper or mass: one or two),
     F_i is U V^T of 2 r T columns: X V U^T costs 8 n r T a row, not the dense F_i's 8 n^2 (a 1000-mass chain's
     three parameters: most of the run, 1.25 of its 2.5 s)."""
-    n, P = len(squared), len(pairs)
-    factors = _series_factors(squared, damping, h) if _halvings(squared, damping, h) == 0 else None
-    parts = []  # per parameter: ("dense", F_i (2n, 2n)) or ("thin", U (2n, R), V (2n, R))
-    flows = None
-    for i in range(P):
-        pair = pairs[i]
-        thin = all(right is not None for _, right in pair)
-        if factors is not None and thin and sum(left.shape[1] for left, _ in pair) * SERIES_TERMS < n // 2:
-            phis, powers = factors  # (n, 2, T), (2, T, n, 2)
-            U = np.concatenate([(left[:, None, :, None] * phis[:, :, None, :]).reshape(2 * n, -1)
-                                for left, _ in pair], axis=1)
-            V = np.concatenate([(right.T[:, None, :, None] * powers[c].transpose(1, 2, 0)[:, :, None, :]
-                                 ).reshape(2 * n, -1) for c, (_, right) in enumerate(pair)], axis=1)
-            parts.append(("thin", U, V))
-            continue
-        if flows is None:
-            flows = _coupling_flows(squared, damping, h)  # (2, n, 2, n, 2): [c, k, row, j, column]
-        alpha, beta = (_product(factors_of) for factors_of in pair)
-        F = alpha[:, None, :, None] * flows[0] + beta[:, None, :, None] * flows[1]
-        parts.append(("dense", F.reshape(2 * n, 2 * n)))
 
-    def couple(X: np.ndarray) -> np.ndarray:
-        out = np.empty((len(X), P, 2 * n))
-        for i, part in enumerate(parts):
+    def __init__(self, squared: np.ndarray, damping: np.ndarray, h: float, pairs: list):
+        n = self.n = len(squared)
+        factors = _series_factors(squared, damping, h) if _halvings(squared, damping, h) == 0 else None
+        self.parts = []  # per parameter: ("thin", U (2n, R), V (2n, R)) or ("dense", F_i (2n, 2n))
+        flows = None
+        for pair in pairs:
+            thin = all(right is not None for _, right in pair)
+            if factors is not None and thin and sum(left.shape[1] for left, _ in pair) * SERIES_TERMS < n // 2:
+                phis, powers = factors  # (n, 2, T), (2, T, n, 2)
+                U = np.concatenate([(left[:, None, :, None] * phis[:, :, None, :]).reshape(2 * n, -1)
+                                    for left, _ in pair], axis=1)
+                V = np.concatenate([(right.T[:, None, :, None] * powers[c].transpose(1, 2, 0)[:, :, None, :]
+                                     ).reshape(2 * n, -1) for c, (_, right) in enumerate(pair)], axis=1)
+                self.parts.append(("thin", U, V))
+                continue
+            if flows is None:
+                flows = _coupling_flows(squared, damping, h)  # (2, n, 2, n, 2): [c, k, row, j, column]
+            alpha, beta = (_product(factors_of) for factors_of in pair)
+            F = alpha[:, None, :, None] * flows[0] + beta[:, None, :, None] * flows[1]
+            self.parts.append(("dense", F.reshape(2 * n, 2 * n)))
+
+    def __call__(self, X: np.ndarray) -> np.ndarray:
+        out = np.empty((len(X), len(self.parts), 2 * self.n))
+        for i, part in enumerate(self.parts):
             if part[0] == "thin":
                 np.matmul(X @ part[2], part[1].T, out=out[:, i])
             else:
                 np.matmul(X, part[1].T, out=out[:, i])
         return out
-    couple.kinds = tuple(part[0] for part in parts)  # how each parameter's coupling is taken, for the tests
-    return couple
 
 
 def may_serve(base: Model) -> bool:
     """Whether this path may take the scene (_setup decides, with its parameters and grid): linear, classically
-    damped, every force with a small generator."""
-    return (base.is_linear and not base.jumps and base.proportional_damping
-            and all(s.exo() is not None and s.exo().S.shape[0] <= LARGEST_GENERATOR for s in base.signals))
+    damped with no rigid-body mode, every force with a small generator."""
+    return (base.is_linear and not base.jumps
+            and all(s.exo() is not None and s.exo().S.shape[0] <= LARGEST_GENERATOR for s in base.signals)
+            and base.proportional_damping and float(base.modes.natural_frequencies.min()) > 0)
 
 
 def _setup(base: Model, stacked: Model, grid: np.ndarray):
     """(Phi, squared frequencies, damping, the step, [(signal, exo)]) where this path serves, else None."""
     N = len(grid)
-    if stacked.n < STACKED_DOFS or N < 3 or not base.is_linear or base.jumps or stacked.jumps:
+    if stacked.n < STACKED_DOFS or N < 3 or stacked.jumps or not may_serve(base):
         return None
-    exos = [(signal, signal.exo()) for signal in stacked.signals]
+    exos = [(signal, signal.exo()) for signal in stacked.signals]  # the scene's and its derivatives' generators
     if any(exo is None or exo.S.shape[0] > LARGEST_GENERATOR for _, exo in exos):
-        return None
-    if not base.proportional_damping or float(base.modes.natural_frequencies.min()) <= 0:
         return None
     h = (grid[-1] - grid[0]) / (N - 1)
     if np.abs(np.diff(grid) - h).max() > 1e-9 * h:

@@ -21,7 +21,7 @@ import numpy as np
 
 from smdcli.analysis.model_derivative import augmented_model, model_derivatives
 from smdcli.analysis.sensitivity_cost import forward_time, load_code, median_time
-from smdcli.analysis.sensitivity_limits import refuse, refuse_large
+from smdcli.analysis.sensitivity_limits import refuse, too_many_dofs, too_much_memory
 from smdcli.analysis.step_scale import block_scales
 from smdcli.errors import SolverFailed, UsageError
 from smdcli.model import Model, build, time_grid
@@ -355,12 +355,12 @@ def _linear(sc: Scenario, base, derivatives: list, grid: np.ndarray, tol: Tolera
     from smdcli.solvers.exact.linear import read_exactly
 
     P, n, N = len(derivatives), base.n, len(grid)
-    refuse_large(sc, P, n, N)
+    too_much_memory(sc, P, n, N)
     stacked, scales = augmented_model(base, derivatives)
     modal = modal_sensitivities(base, stacked, scales, grid)
     if modal is not None:  # a classically damped scene: its modes and each parameter's, side by side
         return (*modal, MODAL_METHOD)
-    refuse_large(sc, P, n)  # past MAX_SIZE: the dense stacked system's exponential cannot take it
+    too_many_dofs(sc, P, n)  # the dense stacked system's exponential, past what it takes
     values = np.empty((len(QUANTITIES), P + 1, N, n))
     total, reads = (P + 1) * n, []
     rates, inputs = stacked.state_matrix[total:], stacked.input_matrix[total:]

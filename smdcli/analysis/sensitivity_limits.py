@@ -1,5 +1,6 @@
-"""Where smd sensitivity declines a scene, in one line before any work: a law whose sensitivities are not built, a
-stacked system past what its dense exponential takes, a modal run past memory.
+"""Where smd sensitivity declines a scene, in one line: a law whose sensitivities are not built (before any work), a
+stacked system past what its dense exponential takes, a modal run past memory (once the model's derivatives say
+which path takes it).
 
 Must not import: io, plots, commands, cli.
 """
@@ -17,7 +18,7 @@ MODAL_COPIES = 36  # the modal path's working memory, in (P + 1) N n numbers (a 
 
 def refuse(sc: Scenario, params: list[str], base: Model) -> None:
     """UsageError where the scene's sensitivities are not given: a law whose sensitivities are not built, more stacked
-    DOFs than MAX_SIZE where the modal path may not take them (refuse_large says so for the rest, once it knows)."""
+    DOFs than MAX_SIZE where the modal path may not take them (the rest: too_many_dofs, once it is known)."""
     if not base.is_linear:
         from smdcli.analysis.event_sensitivity import event_refusal
         from smdcli.analysis.smooth_sensitivity import smooth_refusal
@@ -29,21 +30,24 @@ def refuse(sc: Scenario, params: list[str], base: Model) -> None:
         from smdcli.analysis.modal_sensitivity import may_serve
 
         if not may_serve(base):
-            refuse_large(sc, len(params), base.n)
+            too_many_dofs(sc, len(params), base.n)
 
 
-def refuse_large(sc: Scenario, P: int, n: int, N: int | None = None) -> None:
-    """UsageError where P parameters of an n-DOF scene stack more than MAX_SIZE DOFs: always without N (the dense
-    path), with N only where the modal path's N samples would not fit in memory."""
-    from smdcli.text import plural
+def too_many_dofs(sc: Scenario, P: int, n: int) -> None:
+    """UsageError where P parameters of an n-DOF scene stack more DOFs than the dense exponential takes (MAX_SIZE)."""
+    if (P + 1) * n > MAX_SIZE:
+        from smdcli.text import plural
 
-    if (P + 1) * n <= MAX_SIZE:
-        return
-    if N is None:
         raise UsageError(f"{sc.path}: {plural(P, 'parameter')} of a {n}-DOF scene stack {(P + 1) * n} DOFs; smd "
                          f"sensitivity takes at most {MAX_SIZE} (beyond, a classically damped scene in modal "
                          "coordinates)")
+
+
+def too_much_memory(sc: Scenario, P: int, n: int, N: int) -> None:
+    """UsageError where a modal run past MAX_SIZE stacked DOFs, on N samples, would not fit in memory."""
     needed = MODAL_COPIES * 8.0 * (P + 1) * N * n
-    if not fits(needed):
+    if (P + 1) * n > MAX_SIZE and not fits(needed):
+        from smdcli.text import plural
+
         raise UsageError(f"{sc.path}: {plural(P, 'parameter')} of a {n}-DOF scene on {N} samples need about "
                          f"{needed / 2**30:.1f} GB in modal coordinates, more than half of this machine's memory")
