@@ -159,22 +159,6 @@ def test_a_yielding_storey_k_and_fy_are_recovered_from_a_start_30_percent_off(la
     assert run.solves < 50
 
 
-def test_a_mix_of_stick_and_a_smooth_slip_force_is_refused_naming_the_element(cli, tmp_path):
-    """Stribeck friction (stick, then a slip force that falls smoothly with speed): refused with one line, exit 2,
-    nothing written."""
-    text = ELASTOPLASTIC.replace('law = "elastoplastic"\nk = 400.0\nfy = 20.0', "k = 400.0") + """
-[[friction]]
-connects = ["ground", "m1"]
-force = 2.0
-static = 3.0
-stribeck_velocity = 0.05
-"""
-    (tmp_path / "stribeck.toml").write_text(text)
-    ran = cli("sensitivity", tmp_path / "stribeck.toml", "--param", "spring[0].k", "-o", tmp_path / "out")
-    assert ran.exit_code == 2 and "friction[0] (stribeck)" in ran.output and "not yet built" in ran.output, ran.output
-    assert len(ran.output.strip().splitlines()) == 1 and not (tmp_path / "out").exists()
-
-
 CLOUGH_TWO_SINES = ELASTOPLASTIC.replace('law = "elastoplastic"', 'law = "clough"\nhardening = 0.05').replace(
     "end = 1.2", "end = 4.0") + '[[force]]\non = "m1"\ntype = "sine"\namplitude = 17.0\nomega = 31.0\n'
 
@@ -201,21 +185,17 @@ def test_an_iwan_spring_matches_differences_of_dop853():
 
 
 def test_peak_derivatives_match_differences_of_located_peaks():
-    """d max|x_i|/dp on the exact flow at the located peak's time, against five-point differences of the peaks that
-    exact runs locate between samples (events' intervals keeping their samples): both DOFs of the vibro-impact
-    absorber, to 1e-7 (measured 3e-10)."""
-    from smdcli.solvers.peaks import located_peaks
+    """d max|x_i|/dp on the exact flow at the located peak's time, against five-point differences of the peaks
+    smd simulate reports for exact runs (located between samples, and at the events between them): both DOFs of
+    the vibro-impact absorber over 2 s, to 1e-7 (measured 2.8e-10; the impactor's peak is at an impact)."""
+    from smdcli.solvers.peaks import result_peaks
 
     text = (SCENARIOS / "vibro_impact_gap.toml").read_text().replace("end = 10.0", "end = 2.0")
     sc, _, _ = model_of(text, "gap.toml")
     s = smdcli.sensitivity(sc, ["stop[0].restitution"])
-
-    def peaks(scene):
-        run = smdcli.simulate(scene, method="exact")
-        events = np.array([t for t, _, _ in run.nonsmooth.events], dtype=float)
-        return located_peaks(run.time, run.displacement, run.velocity, run.acceleration, events)
     h = 1e-5 * s.value[0]
-    at = {o: peaks(scenario_with(sc, {"stop[0].restitution": s.value[0] + o * h})) for o in (-2, -1, 1, 2)}
+    at = {o: result_peaks(smdcli.simulate(scenario_with(sc, {"stop[0].restitution": s.value[0] + o * h}),
+                                          method="exact")) for o in (-2, -1, 1, 2)}
     want = (8 * (at[1] - at[-1]) - (at[2] - at[-2])) / (12 * h)
     assert np.abs(s.d_peak_displacement[0] - want).max() <= 1e-7 * np.abs(want).max()
 
@@ -493,3 +473,25 @@ def test_a_stop_scene_under_a_formula_is_fitted_from_data_its_formula_read_at_t(
     run = fit([make_test(start, data, None, None)], ["spring[0].k", "spring[1].k"])
     assert run.converged, run.message
     assert np.abs(run.estimate / [78.2, 246.0] - 1).max() <= 1e-8
+
+
+@pytest.mark.parametrize("name, params", [
+    ("vibro_impact_gap", ["spring[0].k", "stop[0].restitution", "force[0].omega"]),  # both peaks at impacts
+    ("elastoplastic_record", ["spring[0].k", "spring[0].fy"]),  # the peak where the spring yields
+])
+def test_a_peak_at_an_event_between_samples_is_simulate_s_and_has_its_derivative(name, params):
+    """Where the largest |x| is at an event between samples (an impact at the stop, a yield's corner), the peak is
+    the event's, as smd simulate reports it (the samples' and their interpolants' were 0.2 % and 0.02 % low), and
+    its derivative is the event point's total derivative: within 1e-8 of five-point central differences of the
+    peaks of exact runs at 1e-5 of each value (measured 5e-11 to 9e-10)."""
+    from smdcli.solvers.peaks import result_peaks
+
+    sc = smdcli.load(SCENARIOS / f"{name}.toml")
+    s = smdcli.sensitivity(sc, params)
+    assert np.array_equal(s.peak_displacement, result_peaks(smdcli.simulate(sc, method="exact")))
+    for i, path in enumerate(params):
+        h = 1e-5 * s.value[i]
+        peaks = {o: result_peaks(smdcli.simulate(scenario_with(sc, {path: s.value[i] + o * h}), method="exact"))
+                 for o in (-2, -1, 1, 2)}
+        want = (8 * (peaks[1] - peaks[-1]) - (peaks[2] - peaks[-2])) / (12 * h)
+        assert np.abs(s.d_peak_displacement[i] - want).max() <= 1e-8 * np.abs(want).max(), path

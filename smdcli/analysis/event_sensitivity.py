@@ -27,7 +27,7 @@ from smdcli.elements import State
 from smdcli.analysis.event_carry import CarriedSensitivities
 from smdcli.analysis.event_edges import (GRAZE, breakaway_margins, continuous, internal_values, kinked,
                                            on_breakaway, with_continuous)
-from smdcli.analysis.signal_derivative import combined
+from smdcli.analysis.signal_derivative import stencil_total
 from smdcli.analysis.smooth_sensitivity import ANSWERED
 from smdcli.model import Model
 from smdcli.solvers.events.decisions import impact, project
@@ -81,6 +81,7 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
         self.checkpoints: list[tuple] = []  # (t, z, S, states, dq) at the start, each event and each break
         self.moves: dict[float, np.ndarray] = {}  # each event's time -> its scaled derivatives scale_i dt*/dp_i
         self.undefined_from: tuple[float, str] | None = None
+        self.peak_points: list[tuple] = []  # (t, x, scale_i dx/dp_i along the moved event) at each event: peaks there
         # parameters whose own step moves the start across an element's edge (a spring deformed to its yield point
         # exactly, the stiffness moved): they alone have no derivative, from the start; the others do
         self.edges: dict[int, str] = {}
@@ -91,11 +92,8 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
 
     # ----------------------------------------------------------------------------- stencils
     def total(self, i: int, read) -> np.ndarray:
-        """scale_i times the total derivative along parameter i of read(scene, c): the scene at a stencil point
-        and c, what to multiply a scaled sensitivity by to move a quantity with the parameter to that point."""
-        scenes, offsets, weights = self.stencils[i]
-        return combined(weights, [np.asarray(read(scene, o / self.scales[i]), dtype=float)
-                                  for scene, o in zip(scenes, offsets)])
+        """scale_i times the total derivative along parameter i of read(scene, c) (stencil_total)."""
+        return stencil_total(self.stencils[i], self.scales[i], read)
 
     def shifted(self, states, i: int, c: float, dq: list | None = None) -> list[State]:
         """The states with their internal variables moved c times their scaled sensitivities to parameter i (dq: as
@@ -260,6 +258,7 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
 
     def apply(self, states, z: np.ndarray, t: float, element: int, kind: str):
         if kind == KINK or self.undefined_from is not None:
+            self.peak_points.append((t, z[:self.n].copy(), np.full((self.P, self.n), np.nan)))
             return super().apply(states, z, t, element, kind)
         self.advance(t, z)
         S = self.checkpoints[-1][2]
@@ -281,6 +280,7 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
                 dt[i] = -(float(row @ S[i]) + float(self.total(i, guard))) / crossing
         self.moves.setdefault(t, dt)
         moved = S + dt[:, None] * rate_of_z[None]  # the event point's total derivative
+        self.peak_points.append((t, z[:self.n].copy(), moved[:, :self.n].copy()))
         before = len(self.events)
         after, z_after = super().apply(states, z, t, element, kind)
         recorded = self.events[before:]

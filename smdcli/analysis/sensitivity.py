@@ -217,7 +217,7 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
     derivatives = model_derivatives(sc, base, grid, list(params), doc, flowed=linear)
     n, P = base.n, len(derivatives)
     tol = Tolerances()
-    run = dense = None
+    run = dense = mixed = None
     scales = block_scales(derivatives)
     if linear:
         values, stated, method = _linear(sc, base, derivatives, grid, tol)
@@ -226,7 +226,7 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
             blocks, stated, run = _events(base, derivatives, scales, grid)
             method = f"{EVENT_METHOD}; {run.held}" if run.held else EVENT_METHOD
         else:
-            blocks, stated, dense, method = _smooth(sc, base, derivatives, scales, grid, advance)
+            blocks, stated, dense, method, mixed = _smooth(sc, base, derivatives, scales, grid, advance)
         values = _split(blocks, scales)
     nominal = {q: values[i, 0] for i, q in enumerate(QUANTITIES)}
     derived = {q: values[i, 1:] for i, q in enumerate(QUANTITIES)}
@@ -253,12 +253,13 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
         return _result(sc, params, derivatives, grid, base, nominal, derived, nan, nan, np.full((P, n), np.nan),
                        accuracy, (), method)
     notes = []
-    if run is not None and run.undefined_from is not None:
-        when, why = run.undefined_from
+    evented = run if run is not None else mixed  # the events' run, where the scene has events
+    if evented is not None and evented.undefined_from is not None:
+        when, why = evented.undefined_from
         notes.append(f"from t = {when:.9g} s the response has no derivative ({why}): written as nan")
-    for i, why in (run.edges.items() if run is not None else ()):
+    for i, why in (evented.edges.items() if evented is not None else ()):
         notes.append(f"the response has no derivative in {params[i]} ({why}): written as nan")
-    events = jump_times(base, grid) if run is None else np.array([e[0] for e in run.events], dtype=float)
+    events = jump_times(base, grid) if evented is None else np.array([e[0] for e in evented.events], dtype=float)
     peaks, at = located_peaks(grid, nominal["displacement"], nominal["velocity"], nominal["acceleration"], events,
                               with_times=True)
     if run is None:  # the scene and its derivatives on each DOF's quintic at its peak's time, in one evaluation
@@ -267,6 +268,10 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
     else:  # on the exact flow at the peak's time
         sign = np.sign(quintic_each(grid, nominal["displacement"], nominal["velocity"], nominal["acceleration"], at))
         d_peaks = sign * np.stack([run.at(float(at[i]))[:, i] for i in range(n)], axis=1) / scales[:, None]
+    for t, x, dx in getattr(evented, "peak_points", ()):  # a peak at an event between samples (a stick at the top)
+        higher = np.abs(x) > peaks
+        peaks[higher], at[higher] = np.abs(x[higher]), t
+        d_peaks[:, higher] = np.sign(x[higher]) * dx[:, higher] / scales[:, None]
     # a peak within the run's own error of x (a DOF the motion has not reached: zeros, or the rounding of the solution)
     # has no derivative worth a number: its digits are the rounding's
     floor = stated * peaks_of[0].max()
@@ -407,10 +412,16 @@ def _smooth(sc: Scenario, base, derivatives: list, scales: np.ndarray, grid: np.
     """The same blocks for a smooth nonlinear scene, by the forward sensitivity equations (smooth_sensitivity.py)
     at rtol 1e-9 or the scenario's tighter one; its stated accuracy SMOOTH_ERROR times that rtol, its dense
     accelerations and how the equations were integrated."""
-    from smdcli.analysis.smooth_sensitivity import RTOL, smooth_sensitivities
+    from smdcli.analysis.smooth_sensitivity import RTOL, smooth_refusal, smooth_sensitivities
 
-    rtol = min(RTOL, sc.solver.rtol)
-    y, S, rates, d_rates, rates_at, method = smooth_sensitivities(base, derivatives, scales, grid, rtol, advance)
+    rtol, mixed = min(RTOL, sc.solver.rtol), None
+    if smooth_refusal(base) is None:
+        y, S, rates, d_rates, rates_at, method = smooth_sensitivities(base, derivatives, scales, grid, rtol, advance)
+    else:  # events beside smooth terms: from event to event (mixed_sensitivity.py)
+        from smdcli.analysis.mixed_sensitivity import mixed_sensitivities
+
+        y, S, rates, d_rates, rates_at, method, mixed = mixed_sensitivities(base, derivatives, scales, grid, rtol,
+                                                                          sc.solver.atol, advance)
     n, N = base.n, len(grid)
 
     def stacked(nominal, derived):  # (N, n) and (N, n, P) -> (N, P + 1, n)
@@ -423,4 +434,4 @@ def _smooth(sc: Scenario, base, derivatives: list, scales: np.ndarray, grid: np.
         rate, d_rate = rates_at(t, left)
         return rate[n:2 * n], d_rate[n:2 * n].T / scales[:, None]
     acceleration_at.breaks = rates_at.breaks
-    return blocks, SMOOTH_ERROR * rtol, acceleration_at, method
+    return blocks, SMOOTH_ERROR * rtol, acceleration_at, method, mixed

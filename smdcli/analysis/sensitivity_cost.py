@@ -40,8 +40,19 @@ def load_code(base: Model) -> None:
         import smdcli.analysis.event_sensitivity  # noqa: F401
         import smdcli.solvers.events.piecewise  # noqa: F401
         return
-    from smdcli.analysis.smooth_sensitivity import COMPILED
+    from smdcli.analysis.smooth_sensitivity import COMPILED, smooth_refusal
 
+    if smooth_refusal(base):  # events beside smooth terms: the compiled event-driven run, then the compiled kernel
+        import scipy.integrate  # noqa: F401
+        import scipy.optimize  # noqa: F401
+
+        from smdcli.analysis.mixed_sensitivity import RECORDED_BY
+        from smdcli.solvers.events.integrated import load_method
+        from smdcli.solvers.sensitivity_run import warm_kernel
+
+        load_method(RECORDED_BY)
+        warm_kernel()
+        return
     if COMPILED:
         from smdcli.solvers.events.compiled_modes import mode_arrays  # noqa: F401
         from smdcli.solvers.events.smooth_scene import SmoothScene  # noqa: F401

@@ -24,6 +24,10 @@ def refuse(sc: Scenario, params: list[str], base: Model) -> None:
         from smdcli.analysis.smooth_sensitivity import smooth_refusal
 
         refusal = event_refusal(base) if base.is_piecewise_linear else smooth_refusal(base)
+        if refusal and not base.is_piecewise_linear:  # events beside smooth terms: from event to event
+            from smdcli.analysis.mixed_sensitivity import mixed_refusal
+
+            refusal = mixed_refusal(base)
         if refusal:
             raise UsageError(f"{sc.path}: {refusal}")
     if (len(params) + 1) * base.n > MAX_SIZE:

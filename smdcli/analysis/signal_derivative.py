@@ -18,6 +18,14 @@ def combined(weights: np.ndarray, values) -> np.ndarray:
     return sum(w * (v - values[0]) for w, v in zip(weights[1:], values[1:]))
 
 
+def stencil_total(stencil: tuple, scale: float, read) -> np.ndarray:
+    """scale times the total derivative along a parameter of read(scene, c): stencil (its scenes, offsets in the
+    parameter's units, weights times scale), read at each scene and c = offset / scale, what a sensitivity scaled by
+    scale is multiplied by to move a quantity with the parameter to that point (the event runs')."""
+    scenes, offsets, weights = stencil
+    return combined(weights, [np.asarray(read(scene, o / scale), dtype=float) for scene, o in zip(scenes, offsets)])
+
+
 class ParameterDerivative(Signal):
     """du/dp of a force as a signal: the stencil's combination of the force at its points; its generator the
     force's with the derivative's beside it, [[S, 0], [dS, S]] on [w; dw], read as dg w + g dw. Where S moves with p

@@ -70,7 +70,8 @@ def format_sensitivity(d: dict) -> str:
     from smdcli.text import plural
 
     integrated = "compiled DOP853" if "compiled DOP853" in d["method"] else "DOP853 in Python"
-    how = "exact" if d["method"].startswith("exact") else f"forward sensitivity equations, {integrated}"
+    between = " from event to event" if "from event to event" in d["method"] else ""
+    how = "exact" if d["method"].startswith("exact") else f"forward sensitivity equations{between}, {integrated}"
     lines = [f"{d['scenario']}: sensitivities of the peak displacement ({plural(len(d['parameters']), 'parameter')}, "
              f"{how})"]
     width = max(len(p["path"]) for p in d["parameters"])

@@ -285,6 +285,34 @@ class EventDriver(PiecewiseRun):
                 values.append(table[g.quantity][e] - g.level)
         return np.array(values)
 
+class RecordedRun(EventDriver):
+    """The event-driven run with each restart kept in `restarts`: (t, element, guard or None, kind, the modes and y
+    before, after), an event's or a force's break ("break"); `first`: the modes and y after the start's decisions,
+    `struck_at_start`: whether a stop was met moving into it there (what sensitivities carried over it read)."""
+
+    def __init__(self, model: Model, grid: np.ndarray, tol: Tolerances, name: str):
+        super().__init__(model, grid, tol, name)
+        self.restarts: list[tuple] = []
+        self.first, self.struck_at_start = None, False
+
+    def start(self, states, y, t):
+        before = len(self.events)
+        states, y = super().start(states, y, t)
+        self.first = (list(states), y.copy())
+        self.struck_at_start = any(kind == "impact" for _, _, kind in self.events[before:])
+        return states, y
+
+    def apply(self, states, y, t, element, kind):
+        after, y_after = super().apply(states, y, t, element, kind)
+        self.restarts.append((t, element, self.fired[2], kind, list(states), y.copy(), list(after), y_after.copy()))
+        return after, y_after
+
+    def cross_break(self, states, y, t, jump):
+        after, y_after = super().cross_break(states, y, t, jump)
+        self.restarts.append((t, None, None, "break", list(states), y.copy(), list(after), y_after.copy()))
+        return after, y_after
+
+
 def _return(value, s: float, level: float, t0: float, hi: float, f_hi: float, noise: float = 0.0) -> float | None:
     """Where a guard at its level at t0 and past it again at hi comes back to it after a dip below it (deeper than
     noise) too short for the samples to see (a light rebound landing again): the dip found by halving towards t0,
@@ -373,15 +401,22 @@ class _Outputs:
                                                          tuple(run.events), energy, **run.event_arrays())
 
 
-def solve_events(model: Model, grid: np.ndarray, tol: Tolerances, name: str) -> Result:
-    """A nonsmooth scene integrated by method `name` (one with the registry's events), event to event."""
+def load_method(name: str) -> None:
+    """The compiled kernel that runs a method's modes loaded (from numba's cache), or its OdeSolver imported: before
+    any clock starts."""
     kernel = compiled_modes(name)
-    if kernel is not None:  # the compiled kernel loaded, or the OdeSolver imported, before the clock
+    if kernel is not None:
         from smdcli.solvers.integrators.compiled import warm
 
         warm(f"modes:{kernel[0]}")
     else:
         ode_solver_class(name)
+
+
+def solve_events(model: Model, grid: np.ndarray, tol: Tolerances, name: str) -> Result:
+    """A nonsmooth scene integrated by method `name` (one with the registry's events), event to event."""
+    kernel = compiled_modes(name)
+    load_method(name)
     start = time.perf_counter()
     driver = EventDriver(model, grid, tol, name)
     (x, v, a, history), failure, t_reached = driver.run()
