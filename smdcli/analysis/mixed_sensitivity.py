@@ -171,34 +171,19 @@ class MixedRun:
         return rows, np.array([self._augmented(states, float(t), row) for t, row in zip(times, rows)])
 
     def _compiled(self, states, times: np.ndarray, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """_piece by the compiled kernel: the mode's arrays of the scene and of each stencil point's scene, the
-        parameters in groups of as many stencil models as one run takes."""
-        from smdcli.analysis.smooth_sensitivity import _groups
-        from smdcli.solvers.sensitivity_run import run_sensitivities
+        """_piece by the compiled kernel (smooth_sensitivity.grouped_runs) on the mode's arrays of the scene and of
+        each stencil point's scene."""
+        from smdcli.analysis.smooth_sensitivity import grouped_runs, mass_ratio
 
-        m, P = self.m, self.P
+        m, P, N = self.m, self.P, len(times)
         base = self._arrays(self.scene, states)
-        stencil = [(i, w, self._arrays(scene, states),
-                    None if np.array_equal(scene.model.M, self.model.M) else self.model.Minv @ scene.model.M)
+        stencil = [(i, w, self._arrays(scene, states), mass_ratio(self.model, scene.model))
                    for i, (scenes, _, weights) in enumerate(self.stencils) for w, scene in zip(weights, scenes)
                    if scene is not self.scene]
-        extra, N = base.ns_acc, len(times)
-        state0 = np.concatenate([start[:m], np.zeros(extra)])
-        S0, atol = start[m:].reshape(m, P), self.atol[m:].reshape(m, P)
-        rows, rates = np.empty((N, m * (1 + P))), np.empty((N, m * (1 + P)))
-        cuts = np.array([times[0], times[-1]])
-        for group in _groups([i for i, *_ in stencil], P):
-            local = {i: j for j, i in enumerate(group)}
-            models = [(local[i], w, arrays, ratio) for i, w, arrays, ratio in stencil if i in local]
-            tolerance = np.concatenate([self.atol[:m], np.full(extra, np.inf), atol[:, group].ravel()])
-            out, rate = run_sensitivities(base, models, np.concatenate([state0, S0[:, group].ravel()]), times, cuts,
-                                          self.rtol, tolerance, self.model.source)
-            if group[0] == 0:
-                rows[:, :m], rates[:, :m] = out[:, :m], rate[:, :m]
-            take = slice(m + extra, None)
-            rows[:, m:].reshape(N, m, P)[:, :, group] = out[:, take].reshape(N, m, len(group))
-            rates[:, m:].reshape(N, m, P)[:, :, group] = rate[:, take].reshape(N, m, len(group))
-        return rows, rates
+        state0 = np.concatenate([start[:m], np.zeros(base.ns_acc)])
+        y, S, rate, d_S = grouped_runs(base, stencil, state0, start[m:].reshape(m, P), times,
+                                       np.array([times[0], times[-1]]), self.rtol, self.atol, self.model.source)
+        return np.hstack([y, S.reshape(N, m * P)]), np.hstack([rate, d_S.reshape(N, m * P)])
 
     def _arrays(self, scene: SmoothScene, states):
         """The kernels' arrays of a scene's mode in these states (kept by the mode)."""
@@ -226,15 +211,14 @@ class MixedRun:
         return np.concatenate([f, dS.ravel()])
 
     def _absolute(self, x: np.ndarray, v: np.ndarray, history) -> np.ndarray:
-        """Absolute tolerances of [y, S]: the sensitivities' rtol of each component's peak over the recorded run, a
-        thousandth of it."""
+        """Absolute tolerances of [y, S] from each component's peak over the recorded run (smooth_sensitivity's)."""
+        from smdcli.analysis.smooth_sensitivity import absolute_tolerances
+
         peaks = [np.nanmax(np.abs(x), axis=0), np.nanmax(np.abs(v), axis=0)]
         for element in self.scene.elements:
             peaks += [np.array([np.nanmax(np.abs(history.internal[f"{element.path}.{name}"]), initial=0.0)])
                       for name in element.law.ode_states]
-        floor = np.concatenate(peaks)
-        floor = np.maximum(floor, 1e-12 * max(float(floor.max(initial=0.0)), 1e-150))
-        return np.concatenate([floor, np.repeat(floor, self.P)]) * self.rtol * 1e-3
+        return absolute_tolerances(np.concatenate(peaks), self.P, self.rtol)
 
     def _initial(self) -> np.ndarray:
         """S at the start: each parameter's derivative of [x0, v0, q0]; a start on the edge of two branches (its

@@ -44,6 +44,7 @@ def load_code(base: Model) -> None:
 
     if smooth_refusal(base):  # events beside smooth terms: the compiled event-driven run, then the compiled kernel
         import scipy.integrate  # noqa: F401
+        import scipy.interpolate  # noqa: F401  a graze's search
         import scipy.optimize  # noqa: F401
 
         from smdcli.analysis.mixed_sensitivity import RECORDED_BY

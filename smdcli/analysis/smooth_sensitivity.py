@@ -201,7 +201,7 @@ def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gr
     # a first pass of the state alone sets the absolute tolerances: rtol of each block's peak, a thousandth of it
     peak = np.abs(solve_ivp(flow.f, (grid[0], grid[-1]), y0, method="DOP853", rtol=1e-6, atol=1e-12,
                             t_eval=grid).y).max(axis=1)
-    atol = _absolute(peak, P, rtol)
+    atol = absolute_tolerances(peak, P, rtol)
     kinks = flow.kink_rows()
     Y = np.empty((len(grid), size * (1 + P)))
     state = np.concatenate([y0, s0.ravel()])
@@ -248,7 +248,7 @@ def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gr
     return y, S, rates, d_rates, rates_at, PYTHON_METHOD
 
 
-def _absolute(peak: np.ndarray, P: int, rtol: float) -> np.ndarray:
+def absolute_tolerances(peak: np.ndarray, P: int, rtol: float) -> np.ndarray:
     """Absolute tolerances of [y, S] from the state's peaks: rtol of each component's peak, a thousandth of it."""
     floor = np.maximum(peak, 1e-12 * max(peak.max(initial=0.0), 1e-150))  # a scene at rest: above zero still
     return np.concatenate([floor, np.repeat(floor, P)]) * rtol * 1e-3
@@ -262,29 +262,45 @@ def compiled_sensitivities(flow: _Flow, points: list, weights: list, y0: np.ndar
 
     base = _arrays(flow)
     P, s = len(points), len(y0)
-    extra = base.ns_acc  # the energy terms ride along, out of the error's control: nothing here reads them
-    mass = flow.model.M
-    stencil = [(p, w, _arrays(f), None if np.array_equal(f.model.M, mass) else flow.model.Minv @ f.model.M)
+    extra = base.ns_acc  # the energy terms: nothing here reads them
+    stencil = [(p, w, _arrays(f), mass_ratio(flow.model, f.model))
                for p, (ws, fs) in enumerate(zip(weights, points)) for w, f in zip(ws, fs)
                if f is not flow]  # the scene's own point adds f - f: nothing
-
-    def run(start, tolerance, atol, models):
-        return run_sensitivities(base, models, start, grid, cuts, tolerance, atol, flow.model.source)
-
     state0 = np.concatenate([y0, np.zeros(extra)])
-    peak = np.abs(run(state0, 1e-6, np.concatenate([np.full(s, 1e-12), np.full(extra, np.inf)]), [])[0][:, :s])
-    atol = _absolute(peak.max(axis=0), P, rtol)
-    size, N = s + extra, len(grid)
+    peak = np.abs(run_sensitivities(base, [], state0, grid, cuts, 1e-6,
+                                    np.concatenate([np.full(s, 1e-12), np.full(extra, np.inf)]),
+                                    flow.model.source)[0][:, :s])
+    return grouped_runs(base, stencil, state0, s0, grid, cuts, rtol, absolute_tolerances(peak.max(axis=0), P, rtol),
+                        flow.model.source)
+
+
+def mass_ratio(model: Model, other: Model) -> np.ndarray | None:
+    """M^-1 M_j of a stencil point's model (its forces differenced, not its accelerations), None where M is the
+    same."""
+    return None if np.array_equal(other.M, model.M) else model.Minv @ other.M
+
+
+def grouped_runs(base, stencil: list, state0: np.ndarray, s0: np.ndarray, grid: np.ndarray, cuts: np.ndarray,
+                 rtol: float, atol: np.ndarray, source: str):
+    """(y, S, y', S') on the grid by the compiled kernel from state0 (the state, then its energy terms, which ride
+    along out of the error's control) and s0 (s, P): stencil (parameter, weight, arrays, mass_ratio) of each model a
+    parameter's derivative takes, run in groups of consecutive parameters as many as the kernel takes at a time;
+    atol (s + s P) of [y; S]."""
+    from smdcli.solvers.sensitivity_run import run_sensitivities
+
+    (s, P), N = s0.shape, len(grid)
+    extra = len(state0) - s
     S, d_S = np.empty((N, s, P)), np.empty((N, s, P))
     for group in _groups([p for p, *_ in stencil], P):  # the kernel takes STENCIL_MODELS at a time
         local = {p: i for i, p in enumerate(group)}
         models = [(local[p], w, arrays, ratio) for p, w, arrays, ratio in stencil if p in local]
         tolerance = np.concatenate([atol[:s], np.full(extra, np.inf), atol[s:].reshape(s, P)[:, group].ravel()])
-        out, rates = run(np.concatenate([state0, s0[:, group].ravel()]), rtol, tolerance, models)
+        out, rates = run_sensitivities(base, models, np.concatenate([state0, s0[:, group].ravel()]), grid, cuts,
+                                       rtol, tolerance, source)
         if group[0] == 0:  # the state of the first run (the others' differ by their tolerance, not more)
             y, rate = out[:, :s], rates[:, :s]
-        S[:, :, group] = out[:, size:].reshape(N, s, len(group))
-        d_S[:, :, group] = rates[:, size:].reshape(N, s, len(group))
+        S[:, :, group] = out[:, s + extra:].reshape(N, s, len(group))
+        d_S[:, :, group] = rates[:, s + extra:].reshape(N, s, len(group))
     return y, S, rate, d_S
 
 
@@ -325,7 +341,7 @@ def _resumed(grid: np.ndarray, y: np.ndarray, S: np.ndarray, rhs, rtol: float, f
     from scipy.integrate import solve_ivp
 
     size, P = y.shape[1], S.shape[2]
-    atol = _absolute(np.abs(y).max(axis=0), P, rtol)
+    atol = absolute_tolerances(np.abs(y).max(axis=0), P, rtol)
     steps = {}  # output step k -> its dense output
 
     def rates_at(t: float, left: bool = False) -> tuple[np.ndarray, np.ndarray]:
