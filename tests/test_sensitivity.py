@@ -346,7 +346,9 @@ def test_a_short_run_s_seconds_are_the_median_of_repeats_and_a_long_run_is_timed
 @pytest.mark.parametrize("args, message", [
     (("scenarios/two_dof_forced.toml", "--param", "spring[7].k"), "spring[7]"),
     (("scenarios/two_dof_forced.toml", "--param", "time.end"), "not a parameter of the scene"),
-    (("scenarios/two_dof_forced.toml", "--param", "spring[0].kk"), "unknown key (did you mean 'k'?)"),
+    (("scenarios/two_dof_forced.toml", "--param", "spring[0].kk"), "spring[0].kk: unknown key (did you mean 'k'?)\n"),
+    (("scenarios/one_dof_square_fourier.toml", "--param", "force[0].terms"),
+     "force[0].terms: expected a whole number: it takes no value within"),
     (("scenarios/two_dof_forced.toml", "--param", "spring[0].k", "--param", "spring[0].k"), "more than once"),
 ])
 def test_refusals_are_one_line_exit_2_and_write_nothing(cli, tmp_path, args, message):
@@ -585,7 +587,9 @@ def test_a_forcing_frequency_over_a_long_run_matches_the_complex_step_on_every_p
 def test_a_nonlinear_scene_at_rest_has_zero_sensitivities_at_once():
     """A cubic spring's scene with nothing to move it (the differential tests drew it): its peaks are zero, so the
     absolute tolerances taken from them were zero too and the compiled integration crawled for minutes; now they
-    keep a floor above zero, and every derivative is zero, in well under the seconds it took before."""
+    keep a floor above zero, and every derivative is zero, in well under the seconds it took before. The peak stays
+    zero to first order, so its derivative is 0; moved from rest by the parameter itself (x0), |x| has a corner
+    at zero and the peak's derivative is nan, with a note."""
     sc, _, _ = model_of(one_dof(0.0, k=146.66, x0=0.0, end=2.0, step=0.01).replace(
         "k = 146.66", 'k = 146.66\nlaw = "cubic"\nk3 = 60392.3'), "rest.toml")
     start = time.perf_counter()
@@ -593,7 +597,13 @@ def test_a_nonlinear_scene_at_rest_has_zero_sensitivities_at_once():
     assert time.perf_counter() - start < 20
     assert "forward sensitivity equations" in s.method
     assert not np.any(s.d_displacement) and not np.any(s.displacement)
-    assert any("does not move" in note for note in s.notes)
+    assert s.d_peak_displacement[0, 0] == 0.0 and not s.notes
+    moved = smdcli.sensitivity(sc, ["mass[0].x0"])
+    assert np.isnan(moved.d_peak_displacement[0, 0])
+    # from rest the cubic term is second order: dx/dx0 is the linear spring's cos(w t), to the stated 1e-7
+    want = np.cos(np.sqrt(146.66) * moved.time)
+    assert np.abs(moved.d_displacement[0, :, 0] - want).max() <= 1e-7
+    assert any("does not move" in note for note in moved.notes)
 
 
 def test_the_compiled_sensitivities_match_the_complex_step_and_the_python_integration(monkeypatch):

@@ -40,7 +40,7 @@ from smdcli.model.moved import moved, scaled_ground
 from smdcli.model.system import GROUND_DOF
 from smdcli.scenario import Scenario
 from smdcli.shapes.table import Table
-from smdcli.sweep.family import STRUCTURAL, decoded, parameter_value, set_parameter
+from smdcli.sweep.family import STRUCTURAL, decoded, is_given, parameter_value, set_parameter
 
 CENTRAL = (-2.0, -1.0, 1.0, 2.0)  # offsets in units of delta: exact for polynomials of degree 4 (its symmetry)
 FORWARD = (0.0, 1.0, 2.0, 3.0, 4.0)  # where p - delta is not a valid scene (a damper at c = 0): degree 4 too
@@ -200,13 +200,20 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
         if error <= rounding:
             break
     if best is None:
-        raise _unbuildable(path, value, 8 * STEPS[-1] * scale, refused)
+        raise _unbuildable(doc, path, value, 8 * STEPS[-1] * scale, refused)
     return best
 
 
-def _unbuildable(path: str, value: float, step: float, refused: ScenarioError) -> ScenarioError:
-    """Why no scene near the parameter could be built: the reader's own line (a misspelt key is named with the one
-    it likely means), at the values tried."""
+def _unbuildable(doc: dict, path: str, value: float, step: float, refused: ScenarioError) -> ScenarioError:
+    """Why no scene near the parameter could be built: the reader's own line, at the values tried; where the reader
+    refused the parameter's own field, the field's: a key the scenario does not write (a misspelt one, named with the
+    one it likely means) is not a parameter, and one that takes no other value (a count) has no derivative."""
+    if refused.field == path and not is_given(doc, path):
+        return ScenarioError(refused.file, refused.field, refused.message)
+    if refused.field == path:
+        expected = refused.message.split(", found")[0]
+        return ScenarioError(refused.file, refused.field, f"{expected}: it takes no value within {step:.3g} of "
+                             f"{value:g}, so --param {path} has no derivative")
     return ScenarioError(refused.file, refused.field, f"{refused.message} (with --param {path} at {value:g} +- "
                          f"{step:.3g}: no derivative can be taken there)")
 
@@ -307,7 +314,7 @@ def _moved_once(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: st
             continue
         break
     else:
-        raise _unbuildable(path, value, AFFINE_STEP * scale, refused)
+        raise _unbuildable(doc, path, value, AFFINE_STEP * scale, refused)
     _same_structure(other, base, structure, grid, path)
     return other, delta
 

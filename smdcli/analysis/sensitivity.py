@@ -276,8 +276,10 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
     # has no derivative worth a number: its digits are the rounding's
     floor = stated * peaks_of[0].max()
     still = peaks <= floor
-    d_peaks[:, still] = np.nan
-    notes += _unmoved(base.dofs, peaks, still, floor)
+    # a DOF at rest whose derivative is zero throughout stays at rest to first order: its peak's derivative is 0
+    resting = (peaks == 0) & ~derived["displacement"].any(axis=(0, 1))
+    d_peaks[:, still] = np.where(resting[still], 0.0, np.nan)
+    notes += _unmoved(base.dofs, peaks, still & ~resting, floor)
     found = _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_peaks, accuracy,
                     tuple(notes), method)
     found.event_times = events

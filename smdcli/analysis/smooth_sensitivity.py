@@ -250,7 +250,10 @@ def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gr
 
 def absolute_tolerances(peak: np.ndarray, P: int, rtol: float) -> np.ndarray:
     """Absolute tolerances of [y, S] from the state's peaks: rtol of each component's peak, a thousandth of it."""
-    floor = np.maximum(peak, 1e-12 * max(peak.max(initial=0.0), 1e-150))  # a scene at rest: above zero still
+    largest = peak.max(initial=0.0)
+    # a scene at rest has no scale of its own: 1e-12 of a metre (1e-12 of 1e-150 made the tolerances so small that
+    # a parameter moving it from rest, x0 or a force, overflowed the kernel's error norm at its first step)
+    floor = np.maximum(peak, 1e-12 * (largest if largest > 0 else 1.0))
     return np.concatenate([floor, np.repeat(floor, P)]) * rtol * 1e-3
 
 

@@ -78,6 +78,12 @@ def parameter_value(doc: dict, path: str, scenario: Scenario | None = None) -> f
     return float(current)
 
 
+def is_given(doc: dict, path: str) -> bool:
+    """Whether the scenario writes the number at a parameter path (not an absent optional field's default)."""
+    node, last, _ = _located(doc, path)
+    return isinstance(last, int) or last in node
+
+
 def _located(doc: dict, path: str) -> tuple[Any, str | int, float]:
     """(the table or list holding the path's last step, that step, the number there): a UsageError naming the
     path where it leads nowhere or to something that is not a number."""
