@@ -52,6 +52,7 @@ MODAL_METHOD = ("exact, in modal coordinates: the scene's undamped modes and eac
                 "else a five-point stencil)")
 SERIES_RADIUS = 2.0  # |lambda| h up to which the modes' coupling is summed as its series
 SERIES_TERMS = 25  # its terms: 2^25 / 26! below 1e-19
+_INVERSE_FACTORIALS = np.array([1.0 / math.factorial(k) for k in range(3 * SERIES_TERMS + 1)])
 CONDITION = 1e4  # the largest condition of a mode's eigenvectors or of Y's equation this path accepts
 
 
@@ -252,8 +253,8 @@ class _Coupling:
                                      ).reshape(2 * n, -1) for c, (_, right) in enumerate(pair)], axis=1)
                 self.parts.append(("thin", U, V))
                 continue
-            if flows is None:
-                flows = _coupling_flows(squared, damping, h)  # (2, n, 2, n, 2): [c, k, row, j, column]
+            if flows is None:  # (2, n, 2, n, 2): [c, k, row, j, column]
+                flows = _coupling_flows(squared, damping, h, factors)
             alpha, beta = (_product(factors_of) for factors_of in pair)
             F = alpha[:, None, :, None] * flows[0] + beta[:, None, :, None] * flows[1]
             self.parts.append(("dense", F.reshape(2 * n, 2 * n)))
@@ -329,14 +330,15 @@ def _eigen(squared: np.ndarray, damping: np.ndarray) -> tuple[np.ndarray, float]
     return lam, condition
 
 
-def _series_pair_flows(squared: np.ndarray, damping: np.ndarray, h: float) -> np.ndarray:
+def _series_pair_flows(squared: np.ndarray, damping: np.ndarray, h: float, factors=None) -> np.ndarray:
     """_coupling_flows' Fc_kj where every mode's |lambda| h is at most SERIES_RADIUS: e^(L_j s) as its
     Taylor series, int_0^h e^(L_k (h - s)) s^m / m! ds = h^(m + 1) phi_(m+1)(L_k h), so that
     Fc_kj = h sum_m [phi_(m+1)(L_k h) e2] [e_c^T (L_j h)^m]: one product of (2 n, SERIES_TERMS) by (SERIES_TERMS,
     2 n) per c, in real arithmetic, with no eigenvectors (critically damped modes alike). Both factors are read off
-    the powers of each mode's L h: (L_k h)^i e2 their second columns, e_c^T (L_j h)^m their rows."""
+    the powers of each mode's L h: (L_k h)^i e2 their second columns, e_c^T (L_j h)^m their rows (factors:
+    _series_factors' at h, where the caller has them)."""
     n = len(squared)
-    phis, rows = _series_factors(squared, damping, h)
+    phis, rows = _series_factors(squared, damping, h) if factors is None else factors
     pairs = np.empty((2, 2 * n, 2 * n))
     for c in range(2):
         pairs[c] = phis.reshape(2 * n, SERIES_TERMS) @ rows[c].reshape(SERIES_TERMS, 2 * n)
@@ -349,7 +351,7 @@ def _series_factors(squared: np.ndarray, damping: np.ndarray, h: float) -> tuple
     n, terms = len(squared), SERIES_TERMS
     powers = _mode_powers(mode_matrices(squared, damping) * h, 2 * terms)  # (2 terms, n, 2, 2)
     index = np.arange(2 * terms)[:, None] + np.arange(terms)[None, :] + 1
-    inverse_factorials = np.array([1.0 / math.factorial(k) for k in range(3 * terms + 1)])[index]  # 1 / (i + m + 1)!
+    inverse_factorials = _INVERSE_FACTORIALS[index]  # 1 / (i + m + 1)!
     phis = h * (powers[:, :, :, 1].reshape(2 * terms, 2 * n).T @ inverse_factorials)  # (2 n: k, row; m)
     return phis.reshape(n, 2, terms), np.moveaxis(powers[:terms], 2, 0)
 
@@ -377,13 +379,14 @@ def _times_2x2(A: np.ndarray, B: np.ndarray, out: np.ndarray) -> np.ndarray:
     return out
 
 
-def _coupling_flows(squared: np.ndarray, damping: np.ndarray, h: float) -> np.ndarray:
+def _coupling_flows(squared: np.ndarray, damping: np.ndarray, h: float, factors=None) -> np.ndarray:
     """Fc_kj = int_0^h e^(L_k (h - s)) e2 e_c^T e^(L_j s) ds for every pair of modes, as (c, k, row, j, column):
     by the series over a step of h / 2^s that brings every |lambda| h within SERIES_RADIUS, then squared s times as
-    the exponential of [[L_j, 0], [e2 e_c^T, L_k]] squares (its lower-left block: F E_j + E_k F)."""
+    the exponential of [[L_j, 0], [e2 e_c^T, L_k]] squares (its lower-left block: F E_j + E_k F). factors: the
+    series' factors at h where no halving is needed and the caller has them."""
     halvings = _halvings(squared, damping, h)
     step = h / 2 ** halvings
-    pairs = _series_pair_flows(squared, damping, step)
+    pairs = _series_pair_flows(squared, damping, step, factors if halvings == 0 else None)
     if halvings:
         E = mode_propagators(mode_matrices(squared, damping), step)
         for _ in range(halvings):
