@@ -189,6 +189,7 @@ def _csv(path, text: str):
     ("time,m.displacement\n0.06,0.1\n0.03,0.2\n", "times must increase"),
     ("time,m.displacement\n0.03,0.1\n0.03,0.2\n", "times must increase"),
     ("time,q.displacement\n0.03,0.1\n0.06,0.2\n", "names no mass"),
+    ("time,spring[4].force [kN]\n0.03,0.1\n0.06,0.2\n", "'spring[4].force' names no element"),
     ("time,m.acceleration [kg]\n0.03,0.1\n0.06,0.2\n", "not a unit of acceleration"),
     ("time,m.displacement\n0.03,0.1\n", "at least two rows"),
     ("time,m.displacement\n-1.0,0.1\n0.5,0.2\n", "before the scenario's start"),
@@ -283,3 +284,69 @@ def test_data_at_unequal_times_starting_after_the_scene_s_start_fit_the_truth():
     run = fit([make_test(start_sc, data, None, None)], ["spring[0].k", "damper[0].c", "force[0].amplitude"])
     assert run.converged, run.message
     assert np.abs(run.estimate / [400.0, 1.6, 5.0] - 1).max() <= 1e-6
+
+
+
+def _law_scene() -> str:
+    """One DOF behind a cubic spring and a quadratic damper under a sine: both laws of x and v alone."""
+    return one_dof(0.0, k=400.0, x0=0.05, end=3.0, step=0.01, extra=force_block("sine", amplitude=5.0, omega=14.0)
+                   ).replace("k = 400.0", 'k = 400.0\nlaw = "cubic"\nk3 = 2.0e5') + (
+        '[[damper]]\nconnects = ["ground", "m"]\nc = 3.0\nlaw = "quadratic"\n')
+
+
+def test_a_cubic_spring_s_and_a_quadratic_damper_s_force_derivatives_match_differences():
+    """<element>.force of a cubic spring and a quadratic damper: the derivative of the tension (the law's own at
+    the state plus its tangent times the stretch's derivative) against five-point differences of the tensions of
+    DOP853 runs at rtol 1e-12 (the damper's away from its zero crossings, where |v| v has no second derivative and
+    the differences carry their step), to 1e-7 of the largest. A linear law's derivative was taken for both before:
+    k3's term and the damper's 2 c |v| missing."""
+    from smdcli.analysis.forces import element_forces
+    from smdcli.model import build
+
+    sc, _, _ = model_of(_law_scene(), "laws.toml")
+    params = ["spring[0].k", "spring[0].k3", "damper[1].c", "mass.m.m"]
+    s = smdcli.sensitivity(sc, params)
+    weights = np.array([1.0, -8.0, 8.0, -1.0]) / 12.0
+    for path, kind in (("spring[0]", "spring"), ("damper[1]", "damper")):
+        _, derived = s.element_tension(path)
+        for i, p in enumerate(params):
+            # five points: at 1e-3 of p k's and m's truncation shows (2e-6), at 2e-4 the runs' rounding (1e-7)
+            h = 3e-4 * float(s.value[i])
+            tensions = []
+            for offset in (-2, -1, 1, 2):
+                moved = scenario_with(sc, {p: float(s.value[i]) + offset * h})
+                run = smdcli.simulate(moved, method="DOP853", rtol=1e-12, atol=1e-14)
+                forces = element_forces(build(moved), run.displacement, run.velocity)
+                names = forces.spring_names if kind == "spring" else forces.damper_names
+                table = forces.spring if kind == "spring" else forces.damper
+                tensions.append(table[:, names.index(path)])
+            want = weights @ np.array(tensions) / h
+            away = np.abs(s.velocity[:, 0]) > 1e-2 * np.abs(s.velocity).max() if kind == "damper" else slice(None)
+            error = np.abs(derived[i] - want)[away].max() / np.abs(want).max()
+            assert error <= 1e-7, (path, p, error)
+
+
+def test_a_cubic_spring_is_fitted_to_its_force_in_kn_and_a_yielding_one_s_force_is_refused(cli, tmp_path):
+    """A load cell's channel with its unit, spring[0].force [kN] (the header's element index and unit were read
+    as one name and refused before): k, k3 and the quadratic damper's c from 30 % off, to 1e-6. A yielding
+    spring's force depends on its history: one line, exit 2."""
+    from smdcli.analysis.fit_data import read_measured
+
+    truth, _, _ = model_of(_law_scene(), "laws.toml")
+    run = smdcli.simulate(truth, method="DOP853", rtol=1e-12, atol=1e-14)
+    x = run.displacement[:, 0]
+    csv = _csv(tmp_path / "cell.csv", "time,spring[0].force [kN],m.displacement [mm]\n" + "".join(
+        f"{float(t)!r},{float(400.0 * d + 2.0e5 * d**3) / 1e3!r},{float(d) * 1e3!r}\n"
+        for t, d in zip(run.time[1:], x[1:])))
+    want = {"spring[0].k": 400.0, "spring[0].k3": 2.0e5, "damper[1].c": 3.0}
+    start = scenario_with(truth, {p: 1.3 * v for p, v in want.items()})
+    found = fit([make_test(start, read_measured(csv), None, None)], list(want))
+    assert found.converged, found.message
+    assert np.abs(found.estimate / list(want.values()) - 1).max() <= 1e-6
+    scene = tmp_path / "yield.toml"
+    scene.write_text(one_dof(1.6, k=400.0, x0=0.05, end=1.0, step=0.01).replace(
+        "k = 400.0", 'k = 400.0\nlaw = "elastoplastic"\nfy = 15.0'))
+    ran = cli("fit", scene, "--data", _csv(tmp_path / "f.csv", "time,spring[0].force [N]\n0.1,1.0\n0.2,2.0\n"),
+              "--param", "spring[0].fy", "-o", tmp_path / "out")
+    assert ran.exit_code == 2 and "depends on its history" in ran.output, ran.output
+    assert len(ran.output.strip().splitlines()) == 1 and not (tmp_path / "out").exists()

@@ -96,16 +96,21 @@ def make_test(sc: Scenario, measured: Measured, channels: tuple[str, ...] | None
 
     model = build(sc)
     chosen = tuple(channels) if channels else tuple(measured.channels)
-    elements = {e.name for e in model.elements if e.law == "linear"}
+    elements = {e.name for e in model.elements}  # springs and dampers whose force is a law of x and v alone
+    remembering = {e.path: getattr(e.law, "law_name", e.law.name) for e in model.nonsmooth}
     for channel in chosen:
         if channel not in measured.channels:
             raise UsageError(f"{measured.file}: no column {channel!r} (its columns: {', '.join(measured.channels)})")
         owner = channel.rsplit(".", 1)[0]
         quantity = quantity_of(channel)
+        if quantity == "force" and owner in remembering:
+            raise UsageError(f"{measured.file}: column {channel!r}: {owner} ({remembering[owner]}) has a force that "
+                             "depends on its history, and a fit to it is not built; fit the masses' motion "
+                             "(<mass>.displacement, velocity or acceleration)")
         if (quantity == "force" and owner not in elements) or (quantity != "force" and owner not in model.dofs):
             names = sorted(elements) if quantity == "force" else list(model.dofs)
-            raise UsageError(f"{measured.file}: column {channel!r} names no {'linear element' if quantity == 'force' else 'mass'} "
-                             f"of {sc.path} (its {'elements' if quantity == 'force' else 'masses'}: "
+            what, those = ("element", "springs and dampers") if quantity == "force" else ("mass", "masses")
+            raise UsageError(f"{measured.file}: column {channel!r} names no {what} of {sc.path} (its {those}: "
                              f"{', '.join(names)})")
     for name in weights or {}:
         if name not in chosen:

@@ -29,7 +29,8 @@ UNITS = {
                      "in/s^2": 0.0254, "ft/s^2": 0.3048},
     "force": {"N": 1.0, "kN": 1e3, "mN": 1e-3, "lbf": 4.4482216152605},
 }
-_HEADER = re.compile(r"\s*([^\[\]]+?)\s*(?:\[\s*([^\]]*?)\s*\])?\s*")
+# a channel and its unit in brackets at the end; the name may hold an element's index (spring[0].force [kN])
+_HEADER = re.compile(r"\s*(.+?)\s*(?:\[\s*([^\[\]]*?)\s*\])?\s*")
 
 
 @dataclass

@@ -113,7 +113,9 @@ class Sensitivity:
             return None
 
     def element_tension(self, path: str) -> tuple[np.ndarray, np.ndarray]:
-        """A linear spring's or damper's tension on the grid (N,) and its derivative (P, N)."""
+        """A spring's or damper's tension on the grid (N,) and its derivative (P, N): linear, cubic or quadratic (a
+        law of x and v alone; T = c d, k d + k3 d^3 or c |d| d of its stretch or stretch rate d = q_b - q_a), its
+        derivative the law's own at the state plus its tangent times d's."""
         from smdcli.analysis.forces import element_forces
 
         def tension(model, x, v):
@@ -122,10 +124,18 @@ class Sensitivity:
                 if path in names:
                     return values[:, names.index(path)]
             raise KeyError(path)
+        element = next(e for e in self.model.elements if e.name == path)
+
+        def stretch(q):  # q_b - q_a, the ground's q zero
+            return (q[..., element.b] if element.b >= 0 else 0.0) - (q[..., element.a] if element.a >= 0 else 0.0)
+        own, d_own = ((self.displacement, self.d_displacement) if element.kind == "spring" else
+                      (self.velocity, self.d_velocity))
+        d = stretch(own)
+        tangent = (element.coef + 3 * element.k3 * d**2 if element.law == "cubic" else
+                   2 * element.coef * np.abs(d) if element.law == "quadratic" else element.coef)
         nominal = tension(self.model, self.displacement, self.velocity)
-        derived = [d.of(lambda m: tension(m, self.displacement, self.velocity))
-                   + tension(self.model, self.d_displacement[i], self.d_velocity[i])
-                   for i, d in enumerate(self.derivatives)]
+        derived = [d_law.of(lambda m: tension(m, self.displacement, self.velocity)) + tangent * stretch(d_own[i])
+                   for i, d_law in enumerate(self.derivatives)]
         return nominal, np.array(derived).reshape(len(self.derivatives), -1)
 
     def units(self, quantity: str) -> tuple[str, ...]:
