@@ -97,7 +97,7 @@ def make_test(sc: Scenario, measured: Measured, channels: tuple[str, ...] | None
     model = build(sc)
     chosen = tuple(channels) if channels else tuple(measured.channels)
     elements = {e.name for e in model.elements}  # springs and dampers whose force is a law of x and v alone
-    remembering = {e.path: getattr(e.law, "law_name", e.law.name) for e in model.nonsmooth}
+    remembering = {e.path: e.law_label for e in model.nonsmooth}
     for channel in chosen:
         if channel not in measured.channels:
             raise UsageError(f"{measured.file}: no column {channel!r} (its columns: {', '.join(measured.channels)})")

@@ -22,6 +22,21 @@ from smdcli.scenario import GROUND
 ROWS_VALUES = 2 ** 18  # states (rows x DOFs) an element table is computed from at once: its temporaries in cache
 
 
+def element_stretch(element: Element, q: np.ndarray) -> np.ndarray:
+    """An element's stretch d = q_b - q_a (the ground's q zero) of every state in q (..., n): of x for a spring, of v
+    for a damper, the d its law reads."""
+    return -(q @ incidence_matrix([element], q.shape[-1])[0])
+
+
+def law_slope(element: Element, d: np.ndarray) -> np.ndarray | float:
+    """dT/dd of _tensions' law at the stretch d: c, k + 3 k3 d^2 (cubic) or 2 c |d| (quadratic)."""
+    if element.law == "cubic":
+        return element.coef + 3 * element.k3 * d**2
+    if element.law == "quadratic":
+        return 2 * element.coef * np.abs(d)
+    return element.coef
+
+
 def _tensions(elements: list[Element], q: np.ndarray, recorded: dict) -> np.ndarray:
     """(N, elements) tensions of elements of one kind from q (x for springs, v for dampers), a block of rows at a
     time (a 10,000-element chain's table is 80 MB; its temporaries stay a block's); the recorded ones from the run."""

@@ -116,7 +116,7 @@ class Sensitivity:
         """A spring's or damper's tension on the grid (N,) and its derivative (P, N): linear, cubic or quadratic (a
         law of x and v alone; T = c d, k d + k3 d^3 or c |d| d of its stretch or stretch rate d = q_b - q_a), its
         derivative the law's own at the state plus its tangent times d's."""
-        from smdcli.analysis.forces import element_forces
+        from smdcli.analysis.forces import element_forces, element_stretch, law_slope
 
         def tension(model, x, v):
             forces = element_forces(model, x, v)
@@ -125,17 +125,12 @@ class Sensitivity:
                     return values[:, names.index(path)]
             raise KeyError(path)
         element = next(e for e in self.model.elements if e.name == path)
-
-        def stretch(q):  # q_b - q_a, the ground's q zero
-            return (q[..., element.b] if element.b >= 0 else 0.0) - (q[..., element.a] if element.a >= 0 else 0.0)
         own, d_own = ((self.displacement, self.d_displacement) if element.kind == "spring" else
                       (self.velocity, self.d_velocity))
-        d = stretch(own)
-        tangent = (element.coef + 3 * element.k3 * d**2 if element.law == "cubic" else
-                   2 * element.coef * np.abs(d) if element.law == "quadratic" else element.coef)
+        slope = law_slope(element, element_stretch(element, own))
         nominal = tension(self.model, self.displacement, self.velocity)
-        derived = [d_law.of(lambda m: tension(m, self.displacement, self.velocity)) + tangent * stretch(d_own[i])
-                   for i, d_law in enumerate(self.derivatives)]
+        derived = [at.of(lambda m: tension(m, self.displacement, self.velocity)) + slope * element_stretch(element, s)
+                   for at, s in zip(self.derivatives, d_own)]
         return nominal, np.array(derived).reshape(len(self.derivatives), -1)
 
     def units(self, quantity: str) -> tuple[str, ...]:
@@ -287,9 +282,9 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
     floor = stated * peaks_of[0].max()
     still = peaks <= floor
     # a DOF at rest whose derivative is zero throughout stays at rest to first order: its peak's derivative is 0
-    resting = (peaks == 0) & ~derived["displacement"].any(axis=(0, 1))
-    d_peaks[:, still] = np.where(resting[still], 0.0, np.nan)
-    notes += _unmoved(base.dofs, peaks, still & ~resting, floor)
+    resting = (peaks == 0) & ~derived["displacement"].any(axis=1)  # (P, n)
+    d_peaks[:, still] = np.where(resting[:, still], 0.0, np.nan)
+    notes += _unmoved(base.dofs, peaks, still & ~resting.all(axis=0), floor)
     found = _result(sc, params, derivatives, grid, base, nominal, derived, peaks, at, d_peaks, accuracy,
                     tuple(notes), method)
     found.event_times = events

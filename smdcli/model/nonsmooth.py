@@ -26,6 +26,11 @@ class NonsmoothElement:
     belt: float = 0.0  # d' = row . v + belt: the ground end moving (a belt under the mass), m/s
 
     @property
+    def law_label(self) -> str:
+        """The law's name as the scenario writes it (elastoplastic, bouc_wen, coulomb, ...)."""
+        return getattr(self.law, "law_name", self.law.name)
+
+    @property
     def initial_stiffness(self) -> float:
         """The stiffness it has at rest (elastic), beyond what is stamped into K: for modes and [damping]."""
         law = self.law

@@ -162,7 +162,7 @@ def _nonsmooth_choice(model: Model) -> tuple[Solver, str]:
     """Exact event to event for a piecewise-linear scene; else the ODE family, event to event: Radau where a law is
     stiff (Law.stiff: a hysteretic variable pinned at its saturation, a regularized friction near zero speed), DOP853
     otherwise."""
-    laws = ", ".join(f"{e.path} {getattr(e.law, 'law_name', e.law.name)}" for e in model.nonsmooth)
+    laws = ", ".join(f"{e.path} {e.law_label}" for e in model.nonsmooth)
     if model.is_piecewise_linear and all(s.exo() is not None for s in model.signals):
         return get_solver("exact"), (f"piecewise linear ({laws}), {_loads(model) if model.is_forced or model.ground else 'free'}: "
                          "exact between events, each event located on the exact flow to rounding")

@@ -106,7 +106,7 @@ class Exact(Solver):
         if model.is_linear or model.is_piecewise_linear:
             return None
         smooth = [p for p in model.nonlinear_paths if p not in {e.path for e in model.nonsmooth}]
-        curved = [f"{e.path} ({getattr(e.law, 'law_name', e.law.name)})" for e in model.nonsmooth
+        curved = [f"{e.path} ({e.law_label})" for e in model.nonsmooth
                   if not e.law.piecewise_linear]
         first = (smooth or curved)[0]
         return (f"'exact' needs a linear model; {first} is nonlinear" + (" between events" if not smooth else "")
