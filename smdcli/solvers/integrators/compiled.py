@@ -158,12 +158,11 @@ KERNEL_FAMILIES = ("erk", "fixed", "stiff", "radau", "bdf", "rhs", "modes:events
                    "modes:stiff", "return_mapping", "banded", "taylor", "yielding", "sensitivity")
 _warmed: set[str] = set()
 # two chains of kernel families that share compiled parts, each compiled in a child process of its own, about equal
-# (on a 2-core Intel Xeon, 2026-12-01: stiff 127 s, erk 28, modes:events 36, fixed 18, banded 9, yielding 51;
-# radau 80, bdf 55, taylor 45, return_mapping 15, sensitivity 92; with yielding and return_mapping in the second
-# chain it took 347 s to the first's 218)
-COMPILE_CHAINS = (("stiff", "modes:stiff", "erk", "rhs", "modes:events", "fixed", "banded", "yielding",
-                   "return_mapping"),
-                  ("radau", "modes:radau", "bdf", "modes:bdf", "taylor", "sensitivity"))
+# (on a 2-core Intel Xeon under numba's generic target, 2026-12-02: stiff 133 s, erk 27, modes:events 37, fixed 19,
+# banded 9, yielding 80; radau 100, bdf 62, taylor 49, sensitivity 73, return_mapping 17 (as much alone): 305 s and
+# 301 s, where return_mapping in the first chain made it 322 s to the second's 284)
+COMPILE_CHAINS = (("stiff", "modes:stiff", "erk", "rhs", "modes:events", "fixed", "banded", "yielding"),
+                  ("radau", "modes:radau", "bdf", "modes:bdf", "taylor", "sensitivity", "return_mapping"))
 
 
 def compile_side_by_side(families=KERNEL_FAMILIES) -> None:
