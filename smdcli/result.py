@@ -121,6 +121,13 @@ class ElementForces:
     stop_connects: tuple[tuple[str, str], ...] = ()
     internal: dict = field(default_factory=dict)  # "spring[0].plastic_deformation" -> (N,): hysteretic variables
 
+    def tension(self, name: str) -> np.ndarray:
+        """A spring's or damper's tension (N,) by its name (spring[0], damper[1]); KeyError where none has it."""
+        for names, table in ((self.spring_names, self.spring), (self.damper_names, self.damper)):
+            if name in names:
+                return table[:, names.index(name)]
+        raise KeyError(name)
+
 
 @dataclass(frozen=True)
 class Energy:

@@ -118,19 +118,15 @@ class Sensitivity:
         derivative the law's own at the state plus its tangent times d's."""
         from smdcli.analysis.forces import element_forces, element_stretch, law_slope
 
-        def tension(model, x, v):
-            forces = element_forces(model, x, v)
-            for names, values in ((forces.spring_names, forces.spring), (forces.damper_names, forces.damper)):
-                if path in names:
-                    return values[:, names.index(path)]
-            raise KeyError(path)
+        def tension(model):  # at the scene's state, of the model as given (a parameter moved in it, or not)
+            return element_forces(model, self.displacement, self.velocity).tension(path)
+
+        nominal = tension(self.model)  # KeyError where no spring or damper has the name
         element = next(e for e in self.model.elements if e.name == path)
         own, d_own = ((self.displacement, self.d_displacement) if element.kind == "spring" else
                       (self.velocity, self.d_velocity))
         slope = law_slope(element, element_stretch(element, own))
-        nominal = tension(self.model, self.displacement, self.velocity)
-        derived = [at.of(lambda m: tension(m, self.displacement, self.velocity)) + slope * element_stretch(element, s)
-                   for at, s in zip(self.derivatives, d_own)]
+        derived = [at.of(tension) + slope * element_stretch(element, s) for at, s in zip(self.derivatives, d_own)]
         return nominal, np.array(derived).reshape(len(self.derivatives), -1)
 
     def units(self, quantity: str) -> tuple[str, ...]:

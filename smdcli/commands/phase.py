@@ -98,7 +98,7 @@ def _loops(sc: Scenario, method: str | None, label: str | None) -> list[Curve]:
             a, b = (x[:, index[n]] if n in index else np.zeros(len(x)) for n in spring.connects)
             return b - a
 
-        tension = forces.spring[:, forces.spring_names.index(spring.path)]
+        tension = forces.tension(spring.path)
         # the yield and unloading corners: each event's state, where the samples would draw a chord
         t, d, force = result.time, deformation(result.displacement), tension
         if len(t_event):
