@@ -112,8 +112,10 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
     supported (the order varies) and must be 0."""
     y = y0.copy()
     none = np.zeros((0, 0))
-    status, k, _ = integrate_mode(m, 0, y, grid[0], cuts[1:], 0.5 * (cuts[:-1] + cuts[1:]), grid, 1, rtol, atol,
-                                  max_steps, bound, -np.inf, -1, out, none, none, counts, floats, work, 0.0)
+    # int64 arguments, not literal ints: the overload the modes' runs compile and load, not a second one
+    zero, one, no_guard = np.int64(0), np.int64(1), np.int64(-1)
+    status, k, _ = integrate_mode(m, zero, y, grid[0], cuts[1:], 0.5 * (cuts[:-1] + cuts[1:]), grid, one, rtol, atol,
+                                  max_steps, bound, -np.inf, no_guard, out, none, none, counts, floats, work, 0.0)
     if status != OK:
         out[k:] = np.nan
     return status
@@ -148,7 +150,7 @@ def integrate_mode(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_step
             continue
         state_rhs(m, t, y, t >= mid, f, work, Jscratch)
         counts[NFEV] += 1
-        self_h_abs = initial_step(m, t, y, f, t_bound, 1, rtol, atol, mid, work, Jscratch, arg, y_new, scale)
+        self_h_abs = initial_step(m, t, y, f, t_bound, np.int64(1), rtol, atol, mid, work, Jscratch, arg, y_new, scale)
         counts[NFEV] += 1
         counts[NFEV] += state_jacobian(m, t, y, mid, rtol, atol, J, work, Jscratch, dy, arg, f1)
         counts[NJEV] += 1
@@ -156,7 +158,7 @@ def integrate_mode(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_step
         for i in range(size):
             D[0, i] = y[i]
             D[1, i] = f[i] * self_h_abs
-        order = 1
+        order = np.int64(1)  # not a literal 1: change_d's one compile, not a second for order 1
         n_equal_steps = 0
         factored = False
         while t < t_bound:
@@ -272,9 +274,9 @@ def integrate_mode(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_step
                 factored = False
             # Dense output: the difference polynomial at the step's end, in units of the next step (scipy's).
             dense[0, 0], dense[0, 1], dense[0, 2] = t, self_h_abs, order
-            k, t_stop, fired = watch_step(m, BDF, t_old, t, t - t_old, y_old, y, D, dense, Q, grid, k, mid, work,
-                                          Jscratch, arg, skip_t, skip_guard, samples, rows, values, when, row, dy, out,
-                                          out_a, out_t)
+            k, t_stop, fired = watch_step(m, np.int64(BDF), t_old, t, t - t_old, y_old, y, D, dense, Q, grid, k, mid,
+                                          work, Jscratch, arg, skip_t, skip_guard, samples, rows, values, when, row, dy,
+                                          out, out_a, out_t)
             if fired >= 0:
                 return stop_at(m, y, row, t_stop, bound, floats), k, fired
             floats[T_REACHED] = t

@@ -397,7 +397,7 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, boundary,
     norms = linear_norms(m)
     ring = np.zeros(WATCH_WINDOW, dtype=np.bool_)
     y = y0.copy()
-    k = 1
+    k = np.int64(1)  # not a literal 1: the row writers (_dense, _hermite) compile once, for any row
     floats[T_REACHED] = grid[0]
     for seg in range(len(cuts) - 1):
         ta, t_bound = cuts[seg], cuts[seg + 1]

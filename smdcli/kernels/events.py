@@ -69,7 +69,7 @@ def _stretch(m, method, y, t, t_bound, mid, grid, k, rtol, atol, max_steps, boun
     counts[NFEV] += 2
     while t < t_bound:
         status, t_new, h, h_abs = attempt(m, method, t, y, h_abs, t_bound, mid, rtol, atol, fixed_h, K, y_new, scale,
-                                          err, err3, arg, work, jwork, counts)
+                                          err, err3, arg, work, jwork, counts, np.bool_(False))
         if status != OK:
             return status, k, -1
         counts[ACCEPTED] += 1

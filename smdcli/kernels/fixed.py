@@ -174,7 +174,7 @@ def march(m, method, coef, y0, grid, cuts, dt, max_steps, bound, out, counts, fl
     K, arg = np.zeros((3, size)), np.zeros(size)
     trial, dy, g_n, rest = np.zeros(size), np.zeros(size), np.zeros(n), np.zeros(n)
     factored_h = -1.0
-    k = 1
+    k = np.int64(1)  # not a literal 1: the row writers (_dense, _hermite) compile once, for any row
     total = 0
     floats[T_REACHED] = grid[0]
     for seg in range(len(cuts) - 1):
@@ -183,7 +183,7 @@ def march(m, method, coef, y0, grid, cuts, dt, max_steps, bound, out, counts, fl
         steps = step_count(tb - ta, dt)
         h = (tb - ta) / steps
         floats[H_MAX] = max(floats[H_MAX], h)
-        state_rhs(m, ta, y, False, f, work, J)  # restart from equilibrium
+        state_rhs(m, ta, y, np.bool_(False), f, work, J)  # restart from equilibrium
         counts[NFEV] += 1
         if method == GENERALIZED_ALPHA and len(m.el_law) == 0 and h != factored_h:
             jacobian(m, y, J)

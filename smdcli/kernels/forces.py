@@ -197,7 +197,7 @@ def force_series(m, t, ta, mid, p, series, stack):
             terms = len(data) // 2
             for i in range(terms):
                 omega = data[i] * q[0]
-                _harmonic(data[terms + i], omega, omega * (t - q[1]) + q[2], False, p, j, series)
+                _harmonic(data[terms + i], omega, omega * (t - q[1]) + q[2], np.bool_(False), p, j, series)
         elif kind == TABLE_LINEAR:  # a line between knots (they are discontinuities of its slope)
             series[0, j] = force_value(m, j, t, t >= mid, stack)
             if p >= 1 and mid > ta:
@@ -206,6 +206,7 @@ def force_series(m, t, ta, mid, p, series, stack):
             if mid >= q[0] and mid < q[1]:  # inside its window the stretch is one harmonic and a constant
                 data = m.f_data[m.f_ptr[j]:m.f_ptr[j + 1]]
                 series[0, j] += data[0]
-                _harmonic(data[1], data[2], data[2] * (t - q[0]) + data[3] * 0.5 * math.pi, False, p, j, series)
+                _harmonic(data[1], data[2], data[2] * (t - q[0]) + data[3] * 0.5 * math.pi, np.bool_(False), p, j,
+                          series)
         else:  # constant on the stretch, its value in the middle (Taylor.refuse: the shapes without series)
             series[0, j] = force_value(m, j, mid, False, stack)

@@ -164,7 +164,7 @@ def _touch(m, method, t_old, h, y_old, y_new, K, F, Q, mid, work, jwork, arg, wh
 def _sample(m, method, t_old, h, y_old, y_new, K, F, Q, s, mid, work, jwork, arg, when, row, dy):
     """The step's interpolant at time s into row[0], its right-hand side into dy (and the tensions into work)."""
     when[0] = s
-    interpolate(m, method, t_old, h, y_old, y_new, K, F, Q, when, 0, 1, row, mid, work, jwork, arg)
+    interpolate(m, method, t_old, h, y_old, y_new, K, F, Q, when, np.int64(0), np.int64(1), row, mid, work, jwork, arg)
     state_rhs(m, s, row[0], s >= mid, dy, work, jwork)
 
 
@@ -229,7 +229,8 @@ def first_crossing(m, method, t_old, t_new, h, y_old, y_new, K, F, Q, mid, work,
         return t_stop, fired
     for i in range(INTERIOR + 2):
         samples[i] = t_old + h * i / (INTERIOR + 1)
-    interpolate(m, method, t_old, h, y_old, y_new, K, F, Q, samples, 0, INTERIOR + 1, rows, mid, work, jwork, arg)
+    interpolate(m, method, t_old, h, y_old, y_new, K, F, Q, samples, np.int64(0), np.int64(INTERIOR + 1), rows, mid,
+                work, jwork, arg)
     for i in range(len(y_new)):
         rows[INTERIOR + 1, i] = y_new[i]
     samples[INTERIOR + 1] = t_new
@@ -339,7 +340,8 @@ def watch_step(m, method, t_old, t_new, h, y_old, y_new, K, F, Q, grid, k, mid, 
                    jwork, arg, dy)
     if fired >= 0:
         when[0] = t_stop
-        interpolate(m, method, t_old, h, y_old, y_new, K, F, Q, when, 0, 1, row, mid, work, jwork, arg)
+        interpolate(m, method, t_old, h, y_old, y_new, K, F, Q, when, np.int64(0), np.int64(1), row, mid, work, jwork,
+                    arg)
     return k, t_stop, fired
 
 

@@ -155,8 +155,10 @@ def integrate(m, y0, grid, cuts, rtol, atol, max_steps, bound, out, counts, floa
     takes steps of that size with no error control (for measuring the formula's order)."""
     y = y0.copy()
     none = np.zeros((0, 0))
-    status, k, _ = integrate_mode(m, 0, y, grid[0], cuts[1:], 0.5 * (cuts[:-1] + cuts[1:]), grid, 1, rtol, atol,
-                                  max_steps, bound, -np.inf, -1, out, none, none, counts, floats, work, fixed_h)
+    # int64 arguments, not literal ints: the overload the modes' runs compile and load, not a second one
+    zero, one, no_guard = np.int64(0), np.int64(1), np.int64(-1)
+    status, k, _ = integrate_mode(m, zero, y, grid[0], cuts[1:], 0.5 * (cuts[:-1] + cuts[1:]), grid, one, rtol, atol,
+                                  max_steps, bound, -np.inf, no_guard, out, none, none, counts, floats, work, fixed_h)
     if status != OK:
         out[k:] = np.nan
     return status
@@ -196,7 +198,8 @@ def integrate_mode(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_step
         if fixed_h > 0:
             self_h_abs = fixed_h
         else:
-            self_h_abs = initial_step(m, t, y, f, t_bound, 3, rtol, atol, mid, work, Jscratch, arg, y_new, scale)
+            self_h_abs = initial_step(m, t, y, f, t_bound, np.int64(3), rtol, atol, mid, work, Jscratch, arg, y_new,
+                                      scale)
             counts[NFEV] += 1
         self_h_abs_old, self_error_norm_old = -1.0, -1.0
         counts[NFEV] += state_jacobian(m, t, y, mid, rtol, atol, J, work, Jscratch, dy, arg, f1)
@@ -299,7 +302,7 @@ def integrate_mode(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_step
             y_old[:] = y
             t_old, h_dense = t, h
             have_dense = True
-            k, t_stop, fired = watch_step(m, RADAU, t, t_new, h, y, y_new, K, F, Q, grid, k, mid, work,
+            k, t_stop, fired = watch_step(m, np.int64(RADAU), t, t_new, h, y, y_new, K, F, Q, grid, k, mid, work,
                                           Jscratch, arg, skip_t, skip_guard, samples, rows, values, when, row, dy, out,
                                           out_a, out_t)
             if fired >= 0:

@@ -235,10 +235,10 @@ def _march(m, models, weights, owner, ratios, moves, y, grid, cuts, rtol, atol, 
     size_all = len(y)
     size = 2 * m.n + m.ns_q + m.ns_acc
     assign(out[0], y)
-    state_rhs(m, grid[0], y[:size], False, K[0][:size], work, J)  # the state's rates say the branches
+    state_rhs(m, grid[0], y[:size], np.bool_(False), K[0][:size], work, J)  # the state's rates say the branches
     branches(m, y, K[0], signs)
     pending = 0  # rates[0]: the first segment's first stage
-    k = 1
+    k = np.int64(1)  # not a literal 1: the row writers (_dense, _hermite) compile once, for any row
     exponent = -1.0 / 8.0
     h_abs = 0.0
     for seg in range(len(cuts)):
@@ -298,7 +298,7 @@ def _march(m, models, weights, owner, ratios, moves, y, grid, cuts, rtol, atol, 
                     continue
                 for i in range(size_all):
                     scale[i] = atol[i] + max(abs(y[i]), abs(y_new[i])) * rtol
-                error = _error_norm(DOP853, K, h, scale, err, err3)
+                error = _error_norm(np.int64(DOP853), K, h, scale, err, err3)
                 if error < 1:
                     factor = MAX_FACTOR if error == 0 else min(MAX_FACTOR, SAFETY * error ** exponent)
                     if rejected:

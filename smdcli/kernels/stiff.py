@@ -97,8 +97,11 @@ def integrate(m, method, y0, grid, cuts, rtol, atol, max_steps, bound, out, coun
     takes steps of that size with no error control (for measuring a formula's order)."""
     y = y0.copy()
     none = np.zeros((0, 0))
-    status, k, _ = integrate_mode(m, method, y, grid[0], cuts[1:], 0.5 * (cuts[:-1] + cuts[1:]), grid, 1, rtol,
-                                  atol, max_steps, bound, -np.inf, -1, out, none, none, counts, floats, work, fixed_h)
+    # int64 arguments, not literal ints: the overload the modes' runs compile and load, not a second one
+    one, no_guard = np.int64(1), np.int64(-1)
+    status, k, _ = integrate_mode(m, method, y, grid[0], cuts[1:], 0.5 * (cuts[:-1] + cuts[1:]), grid, one, rtol,
+                                  atol, max_steps, bound, -np.inf, no_guard, out, none, none, counts, floats, work,
+                                  fixed_h)
     if status != OK:
         out[k:] = np.nan
     return status
@@ -139,7 +142,7 @@ def integrate_mode(m, method, y, t0, bounds, mids, grid, k, rtol, atol, max_step
         if fixed_h > 0:
             h = fixed_h
         else:  # scipy's starting step for an O(h^3) error estimate (order 2)
-            h = initial_step(m, t, y, f, t_bound, 2, rtol, atol, mid, work, J_new, f_new, y_new, scale)
+            h = initial_step(m, t, y, f, t_bound, np.int64(2), rtol, atol, mid, work, J_new, f_new, y_new, scale)
             counts[NFEV] += 1
         while t < t_bound:
             span = t_bound - t
