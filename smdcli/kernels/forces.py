@@ -201,7 +201,8 @@ def force_series(m, t, ta, mid, p, series, stack):
         elif kind == TABLE_LINEAR:  # a line between knots (they are discontinuities of its slope)
             series[0, j] = force_value(m, j, t, t >= mid, stack)
             if p >= 1 and mid > ta:
-                series[1, j] = (force_value(m, j, mid, False, stack) - force_value(m, j, ta, False, stack)) / (mid - ta)
+                right = np.bool_(False)  # a bool, not a literal False: one compile of the table's lookup
+                series[1, j] = (force_value(m, j, mid, right, stack) - force_value(m, j, ta, right, stack)) / (mid - ta)
         elif kind == PULSE:
             if mid >= q[0] and mid < q[1]:  # inside its window the stretch is one harmonic and a constant
                 data = m.f_data[m.f_ptr[j]:m.f_ptr[j + 1]]
@@ -209,4 +210,4 @@ def force_series(m, t, ta, mid, p, series, stack):
                 _harmonic(data[1], data[2], data[2] * (t - q[0]) + data[3] * 0.5 * math.pi, np.bool_(False), p, j,
                           series)
         else:  # constant on the stretch, its value in the middle (Taylor.refuse: the shapes without series)
-            series[0, j] = force_value(m, j, mid, False, stack)
+            series[0, j] = force_value(m, j, mid, np.bool_(False), stack)

@@ -97,6 +97,8 @@ def _step(w, zeta, uy, b, dt, a0, slope, hmax, e_elastic, e_yield, s, peaks):
     the extremes of u kept in peaks = [max u, min u, events]. e_elastic, e_yield: each mode's transition over a
     piece of a whole interval (dt / ceil(dt / hmax)), computed once per oscillator."""
     c = 2.0 * zeta * w
+    # _root's flag as a bool, not a literal False or True: one compile of it, not one per literal
+    of_velocity, of_displacement = np.bool_(True), np.bool_(False)
     start = 0.0
     segments = 0
     events = True
@@ -130,28 +132,30 @@ def _step(w, zeta, uy, b, dt, a0, slope, hmax, e_elastic, e_yield, s, peaks):
                 top, bottom = s[2] + uy, s[2] - uy
                 if ub > top or ub < bottom:  # yield inside the piece
                     level = top if ub > top else bottom
-                    event_at = _root(kappa, c, p0, p1, p2, p3, z0, zv0, ta, tb, ua - level, ub - level, False, level)
+                    event_at = _root(kappa, c, p0, p1, p2, p3, z0, zv0, ta, tb, ua - level, ub - level, of_displacement,
+                                     level)
                     new_mode = 1.0 if ub > top else -1.0
                 elif (va > 0.0 and vb < 0.0) or (va < 0.0 and vb > 0.0):  # an interior extremum of u
                     reach = h * max(abs(va), abs(vb))
                     high = va > 0.0
                     edge = max(ua, ub) + reach if high else min(ua, ub) - reach
                     if (high and (edge > peaks[0] or edge > top)) or (not high and (edge < peaks[1] or edge < bottom)):
-                        t_ext = _root(kappa, c, p0, p1, p2, p3, z0, zv0, ta, tb, va, vb, True, 0.0)
+                        t_ext = _root(kappa, c, p0, p1, p2, p3, z0, zv0, ta, tb, va, vb, of_velocity, 0.0)
                         u_ext, _ = _state(kappa, c, p0, p1, p2, p3, z0, zv0, t_ext)
                         if high and u_ext > top:  # it passes the yield surface before turning: yield there
                             event_at = _root(kappa, c, p0, p1, p2, p3, z0, zv0, ta, t_ext, ua - top, u_ext - top,
-                                             False, top)
+                                             of_displacement, top)
                             new_mode = 1.0
                         elif not high and u_ext < bottom:
                             event_at = _root(kappa, c, p0, p1, p2, p3, z0, zv0, ta, t_ext, ua - bottom,
-                                             u_ext - bottom, False, bottom)
+                                             u_ext - bottom, of_displacement, bottom)
                             new_mode = -1.0
                         else:
                             peaks[0] = max(peaks[0], u_ext)
                             peaks[1] = min(peaks[1], u_ext)
             elif (mode > 0.0 and vb <= 0.0) or (mode < 0.0 and vb >= 0.0):  # unloading: u' back to zero
-                event_at = tb if vb == 0.0 else _root(kappa, c, p0, p1, p2, p3, z0, zv0, ta, tb, va, vb, True, 0.0)
+                event_at = tb if vb == 0.0 else _root(kappa, c, p0, p1, p2, p3, z0, zv0, ta, tb, va, vb, of_velocity,
+                                                      0.0)
                 new_mode = 0.0
             if event_at >= 0.0 and events:
                 break

@@ -171,7 +171,7 @@ def march(m, M, C, K, R, laws, par, coefficients, x, v, committed, edges, jump_d
     x_old, v_old = np.zeros(n), np.zeros(n)
     acc = np.zeros(3)  # work, dissipated, loop work (on the springs' hysteretic parts)
     stored0 = 0.0
-    row = 0
+    row = np.int64(0)  # not a literal: one compile of _write
     t = edges[0]
     for edge in range(len(edges) - 1):
         ta, tb = edges[edge], edges[edge + 1]

@@ -322,7 +322,7 @@ def integrate(m, grid, cuts, rtol, atol, max_steps, bound, boundary, out, zeroed
             start = row == 1 and t == grid[0]
             series_a = pending < row or last > row or start  # the acceleration's series only where a row needs it
             if series_a:
-                order_sizes(Y, sizes, 0, p - 3, lowest, highest)
+                order_sizes(Y, sizes, np.int64(0), p - 3, lowest, highest)
                 acceleration_series(Y, A, lowest, highest)
                 for i in range(lowest, highest):
                     peak_a = max(peak_a, abs(A[0, i]))

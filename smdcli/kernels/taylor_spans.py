@@ -7,6 +7,8 @@ Must not import: solvers, sweep, io, plots, commands, cli.
 
 from __future__ import annotations
 
+import numpy as np
+
 from smdcli.kernels.compiler import inlined, no_alloc
 
 
@@ -66,7 +68,7 @@ def loaded_dofs(m, y):
     """The span of DOFs that move or are loaded at the start, (first, last + 1): y's x or v not zero, a force or an
     element acting; (0, n) where the ground is forced (the load is on every DOF), (0, 0) for none."""
     n = m.n
-    first, last = n, 0
+    first, last = n, np.int64(0)  # int64s, not literals (one compile of active_dofs)
     for j in range(len(m.f_dof)):
         if m.f_dof[j] < 0:
             return 0, n
@@ -75,4 +77,4 @@ def loaded_dofs(m, y):
         for dof in (m.el_a[e], m.el_b[e]):
             if dof >= 0:
                 first, last = min(first, dof), max(last, dof + 1)
-    return active_dofs(y, first, last, 0, n, 0.0, 0.0)
+    return active_dofs(y, first, last, np.int64(0), n, 0.0, 0.0)
