@@ -158,9 +158,9 @@ KERNEL_FAMILIES = ("erk", "fixed", "stiff", "radau", "bdf", "rhs", "modes:events
                    "modes:stiff", "return_mapping", "banded", "taylor", "yielding", "sensitivity")
 _warmed: set[str] = set()
 # two chains of kernel families that share compiled parts, each compiled in a child process of its own, about equal
-# (on a 2-core Intel Xeon under numba's generic target, 2026-12-02: stiff 133 s, erk 27, modes:events 37, fixed 19,
-# banded 9, yielding 80; radau 100, bdf 62, taylor 49, sensitivity 73, return_mapping 17 (as much alone): 305 s and
-# 301 s, where return_mapping in the first chain made it 322 s to the second's 284)
+# (on a 2-core Intel Xeon under numba's generic target, 2026-12-03, the modes' families free after their integrators:
+# stiff 58 s, erk 16, modes:events 9, fixed 8, banded 6, yielding 57; radau 55, bdf 13, taylor 29, sensitivity 54,
+# return_mapping 10: 155 s and 161 s, where they were 305 s and 301 s before kernels stopped passing literals)
 COMPILE_CHAINS = (("stiff", "modes:stiff", "erk", "rhs", "modes:events", "fixed", "banded", "yielding"),
                   ("radau", "modes:radau", "bdf", "modes:bdf", "taylor", "sensitivity", "return_mapping"))
 
