@@ -194,8 +194,8 @@ def test_a_record_and_a_force_together_match_a_tight_reference(tmp_path, method)
 
 
 def test_a_displacement_pulse_jumps_the_relative_state_and_matches_the_absolute_solve(tmp_path, cli):
-    """The bundled quarter car: absolute motion solved piecewise by scipy's DOP853 (road constant between its jumps, the
-    tyre damper's impulse c du added to the wheel's velocity at each) equals smd's absolute_displacement."""
+    """The bundled quarter car: absolute motion solved piecewise by scipy's DOP853 (road constant between its jumps,
+    the tyre damper's impulse c du added to the wheel's velocity at each) equals smd's absolute_displacement."""
     result = cli("simulate", SCENARIOS / "quarter_car_bump.toml", "-o", tmp_path, "--no-plots")
     assert result.exit_code == 0, result.output
     with h5py.File(tmp_path / "quarter_car_bump.h5") as f:
