@@ -1068,27 +1068,30 @@ def test_a_fourier_series_force_s_amplitude_sensitivity_is_the_response_over_the
 ])
 def test_the_read_off_sensitivities_are_the_stacked_model_s_solution(monkeypatch, name, params):
     """A linear scene's sensitivities read off the stacked state straight into their places (each derivative
-    block's products on its own columns, the scene's and the forces') equal the stacked model solved as a Result
-    and split into blocks, to 1e-13 of each quantity's largest; the scene's own equal `smd simulate`'s exact run."""
+    block's x and v by products on its own columns, the scene's and the forces'; its acceleration from them by M a =
+    F - C v - K x) equal the stacked model solved as a Result and split into blocks, within the accuracy the result
+    states for each (8 u a step, 1.4e-11 of the largest on three_dof_forced's 12,001 steps; measured 1.6e-13 on its
+    acceleration, whose K x and F nearly cancel); the scene's own equal `smd simulate`'s exact run."""
     import smdcli.solvers.exact.linear as linear
 
     reads = []
     original = linear.read_exactly
-    monkeypatch.setattr(linear, "read_exactly", lambda *args: reads.append(original(*args)) or reads[-1])
+    monkeypatch.setattr(linear, "read_exactly", lambda *args, **kw: reads.append(original(*args, **kw)) or reads[-1])
     sc = smdcli.load(SCENARIOS / f"{name}.toml")
     read = smdcli.sensitivity(sc, params)
     assert reads and reads[-1] is not None  # the read route was taken
-    monkeypatch.setattr(linear, "read_exactly", lambda *args: None)
+    monkeypatch.setattr(linear, "read_exactly", lambda *args, **kw: None)
     solved = smdcli.sensitivity(sc, params)
     forward = smdcli.simulate(sc, method="exact")
     for quantity in ("displacement", "velocity", "acceleration"):
         want = getattr(solved, quantity)
-        assert np.abs(getattr(read, quantity) - want).max() <= 1e-13 * np.abs(want).max(), quantity
-        assert np.abs(getattr(forward, quantity) - want).max() <= 1e-13 * np.abs(want).max(), quantity
+        stated = read.accuracy[quantity][0] * np.abs(want).max()
+        assert np.abs(getattr(read, quantity) - want).max() <= stated, quantity
+        assert np.abs(getattr(forward, quantity) - want).max() <= stated, quantity
         for i, path in enumerate(params):
             want = getattr(solved, f"d_{quantity}")[i]
             got = getattr(read, f"d_{quantity}")[i]
-            assert np.abs(got - want).max() <= 1e-13 * np.abs(want).max(), (quantity, path)
+            assert np.abs(got - want).max() <= read.accuracy[f"d_{quantity}"][i] * np.abs(want).max(), (quantity, path)
     np.testing.assert_allclose(read.d_peak_displacement, solved.d_peak_displacement, rtol=1e-12)
 
 

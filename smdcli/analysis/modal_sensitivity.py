@@ -35,8 +35,8 @@ import math
 
 import numpy as np
 
+from smdcli.analysis.stacked_blocks import block_accelerations, stacked_blocks
 from smdcli.model import Model
-from smdcli.model.sparse import cheapest, rows_times
 from smdcli.solvers.base import stated_rounding
 from smdcli.solvers.exact.accurate_expm import NEEDED_NORM
 from smdcli.model.modes import modal_eigenvalues
@@ -71,7 +71,7 @@ def modal_sensitivities(base: Model, stacked: Model, scales: np.ndarray,
     Y, forcing_condition = _particular(lam, squared, damping, S, ends, shapes.T @ stacked.inputs[:n] @ gains)
     if max(vector_condition, forcing_condition) > CONDITION:
         return None
-    dM, dC, dK, columns, x0, v0 = _blocks(stacked, n, P)
+    dM, dC, dK, columns, x0, v0 = stacked_blocks(stacked, n, P)
     mass_form = shapes.T @ base.dense().M
     participation = shapes.T @ columns  # (P + 1, n, F): the forces' reach on each block's modes
     pairs = []  # each parameter's alpha and beta, each as factors (left, right) or (the matrix, None)
@@ -107,7 +107,7 @@ def modal_sensitivities(base: Model, stacked: Model, scales: np.ndarray,
         to_dofs = shapes.T / by[block]
         np.matmul(state[:, :, 0], to_dofs, out=values[0, block])
         np.matmul(state[:, :, 1], to_dofs, out=values[1, block])
-    _accelerations(base, values, u, columns, dM, dC, dK, scales)
+    block_accelerations(base, values, u, columns, dM, dC, dK, scales)
     growth = max(float((np.sqrt(squared) + damping).max()) * h, 1.0)
     accurate = growth > NEEDED_NORM  # the stiff modes' propagators came in double-double
     stated = stated_rounding(2 * chain + N + n, 1.0 if accurate else growth) * max(vector_condition, forcing_condition)
@@ -182,21 +182,6 @@ def _diagonal_steps(exponents: np.ndarray, c: np.ndarray, J: int) -> int:
     blocks += starts[:, None, :]
     blocks *= grow
     return J + len(blocks)
-
-
-def _accelerations(base: Model, values: np.ndarray, u: np.ndarray, columns: np.ndarray, dM: np.ndarray,
-                   dC: np.ndarray, dK: np.ndarray, scales: np.ndarray) -> None:
-    """Each block's acceleration from its displacement and velocity, in place, by the scene's own M a = F - C v - K x
-    (Model.acceleration, each matrix as it multiplies cheapest): a parameter's block driven by B_i u and the scene's
-    - dM a - dC v - dK x (a parameter's few entries: O(n) a time, not the modes' dense product)."""
-    x, v, a = values
-    a[0] = base.acceleration(x[0], v[0], u @ columns[0].T)
-    for i, scale in enumerate(scales):
-        driven = u @ columns[i + 1].T
-        for matrix, of in ((dM[i], a[0]), (dC[i], v[0]), (dK[i], x[0])):
-            if matrix.any():
-                driven -= rows_times(of, cheapest(matrix).T)
-        a[i + 1] = base.acceleration(x[i + 1], v[i + 1], driven / scale)
 
 
 def _projected_factors(shapes: np.ndarray, matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
@@ -294,17 +279,6 @@ def _setup(base: Model, stacked: Model, grid: np.ndarray):
         return None  # a force's edge between output points: the step would hold it
     shapes, squared, damping = modal_coefficients(base)
     return shapes, squared, damping, h, exos
-
-
-def _blocks(stacked: Model, n: int, P: int):
-    """Each parameter's dM, dC, dK (P, n, n), the input columns per block (P + 1, n, F) and the blocks' initial
-    states (P, n) of x and v."""
-    def below(matrix):
-        return np.stack([matrix[(i + 1) * n:(i + 2) * n, :n] for i in range(P)])
-    dense = stacked.dense()
-    columns = stacked.inputs.reshape(P + 1, n, -1)
-    return (below(dense.M), below(dense.C), below(dense.K), columns, stacked.x0[n:].reshape(P, n),
-            stacked.v0[n:].reshape(P, n))
 
 
 def _generators(exos) -> tuple[np.ndarray, np.ndarray, list[int]]:

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from smdcli.analysis.model_derivative import augmented_model, model_derivatives
+from smdcli.analysis.stacked_blocks import block_accelerations, stacked_blocks
 from smdcli.analysis.sensitivity_cost import forward_time, load_code, median_time
 from smdcli.analysis.sensitivity_limits import refuse, too_many_dofs, too_much_memory
 from smdcli.analysis.step_scale import block_scales
@@ -371,22 +372,28 @@ def _linear(sc: Scenario, base, derivatives: list, grid: np.ndarray, tol: Tolera
     too_many_dofs(sc, P, n)  # the dense stacked system's exponential, past what it takes
     values = np.empty((len(QUANTITIES), P + 1, N, n))
     total, reads = (P + 1) * n, []
-    rates, inputs = stacked.state_matrix[total:], stacked.input_matrix[total:]
     for block in range(P + 1):
-        rows, by = slice(block * n, (block + 1) * n), (1.0 if block == 0 else scales[block - 1])
-        x_read, v_read = np.eye(n, 2 * total, block * n) / by, np.eye(n, 2 * total, total + block * n) / by
-        reads += [(x_read, None, values[0, block]), (v_read, None, values[1, block]),
-                  (rates[rows] / by, inputs[rows] / by, values[2, block])]
-    solved = None if stacked.jumps else read_exactly(stacked, grid, reads)
-    if solved is None:
+        by = 1.0 if block == 0 else scales[block - 1]
+        reads += [(np.eye(n, 2 * total, block * n) / by, None, values[0, block]),
+                  (np.eye(n, 2 * total, total + block * n) / by, None, values[1, block])]
+    # x and v read off the stacked state; each block's acceleration from them and the forces (the scene's own M a =
+    # F - C v - K x, a parameter's few entries of dM, dC, dK): a third of the rows the state is read by, where the
+    # acceleration's rows reach the whole of it
+    solved = None if stacked.jumps else read_exactly(stacked, grid, reads, copies=P)
+    if solved is not None:
+        dM, dC, dK, columns, _, _ = stacked_blocks(stacked, n, P)
+        forces = np.empty((N, len(stacked.signals)))
+        for j, signal in enumerate(stacked.signals):
+            forces[:, j] = signal.value(grid)
+        block_accelerations(base, values, forces, columns, dM, dC, dK, scales)
+        stated = solved[0]
+    else:
         exact = get_solver("exact")
         result = across_jumps(lambda piece, times: exact.solve(piece, times, tol), stacked, grid)
         if not result.success:
             raise SolverFailed(f"{sc.path}: the sensitivity equations could not be solved: {result.stats.message}")
         values = _split({q: getattr(result, q).reshape(N, P + 1, n) for q in QUANTITIES}, scales)
         stated = float(result.stats.stated_accuracy)
-    else:
-        stated = solved[0]
     if not np.isfinite(values[0]).all():
         raise SolverFailed(f"{sc.path}: the sensitivity equations could not be solved: not finite")
     return values, float(stated), METHOD

@@ -48,11 +48,6 @@ class Action:
         self.n, self.size = n, 2 * n + m
         state = sparse.csr_array(model.state_matrix)  # the dense matrix is scanned once; no dense temporaries
         stiffness = float(abs(state[n:, :n]).sum(axis=0).max(initial=0.0))  # ||M^-1 K||_1
-        # Balance: x scaled by 2^-e with 2^e ~ sqrt(||M^-1 K||) makes the x and v columns of comparable size;
-        # w scaled so that the force columns G are no larger. Powers of two: the scaling itself is exact.
-        x_scale = 2.0 ** -round(0.5 * math.log2(stiffness)) if stiffness > 0 else 1.0
-        scale = np.ones(self.size)
-        scale[:n] = x_scale
         blocks = []
         G = np.zeros((2 * n, m))
         S = np.zeros((m, m))
@@ -63,9 +58,7 @@ class Action:
             G[:, col:col + k] = np.outer(model.input_matrix[:, j], exo.g)
             blocks.append((2 * n + col, 2 * n + col + k, signal))
             col += k
-        force_norm = float(np.abs(G).sum(axis=0).max(initial=0.0))
-        if force_norm > 0:
-            scale[2 * n:] = 2.0 ** math.floor(math.log2(max(1.0, math.sqrt(stiffness)) / force_norm))
+        scale = balancing(stiffness, float(np.abs(G).sum(axis=0).max(initial=0.0)), n, self.size)
         A = sparse.bmat([[state, sparse.csr_array(G)], [None, sparse.csr_array(S)]], format="csr")
         A = sparse.csr_array(sparse.diags_array(1.0 / scale) @ A @ sparse.diags_array(scale))
         self.mu = float(A.diagonal().sum()) / self.size  # shifted by the mean eigenvalue, restored as e^(mu dt)
@@ -79,12 +72,7 @@ class Action:
     def parameters(self, dt: float) -> tuple[int, int]:
         """(m, s): the fewest products m s with ||A dt|| / s <= theta_m."""
         if dt not in self._parameters:
-            t = self.norm * dt
-            if t == 0:
-                self._parameters[dt] = (0, 1)
-            else:
-                self._parameters[dt] = min(((m, max(1, math.ceil(t / theta))) for m, theta in THETA.items()),
-                                           key=lambda ms: (ms[0] * ms[1], ms[0]))
+            self._parameters[dt] = taylor_parameters(self.norm * dt)
         return self._parameters[dt]
 
     def products(self, dt: float) -> int:
@@ -110,6 +98,43 @@ class Action:
                 c1 = c2
             z = eta * total
         return z
+
+
+def balancing(stiffness: float, force_norm: float, n: int, size: int) -> np.ndarray:
+    """The diagonal scaling of the augmented state: x by 2^-e with 2^e ~ sqrt(||M^-1 K||_1) (the x and v columns
+    of comparable size), the generators' states so that the force columns (force_norm: their 1-norm) are no larger.
+    Powers of two: the scaling itself is exact."""
+    scale = np.ones(size)
+    scale[:n] = 2.0 ** -round(0.5 * math.log2(stiffness)) if stiffness > 0 else 1.0
+    if force_norm > 0:
+        scale[2 * n:] = 2.0 ** math.floor(math.log2(max(1.0, math.sqrt(stiffness)) / force_norm))
+    return scale
+
+
+def taylor_parameters(norm_dt: float) -> tuple[int, int]:
+    """(m, s): the fewest products m s with ||A dt||_1 / s <= theta_m."""
+    if norm_dt == 0:
+        return 0, 1
+    return min(((m, max(1, math.ceil(norm_dt / theta))) for m, theta in THETA.items()),
+               key=lambda ms: (ms[0] * ms[1], ms[0]))
+
+
+def dense_action_cost(Aaug: np.ndarray, n: int, model: Model, grid: np.ndarray) -> float:
+    """action_cost of the model without building its sparse action: its norm and entries from the augmented matrix
+    Aaug ([[A, G], [0, S]], linear.augmented's), balanced and shifted as Action's (a stacked sensitivity system's
+    choice, where Action's sparse build cost 7 ms of a 30-mass chain's two sensitivities)."""
+    size = len(Aaug)
+    stiffness = float(np.abs(Aaug[n:2 * n, :n]).sum(axis=0).max(initial=0.0))
+    scale = balancing(stiffness, float(np.abs(Aaug[:2 * n, 2 * n:]).sum(axis=0).max(initial=0.0)), n, size)
+    balanced = Aaug * (scale[None, :] / scale[:, None])
+    mu = float(np.trace(balanced)) / size
+    balanced[np.diag_indices(size)] -= mu
+    norm = float(np.abs(balanced).sum(axis=0).max(initial=0.0))
+    N = len(grid)
+    h = (grid[-1] - grid[0]) / (N - 1) if N > 1 else 0.0
+    m, s = taylor_parameters(norm * h)
+    breaks = len(model.breakpoints(float(grid[0]), float(grid[-1])))
+    return (N + 2 * breaks) * m * s * ((np.count_nonzero(balanced) + 4 * size) * _SPARSE_ENTRY_S + _SPARSE_CALL_S)
 
 
 def action_cost(action: Action, model: Model, grid: np.ndarray) -> float:

@@ -20,7 +20,6 @@ Must not import: sweep, io, plots, commands, cli.
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from typing import NamedTuple
 
@@ -28,25 +27,21 @@ import numpy as np
 
 from smdcli.model import Model
 from smdcli.result import Result, SolverStats
-from smdcli.solvers.exact.accurate_expm import propagator
+from smdcli.solvers.exact.accurate_expm import flush_negligible
+from smdcli.solvers.exact.arrow import ArrowFlow, arrow_cost
+from smdcli.solvers.exact.dense_flow import PowersFlow, dense_cost
 from smdcli.solvers.exact.hold import first_order_hold, halved, held_reason, hold_error, hold_response_error
 from smdcli.solvers.base import Solver, Tolerances, make_result, segments, stated_rounding
 from smdcli.solvers.exact import sampled
 from smdcli.solvers.exact.harmonic import from_rest_less, split
-from smdcli.solvers.exact.action import ACTION_DOFS, Action, action_cost, solve_action
+from smdcli.solvers.exact.action import ACTION_DOFS, Action, action_cost, dense_action_cost, solve_action
 from smdcli.solvers.exact.modal import modal_applies, solve_modal
 from smdcli.text import plural
 
-BLOCK = 64  # output steps per stacked propagation, at most
-_POWERS_BYTES = 64 * 2**20
 # propagate's reads of the same entries taken as one, up to this many bytes of output: beyond, the one larger
 # product cost more than the calls it spared (OpenBLAS threads it: the 3-DOF forced scene's 12,001 steps took 8 ms
 # merged, 0.6 ms read by read; below 2,000 steps the two are even)
 _MERGED_BYTES = 2**17
-# Seconds per flop of a dense matrix product and per entry of a matrix-vector product (memory-bound), on a 2-core
-# machine: they only decide between this path and the sparse action (action.py), whose cost is on the same scale, and
-# how many of the step's powers the dense path stacks.
-_DENSE_FLOP_S, _DENSE_ENTRY_S = 2e-11, 3e-10
 
 
 def augmented(model: Model) -> tuple[np.ndarray, list[tuple[int, int, object]]]:
@@ -74,24 +69,6 @@ def sparse_action(model: Model, grid: np.ndarray) -> Action | None:
         return None
     action = Action(model)
     return action if action_cost(action, model, grid) < dense_cost(model, grid) else None
-
-
-def dense_cost(model: Model, grid: np.ndarray) -> float:
-    """Estimated seconds of the dense path: expm (about 16 size^3 flops), the J stacked powers of the propagator,
-    and a pass over the propagator per output step."""
-    size = 2 * model.n + sum(s.exo().S.shape[0] for s in model.signals)
-    J = _stacked_powers(size, len(grid), 3 * model.n)
-    return (16 + 2 * J) * size**3 * _DENSE_FLOP_S + len(grid) * size**2 * _DENSE_ENTRY_S
-
-
-def _stacked_powers(size: int, N: int, rows: int = 0) -> int:
-    """How many powers of the step's propagator are stacked: the fewest seconds for J powers (each also multiplied by
-    the `rows` read) and N / J blocks' starts (a product with the state each), at most BLOCK and 64 MB. A 60-mass
-    chain's sensitivity system (size 242, 360 rows read) takes 4, not 64: its 64 powers were 90 % of its solve."""
-    power = sampled.PRODUCT_S + 2 * (size ** 3 + rows * size ** 2) * _DENSE_FLOP_S
-    start = sampled.PRODUCT_S + size ** 2 * _DENSE_ENTRY_S
-    best = round(math.sqrt(max(N - 1, 1) * start / power))
-    return max(1, min(BLOCK, N - 1, best, _POWERS_BYTES // (8 * size * size)))
 
 
 class Exact(Solver):
@@ -190,14 +167,18 @@ def _path(model: Model, grid: np.ndarray) -> tuple[str, object]:
     return ("sampled", knots) if knots is not None else ("dense", None)
 
 
-def read_exactly(model: Model, grid: np.ndarray, readouts: list) -> tuple[float, str] | None:
+def read_exactly(model: Model, grid: np.ndarray, readouts: list, copies: int = 0) -> tuple[float, str] | None:
     """Each of readouts' (R (r, 2n), G (r, signals) or None, out (N, r)) given R [x; v] + G u at every grid time (u
     the force signals' values there), where Exact.solve steps the augmented system or a table's samples (every
     force with its generator, no harmonics superposed, _path dense or sampled): only what is read is written, each
-    output contiguous. The stated accuracy and a description; None where Exact.solve takes another path (the
-    caller solves it as a Result)."""
+    output contiguous. copies: where the model is a sensitivity system, the scene's copies it stacks (arrow.py: its
+    flow by its arrow structure where that serves). The stated accuracy and a description; None where Exact.solve
+    takes another path (the caller solves it as a Result)."""
     if first_order_hold(model, grid)[1] or split(model) is not None:
         return None
+    arrow = _arrow_flow(model, grid, readouts, copies) if copies else None
+    if arrow is not None:
+        return propagate(model, grid, readouts, arrow)
     path, knots = _path(model, grid)
     if path == "dense":
         return propagate(model, grid, readouts)
@@ -248,24 +229,23 @@ def _solve_runs(model: Model, grid: np.ndarray, runs) -> Solved:
     return Solved(x, v, stated, f"{message}; a grid of unequal steps, as {len(runs)} uniform runs")
 
 
-def _in_blocks(reads: list, k: int, stop: int, z: np.ndarray, powers: np.ndarray, seeds) -> np.ndarray:
-    """Rows k .. stop - 1 of each read's output from z at row k - 1, in blocks of as many steps as powers (the step's
-    propagator to the 1st .. Jth power), the force generators restarted at each block's start (seeds(rows): their
-    states at those rows, (len(rows), m), the last m entries of z): the starts one after another (a product by the
-    last power each), then every whole block's steps in one matrix product per read (not a product of the stacked
-    powers with each start: twice the speed at size 27, where that is flops, not Python). reads: (R P, columns,
-    out), the read's rows times the powers (J, r, columns) on the state's columns that reach it, and its (N, r)
-    output. The state at stop - 1."""
-    J, size = powers.shape[0], powers.shape[1]
+def _in_blocks(reads: list, k: int, stop: int, z: np.ndarray, flow, seeds) -> np.ndarray:
+    """Rows k .. stop - 1 of each read's output from z at row k - 1 (in the flow's order), in blocks of flow.J steps
+    (the step's propagator to the 1st .. Jth power: flow.step), the force generators restarted at each block's start
+    (seeds(rows): their states at those rows, (len(rows), m), z's flow.generators): the starts one after another, then every
+    whole block's steps in one matrix product per read (not a product of the stacked powers with each start: twice
+    the speed at size 27, where that is flops, not Python). reads: (R P, columns, out), the read's rows times the
+    powers (J, r, columns) on the state's columns that reach it, and its (N, r) output. The state at stop - 1."""
+    J, size = flow.J, len(z)
     count = stop - k
     whole, rest = divmod(count, J)
     starts = np.empty((whole + (rest > 0), size))
     restarts = seeds(k - 1 + J * np.arange(len(starts)))
-    first = size - restarts.shape[1]
     for b in range(len(starts)):
-        z[first:] = restarts[b]
+        z[flow.generators] = restarts[b]
         starts[b] = z
-        z = powers[min(J, count - b * J) - 1] @ z
+        z = flow.step(z, min(J, count - b * J))
+    flush_negligible(starts)  # a far mass still at rest, 1e-250 m, met by a far power's 1e-100: a subnormal product
     for read, columns, out in reads:
         r, known = out.shape[1], _on_columns(starts, columns, axis=1)
         if whole:
@@ -274,6 +254,27 @@ def _in_blocks(reads: list, k: int, stop: int, z: np.ndarray, powers: np.ndarray
         if rest:
             out[k + whole * J:stop] = (read[:rest].reshape(rest * r, len(columns)) @ known[whole]).reshape(rest, r)
     return z
+
+
+def _arrow_flow(model: Model, grid: np.ndarray, readouts: list, copies: int) -> ArrowFlow | None:
+    """The sensitivity system's flow by its arrow structure (arrow.py), where it serves and costs less than the
+    dense or sparse path _path would take (estimated, the sparse action's without building it): a uniform grid with
+    no record's samples between its points, and every readout reading the scene and at most one copy."""
+    N, n = len(grid), model.n // (copies + 1)
+    if N < 2 or len(_uniform_runs(grid)) > 1 or modal_applies(model) or any(s.exo() is None for s in model.signals) \
+            or sampled.uniform_knots(model, grid) is not None:
+        return None
+    for R, _, _ in readouts:
+        reached = np.abs(R).reshape(len(R), 2, copies + 1, n).sum(axis=(0, 1, 3))[1:]  # each copy's x and v
+        if np.count_nonzero(reached) > 1:
+            return None
+    Aaug = augmented(model)[0]
+    rows = sum(len(R) for R, _, _ in readouts)
+    cost = arrow_cost(len(Aaug) - 2 * copies * n, 2 * n, copies, N, rows)
+    if cost >= dense_cost(model, grid) or (model.n >= ACTION_DOFS and
+                                           dense_action_cost(Aaug, model.n, model, grid) < cost):
+        return None
+    return ArrowFlow.of(Aaug, n, copies, (grid[-1] - grid[0]) / (N - 1), N, rows)
 
 
 def _on_columns(array: np.ndarray, columns: np.ndarray, axis: int) -> np.ndarray:
@@ -285,7 +286,7 @@ def _on_columns(array: np.ndarray, columns: np.ndarray, axis: int) -> np.ndarray
     return array.take(columns, axis=axis)
 
 
-def _reads(readouts: list, powers: np.ndarray, n: int, N: int, signal_rows: np.ndarray) -> tuple[list, list]:
+def _reads(readouts: list, flow, n: int, N: int, signal_rows: np.ndarray) -> tuple[list, list]:
     """propagate's reads: (rows R, R times the powers on the state's entries that reach them (J, r, columns), those
     columns, the (N, r) output), the readouts that reach the same entries taken as one read where their outputs
     together are small (a small scene's cost is its numpy calls: a 1-DOF sensitivity's six readouts are two reads);
@@ -293,7 +294,7 @@ def _reads(readouts: list, powers: np.ndarray, n: int, N: int, signal_rows: np.n
     the forces read off their generators' states, g w (zero rows: the forces evaluated after)."""
     sizes = [len(R) for R, _, _ in readouts]
     starts = np.cumsum([0, *sizes[:-1]]).astype(int)
-    size = powers.shape[1]
+    size = signal_rows.shape[1]
     # every read's rows times the powers at once, then each read on the state's entries that reach it (a
     # sensitivity block: its own, the scene's, the forces')
     rows = np.zeros((sum(sizes), size))
@@ -301,7 +302,9 @@ def _reads(readouts: list, powers: np.ndarray, n: int, N: int, signal_rows: np.n
     for (_, G, _), first, count in zip(readouts, starts, sizes):
         if G is not None:
             rows[first:first + count] += G @ signal_rows
-    read_all = np.matmul(rows, powers)  # (J, reads' rows, size)
+    if flow.order is not None:
+        rows = rows[:, flow.order]
+    read_all = flow.tables(flush_negligible(rows))  # (J, reads' rows, size), in the flow's order
     reaching = np.logical_or.reduceat(read_all.any(axis=0), starts, axis=0)  # (readouts, size)
     groups, filling = [], {}  # filling: the group being filled for each set of entries, and its rows so far
     for i, mask in enumerate(reaching):
@@ -336,34 +339,23 @@ def solve_dense(model: Model, grid: np.ndarray) -> Solved:
     return Solved(x, v, stated, message, a)
 
 
-def propagate(model: Model, grid: np.ndarray, readouts) -> tuple[float, str]:
+def propagate(model: Model, grid: np.ndarray, readouts, arrow: ArrowFlow | None = None) -> tuple[float, str]:
     """The dense exponential of the augmented system (state z = [x; v; the forces' generators]) stepped over the
     grid, each of readouts' (R (r, 2n), G (r, signals) or None, out (N, r)) given R [x; v] + G u at every grid
-    time (read_exactly's). The stated accuracy and a description."""
+    time (read_exactly's); arrow: a sensitivity system's flow by its arrow structure (arrow.py), in place of the
+    stacked system's exponential. The stated accuracy and a description."""
     Aaug, blocks = augmented(model)
     size = Aaug.shape[0]
     n, N = model.n, len(grid)
     h = (grid[-1] - grid[0]) / (N - 1) if N > 1 else 0.0
-    cache: dict[float, np.ndarray] = {}
-    # a stiff scene: double scaling and squaring would lose digits (accurate_expm.propagator)
-    cache[h], growth, accurate = propagator(Aaug, h)
+    generators = slice(2 * n, size)
+    flow = arrow if arrow is not None else PowersFlow(Aaug, h, N, sum(len(R) for R, _, _ in readouts), generators)
 
-    def phi(dt: float) -> np.ndarray:
+    def advance(z: np.ndarray, dt: float) -> np.ndarray:
         if N > 1 and abs(dt - h) <= 1e-9 * h:
-            dt = h  # a grid difference that is h up to the rounding of the grid times
-        if dt not in cache:
-            cache[dt] = propagator(Aaug, dt)[0]
-        return cache[dt]
+            return flow.step(z, 1)  # a grid difference that is h up to the rounding of the grid times
+        return flow.advance(z, dt)
 
-    J = _stacked_powers(size, N, sum(len(R) for R, _, _ in readouts))
-    powers = np.empty((J, size, size))
-    if N > 1:
-        powers[0] = phi(h)
-        done = 1
-        while done < J:  # by doubling: powers done+1 .. 2 done are powers 1 .. done times the done-th
-            more = min(done, J - done)
-            np.matmul(powers[:more], powers[done - 1], out=powers[done:done + more])
-            done += more
     # a force smooth over the run (no breakpoint: a sine, a frequency's derivative) read off its generator's state
     # with the structure's, g w, not evaluated at every time (a third of a frequency's sensitivity on one DOF); one
     # with breakpoints is evaluated, a sample on a jump its right limit as the signal gives it
@@ -372,35 +364,37 @@ def propagate(model: Model, grid: np.ndarray, readouts) -> tuple[float, str]:
     for j, (first, last, signal) in enumerate(blocks):
         if smooth[j]:
             signal_rows[j, first:last] = signal.exo().g
-    reads, merged = _reads(readouts, powers, n, N, signal_rows)
+    reads, merged = _reads(readouts, flow, n, N, signal_rows)  # in the flow's order
 
     segs = segments(model, grid)
     # the generators' states at every segment's start at once (a record's thousands of segments)
     seeds = sampled.table_states(blocks, np.array([ta for ta, _ in segs], dtype=float), 2 * n)
     z = np.zeros(size)
     z[:n], z[n:2 * n] = model.x0, model.v0
+    if flow.order is not None:
+        z = z[flow.order]
     k = 0  # next grid index to fill
     n_expm = 1
     for seg_index, (ta, tb) in enumerate(segs):
         last = seg_index == len(segs) - 1
-        z[2 * n:2 * n + seeds.shape[1]] = seeds[seg_index]
+        z[flow.generators] = seeds[seg_index]
         t_cur = ta
         stop = N if last else int(np.searchsorted(grid, tb, side="left"))
         if k < stop:
             if grid[k] > t_cur:
-                z = phi(grid[k] - t_cur) @ z
+                z = advance(z, grid[k] - t_cur)
                 n_expm += 1
             for R, _, _, out in reads:
                 out[k] = R @ z
             t_cur = grid[k]
             k += 1
             if k < stop:
-                z = _in_blocks([r[1:] for r in reads], k, stop, z, powers,
+                z = _in_blocks([r[1:] for r in reads], k, stop, z, flow,
                                lambda rows: sampled.table_states(blocks, grid[rows], 2 * n))
                 k = stop
                 t_cur = grid[k - 1]
         if not last and tb > t_cur:
-            z = phi(tb - t_cur) @ z
+            z = advance(z, tb - t_cur)
             n_expm += 1
     for combined, outs in merged:
         first = 0
@@ -408,7 +402,11 @@ def propagate(model: Model, grid: np.ndarray, readouts) -> tuple[float, str]:
             out[:] = combined[:, first:first + out.shape[1]]
             first += out.shape[1]
     _add_forces(model, grid, readouts, [j for j, read in enumerate(smooth) if not read])
-    stated = stated_rounding(N + len(segs) + n_expm, 1.0 if accurate else growth)
-    message = (f"ok: {plural(len(segs), 'force segment')}, {plural(len(cache), 'matrix exponential')} "
-               f"of size {size}" + (" in double-double (a stiff scene)" if accurate else ""))
-    return stated, message
+    accurate = arrow is None and flow.accurate
+    stated = stated_rounding(N + len(segs) + n_expm, 1.0 if accurate else flow.growth)
+    if arrow is not None:
+        how = f"its arrow's exponential (the scene's of size {arrow.q} and {plural(arrow.copies, 'copy', 'copies')})"
+    else:
+        how = (f"{plural(flow.exponentials, 'matrix exponential')} of size {size}"
+               + (" in double-double (a stiff scene)" if accurate else ""))
+    return stated, f"ok: {plural(len(segs), 'force segment')}, {how}"
