@@ -1068,10 +1068,10 @@ def test_a_fourier_series_force_s_amplitude_sensitivity_is_the_response_over_the
 ])
 def test_the_read_off_sensitivities_are_the_stacked_model_s_solution(monkeypatch, name, params):
     """A linear scene's sensitivities read off the stacked state straight into their places (each derivative
-    block's x and v by products on its own columns, the scene's and the forces'; its acceleration from them by M a =
-    F - C v - K x) equal the stacked model solved as a Result and split into blocks, within the accuracy the result
-    states for each (8 u a step, 1.4e-11 of the largest on three_dof_forced's 12,001 steps; measured 1.6e-13 on its
-    acceleration, whose K x and F nearly cancel); the scene's own equal `smd simulate`'s exact run."""
+    block's products on its own columns, the scene's and the forces') equal the stacked model solved as a Result
+    and split into blocks, within the accuracy the result states for each (8 u a step: 1.4e-11 of the largest on
+    three_dof_forced's 12,001 steps); the scene's own equal `smd simulate`'s exact run. (A scene of 30 DOFs and
+    more finds its accelerations after its x and v: tests/test_arrow.py.)"""
     import smdcli.solvers.exact.linear as linear
 
     reads = []

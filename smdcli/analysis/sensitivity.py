@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from smdcli.analysis.model_derivative import augmented_model, model_derivatives
-from smdcli.analysis.stacked_blocks import block_accelerations, stacked_blocks
+from smdcli.analysis.stacked_blocks import accelerations_after
 from smdcli.analysis.sensitivity_cost import forward_time, load_code, median_time
 from smdcli.analysis.sensitivity_limits import refuse, too_many_dofs, too_much_memory
 from smdcli.analysis.step_scale import block_scales
@@ -35,6 +35,7 @@ from smdcli.solvers.peaks import jump_times, located_peaks, quintic_each
 from smdcli.solvers.registry import get_solver
 
 QUANTITIES = {"displacement": "m", "velocity": "m/s", "acceleration": "m/s^2"}
+ACCELERATIONS_AFTER = 30  # DOFs from which a linear scene's accelerations are found after its x and v (_linear)
 SMOOTH_ERROR = 100  # a smooth scene's stated error, in units of its rtol: DOP853's global error over its local one
 EVENT_METHOD = ("exact, event to event: between events the scene and its sensitivity equations solved together by "
                 "the matrix exponential; at each event its time's derivative from the guard it crosses and the "
@@ -372,20 +373,20 @@ def _linear(sc: Scenario, base, derivatives: list, grid: np.ndarray, tol: Tolera
     too_many_dofs(sc, P, n)  # the dense stacked system's exponential, past what it takes
     values = np.empty((len(QUANTITIES), P + 1, N, n))
     total, reads = (P + 1) * n, []
+    # a large scene's accelerations from its x and v by its own M a = F - C v - K x (a parameter's few entries of dM,
+    # dC, dK), not read off the stacked state: a third of the rows read, where an acceleration's rows reach all of it
+    after = n >= ACCELERATIONS_AFTER
+    rates, inputs = stacked.state_matrix[total:], stacked.input_matrix[total:]
     for block in range(P + 1):
-        by = 1.0 if block == 0 else scales[block - 1]
+        rows, by = slice(block * n, (block + 1) * n), (1.0 if block == 0 else scales[block - 1])
         reads += [(np.eye(n, 2 * total, block * n) / by, None, values[0, block]),
                   (np.eye(n, 2 * total, total + block * n) / by, None, values[1, block])]
-    # x and v read off the stacked state; each block's acceleration from them and the forces (the scene's own M a =
-    # F - C v - K x, a parameter's few entries of dM, dC, dK): a third of the rows the state is read by, where the
-    # acceleration's rows reach the whole of it
+        if not after:
+            reads.append((rates[rows] / by, inputs[rows] / by, values[2, block]))
     solved = None if stacked.jumps else read_exactly(stacked, grid, reads, copies=P)
+    if solved is not None and after:
+        accelerations_after(base, stacked, values, grid, scales)
     if solved is not None:
-        dM, dC, dK, columns, _, _ = stacked_blocks(stacked, n, P)
-        forces = np.empty((N, len(stacked.signals)))
-        for j, signal in enumerate(stacked.signals):
-            forces[:, j] = signal.value(grid)
-        block_accelerations(base, values, forces, columns, dM, dC, dK, scales)
         stated = solved[0]
     else:
         exact = get_solver("exact")

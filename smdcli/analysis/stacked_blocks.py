@@ -37,3 +37,13 @@ def block_accelerations(base: Model, values: np.ndarray, u: np.ndarray, columns:
             if matrix.any():
                 driven -= rows_times(of, cheapest(matrix).T)
         a[i + 1] = base.acceleration(x[i + 1], v[i + 1], driven / scale)
+
+
+def accelerations_after(base: Model, stacked: Model, values: np.ndarray, grid: np.ndarray, scales: np.ndarray) -> None:
+    """Each block's acceleration from its x and v on the grid (block_accelerations), in place, the stacked model's
+    forces evaluated there (a sample on a jump its right limit, as the signal gives it)."""
+    dM, dC, dK, columns, _, _ = stacked_blocks(stacked, base.n, len(scales))
+    forces = np.empty((len(grid), len(stacked.signals)))
+    for j, signal in enumerate(stacked.signals):
+        forces[:, j] = signal.value(grid)
+    block_accelerations(base, values, forces, columns, dM, dC, dK, scales)

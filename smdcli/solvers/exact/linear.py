@@ -42,6 +42,9 @@ from smdcli.text import plural
 # product cost more than the calls it spared (OpenBLAS threads it: the 3-DOF forced scene's 12,001 steps took 8 ms
 # merged, 0.6 ms read by read; below 2,000 steps the two are even)
 _MERGED_BYTES = 2**17
+# stacked x and v below which a sensitivity system's arrow never cost less than its dense exponential (10- to 63-mass
+# chains: from 120 it did, or matched it), and the estimates are not worth their own time
+ARROW_STATES = 100
 
 
 def augmented(model: Model) -> tuple[np.ndarray, list[tuple[int, int, object]]]:
@@ -261,7 +264,7 @@ def _arrow_flow(model: Model, grid: np.ndarray, readouts: list, copies: int) -> 
     dense or sparse path _path would take (estimated, the sparse action's without building it): a uniform grid with
     no record's samples between its points, and every readout reading the scene and at most one copy."""
     N, n = len(grid), model.n // (copies + 1)
-    if N < 2 or len(_uniform_runs(grid)) > 1 or modal_applies(model) or any(s.exo() is None for s in model.signals) \
+    if 2 * model.n < ARROW_STATES or N < 2 or len(_uniform_runs(grid)) > 1 or modal_applies(model) or any(s.exo() is None for s in model.signals) \
             or sampled.uniform_knots(model, grid) is not None:
         return None
     for R, _, _ in readouts:
