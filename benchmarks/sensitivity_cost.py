@@ -14,7 +14,9 @@ sensitivity` must cost less, whichever way it is compared:
 The last rows are classically damped chains (wall.chain's), whose forward run is output-bound: each sensitivity
 has an output of its own and a coupling to the scene's state on top (its equations are driven by dA/dp x). From 64
 stacked DOFs ((P + 1) n) they are solved in modal coordinates (analysis/modal_sensitivity.py); below, by the dense
-stacked system, where the outputs' cost can outweigh the fixed cost a run shares.
+stacked system, where the outputs' cost can outweigh the fixed cost a run shares. Then chains damped at their free end
+alone, which no modes decouple: the stacked system by its arrow structure where that is estimated to cost less
+(solvers/exact/arrow.py), by the sparse action from a few hundred DOFs.
 
 Median wall times in one process, interleaved, after a warm-up of each (the forward run with BLAS on one thread
 where the scene is small, as the sensitivities run it); the ratios against P + 1.
