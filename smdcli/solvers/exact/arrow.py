@@ -185,9 +185,9 @@ class ArrowFlow:
 
     def tables(self, rows: np.ndarray) -> np.ndarray:
         """rows (r, size, in the arrow's order) times the step's powers 1 .. J, (J, r, size), each row reaching the
-        scene's entries and at most one copy's (ArrowFlow.of's check): the first power, then powers k + 1 .. 2k from
-        powers 1 .. k and the kept k-th power, a row on the scene alone by T_w <- T_w E_w, one reaching copy i by
-        (T_w, T_i) <- (T_w E_w + T_i F_i, T_i E). Each T flushed of negligible entries (the rows, where the caller
+        scene's entries and at most one copy's (linear._arrow_flow's check): the first power, then powers k + 1 ..
+        2k from powers 1 .. k and the kept k-th power, a row on the scene alone by T_w <- T_w E_w, one reaching copy
+        i by (T_w, T_i) <- (T_w E_w + T_i F_i, T_i E). Each T flushed of negligible entries (the rows, where the caller
         flushed them, and the arrow have none): no product meets a subnormal number."""
         J, q, lead = self.J, self.q, self.lead
         out = np.zeros((J, len(rows), rows.shape[1]))

@@ -235,10 +235,11 @@ def _solve_runs(model: Model, grid: np.ndarray, runs) -> Solved:
 def _in_blocks(reads: list, k: int, stop: int, z: np.ndarray, flow, seeds) -> np.ndarray:
     """Rows k .. stop - 1 of each read's output from z at row k - 1 (in the flow's order), in blocks of flow.J steps
     (the step's propagator to the 1st .. Jth power: flow.step), the force generators restarted at each block's start
-    (seeds(rows): their states at those rows, (len(rows), m), z's flow.generators): the starts one after another, then every
-    whole block's steps in one matrix product per read (not a product of the stacked powers with each start: twice
-    the speed at size 27, where that is flops, not Python). reads: (R P, columns, out), the read's rows times the
-    powers (J, r, columns) on the state's columns that reach it, and its (N, r) output. The state at stop - 1."""
+    (seeds(rows): their states at those rows, (len(rows), m), z's flow.generators): the starts one after another,
+    then every whole block's steps in one matrix product per read (not a product of the stacked powers with each
+    start: twice the speed at size 27, where that is flops, not Python). reads: (R P, columns, out), the read's rows
+    times the powers (J, r, columns) on the state's columns that reach it, and its (N, r) output. The state at
+    stop - 1."""
     J, size = flow.J, len(z)
     count = stop - k
     whole, rest = divmod(count, J)
@@ -264,8 +265,8 @@ def _arrow_flow(model: Model, grid: np.ndarray, readouts: list, copies: int) -> 
     dense or sparse path _path would take (estimated, the sparse action's without building it): a uniform grid with
     no record's samples between its points, and every readout reading the scene and at most one copy."""
     N, n = len(grid), model.n // (copies + 1)
-    if 2 * model.n < ARROW_STATES or N < 2 or len(_uniform_runs(grid)) > 1 or modal_applies(model) or any(s.exo() is None for s in model.signals) \
-            or sampled.uniform_knots(model, grid) is not None:
+    if 2 * model.n < ARROW_STATES or N < 2 or len(_uniform_runs(grid)) > 1 or modal_applies(model) \
+            or any(s.exo() is None for s in model.signals) or sampled.uniform_knots(model, grid) is not None:
         return None
     for R, _, _ in readouts:
         reached = np.abs(R).reshape(len(R), 2, copies + 1, n).sum(axis=(0, 1, 3))[1:]  # each copy's x and v
