@@ -26,7 +26,9 @@ import numpy as np
 
 from smdcli.solvers.exact.accurate_expm import NEEDED_NORM, PADE_13, THETA_13, flush_negligible
 from smdcli.solvers.exact.dense_flow import DENSE_ENTRY_S, DENSE_FLOP_S
-from smdcli.solvers.exact.sampled import BLOCK, PRODUCT_S
+from smdcli.solvers.base import stated_rounding
+from smdcli.solvers.exact.sampled import BLOCK, PRODUCT_S, recurrence, table_states
+from smdcli.text import plural
 
 _CALL_S = 6e-6  # a numpy call on small arrays
 
@@ -263,3 +265,38 @@ def arrow_cost(q: int, lead: int, copies: int, N: int, rows: int) -> float:
     table, start = _table_and_start(q, lead, copies, rows)
     product = 2 * (q ** 3 + 2 * copies * lead * q * q) * DENSE_FLOP_S
     return (16 + math.log2(J)) * product + J * table + N / J * start + 2 * N * rows * (q + lead) * DENSE_FLOP_S
+
+
+def arrow_sampled_states(model, knots, Aaug: np.ndarray, blocks, copies: int) -> tuple[np.ndarray, float, str] | None:
+    """sampled.sampled_states of a sensitivity system of `copies` copies (the stacked [x; v] (N, 2 (P + 1) n) at the
+    output points, in the stacked order, the stated accuracy and a description) by its arrow: the scene's recurrence
+    over every knot, then every copy's at once, driven by the scene's states through F_i (E, F_i and the generators'
+    columns the step's arrow's blocks): (1 + 2P) (2n)^2 a step where the stacked recurrence takes (2 (P + 1) n)^2.
+    None where the system is not an arrow or its step's exponential not accurate in double."""
+    total = model.n
+    n = total // (copies + 1)
+    form = arrow_form(Aaug, n, copies)
+    found = None if form is None else arrow_expm(form[1], form[2], knots.step)
+    if found is None:
+        return None
+    (order, A_w, _), (step, norm) = form, found
+    lead, q = 2 * n, len(A_w)
+    steps = len(knots.times) - 1
+    w = table_states(blocks, knots.read_at[:-1], 2 * total)  # the generators, in the scene's order as in the stack
+    z = np.zeros(len(Aaug))
+    z[:total], z[total:2 * total] = model.x0, model.v0
+    z = z[order]
+    E = step.X[None, :lead, :lead]
+    scene, scene_chain = recurrence(E, (w @ step.X[:lead, lead:].T)[:, None], z[None, :lead], np.arange(steps + 1),
+                                    flush=True)
+    coupling = step.Y.transpose(2, 0, 1).reshape(q, copies * lead)  # [F_i, the generators' columns] of every copy
+    forced = flush_negligible(scene[:-1, 0] @ coupling[:lead] + w @ coupling[lead:]).reshape(steps, copies, lead)
+    copied, copy_chain = recurrence(E, forced, z[q:].reshape(copies, lead), knots.rows, flush=True)
+    states = np.empty((len(knots.rows), 2 * total))
+    states[:, order[:lead]] = scene[knots.rows, 0]
+    states[:, order[q:]] = copied.reshape(len(knots.rows), copies * lead)
+    stated = stated_rounding(steps + scene_chain + copy_chain, norm)
+    message = (f"ok: {plural(steps, 'step')} between the tables' samples and the output points, each exact for the "
+               f"tables' first-order hold, by the stacked system's arrow (the scene's state of size {lead} and "
+               f"{plural(copies, 'copy', 'copies')})")
+    return states, stated, message

@@ -28,7 +28,7 @@ import numpy as np
 from smdcli.model import Model
 from smdcli.result import Result, SolverStats
 from smdcli.solvers.exact.accurate_expm import flush_negligible
-from smdcli.solvers.exact.arrow import ArrowFlow, arrow_cost
+from smdcli.solvers.exact.arrow import ArrowFlow, arrow_cost, arrow_sampled_states
 from smdcli.solvers.exact.dense_flow import PowersFlow, dense_cost
 from smdcli.solvers.exact.hold import first_order_hold, halved, held_reason, hold_error, hold_response_error
 from smdcli.solvers.base import Solver, Tolerances, make_result, segments, stated_rounding
@@ -187,7 +187,10 @@ def read_exactly(model: Model, grid: np.ndarray, readouts: list, copies: int = 0
         return propagate(model, grid, readouts)
     if path != "sampled":
         return None
-    states, stated, message = sampled.sampled_states(model, knots, *augmented(model))
+    # a record's samples: the copies' recurrence by the arrow where two or more share it (one copy: even, measured)
+    found = arrow_sampled_states(model, knots, *augmented(model), copies) if copies >= 2 and \
+        2 * model.n >= ARROW_STATES else None
+    states, stated, message = found or sampled.sampled_states(model, knots, *augmented(model))
     for R, _, out in readouts:
         np.matmul(states, R.T, out=out)
     _add_forces(model, grid, readouts)

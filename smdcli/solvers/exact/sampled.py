@@ -22,7 +22,7 @@ import numpy as np
 
 from smdcli.model import Model
 from smdcli.shapes.table import Table
-from smdcli.solvers.exact.accurate_expm import propagator
+from smdcli.solvers.exact.accurate_expm import flush_negligible, propagator
 from smdcli.solvers.base import stated_rounding
 from smdcli.text import plural
 
@@ -96,18 +96,23 @@ def block_length(steps: int, systems: int, s: int) -> int:
     return int(max(1, min(BLOCK, steps, round(math.sqrt(steps * PRODUCT_S / (PRODUCT_S + power))))))
 
 
-def recurrence(E: np.ndarray, forced: np.ndarray, start: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, int]:
+def recurrence(E: np.ndarray, forced: np.ndarray, start: np.ndarray, rows: np.ndarray,
+               flush: bool = False) -> tuple[np.ndarray, int]:
     """y_(k+1) = E y_k + forced_k from y_0 = start for independent systems side by side, at the steps `rows`
     (increasing): (len(rows), P, s), and the longest chain of dependent products (the rounding's count). E (P, s, s),
-    forced (steps, P, s), start (P, s). Blocks of J steps: the forced part of every block from rest, step by step
-    across all blocks at once; the blocks' starts one after another; each block's free part one product with E^j.
-    Taken CHUNK_ENTRIES states at a time, so that many systems over many steps need no more."""
+    or (1, s, s) for all; forced (steps, P, s), start (P, s). Blocks of J steps: the forced part of every block from
+    rest, step by step across all blocks at once; the blocks' starts one after another; each block's free part one
+    product with E^j. Taken CHUNK_ENTRIES states at a time, so that many systems over many steps need no more.
+    flush: E's powers and each block's start flushed of negligible entries (accurate_expm.flush_negligible), as the
+    dense path's are: no product meets a subnormal number."""
     steps, P, s = forced.shape
-    J = block_length(steps, P, s)
-    powers = np.empty((J + 1, P, s, s))
+    J = block_length(steps, len(E), s)
+    powers = np.empty((J + 1, len(E), s, s))  # one E for every system (a sensitivity's copies): its powers once
     powers[0] = np.eye(s)
     for j in range(J):
         powers[j + 1] = powers[j] @ E
+        if flush:
+            flush_negligible(powers[j + 1])
     chunk = max(J, CHUNK_ENTRIES // (P * s * J) * J)
     out = np.empty((len(rows), P, s))
     y = np.array(start, dtype=float)
@@ -122,8 +127,12 @@ def recurrence(E: np.ndarray, forced: np.ndarray, start: np.ndarray, rows: np.nd
             within[:, j + 1] = applied(E, within[:, j]) + padded[:, j]
         starts = np.empty((count + 1, P, s))
         starts[0] = y
+        if flush:
+            flush_negligible(within)
         for b in range(count):
             starts[b + 1] = applied(powers[J], starts[b]) + within[b, J]
+            if flush:
+                flush_negligible(starts[b + 1])
         if E.shape[0] == 1:  # one E: one product for all blocks, systems and powers
             free = (starts[:count].reshape(count * P, s) @ powers[:J, 0].transpose(0, 2, 1))  # (J, count P, s)
             states = within[:, :J] + free.reshape(J, count, P, s).transpose(1, 0, 2, 3)
