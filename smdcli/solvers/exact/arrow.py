@@ -27,7 +27,7 @@ import numpy as np
 from smdcli.solvers.exact.accurate_expm import NEEDED_NORM, PADE_13, THETA_13, flush_negligible
 from smdcli.solvers.exact.dense_flow import DENSE_ENTRY_S, DENSE_FLOP_S
 from smdcli.solvers.base import stated_rounding
-from smdcli.solvers.exact.sampled import BLOCK, PRODUCT_S, recurrence, table_states
+from smdcli.solvers.exact.sampled import BLOCK, recurrence, table_states
 from smdcli.text import plural
 
 _CALL_S = 6e-6  # a numpy call on small arrays
