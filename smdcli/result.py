@@ -122,8 +122,10 @@ class ElementForces:
     internal: dict = field(default_factory=dict)  # "spring[0].plastic_deformation" -> (N,): hysteretic variables
 
     def tension(self, name: str) -> np.ndarray:
-        """A spring's or damper's tension (N,) by its name (spring[0], damper[1]); KeyError where none has it."""
-        for names, table in ((self.spring_names, self.spring), (self.damper_names, self.damper)):
+        """An element's tension (N,) by its name (spring[0], damper[1], friction[0], stop[0]); KeyError where none has
+        it."""
+        for names, table in ((self.spring_names, self.spring), (self.damper_names, self.damper),
+                             (self.friction_names, self.friction), (self.stop_names, self.stop)):
             if name in names:
                 return table[:, names.index(name)]
         raise KeyError(name)

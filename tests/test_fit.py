@@ -217,6 +217,33 @@ def test_fewer_samples_than_parameters_is_refused(cli, tmp_path):
     assert ran.exit_code == 2 and "cannot determine 3 parameters" in ran.output, ran.output
 
 
+def test_a_bouc_wen_spring_is_identified_from_its_load_cell_by_the_cli(cli, tmp_path):
+    """A hysteresis test of the Bouc-Wen law as published: its load cell in kN and its displacement in mm from
+    DOP853 at rtol 1e-13 (spring[0].force [kN], m.displacement [mm]); `smd fit` recovers k, alpha and beta from 30 %
+    off to 1e-6, the force's Jacobian from the sensitivities of d and z; the fitted file plots both channels."""
+    import h5py
+    from test_sensitivity import BOUC_WEN
+
+    truth, _, _ = model_of(BOUC_WEN, "truth.toml")
+    run = smdcli.simulate(truth, method="DOP853", rtol=1e-13, atol=1e-18)
+    force = run.elements.tension("spring[0]")
+    data = _csv(tmp_path / "cell.csv", "time,spring[0].force [kN],m.displacement [mm]\n" + "".join(
+        f"{float(t)!r},{float(f) / 1e3!r},{float(x) * 1e3!r}\n"
+        for t, f, x in zip(run.time[1:], force[1:], run.displacement[1:, 0])))
+    want = {"spring[0].k": 1.0e5, "spring[0].alpha": 0.5, "spring[0].beta": 800.0}
+    scene = tmp_path / "specimen.toml"
+    scene.write_text(BOUC_WEN.replace("k = 1.0e5", "k = 1.3e5").replace("alpha = 0.5", "alpha = 0.35").replace(
+        "beta = 800.0", "beta = 1040.0"))
+    ran = cli("fit", scene, "--data", data, *[a for p in want for a in ("--param", p)], "-o", tmp_path / "out",
+              "--json")
+    assert ran.exit_code == 0, ran.output
+    estimate = np.array([p["estimate"] for p in json.loads(ran.stdout)["parameters"]])
+    assert np.abs(estimate / list(want.values()) - 1).max() <= 1e-6
+    with h5py.File(tmp_path / "out" / "specimen_fit.h5") as f:
+        assert set(f["fitted"]) == {"spring[0].force", "m.displacement"}
+    assert (tmp_path / "out" / "specimen_fit.png").exists()
+
+
 def test_the_cli_writes_the_contract_and_a_scene_that_runs(cli, tmp_path):
     """[fit] in the scenario, --json strict, the file's data sets, the fitted TOML run by smd simulate with the
     estimates in it; --max-iterations 1 stops unconverged with exit 1, the best point written."""
@@ -322,10 +349,10 @@ def test_a_cubic_spring_s_and_a_quadratic_damper_s_force_derivatives_match_diffe
             assert error <= 1e-7, (path, p, error)
 
 
-def test_a_cubic_spring_is_fitted_to_its_force_in_kn_and_a_yielding_one_s_force_is_refused(cli, tmp_path):
+def test_a_cubic_spring_is_fitted_to_its_force_in_kn_and_a_hysteretic_one_s_beside_friction_is_refused(cli, tmp_path):
     """A load cell's channel with its unit, spring[0].force [kN] (the header's element index and unit were read
-    as one name and refused before): k, k3 and the quadratic damper's c from 30 % off, to 1e-6. A yielding
-    spring's force depends on its history: one line, exit 2."""
+    as one name and refused before): k, k3 and the quadratic damper's c from 30 % off, to 1e-6. A Bouc-Wen
+    spring's force beside a friction contact (events beside smooth terms) has no derivatives: one line, exit 2."""
     from smdcli.analysis.fit_data import read_measured
 
     truth, _, _ = model_of(_law_scene(), "laws.toml")
@@ -339,10 +366,11 @@ def test_a_cubic_spring_is_fitted_to_its_force_in_kn_and_a_yielding_one_s_force_
     found = fit([make_test(start, read_measured(csv), None, None)], list(want))
     assert found.converged, found.message
     assert np.abs(found.estimate / list(want.values()) - 1).max() <= 1e-6
-    scene = tmp_path / "yield.toml"
+    scene = tmp_path / "hysteretic.toml"
     scene.write_text(one_dof(1.6, k=400.0, x0=0.05, end=1.0, step=0.01).replace(
-        "k = 400.0", 'k = 400.0\nlaw = "elastoplastic"\nfy = 15.0'))
+        "k = 400.0", 'k = 400.0\nlaw = "bouc_wen"\nalpha = 0.5\nbeta = 20.0\ngamma = 20.0\nn = 1.0') +
+        '[[friction]]\nconnects = ["ground", "m"]\nforce = 0.5\n')
     ran = cli("fit", scene, "--data", _csv(tmp_path / "f.csv", "time,spring[0].force [N]\n0.1,1.0\n0.2,2.0\n"),
-              "--param", "spring[0].fy", "-o", tmp_path / "out")
+              "--param", "spring[0].beta", "-o", tmp_path / "out")
     assert ran.exit_code == 2 and "depends on its history" in ran.output, ran.output
     assert len(ran.output.strip().splitlines()) == 1 and not (tmp_path / "out").exists()

@@ -156,8 +156,8 @@ ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
 
 def _big_sweep(tmp_path, *extra: str) -> list[str]:
-    """`smd sweep` of 2,400 fixed-step members (12 chunks, about 10 s) as a command line, -o still to add."""
-    scene = write(tmp_path, one_dof(0.5, end=2.5, step=0.001))
+    """`smd sweep` of 2,400 fixed-step members (12 chunks, about 5 s) as a command line, -o still to add."""
+    scene = write(tmp_path, one_dof(0.5, end=1.25, step=0.001))
     return [sys.executable, "-m", "smdcli", "sweep", str(scene), "--param", "damper[0].c", "--values",
             "linspace(0.1, 20, 300)", "--param", "spring[0].k", "--values", "linspace(10, 100, 8)", "--keep",
             "metrics", "--no-plots", "--quiet", "--method", "rk4", *extra]

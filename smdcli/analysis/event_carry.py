@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from smdcli.model.nonsmooth import whole_tension
 from smdcli.solvers.exact.sampled import reseeded_steps
 
 FEW_BREAKS = 32  # breaks up to which a carry steps from one to the next (a recurrence's set-up costs more)
@@ -27,6 +28,9 @@ class CarriedSensitivities:
     _carried: dict[int, dict[float, np.ndarray]] | None = None
     _generators: np.ndarray | None = None
     _breaks_seen: set[float] | None = None
+    _output_states: tuple | None = None  # outputs()'s checkpoint of each output point and [z; S] there
+    output_rows = slice(None)  # the output points on the grid asked for (a finely held run's: every per_step-th)
+    coarse = None  # a finely held run's twin at half as many samples (event_sensitivities), for Richardson's rule
 
     # ----------------------------------------------------------------------------- carrying S
     def carry(self, Z: np.ndarray, t_from: float, t_to: float, checkpoint: tuple, augmented=None) -> np.ndarray:
@@ -154,7 +158,40 @@ class CarriedSensitivities:
             rates_out[:len(grid)][at] = (Zs[at] @ big[s:].T + forcing[s:]).reshape(-1, P, s)
         edged = list(self.edges)
         S_out[:, edged], rates_out[:, edged] = np.nan, np.nan
+        self._output_states = segments, Zs
         return S_out, rates_out
+
+    def tensions(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every nonsmooth element's tension at the output points (N, E) and its scaled derivatives (N, P, E), after
+        outputs(): in a checkpoint's mode a tension is a row of the state plus a constant (a held element's, the
+        constraint's force), T = R z + c, so scale_i dT/dp_i = R s_i + (d R z + d c), the last two the total
+        derivative of the mode's rows along the parameter with its internal variables' sensitivities (a plastic
+        deformation's moves c); nan where the response has no derivative."""
+        segments, Zs = self._output_states
+        N, P, s, E = len(self.grid), self.P, self.scene.size, len(self.scene.elements)
+        tension, derived = np.full((N, E), np.nan), np.full((N, P, E), np.nan)
+        for j in np.unique(segments):
+            _, _, _, states_c, dq_c = self.checkpoints[j]
+            at = np.flatnonzero(segments == j)
+            z, S = Zs[at, :s], Zs[at, s:].reshape(len(at), P, s)
+            rows, const = _whole_rows(self.scene, self.scene.mode(states_c))
+            tension[at] = z @ rows.T + const
+            for i in range(P):
+                def read(scene, c, i=i):
+                    return np.concatenate(_whole_rows(scene, scene.mode(self.shifted(states_c, i, c, dq_c))), axis=None)
+                flat = self.total(i, read)
+                derived[at, i] = S[:, i] @ rows.T + z @ flat[:E * s].reshape(E, s).T + flat[E * s:]
+        derived[:, list(self.edges)] = np.nan
+        return tension, derived
+
+    def grid_tensions(self) -> tuple[np.ndarray, np.ndarray]:
+        """tensions() on the grid asked for, combined by Richardson's rule with the coarse twin's where the forces
+        were held finely, as the state is."""
+        tension, derived = (q[self.output_rows] for q in self.tensions())
+        if self.coarse is not None:
+            coarse = [q[self.coarse.output_rows] for q in self.coarse.tensions()]
+            tension, derived = (4.0 * tension - coarse[0]) / 3.0, (4.0 * derived - coarse[1]) / 3.0
+        return tension, derived
 
     def _stepped(self, Z: np.ndarray, t_c: float, times: np.ndarray, checkpoint: tuple, augmented) -> np.ndarray | None:
         """[z; S] at evenly spaced output times from its checkpoint (Z there), all at once: by doubling where no
@@ -213,3 +250,9 @@ class CarriedSensitivities:
     def at(self, t: float) -> np.ndarray:
         """S at time t (nan where the response has no derivative), from the last checkpoint before it."""
         return self.state_at(t)[1]
+
+
+def _whole_rows(scene, mode) -> tuple[np.ndarray, np.ndarray]:
+    """(rows (E, s), constants (E,)) of each element's whole tension in a mode, rows z + constants: the law's and the
+    stiffness kept in K (whole_tension's, a bilinear spring's b k)."""
+    return whole_tension(scene.elements, mode.tension_rows.T, mode.d_rows.T).T, mode.tension_const

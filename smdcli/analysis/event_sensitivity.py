@@ -395,7 +395,7 @@ def event_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gri
     stated = run.stated(len(run.events))
     if per_step > 1:
         n = model.n
-        xc, vc, ac, Sc, d_ac, _ = _sampled_run(model, derivatives, scales, grid, per_step // 2)
+        xc, vc, ac, Sc, d_ac, run.coarse = _sampled_run(model, derivatives, scales, grid, per_step // 2)
         gap = max(_gap((x, S[:, :, :n]), (xc, Sc[:, :, :n])), _gap((v, S[:, :, n:]), (vc, Sc[:, :, n:])),
                   _gap((a, d_a), (ac, d_ac)))
         stated = max(stated, 2.0 / 3.0 * gap)
@@ -434,5 +434,5 @@ def _sampled_run(model: Model, derivatives: list, scales: np.ndarray, grid: np.n
     x, v, a, _ = run.run()
     n = model.n
     S, rates = run.outputs()
-    rows = slice(None, None, per_step)
+    run.output_rows = rows = slice(None, None, per_step)
     return x[rows], v[rows], a[rows], S[rows, :, :2 * n], rates[rows, :, n:2 * n], run

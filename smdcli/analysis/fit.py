@@ -24,6 +24,8 @@ import numpy as np
 
 from smdcli.analysis.fit_data import Measured, quantity_of
 from smdcli.analysis.sensitivity import sensitivity
+from smdcli.analysis.sensitivity_result import TENSIONS_REFUSED
+from smdcli.analysis.smooth_sensitivity import smooth_refusal
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.resources import small_blas
 from smdcli.scenario import Scenario
@@ -96,20 +98,21 @@ def make_test(sc: Scenario, measured: Measured, channels: tuple[str, ...] | None
 
     model = build(sc)
     chosen = tuple(channels) if channels else tuple(measured.channels)
-    elements = {e.name for e in model.elements}  # springs and dampers whose force is a law of x and v alone
-    remembering = {e.path: e.law_label for e in model.nonsmooth}
+    remembering = {e.path: e.law_label for e in model.nonsmooth}  # hysteretic springs, friction contacts, stops
+    elements = {e.name for e in model.elements} | set(remembering)
     for channel in chosen:
         if channel not in measured.channels:
             raise UsageError(f"{measured.file}: no column {channel!r} (its columns: {', '.join(measured.channels)})")
         owner = channel.rsplit(".", 1)[0]
         quantity = quantity_of(channel)
-        if quantity == "force" and owner in remembering:
+        if quantity == "force" and owner in remembering and not model.is_piecewise_linear and \
+                smooth_refusal(model) is not None:
             raise UsageError(f"{measured.file}: column {channel!r}: {owner} ({remembering[owner]}) has a force that "
-                             "depends on its history, and a fit to it is not built; fit the masses' motion "
+                             f"depends on its history: {TENSIONS_REFUSED}; fit the masses' motion "
                              "(<mass>.displacement, velocity or acceleration)")
         if (quantity == "force" and owner not in elements) or (quantity != "force" and owner not in model.dofs):
             names = sorted(elements) if quantity == "force" else list(model.dofs)
-            what, those = ("element", "springs and dampers") if quantity == "force" else ("mass", "masses")
+            what, those = ("element", "elements") if quantity == "force" else ("mass", "masses")
             raise UsageError(f"{measured.file}: column {channel!r} names no {what} of {sc.path} (its {those}: "
                              f"{', '.join(names)})")
     for name in weights or {}:

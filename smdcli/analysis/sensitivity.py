@@ -14,12 +14,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from smdcli.analysis.model_derivative import augmented_model, model_derivatives
+from smdcli.analysis.sensitivity_result import METHOD, QUANTITIES, Sensitivity
 from smdcli.analysis.stacked_blocks import accelerations_after
 from smdcli.analysis.sensitivity_cost import forward_time, load_code, median_time
 from smdcli.analysis.sensitivity_limits import refuse, too_many_dofs, too_much_memory
@@ -34,7 +33,6 @@ from smdcli.solvers.ground import across_jumps
 from smdcli.solvers.peaks import jump_times, located_peaks, quintic_each
 from smdcli.solvers.registry import get_solver
 
-QUANTITIES = {"displacement": "m", "velocity": "m/s", "acceleration": "m/s^2"}
 ACCELERATIONS_AFTER = 30  # DOFs from which a linear scene's accelerations are found after its x and v (_linear)
 SMOOTH_ERROR = 100  # a smooth scene's stated error, in units of its rtol: DOP853's global error over its local one
 EVENT_METHOD = ("exact, event to event: between events the scene and its sensitivity equations solved together by "
@@ -42,105 +40,6 @@ EVENT_METHOD = ("exact, event to event: between events the scene and its sensiti
                 "state's jump across it (the saltation), internal variables (plastic deformation) carried with "
                 "their own sensitivities; the model's derivatives taken on the assembled scene (a five-point "
                 "stencil in each parameter)")
-METHOD = ("exact: the scene and its sensitivity equations (the same M, C and K driven by -dM x'' - dC x' - dK x + "
-          "B du/dp) solved together by the matrix exponential; the model's derivatives taken on the assembled model "
-          "(one difference where every number of the model is affine in the parameter, else a five-point stencil, "
-          "exact for polynomials of degree 4: every matrix, initial state and force generator of a linear scene)")
-
-
-@dataclass
-class Sensitivity:
-    """A scene's response and its derivatives with respect to P parameters (per unit of each)."""
-
-    scenario: str
-    parameter: tuple[str, ...]
-    value: np.ndarray  # (P,) the nominal values
-    parameter_units: tuple[str, ...]
-    time: np.ndarray
-    dof: tuple[str, ...]
-    displacement: np.ndarray  # (N, n)
-    velocity: np.ndarray
-    acceleration: np.ndarray
-    d_displacement: np.ndarray  # (P, N, n)
-    d_velocity: np.ndarray
-    d_acceleration: np.ndarray
-    peak_displacement: np.ndarray  # (n,)
-    peak_time: np.ndarray  # (n,)
-    d_peak_displacement: np.ndarray  # (P, n)
-    accuracy: dict[str, np.ndarray]  # per data set, (P,): stated error relative to the parameter's largest value
-    method: str = METHOD
-    model_error: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (P,) the stencil's estimated error
-    wall_time_s: float = 0.0
-    forward_time_s: float = 0.0  # a forward run of the scene (sensitivity_cost.forward_time), for the comparison
-    notes: tuple[str, ...] = ()
-    outputs: list[Path] = field(default_factory=list)
-    model: object = None  # the scene's Model
-    derivatives: list = field(default_factory=list)  # model_derivative.Derivative per parameter
-    event_times: np.ndarray = field(default_factory=lambda: np.zeros(0))  # where the solution is not smooth
-    exact_at: Callable | None = None  # t -> (P, n) d_displacement at any time, on the exact flow (event runs)
-    # t -> ((2n,) x and v, (P, 2n) their derivatives) at any time, on the exact flow (event runs)
-    exact_state_at: Callable | None = None
-    # an event run's checkpoints (its start, each event and each break): (t, the nonsmooth elements' states, each
-    # element's internal variables' derivatives {name: (P,)}, per unit of each parameter)
-    law_states: list = field(default_factory=list)
-    # (t, left) -> (a, a', d a/dp, d a'/dp): the relative acceleration and its rate (n,), their derivatives (P, n),
-    # at any time on the exact flow (event runs), right limits or (left) before an event at t
-    exact_rates_at: Callable | None = None
-    # (t, left) -> (a, d a/dp): the relative acceleration (n,) and its derivatives (P, n) at any time on a smooth
-    # run's dense output; its attribute breaks: where the integration restarted (a kink, a force's break)
-    dense_acceleration_at: Callable | None = None
-    event_moves: dict = field(default_factory=dict)  # each event's time -> (P,) dt*/dp: how it moves (event runs)
-
-    def ground_acceleration(self, times=None, rate: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
-        """The support's acceleration at times (the grid by default) (N,) and its derivative (P, N), or None without
-        support motion: what turns the relative acceleration into the absolute one an accelerometer reads. With
-        rate, its time derivative (right limits; None where the motion has none)."""
-        if self.model is None or self.model.ground is None:
-            return None
-        from smdcli.model.system import GROUND_DOF
-
-        ground = [j for j, dof in enumerate(self.model.force_dofs) if dof == GROUND_DOF]
-        at = self.time if times is None else np.asarray(times, dtype=float)
-
-        def of(model):
-            signals = [model.signals[j] for j in ground]
-            if rate:
-                signals = [signal.derivative(float(self.time[0])) for signal in signals]
-                if any(signal is None for signal in signals):
-                    raise NotImplementedError
-            return sum(np.broadcast_to(signal.value(at), at.shape) for signal in signals)
-        try:
-            return of(self.model), np.array([d.of(of) for d in self.derivatives]).reshape(len(self.derivatives), -1)
-        except NotImplementedError:
-            return None
-
-    def element_tension(self, path: str) -> tuple[np.ndarray, np.ndarray]:
-        """A spring's or damper's tension on the grid (N,) and its derivative (P, N): linear, cubic or quadratic (a
-        law of x and v alone; T = c d, k d + k3 d^3 or c |d| d of its stretch or stretch rate d = q_b - q_a), its
-        derivative the law's own at the state plus its tangent times d's."""
-        from smdcli.analysis.forces import element_forces, element_stretch, law_slope
-
-        def tension(model):  # at the scene's state, of the model as given (a parameter moved in it, or not)
-            return element_forces(model, self.displacement, self.velocity).tension(path)
-
-        nominal = tension(self.model)  # KeyError where no spring or damper has the name
-        element = next(e for e in self.model.elements if e.name == path)
-        own, d_own = ((self.displacement, self.d_displacement) if element.kind == "spring" else
-                      (self.velocity, self.d_velocity))
-        slope = law_slope(element, element_stretch(element, own))
-        derived = [at.of(tension) + slope * element_stretch(element, s) for at, s in zip(self.derivatives, d_own)]
-        return nominal, np.array(derived).reshape(len(self.derivatives), -1)
-
-    def units(self, quantity: str) -> tuple[str, ...]:
-        """The units of d_<quantity>, one per parameter: m/(N/m), m/kg, ..."""
-        return tuple(derivative_units(QUANTITIES[quantity], u) for u in self.parameter_units)
-
-
-def derivative_units(of: str, parameter: str) -> str:
-    """The units of d(of)/d(parameter): m/(N/m), m/kg, m for a dimensionless parameter."""
-    if parameter in ("", "1"):
-        return of
-    return f"{of}/({parameter})" if any(c in parameter for c in "/*^ ") else f"{of}/{parameter}"
 
 
 def sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None = None, timed: bool = False,
@@ -220,16 +119,17 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
     derivatives = model_derivatives(sc, base, grid, list(params), doc, flowed=linear)
     n, P = base.n, len(derivatives)
     tol = Tolerances()
-    run = dense = mixed = None
+    run = dense = mixed = tensions = None  # tensions: the nonsmooth elements' tensions and derivatives, on call
     scales = block_scales(derivatives)
     if linear:
         values, stated, method = _linear(sc, base, derivatives, grid, tol)
     else:
         if piecewise:
             blocks, stated, run = _events(base, derivatives, scales, grid)
+            tensions = run.grid_tensions
             method = f"{EVENT_METHOD}; {run.held}" if run.held else EVENT_METHOD
         else:
-            blocks, stated, dense, method, mixed = _smooth(sc, base, derivatives, scales, grid, advance)
+            blocks, stated, dense, method, mixed, tensions = _smooth(sc, base, derivatives, scales, grid, advance)
         values = _split(blocks, scales)
     nominal = {q: values[i, 0] for i, q in enumerate(QUANTITIES)}
     derived = {q: values[i, 1:] for i, q in enumerate(QUANTITIES)}
@@ -253,8 +153,10 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
         accuracy[q] = np.full(1, stated)
     if not peaks:
         nan = np.full(n, np.nan)
-        return _result(sc, params, derivatives, grid, base, nominal, derived, nan, nan, np.full((P, n), np.nan),
-                       accuracy, (), method)
+        found = _result(sc, params, derivatives, grid, base, nominal, derived, nan, nan, np.full((P, n), np.nan),
+                        accuracy, (), method)
+        found.law_tensions = _law_tensions(base, tensions, scales)
+        return found
     notes = []
     evented = run if run is not None else mixed  # the events' run, where the scene has events
     if evented is not None and evented.undefined_from is not None:
@@ -287,6 +189,7 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
                     tuple(notes), method)
     found.event_times = events
     found.dense_acceleration_at = dense
+    found.law_tensions = _law_tensions(base, tensions, scales)
     if run is not None:
         found.exact_at = lambda t: run.at(t)[:, :n] / scales[:, None]
 
@@ -304,6 +207,22 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
         found.law_states = [(t, states, [{name: value / scales for name, value in d.items()} for d in dq])
                             for t, _, _, states, dq in run.checkpoints]
     return found
+
+
+def _law_tensions(base: Model, source, scales: np.ndarray) -> Callable | None:
+    """path -> a nonsmooth element's tension on the grid (N,) and its derivatives (P, N), from source() (all the
+    elements' (N, E) and their scaled derivatives (N, P, E), taken on first use); None without a source."""
+    if source is None:
+        return None
+    paths = [element.path for element in base.nonsmooth]
+    table = []
+
+    def tensions(path: str) -> tuple[np.ndarray, np.ndarray]:
+        if not table:
+            table.extend(source())
+        e = paths.index(path)
+        return table[0][:, e], table[1][:, :, e].T / scales[:, None]
+    return tensions
 
 
 def _unmoved(dofs, peaks: np.ndarray, still: np.ndarray, floor: float) -> list[str]:
@@ -422,8 +341,9 @@ def _events(base, derivatives: list, scales: np.ndarray, grid: np.ndarray) -> tu
 def _smooth(sc: Scenario, base, derivatives: list, scales: np.ndarray, grid: np.ndarray, advance=None) -> tuple:
     """The same blocks for a smooth nonlinear scene, by the forward sensitivity equations (smooth_sensitivity.py)
     at rtol 1e-9 or the scenario's tighter one; its stated accuracy SMOOTH_ERROR times that rtol, its dense
-    accelerations and how the equations were integrated."""
-    from smdcli.analysis.smooth_sensitivity import RTOL, smooth_refusal, smooth_sensitivities
+    accelerations, how the equations were integrated, the mixed run (events beside smooth terms) if one, and its
+    laws' tensions on call (not beside events)."""
+    from smdcli.analysis.smooth_sensitivity import RTOL, smooth_refusal, smooth_sensitivities, smooth_tensions
 
     rtol, mixed = min(RTOL, sc.solver.rtol), None
     if smooth_refusal(base) is None:
@@ -445,4 +365,5 @@ def _smooth(sc: Scenario, base, derivatives: list, scales: np.ndarray, grid: np.
         rate, d_rate = rates_at(t, left)
         return rate[n:2 * n], d_rate[n:2 * n].T / scales[:, None]
     acceleration_at.breaks = rates_at.breaks
-    return blocks, SMOOTH_ERROR * rtol, acceleration_at, method, mixed
+    tensions = None if mixed is not None else lambda: smooth_tensions(base, derivatives, scales, y, S)
+    return blocks, SMOOTH_ERROR * rtol, acceleration_at, method, mixed, tensions

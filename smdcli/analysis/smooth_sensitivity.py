@@ -24,6 +24,7 @@ from smdcli.analysis.signal_derivative import combined
 from smdcli.elements.base import KINK
 from smdcli.errors import SolverFailed
 from smdcli.model import Model
+from smdcli.model.nonsmooth import whole_tension
 
 # what smd sensitivity answers, as its refusals name it (here and event_sensitivity's)
 ANSWERED = ("linear scenes; elastoplastic, bilinear, Clough and Iwan springs, Coulomb friction and stops; cubic "
@@ -112,6 +113,19 @@ class _Flow:
         out[n:2 * n] = model.Minv @ F
         return out
 
+    def tensions(self, y: np.ndarray) -> np.ndarray:
+        """Each element's whole tension (N, E) at the states y (N, s): its piece's k d + c d' + constant and its
+        smooth term (a Bouc-Wen spring's (1 - alpha) k z), as f applies them, and the stiffness kept in K."""
+        n = self.n
+        d, rate = y[:, :n] @ self.R.T, y[:, n:2 * n] @ self.R.T + self.belts
+        out = np.empty_like(d)
+        for e, piece in enumerate(self.pieces):
+            out[:, e] = piece.stiffness * d[:, e] + piece.damping * rate[:, e] + piece.constant
+            if piece.nonlinear is not None:
+                out[:, e] += [piece.nonlinear(d[k, e], rate[k, e], self._live(e, row).internal)
+                              for k, row in enumerate(y)]
+        return whole_tension(self.elements, out, d)
+
     def jacobian(self, t: float, y: np.ndarray) -> np.ndarray:
         """df/dy at (t, y), analytic."""
         n, model = self.n, self.model
@@ -154,6 +168,29 @@ class _Flow:
                     row[part.start + names.index(key.split(":", 1)[1])] = 1.0
                     out.append((row, 0.0))
         return out
+
+
+def smooth_tensions(model: Model, derivatives: list, scales: np.ndarray, y: np.ndarray,
+                    S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each nonsmooth element's tension (N, E) at a smooth run's states y (N, s) and its scaled derivatives
+    (N, P, E) from their sensitivities S (N, s, P): the law's slopes in d, d' and its internal variables times theirs,
+    plus the stencil's partial derivative at the state."""
+    flow = _Flow(model)
+    n, tension = model.n, flow.tensions(y)
+    derived = np.empty((len(y), len(derivatives), len(flow.elements)))
+    for i, (d, scale) in enumerate(zip(derivatives, scales)):
+        derived[:, i] = combined(d.weights * scale, [tension if m is model else _Flow(m).tensions(y) for m in d.models])
+    for e, (element, piece, part) in enumerate(zip(flow.elements, flow.pieces, flow.slices)):
+        row = flow.R[e]
+        slopes = np.array([element.law.smooth_jacobian(flow._live(e, state), float(state[:n] @ row),
+                                                       float(state[n:2 * n] @ row + flow.belts[e]))[0]
+                           for state in y]).reshape(len(y), -1)
+        slopes[:, 0] += piece.stiffness + element.law.linear_stiffness
+        slopes[:, 1] += piece.damping
+        moved = np.concatenate([np.einsum("j,kjp->kp", row, S[:, :n])[:, None],
+                                np.einsum("j,kjp->kp", row, S[:, n:2 * n])[:, None], S[:, part]], axis=1)
+        derived[:, :, e] += np.einsum("kq,kqp->kp", slopes, moved)
+    return tension, derived
 
 
 def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, grid: np.ndarray, rtol: float,
