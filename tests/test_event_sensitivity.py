@@ -121,11 +121,14 @@ def dop853_tension_differences(sc, s, path, element, relative=1e-4):
     # its hardening stiffness b k kept in K, the law's part beside it
     ("bilinear", ELASTOPLASTIC.replace('law = "elastoplastic"', 'law = "bilinear"\nhardening = 0.1'),
      ["spring[0].k", "spring[0].fy", "spring[0].hardening"], "spring[0]"),
+    ("iwan", ELASTOPLASTIC.replace('law = "elastoplastic"\nk = 400.0\nfy = 20.0',
+                                   'law = "iwan"\nk = [250.0, 150.0]\nfy = [10.0, 15.0]').replace("end = 1.2", "end = 3.0"),
+     ["spring[0].k[0]", "spring[0].fy[1]", "damper[0].c"], "spring[0]"),
     # a plastic stop (restitution 0) the sine holds the mass against for a while each cycle: its contact force
     ("resting on a stop", ELASTOPLASTIC.replace('law = "elastoplastic"\n', "").replace("fy = 20.0\n", "").replace(
         "end = 1.2", "end = 2.0") + '[[stop]]\nconnects = ["ground", "m1"]\nmin = -0.02\nmax = 0.03\n'
      'restitution = 0.0\n', ["spring[0].k", "stop[0].max", "force[0].amplitude"], "stop[0]"),
-], ids=["yielding", "stick-slip", "clough", "bilinear", "stop"])
+], ids=["yielding", "stick-slip", "clough", "bilinear", "iwan", "stop"])
 def test_a_hysteretic_spring_s_and_a_contact_s_force_match_differences_of_dop853(name, text, paths, element):
     """The force of an element with a history (a plastic deformation, a stuck contact's or a resting stop's held
     force) and its derivatives, T = R z + c in each mode: the run's own force equal to simulate's, and each
