@@ -53,7 +53,8 @@ def dop853_differences(sc, s, paths, relative=1e-4):
 def away_from_events(sc, s, margin=1e-3):
     """The samples farther than margin from every event of the nominal run: a sample an event passes within the
     differences' offsets is no place to difference a response that jumps in slope there."""
-    times = np.array([t for t, _, _ in smdcli.simulate(sc, method="exact").nonsmooth.events])
+    times = np.array([t for t, _, _ in smdcli.simulate(sc, method="exact").nonsmooth.events] +
+                     [t for t, _, _ in s.model.jumps])  # and the ground's jumps (DOP853's sample there: the left limit)
     if not len(times):
         return np.ones(len(s.time), dtype=bool)
     return np.abs(s.time[:, None] - times[None, :]).min(axis=1) > margin
@@ -145,6 +146,38 @@ def test_a_hysteretic_spring_s_and_a_contact_s_force_match_differences_of_dop853
         assert clear.mean() > 0.8
         error = np.abs(derived[i][clear] - want[clear]).max() / np.abs(want).max()
         assert error <= 1e-7, (path, error)
+
+
+UNFORCED_STOREY = ELASTOPLASTIC.split("[[force]]")[0]
+
+
+@pytest.mark.parametrize("ground, paths", [
+    # a rectangle pulse of ground velocity: the state's velocity jumps by -0.16 m/s at its ends (its amplitude's
+    # derivative, and a mass's and the damper's through the impulse c du it passes); the storey yields after
+    ('quantity = "velocity"\ntype = "pulse"\namplitude = 1.6\nt0 = 0.2\nduration = 0.3',
+     ["spring[0].k", "spring[0].fy", "damper[0].c", "ground_motion.amplitude", "mass.m1.m"]),
+    # a rectangle pulse of ground displacement, 0.12 m: the storey yields through each jump (its plastic
+    # deformation set by the law's own jump at the moved point)
+    ('quantity = "displacement"\ntype = "pulse"\namplitude = 0.12\nt0 = 0.2\nduration = 0.5',
+     ["spring[0].k", "spring[0].fy", "damper[0].c", "ground_motion.amplitude"]),
+], ids=["velocity pulse", "displacement pulse"])
+def test_a_yielding_storey_under_ground_jumps_matches_differences_of_dop853(ground, paths):
+    """The ground's displacement or velocity jumps: the relative state jumps, and so do its sensitivities, by each
+    parameter's derivative of the jump; to 1e-7 of each parameter's largest (measured 1.1e-10 to 1.6e-8)."""
+    sc, _, _ = model_of(UNFORCED_STOREY + f"[ground_motion]\n{ground}\n", "pulse.toml")
+    check_against_dop853(sc, paths)
+
+
+def test_a_ground_jump_while_a_contact_is_held_has_no_derivative_after_it():
+    """A velocity pulse that starts while the Coulomb block is stuck: the contact's decision at the jump is not
+    differentiated; from the jump on, nan and a note."""
+    text = (SCENARIOS / "coulomb_free_decay.toml").read_text() + \
+        '\n[ground_motion]\nquantity = "velocity"\ntype = "pulse"\namplitude = 0.05\nt0 = 2.0\nduration = 0.3\n'
+    sc, _, _ = model_of(text, "held.toml")
+    s = smdcli.sensitivity(sc, ["spring[0].k"])
+    assert len(s.notes) == 1 and "from t = 2 s" in s.notes[0] and "held contact" in s.notes[0], s.notes
+    before = s.time < 2.0
+    assert np.isfinite(s.d_displacement[0][before]).all() and np.isnan(s.d_displacement[0][~before]).all()
 
 
 def test_a_graze_has_no_derivative_and_says_so():

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from smdcli.analysis.event_edges import continuous, with_continuous
 from smdcli.model.nonsmooth import whole_tension
 from smdcli.solvers.exact.sampled import reseeded_steps
 
@@ -108,9 +109,9 @@ class CarriedSensitivities:
         if self._seed_table is None:
             at = self.break_times
 
-            def reseeded(scene, c):
-                return np.hstack([signal.exo_states(at) for _, _, signal, _ in scene.blocks])
-            own = np.hstack([signal.exo_states(at) for _, _, signal, _ in self.scene.blocks])
+            def reseeded(scene, c):  # (breaks, generators); none where only the ground's jumps break the run
+                return np.hstack([np.zeros((len(at), 0))] + [signal.exo_states(at) for _, _, signal, _ in scene.blocks])
+            own = reseeded(self.scene, 0.0)
             seeds = np.hstack([own] + [self.total(i, reseeded) for i in range(self.P)])
             self._seed_table = {float(t): row for row, t in enumerate(at)}, seeds
         return self._seed_table
@@ -121,6 +122,55 @@ class CarriedSensitivities:
         table, seeds = self._seeds_table()  # t is a break: carry and cross_break reseed nowhere else
         Z[self._generator_columns()] = seeds[table[t]]
         return Z
+
+    def across_jump(self, before, after, z: np.ndarray, S: np.ndarray, t: float, recorded) -> np.ndarray:
+        """S (P, s) across the ground's jump at t (z: the state before it): each parameter's derivative of the jump
+        (dx, dv) added (a pulse's amplitude, a mass or a damper to ground moves it), and the numbers the jump sets in
+        an element (a spring yielding through a displacement step) by the law's own jump at the moved point. A jump
+        whose time moves with a parameter (a pulse's start or length), one that meets a held contact or stop, or one
+        after which the elements' modes are decided anew, leaves the response without a derivative from t."""
+        n, size = self.n, 2 * self.n
+
+        def jump_of(scene, c):
+            found = [np.concatenate([dx, dv]) for when, dx, dv in scene.model.jumps
+                     if abs(when - t) <= 1e-12 * max(abs(t), 1.0)]
+            if not found:
+                raise LookupError
+            return np.sum(found, axis=0)
+        try:
+            moves = [self.total(i, jump_of) for i in range(self.P)]
+        except LookupError:
+            self.no_derivative(t, "the ground's jump moves in time with the parameter")
+            return S
+        if recorded or any(el.law.piece(state).held for el, state in zip(self.scene.elements, before)):
+            self.no_derivative(t, "the ground's jump meets a held contact or stop, or the elements' modes are "
+                               "decided anew after it")
+            return S
+        jumped_S = S.copy()
+        jumped_S[:, :size] += moves
+        for e, (old, new) in enumerate(zip(before, after)):
+            if old == new:
+                continue
+            numbers = continuous(new.internal)
+            names = sorted(numbers)
+            for i in range(self.P):
+                def jumped(scene, c, i=i):
+                    x = z[:n] + c * S[i, :n]
+                    d_old = float(scene.R[e] @ x)
+                    d_new = float(scene.R[e] @ (x + jump_of(scene, c)[:n]))
+                    made, _ = scene.elements[e].law.jump(self.shifted(before, i, c)[e], d_old, d_new)
+                    if made.mode != new.mode or with_continuous(made.internal, numbers) != new.internal:
+                        raise ValueError  # another branch within the parameter's step
+                    return [continuous(made.internal)[name] for name in names]
+                try:
+                    values = self.total(i, jumped)
+                except ValueError:
+                    self.no_derivative(t, f"{self.scene.elements[e].path} passes through the ground's jump onto "
+                                       "another branch within the parameter's step")
+                    return jumped_S
+                for name, value in zip(names, values):
+                    self.dq[e].setdefault(name, np.zeros(self.P))[i] = value
+        return jumped_S
 
     # ----------------------------------------------------------------------------- between samples
     def outputs(self) -> tuple[np.ndarray, np.ndarray]:

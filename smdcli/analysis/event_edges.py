@@ -75,6 +75,14 @@ def with_continuous(internal: dict, values: dict[str, float]) -> dict:
     return out
 
 
+def shifted_states(states, dq: list, i: int, c: float) -> list[State]:
+    """The states with their internal variables moved c times their scaled sensitivities to parameter i (dq: each
+    element's {name: (P,)}): a stencil point's states along the moved run."""
+    return [State(s.mode, with_continuous(s.internal, {name: value + c * float(dq[e][name][i])
+                                                       for name, value in continuous(s.internal).items()
+                                                       if name in dq[e]})) for e, s in enumerate(states)]
+
+
 def internal_values(state: State) -> list[float]:
     """A state's internal numbers (continuous's) in name order."""
     numbers = continuous(state.internal)

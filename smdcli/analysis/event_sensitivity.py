@@ -26,7 +26,7 @@ from smdcli.elements.base import KINK, RATE
 from smdcli.elements import State
 from smdcli.analysis.event_carry import CarriedSensitivities
 from smdcli.analysis.event_edges import (GRAZE, breakaway_margins, continuous, internal_values, kinked,
-                                           on_breakaway, with_continuous)
+                                           on_breakaway, shifted_states, with_continuous)
 from smdcli.analysis.signal_derivative import stencil_total
 from smdcli.analysis.smooth_sensitivity import ANSWERED
 from smdcli.model import Model
@@ -59,8 +59,6 @@ def event_refusal(model: Model) -> str | None:
     if model.cubic is not None or model.quadratic is not None:
         return ("cubic springs or quadratic dampers beside yielding, friction or stops: sensitivities of such a mix are "
                 "not yet built")
-    if model.jumps:
-        return "the ground's displacement jumps in a yielding, friction or stop scene: its sensitivities are not built"
     return None
 
 
@@ -98,10 +96,7 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
     def shifted(self, states, i: int, c: float, dq: list | None = None) -> list[State]:
         """The states with their internal variables moved c times their scaled sensitivities to parameter i (dq: as
         a checkpoint kept them; the run's current ones by default)."""
-        dq = self.dq if dq is None else dq
-        return [State(s.mode, with_continuous(s.internal, {name: value + c * float(dq[e][name][i])
-                                                           for name, value in continuous(s.internal).items()
-                                                           if name in dq[e]})) for e, s in enumerate(states)]
+        return shifted_states(states, self.dq if dq is None else dq, i, c)
 
     def augmented(self, states, dq: list) -> tuple[Flow, np.ndarray, np.ndarray]:
         """The flow of [z; S] in these states with these internal sensitivities, its forcing and its matrix: the mode
@@ -353,7 +348,10 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
         before = len(self.events)
         after, z_after = super().cross_break(states, z, t, jump)
         S = self._reseeded(np.concatenate([z, S.ravel()]), t)[self.scene.size:].reshape(S.shape)
-        self.carry_internal(states, after, z, S, self.events[before:])
+        if jump is not None:  # the ground's: the state jumps
+            S = self.across_jump(states, after, z, S, t, self.events[before:])
+        else:
+            self.carry_internal(states, after, z, S, self.events[before:])
         self.settle_checkpoint(t, z_after, S, after)
         return after, z_after
 

@@ -14,8 +14,9 @@ of mode and the velocity jump of an impact (its derivative taken at the scene's 
 point). A kink of a smooth law leaves f continuous, so s too. Where a guard's top comes within GRAZE of its level
 without crossing it, the response has no derivative from there: nan, and the reason.
 
-Laws whose events set internal variables of their own (yielding springs: a plastic deformation, a Clough target)
-beside smooth terms are not taken here (mixed_refusal).
+Laws whose events set internal variables of their own (a yielding spring's plastic deformation, a Clough spring's
+target) carry their sensitivities as the exact event runs do (event_sensitivity.py): set at each event by the law's
+own event at the moved point, read by the modes after it at the stencil's points (shifted_states).
 
 Must not import: io, plots, commands, cli.
 """
@@ -24,10 +25,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from smdcli.analysis.event_edges import GRAZE, breakaway_margins, on_breakaway
+from smdcli.analysis.event_edges import breakaway_margins, continuous, on_breakaway, shifted_states
+from smdcli.analysis.mixed_edges import MixedEdges
 from smdcli.analysis.signal_derivative import stencil_total
-from smdcli.analysis.smooth_sensitivity import ANSWERED
-from smdcli.elements.base import KINK, RATE
+from smdcli.elements.base import KINK
 from smdcli.errors import SolverFailed
 from smdcli.model import Model
 from smdcli.solvers.base import Tolerances, force_function
@@ -40,23 +41,17 @@ METHOD = ("forward sensitivity equations s' = J s + df/dp integrated beside the 
           "derivative from its guard and the sensitivities' jump across it (saltation)")
 RECORDED_BY = "DOP853"  # the method of the event-driven run the sensitivities are carried over (compiled modes)
 ALONG = 2.0 ** -17  # J s as a central difference of f over this share of the state's size along s
-NEAR_LEVEL = 1e-2  # a guard's top that the rows' interpolant puts within this share of its size is looked at closely
 GRAZING = 1e-9  # a crossing whose rate is below this share of the terms it sums is met tangentially: no dt*/dp
 
 
 def mixed_refusal(model: Model) -> str | None:
     """Why the mixed event and smooth sensitivities cannot take the scene, or None."""
-    for element in model.nonsmooth:
-        law = element.law
-        if set(law.internal_names) - set(law.ode_states):
-            return (f"{element.path} ({getattr(law, 'law_name', law.name)}) sets internal variables at its events "
-                    f"beside smooth nonlinear terms: sensitivities of such a mix are not yet built (built: {ANSWERED})")
     if model.jumps:
         return "the ground's displacement jumps in a scene with events: its sensitivities are not built"
     return None
 
 
-class MixedRun:
+class MixedRun(MixedEdges):
     """The sensitivities of a mixed scene carried over a recorded run: scale_i dy/dp_i, each block the state's size."""
 
     def __init__(self, model: Model, derivatives: list, scales: np.ndarray, grid: np.ndarray, rtol: float):
@@ -72,6 +67,10 @@ class MixedRun:
         self.events: list = []
         self.peak_points: list[tuple] = []  # (t, x, scale_i dx/dp_i along the moved event) at each event: peaks there
         self._kept: dict = {}  # the kernels' arrays of each scene and mode
+        # each element's internal numbers that its events set (not integrated: a plastic deformation) -> their (P,)
+        # scaled sensitivities, as they stand; and as they stood over each piece of the run
+        self.dq: list[dict] = [{} for _ in self.scene.elements]
+        self.piece_dq: list[list[dict]] = []
 
     def total(self, i: int, read) -> np.ndarray:
         """scale_i times the total derivative along parameter i of read(scene, c) (stencil_total)."""
@@ -87,8 +86,10 @@ class MixedRun:
         accel, _, qdot = scene.parts(states, t, y)
         return np.concatenate([y[self.n:2 * self.n], accel, qdot])
 
-    def _rates(self, states, t: float, y: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(y', S') at (t, y, S) in these modes: S' = J S + df/dp, column by column."""
+    def _rates(self, states, t: float, y: np.ndarray, S: np.ndarray, dq=None) -> tuple[np.ndarray, np.ndarray]:
+        """(y', S') at (t, y, S) in these modes: S' = J S + df/dp, column by column, df/dp with the internal numbers'
+        sensitivities dq (the run's current ones by default)."""
+        dq = self.dq if dq is None else dq
         f = self._rate(self.scene, states, t, y)
         size = float(np.abs(y).max(initial=0.0))
         out = np.empty_like(S)
@@ -101,8 +102,8 @@ class MixedRun:
                 along = (ahead - back) / (2 * eps)
             else:
                 along = 0.0
-            out[:, i] = along + self.total(i, lambda scene, c: f if scene is self.scene else
-                                           self._rate(scene, states, t, y))
+            out[:, i] = along + self.total(i, lambda scene, c, i=i: f if scene is self.scene else
+                                           self._rate(scene, shifted_states(states, dq, i, c), t, y))
         return f, out
 
     # ----------------------------------------------------------------------------- the run
@@ -135,6 +136,7 @@ class MixedRun:
             times = np.unique(np.concatenate([[t], wanted, [t_next]]))
             rows, rates = self._piece(states, times, np.concatenate([y, S.ravel()]))
             self.pieces.append((t, t_next, list(states), times, rows, rates))
+            self.piece_dq.append([{k: v.copy() for k, v in d.items()} for d in self.dq])
             at = np.searchsorted(times, wanted)
             Y[filled:filled + len(wanted)], dY[filled:filled + len(wanted)] = rows[at], rates[at]
             filled += len(wanted)
@@ -177,9 +179,10 @@ class MixedRun:
 
         m, P, N = self.m, self.P, len(times)
         base = self._arrays(self.scene, states)
-        stencil = [(i, w, self._arrays(scene, states), mass_ratio(self.model, scene.model))
-                   for i, (scenes, _, weights) in enumerate(self.stencils) for w, scene in zip(weights, scenes)
-                   if scene is not self.scene]
+        stencil = [(i, w, self._arrays(scene, shifted_states(states, self.dq, i, o / self.scales[i])),
+                    mass_ratio(self.model, scene.model))
+                   for i, (scenes, offsets, weights) in enumerate(self.stencils)
+                   for w, scene, o in zip(weights, scenes, offsets) if scene is not self.scene]
         state0 = np.concatenate([start[:m], np.zeros(base.ns_acc)])
         y, S, rate, d_S = grouped_runs(base, stencil, state0, start[m:].reshape(m, P), times,
                                        np.array([times[0], times[-1]]), self.rtol, self.atol, self.model.source)
@@ -205,9 +208,9 @@ class MixedRun:
         for scene in [self.scene, *(s for scenes, _, _ in self.stencils for s in scenes)]:
             scene.force = force_function(scene.model, ta, tb) if scene.model.is_forced else (lambda _: np.empty(0))
 
-    def _augmented(self, states, t: float, Z: np.ndarray) -> np.ndarray:
+    def _augmented(self, states, t: float, Z: np.ndarray, dq=None) -> np.ndarray:
         m = self.m
-        f, dS = self._rates(states, t, Z[:m], Z[m:].reshape(m, self.P))
+        f, dS = self._rates(states, t, Z[:m], Z[m:].reshape(m, self.P), dq)
         return np.concatenate([f, dS.ravel()])
 
     def _absolute(self, x: np.ndarray, v: np.ndarray, history) -> np.ndarray:
@@ -226,6 +229,10 @@ class MixedRun:
         it) is carried as zeros and read as nan."""
         S = np.zeros((self.m, self.P))
         nominal = None
+        scene = self.scene
+        d0, rate0 = scene.R @ self.model.x0, scene.R @ self.model.v0 + scene.belts
+        set_names = [list(self._set_numbers(e, el.law.start(float(d0[e]), float(rate0[e]))))
+                     for e, el in enumerate(scene.elements)]  # the internal numbers the start sets, not integrated
         for i in range(self.P):
             branches, margins = set(), {}
 
@@ -238,7 +245,8 @@ class MixedRun:
                 y0 = np.concatenate([model.x0, model.v0, np.asarray(q0, dtype=float)])
                 scene.now = float(self.grid[0])
                 margins[c] = breakaway_margins(scene, starts, y0)
-                return y0
+                numbers = [continuous(s.internal) for s in starts]
+                return np.concatenate([y0, [numbers[e][name] for e, names in enumerate(set_names) for name in names]])
             column = self.total(i, initial)
             if nominal is None:
                 initial(self.scene, 0.0)
@@ -249,7 +257,11 @@ class MixedRun:
                                  "(within the parameter's step: a contact held at its breakaway force), where the "
                                  "response's derivatives on either side differ")
                 column = np.zeros_like(column)
-            S[:, i] = column
+            S[:, i] = column[:self.m]
+            at = iter(column[self.m:])
+            for e, names in enumerate(set_names):
+                for name in names:
+                    self.dq[e].setdefault(name, np.zeros(self.P))[i] = next(at)
         return S
 
     # ----------------------------------------------------------------------------- events
@@ -289,8 +301,8 @@ class MixedRun:
             self.peak_points.append((t, y_before[:self.n].copy(), np.full((P, self.n), np.nan)))
             return S
         for i in range(P):
-            dt[i] = -float(self.total(i, lambda sc, c: self._guard_value(sc, before, t, y_before + c * S[:, i],
-                                                                          element, guard))) / crossing
+            dt[i] = -float(self.total(i, lambda sc, c: self._guard_value(
+                sc, shifted_states(before, self.dq, i, c), t, y_before + c * S[:, i], element, guard))) / crossing
         self.moves = getattr(self, "moves", {})
         self.moves.setdefault(t, dt)
         moved = S + f_before[:, None] * dt[None]  # the event point's total derivative
@@ -301,61 +313,15 @@ class MixedRun:
             for i in range(P):
                 def jumped(sc, c, i=i):
                     z = y_before + c * moved[:, i]
-                    struck = impact(sc, before, z[:2 * n], element, sc.elements[element].law.rebound)
-                    return np.concatenate([project(sc, after, struck, self.v_scale), z[2 * n:]])
+                    struck = impact(sc, shifted_states(before, self.dq, i, c), z[:2 * n], element,
+                                    sc.elements[element].law.rebound)
+                    return np.concatenate([project(sc, shifted_states(after, self.dq, i, c), struck, self.v_scale),
+                                           z[2 * n:]])
                 out[:, i] = self.total(i, jumped)
             moved = out
+        self._carry_internal(t, element, kind, before, after, y_before, moved)
         f_after = self._rate(scene, after, t, y_after)
         return moved - f_after[:, None] * dt[None]
-
-    def _near_miss(self, index: int, ending) -> None:
-        """A guard whose top comes within GRAZE of its level inside piece `index` without crossing it (the guard that
-        ends the piece aside): an event a change of the parameters this small makes appear, so no derivative from
-        there. Looked at on the piece's rows; a top among them that the rows' cubic interpolant brings within
-        NEAR_LEVEL of the level is found on the state carried there."""
-        from scipy.interpolate import CubicHermiteSpline
-        from scipy.optimize import minimize_scalar
-
-        scene, m = self.scene, self.m
-        ta, tb, states, times, rows, rates = self.pieces[index]
-        cubic = CubicHermiteSpline(times, rows[:, :m], rates[:, :m]) if len(times) > 2 else None
-        guards = [(e, g) for e, (el, s) in enumerate(zip(scene.elements, states)) for g in el.law.piece(s).guards
-                  if g.kind != KINK and (e, g) != ending]
-        for e, guard in guards:
-            def below(t, y, e=e, guard=guard):  # how far below its level the guard is: > 0 until it crosses
-                return -guard.direction * self._guard_value(scene, states, float(t), y, e, guard)
-            values = np.array([below(t, row[:m]) for t, row in zip(times, rows)])
-            # its lowest points: between rows (a plateau, the scene at rest, is none), and the piece's end where
-            # another restart (a kink at the turn) ends it
-            inner = (values[1:-1] <= values[:-2]) & (values[1:-1] <= values[2:]) & \
-                ((values[1:-1] < values[:-2]) | (values[1:-1] < values[2:]))
-            lows = [(j, True) for j in np.flatnonzero(inner) + 1]
-            lows += [(len(values) - 1, False)] if len(values) > 1 and values[-1] < values[-2] else []
-            for j, between in lows:
-                when, top = float(times[j]), -float(values[j])
-                size = self._guard_size(states, rows[j, :m], e, guard)
-                if between:
-                    bounds, tight = (times[j - 1], times[j + 1]), {"xatol": 1e-12 * max(abs(tb), 1.0)}
-                    rough = minimize_scalar(lambda t: below(t, cubic(t)), bounds=bounds, method="bounded",
-                                            options=tight)
-                    if -float(rough.fun) < -NEAR_LEVEL * size:
-                        continue  # far below its level: no graze, whatever the interpolant's error
-                    found = minimize_scalar(lambda t: below(t, self._carried(index, float(t))[:m]), bounds=bounds,
-                                            method="bounded", options=tight)
-                    when, top = float(found.x), -float(found.fun)
-                if -GRAZE * size <= top < 0:
-                    self.no_derivative(when, f"{scene.elements[e].path} comes within {-top:.3g} of its "
-                                       f"{guard.kind} without reaching it: a graze, which a change of the parameters "
-                                       "that small turns into an event")
-
-    def _guard_size(self, states, y: np.ndarray, e: int, guard) -> float:
-        """What a guard's nearness to its level is judged against: the level and the quantity's size, or for a rate
-        the run's speeds."""
-        d, rate, tension, _ = self.scene.evaluate(states, y)
-        if guard.quantity.startswith("internal:"):
-            return abs(guard.level) + 1.0
-        size = abs(guard.level) + abs(float({"d": d, "rate": rate, "tension": tension}[guard.quantity][e]))
-        return max(size, self.v_scale) if guard.quantity == RATE else size
 
     def _carried(self, index: int, t: float) -> np.ndarray:
         """[y; S] at t inside piece `index`: from its last row at or before t, by scipy's DOP853."""
@@ -366,7 +332,8 @@ class MixedRun:
         if t <= times[k]:
             return rows[k]
         self._on_cut(float(times[k]))
-        run = solve_ivp(lambda tt, Z: self._augmented(states, tt, Z), (times[k], t), rows[k], method="DOP853",
+        dq = self.piece_dq[index]
+        run = solve_ivp(lambda tt, Z: self._augmented(states, tt, Z, dq), (times[k], t), rows[k], method="DOP853",
                         rtol=self.rtol, atol=self.atol)
         return run.y[:, -1]
 
@@ -385,7 +352,7 @@ class MixedRun:
         def rates_at(t: float, left: bool = False) -> tuple[np.ndarray, np.ndarray]:
             index = max(int(np.searchsorted(starts, t, side="left" if left else "right")) - 1, 0)
             Z = self._carried(index, t)
-            f, dS = self._rates(self.pieces[index][2], t, Z[:m], Z[m:].reshape(m, P))
+            f, dS = self._rates(self.pieces[index][2], t, Z[:m], Z[m:].reshape(m, P), self.piece_dq[index])
             if self.undefined_from is not None and t >= self.undefined_from[0]:
                 dS = np.full_like(dS, np.nan)
             for i in self.edges:

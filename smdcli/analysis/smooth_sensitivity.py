@@ -28,8 +28,8 @@ from smdcli.model.nonsmooth import whole_tension
 
 # what smd sensitivity answers, as its refusals name it (here and event_sensitivity's)
 ANSWERED = ("linear scenes; elastoplastic, bilinear, Clough and Iwan springs, Coulomb friction and stops; cubic "
-            "springs, quadratic dampers, Bouc-Wen springs and regularized friction; Stribeck friction, and friction "
-            "or stops beside those smooth terms")
+            "springs, quadratic dampers, Bouc-Wen springs and regularized friction; Stribeck friction, and yielding "
+            "springs, friction or stops beside those smooth terms")
 RTOL = 1e-9  # smd sensitivity's default for smooth nonlinear scenes (a scenario's tighter rtol applies)
 COMPILED = True  # the compiled kernel where it takes the scene; the Python integration (the tests' second way) else
 COMPILED_METHOD = ("forward sensitivity equations s' = J s + df/dp integrated beside the state by compiled DOP853 "
