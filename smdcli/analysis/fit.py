@@ -24,8 +24,6 @@ import numpy as np
 
 from smdcli.analysis.fit_data import Measured, quantity_of
 from smdcli.analysis.sensitivity import sensitivity
-from smdcli.analysis.sensitivity_result import TENSIONS_REFUSED
-from smdcli.analysis.smooth_sensitivity import smooth_refusal
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.resources import small_blas
 from smdcli.scenario import Scenario
@@ -98,18 +96,13 @@ def make_test(sc: Scenario, measured: Measured, channels: tuple[str, ...] | None
 
     model = build(sc)
     chosen = tuple(channels) if channels else tuple(measured.channels)
-    remembering = {e.path: e.law_label for e in model.nonsmooth}  # hysteretic springs, friction contacts, stops
-    elements = {e.name for e in model.elements} | set(remembering)
+    # springs and dampers, and the hysteretic springs, friction contacts and stops (their forces from the runs' own)
+    elements = {e.name for e in model.elements} | {e.path for e in model.nonsmooth}
     for channel in chosen:
         if channel not in measured.channels:
             raise UsageError(f"{measured.file}: no column {channel!r} (its columns: {', '.join(measured.channels)})")
         owner = channel.rsplit(".", 1)[0]
         quantity = quantity_of(channel)
-        if quantity == "force" and owner in remembering and not model.is_piecewise_linear and \
-                smooth_refusal(model) is not None:
-            raise UsageError(f"{measured.file}: column {channel!r}: {owner} ({remembering[owner]}) has a force that "
-                             f"depends on its history: {TENSIONS_REFUSED}; fit the masses' motion "
-                             "(<mass>.displacement, velocity or acceleration)")
         if (quantity == "force" and owner not in elements) or (quantity != "force" and owner not in model.dofs):
             names = sorted(elements) if quantity == "force" else list(model.dofs)
             what, those = ("element", "elements") if quantity == "force" else ("mass", "masses")

@@ -11,6 +11,7 @@ import numpy as np
 
 from smdcli.analysis.event_edges import GRAZE, continuous, shifted_states
 from smdcli.elements.base import KINK, RATE
+from smdcli.model.nonsmooth import whole_tension
 
 NEAR_LEVEL = 1e-2  # a guard's top that the rows' interpolant puts within this share of its size is looked at closely
 
@@ -111,3 +112,29 @@ class MixedEdges:
                     return
                 for name, value in zip(numbers, values):
                     self.dq[e].setdefault(name, np.zeros(self.P))[i] = value
+
+    def grid_tensions(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every nonsmooth element's whole tension on the grid (N, E) (the law's, a held contact's constraint force,
+        the stiffness kept in K) and its scaled derivatives (N, P, E): the tension in each row's piece, differenced
+        along each parameter at the stencil's points with the state moved by its sensitivity and the internal
+        numbers by theirs; right limits at a restart, as the outputs; nan where the response has no derivative."""
+        y, S = self.grid_states
+        N, E = len(self.grid), len(self.scene.elements)
+        tension, derived = np.full((N, E), np.nan), np.full((N, self.P, E), np.nan)
+        cut = None
+        for k, t in enumerate(self.grid.tolist()):
+            if cut != (now := int(np.searchsorted(self.cuts, t, side="right"))):
+                self._on_cut(t)  # every scene's forces on t's segment (a held contact's force reads them)
+                cut = now
+            states, dq = self.pieces[self.row_piece[k]][2], self.piece_dq[self.row_piece[k]]
+
+            def whole(scene, c, i=None):
+                moved = states if i is None else shifted_states(states, dq, i, c)
+                scene.now = t
+                d, _, law, _ = scene.evaluate(moved, y[k] if i is None else y[k] + c * S[k, :, i])
+                return whole_tension(scene.elements, law, d)
+            tension[k] = whole(self.scene, 0.0)
+            for i in range(self.P):
+                if np.isfinite(S[k, :, i]).all():
+                    derived[k, i] = self.total(i, lambda scene, c, i=i: whole(scene, c, i))
+        return tension, derived

@@ -122,6 +122,7 @@ class MixedRun(MixedEdges):
         grid, m, P = self.grid, self.m, self.P
         N = len(grid)
         Y, dY = np.full((N, m * (1 + P)), np.nan), np.full((N, m * (1 + P)), np.nan)
+        self.row_piece = np.zeros(N, dtype=int)  # the piece each output row was read in
         states, y = recorded.first
         y, t = y[:m], float(grid[0])
         self._on_cut(t)
@@ -139,6 +140,7 @@ class MixedRun(MixedEdges):
             self.piece_dq.append([{k: v.copy() for k, v in d.items()} for d in self.dq])
             at = np.searchsorted(times, wanted)
             Y[filled:filled + len(wanted)], dY[filled:filled + len(wanted)] = rows[at], rates[at]
+            self.row_piece[filled:filled + len(wanted)] = len(self.pieces) - 1
             filled += len(wanted)
             if advance is not None and len(wanted):
                 advance(len(wanted))
@@ -347,6 +349,7 @@ class MixedRun(MixedEdges):
             S[later], d_rates[later] = np.nan, np.nan
         for i in self.edges:
             S[:, :, i], d_rates[:, :, i] = np.nan, np.nan
+        self.grid_states = y, S
         starts = np.array([a for a, *_ in self.pieces])
 
         def rates_at(t: float, left: bool = False) -> tuple[np.ndarray, np.ndarray]:

@@ -342,7 +342,7 @@ def _smooth(sc: Scenario, base, derivatives: list, scales: np.ndarray, grid: np.
     """The same blocks for a smooth nonlinear scene, by the forward sensitivity equations (smooth_sensitivity.py)
     at rtol 1e-9 or the scenario's tighter one; its stated accuracy SMOOTH_ERROR times that rtol, its dense
     accelerations, how the equations were integrated, the mixed run (events beside smooth terms) if one, and its
-    laws' tensions on call (not beside events)."""
+    laws' tensions on call."""
     from smdcli.analysis.smooth_sensitivity import RTOL, smooth_refusal, smooth_sensitivities, smooth_tensions
 
     rtol, mixed = min(RTOL, sc.solver.rtol), None
@@ -365,5 +365,5 @@ def _smooth(sc: Scenario, base, derivatives: list, scales: np.ndarray, grid: np.
         rate, d_rate = rates_at(t, left)
         return rate[n:2 * n], d_rate[n:2 * n].T / scales[:, None]
     acceleration_at.breaks = rates_at.breaks
-    tensions = None if mixed is not None else lambda: smooth_tensions(base, derivatives, scales, y, S)
+    tensions = mixed.grid_tensions if mixed is not None else lambda: smooth_tensions(base, derivatives, scales, y, S)
     return blocks, SMOOTH_ERROR * rtol, acceleration_at, method, mixed, tensions

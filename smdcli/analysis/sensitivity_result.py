@@ -13,9 +13,6 @@ from pathlib import Path
 import numpy as np
 
 QUANTITIES = {"displacement": "m", "velocity": "m/s", "acceleration": "m/s^2"}
-# where the tension of a law with a history (a plastic deformation, Bouc-Wen's z, a stuck contact) has no derivatives
-TENSIONS_REFUSED = ("the tension's derivatives of a law with a history are built for piecewise-linear scenes (solved "
-                    "event to event) and smooth ones, not for events beside smooth nonlinear terms")
 METHOD = ("exact: the scene and its sensitivity equations (the same M, C and K driven by -dM x'' - dC x' - dK x + "
           "B du/dp) solved together by the matrix exponential; the model's derivatives taken on the assembled model "
           "(one difference where every number of the model is affine in the parameter, else a five-point stencil, "
@@ -99,7 +96,7 @@ class Sensitivity:
 
         if any(e.path == path for e in self.model.nonsmooth):
             if self.law_tensions is None:
-                raise NotImplementedError(f"{path}: {TENSIONS_REFUSED}")
+                raise NotImplementedError(f"{path}: this run kept no tensions of its laws (a linear scene has none)")
             return self.law_tensions(path)
 
         def tension(model):  # at the scene's state, of the model as given (a parameter moved in it, or not)
