@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from smdcli.analysis.event_edges import continuous, with_continuous
+from smdcli.analysis.event_edges import carry_numbers, continuous
 from smdcli.model.nonsmooth import whole_tension
 from smdcli.solvers.exact.sampled import reseeded_steps
 
@@ -151,25 +151,16 @@ class CarriedSensitivities:
         for e, (old, new) in enumerate(zip(before, after)):
             if old == new:
                 continue
-            numbers = continuous(new.internal)
-            names = sorted(numbers)
-            for i in range(self.P):
-                def jumped(scene, c, i=i):
-                    x = z[:n] + c * S[i, :n]
-                    d_old = float(scene.R[e] @ x)
-                    d_new = float(scene.R[e] @ (x + jump_of(scene, c)[:n]))
-                    made, _ = scene.elements[e].law.jump(self.shifted(before, i, c)[e], d_old, d_new)
-                    if made.mode != new.mode or with_continuous(made.internal, numbers) != new.internal:
-                        raise ValueError  # another branch within the parameter's step
-                    return [continuous(made.internal)[name] for name in names]
-                try:
-                    values = self.total(i, jumped)
-                except ValueError:
-                    self.no_derivative(t, f"{self.scene.elements[e].path} passes through the ground's jump onto "
-                                       "another branch within the parameter's step")
-                    return jumped_S
-                for name, value in zip(names, values):
-                    self.dq[e].setdefault(name, np.zeros(self.P))[i] = value
+
+            def jumped(scene, c, i):
+                x = z[:n] + c * S[i, :n]
+                d_old = float(scene.R[e] @ x)
+                d_new = float(scene.R[e] @ (x + jump_of(scene, c)[:n]))
+                return scene.elements[e].law.jump(self.shifted(before, i, c)[e], d_old, d_new)[0]
+            if not carry_numbers(self, e, sorted(continuous(new.internal)), new, jumped):
+                self.no_derivative(t, f"{self.scene.elements[e].path} passes through the ground's jump onto another "
+                                   "branch within the parameter's step")
+                break
         return jumped_S
 
     # ----------------------------------------------------------------------------- between samples

@@ -83,6 +83,32 @@ def shifted_states(states, dq: list, i: int, c: float) -> list[State]:
                                                        if name in dq[e]})) for e, s in enumerate(states)]
 
 
+def carry_numbers(run, e: int, names: list[str], expected: State, made) -> bool:
+    """The sensitivities of element e's internal numbers `names` that an event (or the ground's jump) sets, into
+    run.dq: for each parameter i, run.total of made(scene, c, i), the State the law makes at that stencil point along
+    the moved run, read at names. False (the parameters from i on left as they were) where a point's State lies on
+    another branch than the nominal `expected`: another mode, other flags or other numbers' names."""
+    numbers = continuous(expected.internal)
+    for i in range(run.P):
+        def at_point(scene, c, i=i):
+            state = made(scene, c, i)
+            if state.mode != expected.mode or with_continuous(state.internal, numbers) != expected.internal:
+                raise _OtherBranch
+            found = continuous(state.internal)
+            return [found[name] for name in names]
+        try:
+            values = run.total(i, at_point)
+        except _OtherBranch:
+            return False
+        for name, value in zip(names, values):
+            run.dq[e].setdefault(name, np.zeros(run.P))[i] = value
+    return True
+
+
+class _OtherBranch(Exception):
+    """A stencil point's event leads to another branch than the nominal one."""
+
+
 def internal_values(state: State) -> list[float]:
     """A state's internal numbers (continuous's) in name order."""
     numbers = continuous(state.internal)

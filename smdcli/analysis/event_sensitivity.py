@@ -25,8 +25,8 @@ import numpy as np
 from smdcli.elements.base import KINK, RATE
 from smdcli.elements import State
 from smdcli.analysis.event_carry import CarriedSensitivities
-from smdcli.analysis.event_edges import (GRAZE, breakaway_margins, continuous, internal_values, kinked,
-                                           on_breakaway, shifted_states, with_continuous)
+from smdcli.analysis.event_edges import (GRAZE, breakaway_margins, carry_numbers, continuous, internal_values,
+                                           kinked, on_breakaway, shifted_states)
 from smdcli.analysis.signal_derivative import stencil_total
 from smdcli.analysis.smooth_sensitivity import ANSWERED
 from smdcli.model import Model
@@ -43,10 +43,6 @@ GRAZING = 1e-9  # a crossing whose rate is below this share of the terms it sums
 EVENT_ERROR = 1e-9
 # the laws whose events carry their sensitivities
 SUPPORTED = ("elastoplastic", "bilinear", "clough", "iwan", "coulomb", "stop")
-
-
-class NotDifferentiable(Exception):
-    """The response has no derivative from this event on."""
 
 
 def event_refusal(model: Model) -> str | None:
@@ -319,27 +315,16 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
                 self.no_derivative(recorded[0][0] if recorded else 0.0,
                                    f"{path} changes its internal variables by several events at one instant")
                 return
-            numbers = continuous(new.internal)
-            names = sorted(numbers)
-            for i in range(self.P):
-                def event(scene, c, i=i):
-                    shifted = self.shifted(before, i, c)
-                    d, rate, tension, _ = scene.evaluate(shifted, z + c * moved[i])
-                    law = scene.elements[e].law
-                    made = law.event(shifted[e], kinds[0], float(d[e]), float(rate[e]), float(tension[e]))
-                    # another branch, other flags or other numbers' names than the nominal event's: no derivative
-                    if made.mode != new.mode or with_continuous(made.internal, numbers) != new.internal:
-                        raise NotDifferentiable
-                    made_numbers = continuous(made.internal)
-                    return [made_numbers[name] for name in names]
-                try:
-                    values = self.total(i, event)
-                except NotDifferentiable:  # the event leads elsewhere within the parameter's step (a line's target)
-                    self.no_derivative(recorded[0][0], f"{path}'s {kinds[0]} leads to another branch within the "
-                                       "parameter's step: its derivatives on either side differ")
-                    return
-                for name, value in zip(names, values):
-                    self.dq[e].setdefault(name, np.zeros(self.P))[i] = value
+
+            def event(scene, c, i):
+                shifted = self.shifted(before, i, c)
+                d, rate, tension, _ = scene.evaluate(shifted, z + c * moved[i])
+                return scene.elements[e].law.event(shifted[e], kinds[0], float(d[e]), float(rate[e]), float(tension[e]))
+            if not carry_numbers(self, e, sorted(continuous(new.internal)), new, event):
+                # the event leads elsewhere within the parameter's step (a line's target)
+                self.no_derivative(recorded[0][0], f"{path}'s {kinds[0]} leads to another branch within the "
+                                   "parameter's step: its derivatives on either side differ")
+                return
 
     def cross_break(self, states, z: np.ndarray, t: float, jump):
         self.advance(t, z)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from smdcli.analysis.event_edges import GRAZE, continuous, shifted_states
+from smdcli.analysis.event_edges import GRAZE, carry_numbers, continuous, shifted_states
 from smdcli.elements.base import KINK, RATE
 from smdcli.model.nonsmooth import whole_tension
 
@@ -93,25 +93,18 @@ class MixedEdges:
             if e != element:
                 self.no_derivative(t, f"{path} changes its internal variables at another element's event")
                 return
-            for i in range(self.P):
-                def event(scene, c, i=i):
-                    moved_states = shifted_states(before, self.dq, i, c)
-                    y = y_before + c * moved[:, i]
-                    scene.now = t
-                    d, rate, tension, _ = scene.evaluate(moved_states, y)
-                    made = scene.elements[e].law.event(scene.live(moved_states, y)[e], kind, float(d[e]),
-                                                       float(rate[e]), float(tension[e]))
-                    if made.mode != new.mode or self._set_numbers(e, made).keys() != numbers.keys():
-                        raise ValueError  # another branch within the parameter's step
-                    return list(self._set_numbers(e, made).values())
-                try:
-                    values = self.total(i, event)
-                except ValueError:
-                    self.no_derivative(t, f"{path}'s {kind} leads to another branch within the parameter's step: "
-                                       "its derivatives on either side differ")
-                    return
-                for name, value in zip(numbers, values):
-                    self.dq[e].setdefault(name, np.zeros(self.P))[i] = value
+
+            def event(scene, c, i):
+                moved_states = shifted_states(before, self.dq, i, c)
+                y = y_before + c * moved[:, i]
+                scene.now = t
+                d, rate, tension, _ = scene.evaluate(moved_states, y)
+                return scene.elements[e].law.event(scene.live(moved_states, y)[e], kind, float(d[e]), float(rate[e]),
+                                                   float(tension[e]))
+            if not carry_numbers(self, e, list(numbers), new, event):
+                self.no_derivative(t, f"{path}'s {kind} leads to another branch within the parameter's step: its "
+                                   "derivatives on either side differ")
+                return
 
     def grid_tensions(self) -> tuple[np.ndarray, np.ndarray]:
         """Every nonsmooth element's whole tension on the grid (N, E) (the law's, a held contact's constraint force,

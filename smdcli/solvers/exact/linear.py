@@ -188,9 +188,10 @@ def read_exactly(model: Model, grid: np.ndarray, readouts: list, copies: int = 0
     if path != "sampled":
         return None
     # a record's samples: the copies' recurrence by the arrow where two or more share it (one copy: even, measured)
-    found = arrow_sampled_states(model, knots, *augmented(model), copies) if copies >= 2 and \
-        2 * model.n >= ARROW_STATES else None
-    states, stated, message = found or sampled.sampled_states(model, knots, *augmented(model))
+    system = augmented(model)
+    found = arrow_sampled_states(model, knots, *system, copies) if copies >= 2 and 2 * model.n >= ARROW_STATES \
+        else None
+    states, stated, message = found or sampled.sampled_states(model, knots, *system)
     for R, _, out in readouts:
         np.matmul(states, R.T, out=out)
     _add_forces(model, grid, readouts)
