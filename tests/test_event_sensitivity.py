@@ -54,7 +54,7 @@ def away_from_events(sc, s, margin=1e-3):
     """The samples farther than margin from every event of the nominal run: a sample an event passes within the
     differences' offsets is no place to difference a response that jumps in slope there."""
     times = np.array([t for t, _, _ in smdcli.simulate(sc, method="exact").nonsmooth.events] +
-                     [t for t, _, _ in s.model.jumps])  # and the ground's jumps (DOP853's sample there: the left limit)
+                     [t for t, _, _ in s.model.jumps])  # and the ground's jumps (the response's slope jumps there too)
     if not len(times):
         return np.ones(len(s.time), dtype=bool)
     return np.abs(s.time[:, None] - times[None, :]).min(axis=1) > margin

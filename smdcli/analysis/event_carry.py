@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from smdcli.analysis.event_edges import carry_numbers, continuous
+from smdcli.analysis.event_edges import carry_numbers, continuous, ground_jump
 from smdcli.model.nonsmooth import whole_tension
 from smdcli.solvers.exact.sampled import reseeded_steps
 
@@ -132,11 +132,7 @@ class CarriedSensitivities:
         n, size = self.n, 2 * self.n
 
         def jump_of(scene, c):
-            found = [np.concatenate([dx, dv]) for when, dx, dv in scene.model.jumps
-                     if abs(when - t) <= 1e-12 * max(abs(t), 1.0)]
-            if not found:
-                raise LookupError
-            return np.sum(found, axis=0)
+            return ground_jump(scene, t)
         try:
             moves = [self.total(i, jump_of) for i in range(self.P)]
         except LookupError:

@@ -75,6 +75,16 @@ def with_continuous(internal: dict, values: dict[str, float]) -> dict:
     return out
 
 
+def ground_jump(scene: Scene, t: float) -> np.ndarray:
+    """The ground's jump of the relative state at t in this scene's model, [dx; dv] (2n,); LookupError where it has
+    none there (a pulse the parameter moves in time)."""
+    found = [np.concatenate([dx, dv]) for when, dx, dv in scene.model.jumps
+             if abs(when - t) <= 1e-12 * max(abs(t), 1.0)]
+    if not found:
+        raise LookupError
+    return np.sum(found, axis=0)
+
+
 def shifted_states(states, dq: list, i: int, c: float) -> list[State]:
     """The states with their internal variables moved c times their scaled sensitivities to parameter i (dq: each
     element's {name: (P,)}): a stencil point's states along the moved run."""

@@ -44,11 +44,6 @@ ALONG = 2.0 ** -17  # J s as a central difference of f over this share of the st
 GRAZING = 1e-9  # a crossing whose rate is below this share of the terms it sums is met tangentially: no dt*/dp
 
 
-def mixed_refusal(model: Model) -> str | None:
-    """Why the mixed event and smooth sensitivities cannot take the scene, or None."""
-    if model.jumps:
-        return "the ground's displacement jumps in a scene with events: its sensitivities are not built"
-    return None
 
 
 class MixedRun(MixedEdges):
@@ -281,6 +276,8 @@ class MixedRun(MixedEdges):
               S: np.ndarray) -> np.ndarray:
         """S after a restart at t: continuous across a force's break and a smooth law's kink (f is); across an event
         of p-dependent time, the saltation."""
+        if kind == "break" and any(abs(when - t) <= 1e-12 * max(abs(t), 1.0) for when, _, _ in self.model.jumps):
+            return self._across_jump(t, before, y_before, after, S)
         if kind in ("break", KINK):
             return S
         if self.undefined_from is not None and self.undefined_from[0] <= t:
@@ -369,9 +366,9 @@ def mixed_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gri
                         atol: float, advance=None):
     """(y, dy/dp * scale, y', dy'/dp * scale) on the grid ((N, s), (N, s, P), (N, s), (N, s, P)), rates_at(t, left),
     the method's text and the run (its events, and where the derivatives stop existing) of a scene that mixes events
-    with smooth nonlinear terms (mixed_refusal takes it). The recorded run's absolute tolerance: atol, or a thousandth
-    of rtol of the smaller of the state's peaks (displacement, velocity) where that is tighter, from a first run of
-    the scene at rtol 1e-6 (compiled)."""
+    with smooth nonlinear terms. The recorded run's absolute tolerance: atol, or a thousandth of rtol of the smaller
+    of the state's peaks (displacement, velocity) where that is tighter, from a first run of the scene at rtol 1e-6
+    (compiled)."""
     from smdcli.solvers.events.integrated import solve_events
 
     first = solve_events(model, grid, Tolerances(rtol=1e-6, atol=1e-12), RECORDED_BY)

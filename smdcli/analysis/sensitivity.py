@@ -164,7 +164,9 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
         notes.append(f"from t = {when:.9g} s the response has no derivative ({why}): written as nan")
     for i, why in (evented.edges.items() if evented is not None else ()):
         notes.append(f"the response has no derivative in {params[i]} ({why}): written as nan")
-    events = jump_times(base, grid) if evented is None else np.array([e[0] for e in evented.events], dtype=float)
+    # where the state or the acceleration jumps (the forces' and the ground's jumps, the events) the interpolant does
+    # not hold: those intervals keep their samples (result_peaks' rule)
+    events = np.unique(np.concatenate([jump_times(base, grid), [e[0] for e in getattr(evented, "events", ())]]))
     peaks, at = located_peaks(grid, nominal["displacement"], nominal["velocity"], nominal["acceleration"], events,
                               with_times=True)
     if run is None:  # the scene and its derivatives on each DOF's quintic at its peak's time, in one evaluation

@@ -19,16 +19,10 @@ MODAL_COPIES = 36  # the modal path's working memory, in (P + 1) N n numbers (a 
 def refuse(sc: Scenario, params: list[str], base: Model) -> None:
     """UsageError where the scene's sensitivities are not given: a law whose sensitivities are not built, more stacked
     DOFs than MAX_SIZE where the modal path may not take them (the rest: too_many_dofs, once it is known)."""
-    if not base.is_linear:
+    if base.is_piecewise_linear:  # a smooth scene, or events beside smooth terms (mixed_sensitivity.py): all taken
         from smdcli.analysis.event_sensitivity import event_refusal
-        from smdcli.analysis.smooth_sensitivity import smooth_refusal
 
-        refusal = event_refusal(base) if base.is_piecewise_linear else smooth_refusal(base)
-        if refusal and not base.is_piecewise_linear:  # events beside smooth terms: from event to event
-            from smdcli.analysis.mixed_sensitivity import mixed_refusal
-
-            refusal = mixed_refusal(base)
-        if refusal:
+        if refusal := event_refusal(base):
             raise UsageError(f"{sc.path}: {refusal}")
     if (len(params) + 1) * base.n > MAX_SIZE:
         from smdcli.analysis.modal_sensitivity import may_serve

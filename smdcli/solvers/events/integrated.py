@@ -132,6 +132,9 @@ class EventDriver(PiecewiseRun):
                 if k < len(grid) and grid[k] == t:
                     outputs.store(k, t, y, states)
                     k += 1
+                elif jump is not None and k > 0 and grid[k - 1] == t:
+                    outputs.store(k - 1, t, y, states)  # stored on the way as the left limit: a jump's sample is
+                    # its right limit, as the exact solver and across_jumps give it
         self.sort_events()
         return outputs.finish(), failure, t_reached
 
