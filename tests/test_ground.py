@@ -9,7 +9,7 @@ import h5py
 import numpy as np
 import pytest
 from conftest import ROOT, SCENARIOS, model_of
-from test_event_sensitivity import UNFORCED_STOREY
+from test_event_sensitivity import RESTING_ON_A_STOP, UNFORCED_STOREY, ground_pulse
 from scipy.integrate import solve_ivp
 
 from smdcli import scenario
@@ -228,14 +228,33 @@ def test_an_event_driven_run_s_sample_on_a_ground_jump_is_its_right_limit(method
     """A yielding storey under a displacement pulse whose jumps fall on samples: the event-driven integrators' samples
     there are the right limits (the relative displacement -0.12 m at the pulse's start), as the exact solver's; they
     stored the left limit (0 m) until the row was written again after the jump."""
-    text = UNFORCED_STOREY + (
-        '[ground_motion]\nquantity = "displacement"\ntype = "pulse"\namplitude = 0.12\nt0 = 0.2\nduration = 0.5\n')
+    text = UNFORCED_STOREY + ground_pulse("displacement", 0.12, 0.2, 0.5)
     sc, model, grid = model_of(text, "pulse.toml")
     exact = solve(model, grid, "exact", Tolerances())
     run = solve(model, grid, method, Tolerances(rtol=1e-10, atol=1e-13))
     np.testing.assert_allclose(exact.displacement[np.searchsorted(grid, 0.2)], [-0.12], atol=1e-15)
     # at rtol 1e-10 the integrators' global error (measured 1.2e-11 and 1.1e-10 of the peak), on the jumps too
     assert np.abs(run.displacement - exact.displacement).max() <= 1e-8 * np.abs(exact.displacement).max()
+
+
+@pytest.mark.parametrize("method", ["exact", "DOP853"])
+@pytest.mark.parametrize("amplitude, first_kind, speed", [(0.2, "impact", 0.1), (-0.2, "separation", 0.2)],
+                         ids=["driven into the mass", "leaving the mass"])
+def test_a_ground_jump_strikes_or_lets_go_a_mass_resting_on_its_stop(method, amplitude, first_kind, speed):
+    """A mass pressed onto its stop (restitution 0.5) when the ground's velocity jumps: the stop driven into it
+    strikes it (the mass leaves at 0.5 x 0.2 m/s), the stop moving away lets it go (at 0.2 m/s); either flight ends
+    where an independent DOP853 solve of the free mass (x'' = -100 x - 0.5 x' - 3) comes back to the stop. Both
+    kept the mass resting on the stop, unmoved."""
+    sc, model, grid = model_of(RESTING_ON_A_STOP + ground_pulse("velocity", amplitude, 0.5, 0.2), "stop.toml")
+    events = solve(model, grid, method, Tolerances(rtol=1e-12, atol=1e-15)).nonsmooth.events
+    assert events[0][0] == 0.5 and events[0][2] == first_kind, events[:2]
+
+    def back(t, y):
+        return y[0] + 0.01
+    back.terminal, back.direction = True, -1
+    flight = solve_ivp(lambda t, y: [y[1], -100 * y[0] - 0.5 * y[1] - 3], (0.5, 1.5), [-0.01, speed],
+                       method=REFERENCE_METHOD, rtol=1e-13, atol=1e-16, events=back)
+    assert events[1][2] == "impact" and abs(events[1][0] - flight.t_events[0][0]) <= 1e-9, (events[1], flight.t_events)
 
 
 @pytest.mark.parametrize("method", ["Radau", "rk4", "auto"])

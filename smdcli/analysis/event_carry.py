@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from smdcli.analysis.event_edges import carry_numbers, continuous, ground_jump
+from smdcli.analysis.event_edges import across_ground_jump
 from smdcli.model.nonsmooth import whole_tension
 from smdcli.solvers.exact.sampled import reseeded_steps
 
@@ -123,40 +123,17 @@ class CarriedSensitivities:
         Z[self._generator_columns()] = seeds[table[t]]
         return Z
 
-    def across_jump(self, before, after, z: np.ndarray, S: np.ndarray, t: float, recorded) -> np.ndarray:
-        """S (P, s) across the ground's jump at t (z: the state before it): each parameter's derivative of the jump
-        (dx, dv) added (a pulse's amplitude, a mass or a damper to ground moves it), and the numbers the jump sets in
-        an element (a spring yielding through a displacement step) by the law's own jump at the moved point. A jump
-        whose time moves with a parameter (a pulse's start or length), one that meets a held contact or stop, or one
-        after which the elements' modes are decided anew, leaves the response without a derivative from t."""
-        n, size = self.n, 2 * self.n
-
-        def jump_of(scene, c):
-            return ground_jump(scene, t)
-        try:
-            moves = [self.total(i, jump_of) for i in range(self.P)]
-        except LookupError:
-            self.no_derivative(t, "the ground's jump moves in time with the parameter")
-            return S
-        if recorded or any(el.law.piece(state).held for el, state in zip(self.scene.elements, before)):
-            self.no_derivative(t, "the ground's jump meets a held contact or stop, or the elements' modes are "
-                               "decided anew after it")
+    def across_jump(self, before, after, z: np.ndarray, S: np.ndarray, t: float) -> np.ndarray:
+        """S (P, s) across the ground's jump at t (z: the state before it, S reseeded there): x's and v's by
+        event_edges.across_ground_jump (the jump's derivative, the modes it decides, a held constraint's
+        projection), the numbers the jump sets carried; where it gives none (a pulse's start that moves with the
+        parameter, modes decided otherwise within its step), no derivative from t."""
+        rows = across_ground_jump(self, t, before, after, z, lambda i: S[i], reseed=True)
+        if isinstance(rows, str):
+            self.no_derivative(t, rows)
             return S
         jumped_S = S.copy()
-        jumped_S[:, :size] += moves
-        for e, (old, new) in enumerate(zip(before, after)):
-            if old == new:
-                continue
-
-            def jumped(scene, c, i):
-                x = z[:n] + c * S[i, :n]
-                d_old = float(scene.R[e] @ x)
-                d_new = float(scene.R[e] @ (x + jump_of(scene, c)[:n]))
-                return scene.elements[e].law.jump(self.shifted(before, i, c)[e], d_old, d_new)[0]
-            if not carry_numbers(self, e, sorted(continuous(new.internal)), new, jumped):
-                self.no_derivative(t, f"{self.scene.elements[e].path} passes through the ground's jump onto another "
-                                   "branch within the parameter's step")
-                break
+        jumped_S[:, :2 * self.n] = rows
         return jumped_S
 
     # ----------------------------------------------------------------------------- between samples

@@ -85,6 +85,71 @@ def ground_jump(scene: Scene, t: float) -> np.ndarray:
     return np.sum(found, axis=0)
 
 
+def jumped_state(scene: Scene, states, z: np.ndarray, t: float, v_scale: float) -> tuple[list[State], np.ndarray]:
+    """The ground's jump at t from (states, z) in this scene, as PiecewiseRun.cross_break makes it, nothing recorded:
+    the state jumped (ground_jump), each element's state by its law's own jump, a rigid stop the jump drives into
+    the mass resting on it struck (its rebound; held again where it has none), the modes decided anew at the new
+    state (consistent: a stuck contact the jump sets slipping, a stop it leaves behind let go) and the state put on
+    the held constraints (project)."""
+    from smdcli.elements.stop import FREE
+    from smdcli.solvers.events.decisions import consistent, driven_into, impact, project
+    from smdcli.solvers.events.scene import TOUCH
+
+    n = scene.n
+    z = z.copy()
+    d_old = scene.R @ z[:n]
+    z[:2 * n] += ground_jump(scene, t)
+    d_new = scene.R @ z[:n]
+    states = [el.law.jump(state, float(d_old[e]), float(d_new[e]))[0]
+              for e, (el, state) in enumerate(zip(scene.elements, states))]
+    for e in driven_into(scene, states, z, TOUCH * v_scale):
+        law = scene.elements[e].law
+        states[e] = State(FREE)
+        z = impact(scene, states, z, e, law.rebound)
+        if law.rebound == 0:
+            states[e] = law.event(states[e], "rest", float(d_new[e]), 0.0, 0.0)
+    states = consistent(scene, states, z, t, lambda e, kind: None, (), v_scale, ())
+    return states, project(scene, states, z, v_scale)
+
+
+def across_ground_jump(run, t: float, before, after, z: np.ndarray, moved, reseed: bool = False) -> np.ndarray | str:
+    """The state's scaled sensitivities [dx; dv] (P, 2n) just after the ground's jump at t, each the total derivative
+    of jumped_state along its parameter at the stencil's points (the jump's own derivative, a mass's or a damper's
+    impulse c du, an impact's rebound, a contact's constraint where it stays held), with the elements' internal
+    numbers that the jump sets carried into run.dq (a spring yielding through a displacement step); or why there is
+    none (a jump the parameter moves in time, modes it decides otherwise within the parameter's step). run: a
+    sensitivity run (its n, P, dq, v_scale, total); before, after: the modes on either side; z: the state just
+    before, moved(i) its sensitivity to parameter i (z's size); reseed: the force generators in z, restarted at t by
+    each scene."""
+    n, modes = run.n, [state.mode for state in after]
+
+    def mapped(scene, c, i):
+        start = z + c * moved(i)
+        if reseed:
+            scene.reseed(start, t)
+        return jumped_state(scene, shifted_states(before, run.dq, i, c), start, t, run.v_scale)
+
+    def on_branch(scene, c, i):
+        states, jumped = mapped(scene, c, i)
+        if [state.mode for state in states] != modes:
+            raise _OtherBranch
+        return jumped[:2 * n]
+    try:
+        rows = np.array([run.total(i, lambda scene, c, i=i: on_branch(scene, c, i)) for i in range(run.P)])
+    except LookupError:
+        return "the ground's jump moves in time with the parameter"
+    except _OtherBranch:
+        return "the elements' modes after the ground's jump change within the parameter's step"
+    for e, (old, new) in enumerate(zip(before, after)):
+        integrated = set(run.scene.elements[e].law.ode_states)
+        names = [name for name in sorted(continuous(new.internal)) if name not in integrated]
+        if old != new and names and not carry_numbers(run, e, names, new, lambda scene, c, i, e=e:
+                                                       mapped(scene, c, i)[0][e]):
+            return f"{run.scene.elements[e].path} passes through the ground's jump onto another branch within the " \
+                "parameter's step"
+    return rows
+
+
 def shifted_states(states, dq: list, i: int, c: float) -> list[State]:
     """The states with their internal variables moved c times their scaled sensitivities to parameter i (dq: each
     element's {name: (P,)}): a stencil point's states along the moved run."""

@@ -334,7 +334,7 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
         after, z_after = super().cross_break(states, z, t, jump)
         S = self._reseeded(np.concatenate([z, S.ravel()]), t)[self.scene.size:].reshape(S.shape)
         if jump is not None:  # the ground's: the state jumps
-            S = self.across_jump(states, after, z, S, t, self.events[before:])
+            S = self.across_jump(states, after, z, S, t)
         else:
             self.carry_internal(states, after, z, S, self.events[before:])
         self.settle_checkpoint(t, z_after, S, after)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from smdcli.analysis.event_edges import GRAZE, carry_numbers, continuous, ground_jump, shifted_states
+from smdcli.analysis.event_edges import GRAZE, across_ground_jump, carry_numbers, continuous, shifted_states
 from smdcli.elements.base import KINK, RATE
 from smdcli.model.nonsmooth import whole_tension
 
@@ -107,40 +107,16 @@ class MixedEdges:
                 return
 
     def _across_jump(self, t: float, before, y_before: np.ndarray, after, S: np.ndarray) -> np.ndarray:
-        """S (m, P) across the ground's jump at t (event_carry.across_jump's rule): each parameter's derivative of
-        the jump added to x and v, and the numbers the jump sets in an element (a spring yielding through a
-        displacement step) carried by the law's own jump at the moved point. A jump the parameter moves in time, one
-        that meets a held contact or stop, or one after which the modes are decided anew leaves no derivative."""
-        n, scene = self.n, self.scene
-        try:
-            moves = np.stack([self.total(i, lambda sc, c: ground_jump(sc, t)) for i in range(self.P)], axis=1)
-        except LookupError:
-            self.no_derivative(t, "the ground's jump moves in time with the parameter")
+        """S (m, P) across the ground's jump at t: x's and v's by event_edges.across_ground_jump (the jump's
+        derivative, the modes it decides, a held constraint's projection), the numbers the jump sets carried; where it
+        gives none, no derivative from t."""
+        self._on_cut(t)  # every scene's forces just after t, as the modes are decided there
+        rows = across_ground_jump(self, t, before, after, y_before, lambda i: S[:, i])
+        if isinstance(rows, str):
+            self.no_derivative(t, rows)
             return S
-        x, jump = y_before[:n], ground_jump(scene, t)
-        d_old, d_new = scene.R @ x, scene.R @ (x + jump[:n])
-        jumped = [el.law.jump(state, float(d_old[e]), float(d_new[e]))[0]
-                  for e, (el, state) in enumerate(zip(scene.elements, before))]
-        if any(el.law.piece(state).held for el, state in zip(scene.elements, before)) or \
-                [s.mode for s in jumped] != [s.mode for s in after]:
-            self.no_derivative(t, "the ground's jump meets a held contact or stop, or the elements' modes are "
-                               "decided anew after it")
-            return S
-        before_S, S = S, S.copy()
-        S[:2 * n] += moves
-        for e, (old, new) in enumerate(zip(before, after)):
-            names = list(self._set_numbers(e, new))
-            if old == new or not names:
-                continue
-
-            def at_point(sc, c, i, e=e):
-                moved = x + c * before_S[:n, i]
-                return sc.elements[e].law.jump(shifted_states(before, self.dq, i, c)[e], float(sc.R[e] @ moved),
-                                               float(sc.R[e] @ (moved + ground_jump(sc, t)[:n])))[0]
-            if not carry_numbers(self, e, names, new, at_point):
-                self.no_derivative(t, f"{scene.elements[e].path} passes through the ground's jump onto another branch "
-                                   "within the parameter's step")
-                break
+        S = S.copy()
+        S[:2 * self.n] = rows.T
         return S
 
     def grid_tensions(self) -> tuple[np.ndarray, np.ndarray]:

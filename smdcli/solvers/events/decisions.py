@@ -17,6 +17,21 @@ from smdcli.solvers.events.scene import TOUCH, Scene, at_level
 MAX_IMPACTS_IN_A_SEQUENCE = 10_000
 
 
+def driven_into(scene: Scene, states: list[State], z: np.ndarray, resolution: float) -> list[int]:
+    """The rigid stops held at their limits that the motion runs into faster than resolution (a speed): a stop met
+    moving into it at the start, a resting mass the ground's jump drives its wall end into. Each is an impact."""
+    from smdcli.elements.stop import FREE, Stop
+
+    n = scene.n
+    found = []
+    for e, (el, state) in enumerate(zip(scene.elements, states)):
+        if isinstance(el.law, Stop) and el.law.rigid and state.mode != FREE:
+            rate = float(scene.R[e] @ z[n:2 * n])
+            if (rate < -resolution) if state.mode.endswith("min") else (rate > resolution):
+                found.append(e)
+    return found
+
+
 def scale_of(values: np.ndarray) -> float:
     """A magnitude to judge 'zero' against."""
     return max(float(np.max(np.abs(values), initial=0.0)), 1e-300)
@@ -75,7 +90,9 @@ def consistent(scene: Scene, states: list[State], z: np.ndarray, t: float, on_ev
                     candidates.append(e)
             elif table == "stop" and law.rigid and state.mode != FREE:
                 at_min = state.mode.endswith("min")
-                if (tension[e] > 0) if at_min else (tension[e] < 0):
+                # pulling, or left behind by the ground's jump (its wall end moving off the resting mass)
+                if ((tension[e] > 0) if at_min else (tension[e] < 0)) or \
+                        ((rate[e] > tolerance) if at_min else (rate[e] < -tolerance)):
                     states[e] = law.event(state, "separation", d[e], rate[e], tension[e])
                     on_event(e, "separation")
                     changed = True

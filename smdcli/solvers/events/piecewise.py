@@ -38,7 +38,8 @@ from smdcli.solvers.events.batches import Batches
 from smdcli.solvers.events.crossings import Crossings
 from smdcli.solvers.exact.flow import Flow
 from smdcli.solvers.exact.hold import first_order_hold, halved, held_reason, hold_error, hold_response_error
-from smdcli.solvers.events.decisions import accumulation, consistent, impact, project, remaining_flights, touch
+from smdcli.solvers.events.decisions import accumulation, consistent, driven_into, impact, project, remaining_flights, \
+    touch
 from smdcli.solvers.events.scene import TOUCH, Mode, Scene
 from smdcli.solvers.events.record import Outputs, step_integrals
 
@@ -307,16 +308,22 @@ class PiecewiseRun(Crossings, Batches):
 
     def start(self, states, z: np.ndarray, t: float):
         """The modes at the start: a rigid stop met moving into it is an impact at once; then consistent."""
-        from smdcli.elements.stop import FREE, Stop
-
-        for e, (el, state) in enumerate(zip(self.scene.elements, states)):
-            if isinstance(el.law, Stop) and el.law.rigid and state.mode != FREE:
-                rate = float(el.row @ z[self.n:2 * self.n])
-                if (rate < 0) if state.mode.endswith("min") else (rate > 0):
-                    states[e] = State(FREE)
-                    states, z = self.impact(states, z, t, e)
+        states, z = self.strike(states, z, t, 0.0)
         states = self.settle(states, z, t)
         return states, self.project(states, z)
+
+    def strike(self, states, z: np.ndarray, t: float, resolution: float):
+        """Each rigid stop held at its limit that the motion runs into faster than resolution struck at once (an
+        impact, its restitution's rebound): at the start, or where the ground's jump drives its wall end into the
+        mass resting on it."""
+        from smdcli.elements.stop import FREE
+
+        for e in driven_into(self.scene, states, z, resolution):
+            if states[e].mode != FREE:  # not let go by an impact struck before it
+                states = list(states)
+                states[e] = State(FREE)
+                states, z = self.impact(states, z, t, e)
+        return states, z
 
     def breaks(self) -> list[tuple[float, object]]:
         """Force discontinuities (reseed the generators) and ground jumps (the state jumps), in time order."""
@@ -351,6 +358,7 @@ class PiecewiseRun(Crossings, Batches):
                 lost += loss
             self.cumulative["hysteretic"] += lost
             self.cumulative["input"] += sum(self.stored(states, z)) - before + lost
+            states, z = self.strike(states, z, t, self.speed_resolution())
             states = self.settle(states, z, t)
             z = self.project(states, z)
         return states, z
