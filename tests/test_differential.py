@@ -3,19 +3,19 @@ bilinear, Clough, Iwan, Bouc-Wen, cubic springs, quadratic dampers, Coulomb fric
 at its kinetic one, Stribeck and regularized friction, rigid stops, and events beside smooth terms: Coulomb friction
 beside a cubic spring, a stop beside a Bouc-Wen spring), force type (sine, step, square, table, the four shock
 pulses), damping form (dampers, Rayleigh, modal), support motion (a sine, a shock pulse, a record shorter than the
-run) and initial state. For each: `exact` against an implicit and an explicit integrator at tight tolerance (and,
-for a yielding frame's scene, against the compiled kernel `smd ida` runs it with), every run's own physics
-(analysis.guards: dissipation never decreasing, friction within its static force, stops never passed, yield surfaces
-never exceeded, the energy balance), the CLI's file against the API, and the export against the file, a sweep of
-the first spring's k (its law's k where it is hysteretic) against simulate of each member, and the sensitivities to
-that k, to the force's amplitude and frequency and to one more of the scene's numbers (every one of them with
-SMD_DIFFERENTIAL_EVERY_PARAMETER=1) against differences of the reference runs. Agreement within the
-stated accuracies, or a reported failure (a solver that says it failed, a run marked suspect): never a silent
-difference.
+run, a rectangle pulse of the ground's velocity or displacement: the state jumps) and initial state. For each:
+`exact` against an implicit and an explicit integrator at tight tolerance (and, for a yielding frame's scene, against
+the compiled kernel `smd ida` runs it with), every run's own physics (analysis.guards: dissipation never decreasing,
+friction within its static force, stops never passed, yield surfaces never exceeded, the energy balance), the CLI's
+file against the API, and the export against the file, a sweep of the first spring's k (its law's k where it is
+hysteretic) against simulate of each member, and the sensitivities to that k, to the force's amplitude and frequency
+and to one more of the scene's numbers (every one of them with SMD_DIFFERENTIAL_EVERY_PARAMETER=1) against
+differences of the reference runs. Agreement within the stated accuracies, or a reported failure (a solver that says
+it failed, a run marked suspect): never a silent difference.
 
 Seeded (derandomized), SMD_DIFFERENTIAL_EXAMPLES scenes (default 60, under a minute); `SMD_DIFFERENTIAL_EXAMPLES=600
-python -m pytest tests/test_differential.py` is the 10x run. Every failure it ever finds becomes a scene of
-FOUND below, a test of its own.
+python -m pytest tests/test_differential.py` is the 10x run. Every failure it ever finds becomes a scene of FOUND
+below, a test of its own.
 """
 
 import os
@@ -106,7 +106,7 @@ def scenes(draw):
     elif damping == "rayleigh":
         lines += ["[damping]", f"alpha = {draw(st.floats(0.0, 0.5))!r}", f"beta = {draw(st.floats(0.0, 0.002))!r}"]
     force = draw(st.sampled_from(["none", "sine", "step", "square", "table", "pulse", "ground_sine", "ground_record",
-                                  "ground_pulse", "chirp", "fourier_square", "expression"]))
+                                  "ground_pulse", "chirp", "fourier_square", "expression", "ground_jumps"]))
     on = draw(st.sampled_from(names))
     amplitude = draw(st.floats(0.5, 10.0))
     if force == "sine":
@@ -141,6 +141,12 @@ def scenes(draw):
     elif force == "ground_sine":
         lines += ["[ground_motion]", 'quantity = "acceleration"', 'type = "sine"', f"amplitude = {amplitude!r}",
                   f"omega = {draw(st.floats(2.0, 30.0))!r}"]
+    elif force == "ground_jumps":  # a rectangle pulse of the ground's velocity or displacement: the state jumps
+        quantity, size = draw(st.sampled_from([("velocity", 0.05), ("displacement", 0.005)]))
+        lines += ["[ground_motion]", f'quantity = "{quantity}"', 'type = "pulse"',
+                  f"amplitude = {draw(st.sampled_from([1.0, -2.0, 4.0])) * size!r}",
+                  f"t0 = {draw(st.sampled_from([0.1, 0.2345]))!r}",
+                  f"duration = {draw(st.sampled_from([0.05, 0.3333]))!r}"]
     elif force == "ground_record":  # a record shorter than the run: it ends, and says so
         lines += ["[ground_motion]", 'quantity = "acceleration"', 'type = "table"', "t = [0.0, 0.2, 0.4, 0.6]",
                   f"values = [0.0, {amplitude!r}, {-amplitude!r}, {amplitude / 2!r}]"]
@@ -817,6 +823,31 @@ omega = 18.378917561928944
 """,  # friction beside a cubic spring, held while nothing moves until the ground's sine breaks it away: the
 #   breakaway's rate along the flow was differenced over a time scale taken from the rates (all zero): 1e292 s,
 #   and the sensitivities after it 1e276 (the kernel failed on them)
+"""[time]
+end = 1.0
+step = 0.01
+[[mass]]
+name = "m0"
+m = 1.0
+x0 = 0.0
+v0 = 0.0
+[[spring]]
+connects = ["ground", "m0"]
+k = 50.0
+[[friction]]
+connects = ["ground", "m0"]
+force = 1.0
+regularization = 0.001
+viscous = 0.0
+belt_velocity = 0.2
+[ground_motion]
+quantity = "velocity"
+type = "pulse"
+amplitude = 0.05
+t0 = 0.1
+duration = 0.05
+""",  # a smooth scene (regularized friction) under the ground's velocity jumps: its sensitivity equations ignored
+#   the jumps, its response and sensitivities those of a ground at rest (1.2e-4 of the largest off, no word)
 ]
 
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from smdcli.elements import State
 from smdcli.solvers.events.scene import Scene
+from smdcli.solvers.ground import jump_at
 
 GRAZE = 1e-9  # a guard's top within this share of its terms below its level: a near miss, no derivative from it
 
@@ -75,19 +76,9 @@ def with_continuous(internal: dict, values: dict[str, float]) -> dict:
     return out
 
 
-def ground_jump(scene: Scene, t: float) -> np.ndarray:
-    """The ground's jump of the relative state at t in this scene's model, [dx; dv] (2n,); LookupError where it has
-    none there (a pulse the parameter moves in time)."""
-    found = [np.concatenate([dx, dv]) for when, dx, dv in scene.model.jumps
-             if abs(when - t) <= 1e-12 * max(abs(t), 1.0)]
-    if not found:
-        raise LookupError
-    return np.sum(found, axis=0)
-
-
 def jumped_state(scene: Scene, states, z: np.ndarray, t: float, v_scale: float) -> tuple[list[State], np.ndarray]:
     """The ground's jump at t from (states, z) in this scene, as PiecewiseRun.cross_break makes it, nothing recorded:
-    the state jumped (ground_jump), each element's state by its law's own jump, a rigid stop the jump drives into
+    the state jumped (ground.jump_at), each element's state by its law's own jump, a rigid stop the jump drives into
     the mass resting on it struck (its rebound; held again where it has none), the modes decided anew at the new
     state (consistent: a stuck contact the jump sets slipping, a stop it leaves behind let go) and the state put on
     the held constraints (project)."""
@@ -98,7 +89,7 @@ def jumped_state(scene: Scene, states, z: np.ndarray, t: float, v_scale: float) 
     n = scene.n
     z = z.copy()
     d_old = scene.R @ z[:n]
-    z[:2 * n] += ground_jump(scene, t)
+    z[:2 * n] += jump_at(scene.model, t)
     d_new = scene.R @ z[:n]
     states = [el.law.jump(state, float(d_old[e]), float(d_new[e]))[0]
               for e, (el, state) in enumerate(zip(scene.elements, states))]

@@ -194,20 +194,25 @@ def smooth_tensions(model: Model, derivatives: list, scales: np.ndarray, y: np.n
 
 
 def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, grid: np.ndarray, rtol: float,
-                         advance=None):
+                         advance=None, start: tuple[np.ndarray, np.ndarray] | None = None):
     """(y, dy/dp * scale, y', dy'/dp * scale) on the grid: (N, s), (N, s, P), (N, s), (N, s, P), for a scene
     smooth_refusal takes, and rates_at(t, left=False) -> (y', dy'/dp * scale) at any time on the integrator's dense
-    output (each piece's own: a kink or a force's break ends one; left: the piece that ends at t); advance(count) is called as output times are filled
-    (a progress bar's)."""
+    output (each piece's own: a kink or a force's break ends one; left: the piece that ends at t); advance(count) is
+    called as output times are filled (a progress bar's). start: (y, S) at the grid's first time, where not the
+    scene's initial state (a piece after the ground's jump); the ground's jumps: smooth_jumps.py."""
     from scipy.integrate import solve_ivp
 
+    if model.jumps:
+        from smdcli.analysis.smooth_jumps import across_ground_jumps
+
+        return across_ground_jumps(model, derivatives, scales, grid, rtol, advance, smooth_sensitivities)
     flow = _Flow(model)
     points = [[flow if m is model else _Flow(m) for m in d.models] for d in derivatives]  # an affine one's: base, other
     weights = [d.weights * s for d, s in zip(derivatives, scales)]
     size, P = 2 * model.n + flow.q, len(derivatives)
-    y0 = flow.initial()
-    s0 = np.stack([combined(ws, [f.initial() for f in fs]) for ws, fs in zip(weights, points)], axis=1) \
-        if P else np.zeros((size, 0))
+    y0 = flow.initial() if start is None else start[0]
+    s0 = (np.stack([combined(ws, [f.initial() for f in fs]) for ws, fs in zip(weights, points)], axis=1)
+          if P else np.zeros((size, 0))) if start is None else start[1]
     n = model.n
     masses = [combined(ws, [f.model.M for f in fs]) for ws, fs in zip(weights, points)]  # dM/dp (scaled)
 

@@ -20,6 +20,15 @@ from smdcli.solvers.base import Tolerances, make_result
 GROUND_RTOL = 1e-12
 
 
+def jump_at(model: Model, t: float) -> np.ndarray:
+    """The ground's jump of the relative state at t, [dx; dv] (2n,), the model's jumps there summed; LookupError where
+    it has none there (a pulse a parameter moves in time)."""
+    found = [np.concatenate([dx, dv]) for when, dx, dv in model.jumps if abs(when - t) <= 1e-12 * max(abs(t), 1.0)]
+    if not found:
+        raise LookupError(t)
+    return np.sum(found, axis=0)
+
+
 def across_jumps(solve: Callable[[Model, np.ndarray], Result], model: Model, grid: np.ndarray) -> Result:
     """solve(model, grid), restarted at each jump of the state: between jumps the solver runs on the output points
     there (a uniform grid), joined to the jumps by one step each; the output at a jump's time is its right limit."""
