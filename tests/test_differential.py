@@ -13,7 +13,7 @@ and to one more of the scene's numbers (every one of them with SMD_DIFFERENTIAL_
 differences of the reference runs. Agreement within the stated accuracies, or a reported failure (a solver that says
 it failed, a run marked suspect): never a silent difference.
 
-Seeded (derandomized), SMD_DIFFERENTIAL_EXAMPLES scenes (default 60, under a minute); `SMD_DIFFERENTIAL_EXAMPLES=600
+Seeded (derandomized), SMD_DIFFERENTIAL_EXAMPLES scenes (default 40, about two minutes); `SMD_DIFFERENTIAL_EXAMPLES=400
 python -m pytest tests/test_differential.py` is the 10x run. Every failure it ever finds becomes a scene of FOUND
 below, a test of its own.
 """
@@ -27,7 +27,8 @@ from hypothesis import strategies as st
 
 from smdcli.errors import SolverFailed
 
-EXAMPLES = int(os.environ.get("SMD_DIFFERENTIAL_EXAMPLES", 60))
+# 40: with the ground's jumps drawn, 60 scenes took 156 s alone (112 s before) and pushed the suite past CI's time
+EXAMPLES = int(os.environ.get("SMD_DIFFERENTIAL_EXAMPLES", 40))
 # drawn by two tests, half each (a test's seed is its own), so that pytest-xdist runs them side by side: as one test
 # the 60 scenes took 250 s in one process, the suite's longest pole
 SETTINGS = settings(max_examples=(EXAMPLES + 1) // 2, deadline=None, derandomize=True, database=None,
