@@ -71,8 +71,9 @@ def write(result: Result, path: str | Path) -> Path:
 
 
 def sensitivity(scenario: Scenario | str | Path, params: list[str]):
-    """Exact sensitivities of a linear scene (a Scenario or a path) to parameter paths, as `smd sensitivity` takes
-    them, writing nothing: .parameter, .time, .displacement, .d_displacement (P, N, n) and the file's other arrays."""
+    """Sensitivities of a scene (a Scenario or a path; linear, piecewise linear or smooth nonlinear) to parameter
+    paths, as `smd sensitivity` takes them, writing nothing: .parameter, .time, .displacement, .d_displacement
+    (P, N, n) and the file's other arrays."""
     from smdcli.analysis.sensitivity import sensitivity as sensitivities
 
     sc = scenario if isinstance(scenario, Scenario) else load(scenario)

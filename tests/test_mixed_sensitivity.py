@@ -165,6 +165,40 @@ omega = 9.0
 
 CUBIC_BESIDE = '[[spring]]\nconnects = ["ground", "m1"]\nlaw = "cubic"\nk = 50.0\nk3 = 2.0e4\n'
 
+STRIBECK_CHAIN = """
+[time]
+end = 1.0
+step = 0.01
+[[mass]]
+name = "m0"
+m = 1.0
+[[mass]]
+name = "m1"
+m = 1.0
+[[mass]]
+name = "m2"
+m = 1.0
+[[spring]]
+connects = ["ground", "m0"]
+k = 50.0
+[[spring]]
+connects = ["m0", "m1"]
+k = 50.0
+[[spring]]
+connects = ["m1", "m2"]
+k = 50.0
+[[friction]]
+connects = ["ground", "m2"]
+force = 0.5
+static = 0.65
+stribeck_velocity = 0.02
+[[force]]
+on = "m2"
+type = "sine"
+amplitude = 1.0
+omega = 2.0
+"""
+
 
 @pytest.mark.parametrize("text, paths", [
     # Coulomb stick-slip of a mass behind a hardening spring: 10 events (measured 7.6e-10 to 4.4e-8)
@@ -183,8 +217,11 @@ CUBIC_BESIDE = '[[spring]]\nconnects = ["ground", "m1"]\nlaw = "cubic"\nk = 50.0
     (ELASTOPLASTIC.replace("end = 1.2", "end = 2.0") + CUBIC_BESIDE +
      '[[friction]]\nconnects = ["ground", "m1"]\nforce = 5.0\nstatic = 6.0\n',
      ["spring[0].k", "spring[0].fy", "friction[0].force", "spring[1].k3"]),
+    # a Stribeck contact breaking away at the end of a chain still at rest (rounding's 1e-17 m): the sensitivity
+    # kernel's first step after it was 1e-16 s (0.01 |y| / |y'| alone) and failed there
+    (STRIBECK_CHAIN, ["force[0].amplitude", "friction[0].static", "force[0].omega"]),
 ], ids=["friction beside a cubic spring", "impacts beside a Bouc-Wen spring", "yielding beside a quadratic damper",
-        "bilinear beside a cubic spring", "yielding, cubic and friction"])
+        "bilinear beside a cubic spring", "yielding, cubic and friction", "a Stribeck contact breaking away"])
 def test_events_beside_smooth_terms_match_differences_of_dop853(text, paths):
     """Against five-point central differences of smd's DOP853 runs at rtol 1e-13, events located on its interpolant
     (the forward integrator, not the sensitivity equations), at 1e-4 of each value: within 1e-7 of the largest."""

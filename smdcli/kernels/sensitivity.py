@@ -208,10 +208,11 @@ def augmented_rates(m, models, weights, owner, ratios, moves, g, t, y, left, dy,
 
 @kernel
 def integrate(m, models, weights, owner, ratios, moves, y0, grid, cuts, rtol, atol, max_steps, out, rates, work,
-              counts):
+              counts, reached):
     """From y0 at grid[0] over the grid, restarting at each cut (a force's discontinuity) as the compiled pairs do,
     each output time landed on: out and rates (N, len(y0)) get the state and its rate there (right limits); counts:
-    right-hand sides, accepted and rejected steps. Returns OK, TOO_SMALL_STEP, STEP_BUDGET or NOT_FINITE."""
+    right-hand sides, accepted and rejected steps; reached[0]: the time a failure met. Returns OK, TOO_SMALL_STEP,
+    STEP_BUDGET or NOT_FINITE."""
     size_all = len(y0)
     n = m.n
     s = 2 * n + m.ns_q
@@ -221,17 +222,18 @@ def integrate(m, models, weights, owner, ratios, moves, y0, grid, cuts, rtol, at
     J, dwork, f, g = np.zeros((s, s)), np.zeros((n, s)), np.zeros(2 * n + m.ns_q + m.ns_acc), np.zeros(n)
     signs, now = np.ones((len(m.ns_belt), 2)), np.ones((len(m.ns_belt), 2))
     return _march(m, models, weights, owner, ratios, moves, y0.copy(), grid, cuts, rtol, atol, max_steps, out, rates,
-                  work, counts, K, arg, y_new, scale, err, err3, J, dwork, f, g, signs, now)
+                  work, counts, reached, K, arg, y_new, scale, err, err3, J, dwork, f, g, signs, now)
 
 
 @no_alloc
 def _march(m, models, weights, owner, ratios, moves, y, grid, cuts, rtol, atol, max_steps, out, rates, work, counts,
-           K, arg, y_new, scale, err, err3, J, dwork, f, g, signs, now):
+           reached, K, arg, y_new, scale, err, err3, J, dwork, f, g, signs, now):
     """integrate's steps, on the scratch it made: compiled without reference counting, which the stages' inlined
     right-hand sides would otherwise pay on every read of a model's arrays. The stages have one call site, inlined
     (a call handed over the stencil's models, array by array, and took a third of the time): a step's first stage is
     taken anew (fresh) at a segment's start and past a kink, as a pass of the stage loop that takes no step, and an
-    output's rate wanted at a cut (pending) is the next segment's first (at the last cut: one more segment, empty)."""
+    output's rate wanted at a cut (pending) is the next segment's first (at the last cut: one more segment, empty);
+    the first step's length is Hairer's (erk.initial_step's), its Euler probe one more such pass (probing)."""
     size_all = len(y)
     size = 2 * m.n + m.ns_q + m.ns_acc
     assign(out[0], y)
@@ -241,6 +243,8 @@ def _march(m, models, weights, owner, ratios, moves, y, grid, cuts, rtol, atol, 
     k = np.int64(1)  # not a literal 1: the row writers (_dense, _hermite) compile once, for any row
     exponent = -1.0 / 8.0
     h_abs = 0.0
+    probing = False
+    d1 = 0.0
     for seg in range(len(cuts)):
         ta = cuts[seg]
         t_end = cuts[seg + 1] if seg + 1 < len(cuts) else ta
@@ -253,14 +257,18 @@ def _march(m, models, weights, owner, ratios, moves, y, grid, cuts, rtol, atol, 
             rejected = False
             landed = 0
             while True:
-                if not fresh and h_abs < min_step:
+                if not fresh and not probing and h_abs < min_step:
+                    reached[0] = t
                     return TOO_SMALL_STEP
                 t_new = t if fresh else min(t + h_abs, target)
                 h = t_new - t
-                for st in range(0 if fresh else 1, 1 if fresh else STAGES + 1):
+                for st in range(0 if fresh else 1, 1 if fresh else 2 if probing else STAGES + 1):
                     assign(arg, y)
                     ts = t
-                    if st == STAGES:  # the step's end (y_new), whose rate starts the next step
+                    if probing:  # the first step's Euler probe: f(t + h0, y + h0 f) into K[1]
+                        ts = t + h_abs
+                        axpy(h_abs, K[0], arg)
+                    elif st == STAGES:  # the step's end (y_new), whose rate starts the next step
                         ts = t_new
                         for j in range(STAGES):
                             if B[j] != 0.0:
@@ -278,13 +286,28 @@ def _march(m, models, weights, owner, ratios, moves, y, grid, cuts, rtol, atol, 
                     if pending >= 0:
                         assign(rates[pending], K[0])
                         pending = -1
+                    if t >= t_end:
+                        break
                     if h_abs == 0.0:  # later segments go on at the pace the first reached: a force's kink needs none
                         for i in range(size_all):
                             scale[i] = atol[i] + abs(y[i]) * rtol
                         d0, d1 = scaled_rms(y, scale), scaled_rms(K[0], scale)
-                        h_abs = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
-                    if t >= t_end:
-                        break
+                        # h0 alone took 1e-16 s where the state was rounding's (a Stribeck contact just broken away,
+                        # its chain at 1e-17 m) and the sensitivities' rates whole: no step could be taken
+                        h_abs = min(1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1, t_end - t)
+                        probing = True
+                    continue
+                if probing:
+                    probing = False
+                    counts[0] += 1
+                    for i in range(size_all):
+                        err[i] = K[1][i] - K[0][i]
+                    d2 = scaled_rms(err, scale) / h_abs
+                    if d1 <= 1e-15 and d2 <= 1e-15:
+                        h_abs = max(1e-6, h_abs * 1e-3)
+                    else:
+                        h_abs = min(100 * h_abs, (0.01 / max(d1, d2)) ** -exponent)
+                    h_abs = min(h_abs, t_end - t)
                     continue
                 assign(y_new, arg)
                 counts[0] += STAGES
@@ -312,6 +335,7 @@ def _march(m, models, weights, owner, ratios, moves, y, grid, cuts, rtol, atol, 
             if t >= t_end:
                 break  # the last cut's lone first stage: no step
             counts[1] += 1
+            reached[0] = t
             if counts[1] > max_steps:
                 return STEP_BUDGET
             for i in range(size_all):

@@ -37,13 +37,13 @@ def run_sensitivities(base, stencil: list, start: np.ndarray, grid: np.ndarray, 
     for j, (_, _, _, ratio) in enumerate(stencil):
         if ratio is not None:
             ratios[j] = ratio
+    reached = np.zeros(1)  # where a failure met
     status = kernel.integrate(base, models, np.array([w for _, w, _, _ in stencil], dtype=float),
                               np.array([p for p, _, _, _ in stencil], dtype=np.int64), ratios,
                               np.array([r is not None for *_, r in stencil], dtype=np.bool_),
                               np.asarray(start, dtype=float), grid, cuts, float(rtol), atol, MAX_STEPS, out, rates,
-                              np.zeros(work_size(base)), np.zeros(3, dtype=np.int64))
+                              np.zeros(work_size(base)), np.zeros(3, dtype=np.int64), reached)
     if status != kernel.OK:
-        reached = grid[np.isfinite(out[:, 0])][-1]
-        raise SolverFailed(f"{source}: the sensitivity equations failed after t = {reached:.6g} s "
-                           f"({failure_text(status, MAX_STEPS, np.inf)})")
+        raise SolverFailed(f"{source}: the sensitivity equations failed at t = {reached[0]:.6g} s: "
+                           f"{failure_text(status, MAX_STEPS, np.inf)}")
     return out, rates
