@@ -230,14 +230,16 @@ def reversal(m, y, y_new, f, f_new, h):
 
 @no_alloc
 def hermite_crossing(r0, r1, d0, d1, first):
-    """Where in [0, first] the cubic Hermite interpolant of a quantity (values r0, r1 of opposite signs at the
-    step's ends, slopes d0, d1 over the step) changes sign, bracketed by bisection and returned at its far side."""
+    """Where in [0, first] the cubic Hermite interpolant of a quantity (values r0, r1 at the step's ends, slopes d0,
+    d1 over the step; a sign change within [0, first]) changes sign, bracketed by bisection and returned at its far
+    side; from r0 = 0, the side it moves to is its slope's."""
+    side = r0 if r0 != 0.0 else d0
     lo, hi = 0.0, first
     for _ in range(48):
         s = 0.5 * (lo + hi)
         u = 1.0 - s
         value = (r0 * (1 + 2 * s) + d0 * s) * u * u + (r1 * (3 - 2 * s) - d1 * u) * s * s
-        if value * r0 > 0.0:
+        if value * side > 0.0:
             lo = s
         else:
             hi = s

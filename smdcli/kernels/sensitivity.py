@@ -152,12 +152,16 @@ def first_crossing(r0, r1, d0, d1, first):
     d1 over the step) first changes sign, just past it, or first for none: looked at in CROSSING_SAMPLES points, so
     that one crossing and coming back within the step (a grazing d' or z: its held branch would be wrong between,
     unseen by the error estimate) is found too, then bisected (erk.hermite_crossing)."""
-    if r0 == 0.0:
-        return first  # on the kink at the start: branches took the side it moves to
+    # on the kink at the start, branches took the side it moves to, its slope's: a step that turns back across it
+    # is cut there too (a first step of Hairer's length from a mass leaving a stop, d' = 0, held the wrong branch of a
+    # Bouc-Wen law's J past its turn: 1.1e-5 off)
+    side = r0 if r0 != 0.0 else d0
+    if side == 0.0:
+        return first
     for j in range(1, CROSSING_SAMPLES + 1):
         s = first * j / CROSSING_SAMPLES
         u = 1.0 - s
-        if ((r0 * (1 + 2 * s) + d0 * s) * u * u + (r1 * (3 - 2 * s) - d1 * u) * s * s) * r0 < 0.0:
+        if ((r0 * (1 + 2 * s) + d0 * s) * u * u + (r1 * (3 - 2 * s) - d1 * u) * s * s) * side < 0.0:
             return hermite_crossing(r0, r1, d0, d1, s)
     return first
 
