@@ -47,6 +47,17 @@ def check_address(scheduler: str) -> None:
                          f"({exc.strerror or 'timed out'})") from None
 
 
+def _quiet_resource_tracker() -> None:
+    """Keep the resource tracker's 'leaked semaphore objects to clean up' warning (its clean-up goes on) out of the
+    terminal, by the environment the tracker process starts with."""
+    import os
+
+    quiet = "ignore::UserWarning:multiprocessing.resource_tracker"
+    given = os.environ.get("PYTHONWARNINGS")
+    if quiet not in (given or ""):
+        os.environ["PYTHONWARNINGS"] = f"{given},{quiet}" if given else quiet
+
+
 class Cluster:
     """A Client on the scheduler at an address, or on a new LocalCluster of `workers` processes; close() ends both."""
 
@@ -58,6 +69,10 @@ class Cluster:
         self.local = None
         self.where = "a LocalCluster" if scheduler == "local" else f"the cluster at {scheduler}"
         if scheduler == "local":
+            # the workers' semaphores, left when an interrupt stops them, are unlinked by multiprocessing's resource
+            # tracker (a process the cluster starts) as it ends, with a warning for each batch: under PYTHONUNBUFFERED
+            # (Docker images set it) three lines of it followed smd's one-line message on SIGTERM
+            _quiet_resource_tracker()
             self.local = LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
                                       dashboard_address=None, silence_logs=logging.CRITICAL)
             self.client = Client(self.local)
