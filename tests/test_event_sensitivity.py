@@ -621,14 +621,16 @@ def test_a_stop_scene_under_a_formula_is_fitted_from_data_its_formula_read_at_t(
 ])
 def test_a_peak_at_an_event_between_samples_is_simulate_s_and_has_its_derivative(name, params):
     """Where the largest |x| is at an event between samples (an impact at the stop, a yield's corner), the peak is
-    the event's, as smd simulate reports it (the samples' and their interpolants' were 0.2 % and 0.02 % low), and
-    its derivative is the event point's total derivative: within 1e-8 of five-point central differences of the
-    peaks of exact runs at 1e-5 of each value (measured 5e-11 to 9e-10)."""
+    the event's, as smd simulate reports it, to its stated accuracy (the samples' and their interpolants' were 0.2 %
+    and 0.02 % low), and its derivative is the event point's total derivative: within 1e-8 of five-point central
+    differences of the peaks of exact runs at 1e-5 of each value (measured 5e-11 to 9e-10)."""
     from smdcli.solvers.peaks import result_peaks
 
     sc = smdcli.load(SCENARIOS / f"{name}.toml")
     s = smdcli.sensitivity(sc, params)
-    assert np.array_equal(s.peak_displacement, result_peaks(smdcli.simulate(sc, method="exact")))
+    run = smdcli.simulate(sc, method="exact")  # the same run to its stated accuracy (3.5e-18 m apart: a BLAS's order)
+    stated = run.stats.stated_accuracy * s.peak_displacement.max()
+    assert np.abs(s.peak_displacement - result_peaks(run)).max() <= stated
     for i, path in enumerate(params):
         h = 1e-5 * s.value[i]
         peaks = {o: result_peaks(smdcli.simulate(scenario_with(sc, {path: s.value[i] + o * h}), method="exact"))
