@@ -101,6 +101,20 @@ def rows_through(grid, k, t):
 
 
 @no_alloc
+def probe_step(d0, d1):
+    """Hairer's first guess h0 at a first step, from the scaled sizes of the state (d0) and of its rate (d1)."""
+    return 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+
+
+@no_alloc
+def probed_step(h0, d1, d2, order):
+    """Hairer's first step from h0 and its Euler probe (d2: the rate's scaled change over h0, per unit of h0)."""
+    if d1 <= 1e-15 and d2 <= 1e-15:
+        return max(1e-6, h0 * 1e-3)
+    return min(100 * h0, (0.01 / max(d1, d2)) ** (1.0 / (order + 1)))
+
+
+@no_alloc
 def initial_step(m, t0, y0, f0, t_bound, order, rtol, atol, mid, work, jwork, f1, y1, scale):
     """scipy's select_initial_step (Hairer, Norsett and Wanner, II.4); f1, y1 and scale are scratch."""
     length = t_bound - t0
@@ -110,19 +124,13 @@ def initial_step(m, t0, y0, f0, t_bound, order, rtol, atol, mid, work, jwork, f1
         scale[i] = atol[i] + abs(y0[i]) * rtol
     d0 = scaled_rms(y0, scale)
     d1 = scaled_rms(f0, scale)
-    h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
-    h0 = min(h0, length)
+    h0 = min(probe_step(d0, d1), length)
     for i in range(len(y0)):
         y1[i] = y0[i] + h0 * f0[i]
     state_rhs(m, t0 + h0, y1, t0 + h0 >= mid, f1, work, jwork)
     for i in range(len(y0)):
         y1[i] = f1[i] - f0[i]
-    d2 = scaled_rms(y1, scale) / h0
-    if d1 <= 1e-15 and d2 <= 1e-15:
-        h1 = max(1e-6, h0 * 1e-3)
-    else:
-        h1 = (0.01 / max(d1, d2)) ** (1.0 / (order + 1))
-    return min(100 * h0, h1, length)
+    return min(probed_step(h0, d1, scaled_rms(y1, scale) / h0, order), length)
 
 
 @no_alloc

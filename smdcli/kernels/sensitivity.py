@@ -25,8 +25,9 @@ from smdcli.elements.friction import SMOOTH_STRIBECK, SMOOTH_TANH
 from smdcli.kernels import tableaus
 from smdcli.kernels.arrays import CUBIC_SPRING
 from smdcli.kernels.compiler import inlined, kernel, no_alloc
-from smdcli.kernels.erk import (DOP853, MAX_FACTOR, MIN_FACTOR, NOT_FINITE, OK, SAFETY, STEP_BUDGET,
-                                TOO_SMALL_STEP, _error_norm, axpy, assign, hermite_crossing, reversal, scaled_rms)
+from smdcli.kernels.erk import (DOP853, ERROR_ORDER, MAX_FACTOR, MIN_FACTOR, NOT_FINITE, OK, SAFETY, STEP_BUDGET,
+                                TOO_SMALL_STEP, _error_norm, axpy, assign, hermite_crossing, probe_step, probed_step,
+                                reversal, scaled_rms)
 from smdcli.kernels.rhs import state_rhs, state_rhs_inlined
 
 STAGES = tableaus.DOP853_STAGES
@@ -298,7 +299,7 @@ def _march(m, models, weights, owner, ratios, moves, y, grid, cuts, rtol, atol, 
                         d0, d1 = scaled_rms(y, scale), scaled_rms(K[0], scale)
                         # h0 alone took 1e-16 s where the state was rounding's (a Stribeck contact just broken away,
                         # its chain at 1e-17 m) and the sensitivities' rates whole: no step could be taken
-                        h_abs = min(1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1, t_end - t)
+                        h_abs = min(probe_step(d0, d1), t_end - t)
                         probing = True
                     continue
                 if probing:
@@ -307,11 +308,7 @@ def _march(m, models, weights, owner, ratios, moves, y, grid, cuts, rtol, atol, 
                     for i in range(size_all):
                         err[i] = K[1][i] - K[0][i]
                     d2 = scaled_rms(err, scale) / h_abs
-                    if d1 <= 1e-15 and d2 <= 1e-15:
-                        h_abs = max(1e-6, h_abs * 1e-3)
-                    else:
-                        h_abs = min(100 * h_abs, (0.01 / max(d1, d2)) ** -exponent)
-                    h_abs = min(h_abs, t_end - t)
+                    h_abs = min(probed_step(h_abs, d1, d2, np.int64(ERROR_ORDER[DOP853])), t_end - t)
                     continue
                 assign(y_new, arg)
                 counts[0] += STAGES
