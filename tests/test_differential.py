@@ -885,6 +885,34 @@ values = [0.0, 5.0, -2.5, 0.0]
 """,  # impacts accumulating on a stop beside a Bouc-Wen spring, the mass then leaving it at rest (d' = 0): once the
 #   sensitivity kernel's first step was Hairer's, the kink check skipped a step starting on the kink, and the step
 #   held J's wrong branch past d' turning back (x0's sensitivity 1.1e-5 off)
+    """[time]
+end = 1.0
+step = 0.01
+[[mass]]
+name = "m0"
+m = 2.88720537622291
+x0 = 0.01
+[[mass]]
+name = "m1"
+m = 3.2530055939856592
+[[mass]]
+name = "m2"
+m = 0.5
+[[spring]]
+connects = ["ground", "m0"]
+law = "clough"
+k = 50.0
+fy = 0.5
+hardening = -0.03
+[[spring]]
+connects = ["m0", "m1"]
+k = 50.0
+[[spring]]
+connects = ["m1", "m2"]
+k = 50.0
+""",  # a Clough spring deformed to its yield point exactly at the start (x0 = fy / k): the stencil's points of k, fy
+#   and x0 started it elastic on one side, on its backbone on the other, whose internal variables differ in number,
+#   and the sensitivity crashed (a traceback) where it says the derivative does not exist
 ]
 
 

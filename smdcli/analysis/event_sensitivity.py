@@ -210,9 +210,11 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
             self.no_derivative(t, "a stop is met moving into it at the start")
         n, E = self.n, self.scene.E
         S = np.zeros((self.P, self.scene.size))
+        nominal = np.array([v for s in states for v in internal_values(s)])
         for i in range(self.P):
             branches, internals = set(), {}  # the elements' starting modes and internal values at the stencil's points
             margins = {}  # the held contacts' forces less their breakaway at the stencil's points
+            ragged = []  # the points whose internal variables are another branch's
 
             def initial(scene, c):
                 model = scene.model
@@ -224,10 +226,15 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
                 branches.add(tuple(s.mode for s in starts))
                 margins[c] = breakaway_margins(scene, starts, z0)
                 internals[c] = np.array([value for s in starts for value in internal_values(s)])
-                return np.concatenate([z0] + [internal_values(s) for s in starts])
+                if len(internals[c]) != len(nominal):
+                    # another branch, whose internal variables differ in number (a Clough spring deformed to its
+                    # yield point exactly, the stiffness moved: elastic on one side, on its backbone on the other)
+                    ragged.append(c)
+                    internals[c] = np.full(len(nominal), np.nan)
+                return np.concatenate([z0, internals[c]])
             flat = self.total(i, initial)
             held_at_breakaway = on_breakaway(margins, held_margins, self.scene)
-            if len(branches) > 1 or kinked(internals, np.array([v for s in states for v in internal_values(s)])) or \
+            if len(branches) > 1 or ragged or kinked(internals, nominal) or \
                     held_at_breakaway:
                 # a start on the edge of two branches (deformed to its yield point exactly, held at its breakaway):
                 # carried as zeros, read as nan (outputs, state_at, rates_at)
