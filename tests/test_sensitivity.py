@@ -463,9 +463,11 @@ omega = 7.0
 """
 
 
-def regularized_reference(grid, k=100.0, F=0.8, r=1e-3, cv=0.05, belt=0.2, m2=0.5, w=7.0):
+def regularized_reference(grid, k=100.0, F=0.8, r=1e-3, cv=0.05, belt=0.2, m2=0.5, w=7.0, landed=False):
     """REGULARIZED's two masses, written here (the friction's force F tanh(s / r) + cv s on m2, s = v2 - belt its
-    slip over the belt), by DOP853 at rtol 1e-13 in complex arithmetic: x1, x2, v1, v2 on the grid."""
+    slip over the belt), by DOP853 at rtol 1e-13 in complex arithmetic: x1, x2, v1, v2 on the grid (landed: each
+    sample a run's end, not its interpolant's: stuck to the belt under r = 1e-5 the stiff v2's interpolant had dv2/dk
+    +2.6e-9 where the runs' ends agree on -4.09e-9)."""
     from scipy.integrate import solve_ivp
 
     def f(t, y):
@@ -473,28 +475,36 @@ def regularized_reference(grid, k=100.0, F=0.8, r=1e-3, cv=0.05, belt=0.2, m2=0.
         a1 = 6.0 * np.sin(w * t) - k * x1 - 50.0 * (x1 - x2) - 0.3 * v1
         a2 = (-50.0 * (x2 - x1) - F * np.tanh((v2 - belt) / r) - cv * (v2 - belt)) / m2
         return [v1, v2, a1, a2]
-    return solve_ivp(f, (grid[0], grid[-1]), np.array([0.0, 0.0, 0.0, 0.1], complex), method="DOP853",
-                     rtol=1e-13, atol=1e-16, t_eval=grid).y
+    start = np.array([0.0, 0.0, 0.0, 0.1], complex)
+    if not landed:
+        return solve_ivp(f, (grid[0], grid[-1]), start, method="DOP853", rtol=1e-13, atol=1e-16, t_eval=grid).y
+    rows = [start]
+    for a, b in zip(grid[:-1], grid[1:]):
+        rows.append(solve_ivp(f, (a, b), rows[-1], method="DOP853", rtol=1e-13, atol=1e-16).y[:, -1])
+    return np.array(rows).T
 
 
-@pytest.mark.parametrize("belt", [0.2, 0.0])
-def test_regularized_friction_matches_the_complex_step_of_dop853(monkeypatch, belt):
+@pytest.mark.parametrize("kernel, belt", [("explicit", 0.2), ("explicit", 0.0), ("implicit", 0.2)])
+def test_regularized_friction_matches_the_complex_step_of_dop853(monkeypatch, kernel, belt):
     """A tanh friction (1 mm/s, over a belt) is a smooth law: its sensitivities are the forward sensitivity
     equations', J its tension's slope F sech^2(s / r) / r; each parameter (the friction's own four among them: r's
     step taken in r's scale, where the law's keys moved no array of the model and the step was 1e-3 absolute, twice
     r, 14 % off and stated exact; the belt's in r's too, from 0 as well, where a step from a zero array was taken
     for one that moved nothing and widened: 5 % off) to 1e-7 of its largest against the complex step, the stated
     accuracy above the error; the Python integration (the peaks' rates between samples) within both runs' stated
-    errors of the kernel (its viscous part once read the mass's velocity without the belt's: 57 % off)."""
+    errors of the kernel (its viscous part once read the mass's velocity without the belt's: 57 % off). Both kernels:
+    DOP853, and Radau IIA (which a stiffer law is handed to)."""
     import smdcli.analysis.smooth_sensitivity as smooth
+    from smdcli.solvers import sensitivity_run
 
+    monkeypatch.setattr(sensitivity_run, "KERNEL", kernel)
     sc, _, grid = model_of(REGULARIZED.replace("belt_velocity = 0.2", f"belt_velocity = {belt!r}"), "regularized.toml")
     arguments = {"spring[0].k": {"k": 100 + 1j * H}, "friction[0].force": {"F": 0.8 + 1j * H},
                  "friction[0].regularization": {"r": 1e-3 + 1j * H}, "friction[0].viscous": {"cv": 0.05 + 1j * H},
                  "friction[0].belt_velocity": {"belt": belt + 1j * H}, "mass.m2.m": {"m2": 0.5 + 1j * H},
                  "force[0].omega": {"w": 7 + 1j * H}}
     s = smdcli.sensitivity(sc, list(arguments))
-    assert "compiled DOP853" in s.method
+    assert ("compiled Radau IIA" if kernel == "implicit" else "compiled DOP853") in s.method
     for i, (path, given) in enumerate(arguments.items()):
         want = regularized_reference(grid, **{"belt": belt, **given}).imag / H
         for got, reference, quantity in ((s.d_displacement[i], want[:2].T, "displacement"),
@@ -508,6 +518,44 @@ def test_regularized_friction_matches_the_complex_step_of_dop853(monkeypatch, be
         a, b = getattr(s, quantity), getattr(python, quantity)
         allowed = (s.accuracy[quantity] + python.accuracy[quantity]) * np.abs(b).max(axis=(1, 2))
         assert np.all(np.abs(a - b).max(axis=(1, 2)) <= allowed), quantity
+
+
+def test_a_belt_s_speed_is_stepped_within_a_fine_regularization(monkeypatch):
+    """The belt's 0.2 m/s under r = 1e-5 m/s: its step, a share of r, moves the belt by less than a millionth of
+    itself, and widened for the belt's digits (to 0.2's scale) it stepped across the whole tanh: dx/d belt was 15
+    times the complex step's, stated 1e-7. Never widened past the law's own scale, it is the complex step's to 1e-7
+    (by the explicit kernel alone, over 0.1 s)."""
+    from smdcli.solvers import sensitivity_run
+
+    monkeypatch.setattr(sensitivity_run, "KERNEL", "explicit")
+    sc, _, grid = model_of(REGULARIZED.replace("regularization = 1e-3", "regularization = 1e-5")
+                           .replace("end = 3.0", "end = 0.1"), "belt.toml")
+    s = smdcli.sensitivity(sc, ["friction[0].belt_velocity"])
+    want = regularized_reference(grid, r=1e-5, belt=0.2 + 1j * H, landed=True).imag / H
+    error = np.abs(s.d_displacement[0] - want[:2].T).max() / np.abs(want[:2]).max()
+    assert error <= 1e-7 and error <= s.accuracy["d_displacement"][0], error
+
+
+def test_a_stiff_regularized_friction_is_handed_to_radau_and_matches_the_complex_step():
+    """r = 1e-5 m/s (F / (m r) = 1.6e5 /s): DOP853's steps are stability's, a 130th of the output step; Hairer's test
+    says so and the run turns to the implicit kernel (Radau IIA, the sensitivities by its collocation formula
+    differentiated); the stiffness, the friction's four numbers (the belt's speed stepped in r's scale: widened to the belt's own 0.2 for its digits, it
+    was 15 times the complex step's, stated 1e-7) and the mass to 1e-7 of their largest, the stated accuracy above
+    the error."""
+    sc, _, grid = model_of(REGULARIZED.replace("regularization = 1e-3", "regularization = 1e-5")
+                           .replace("end = 3.0", "end = 0.5"), "stiff.toml")
+    arguments = {"spring[0].k": {"k": 100 + 1j * H}, "friction[0].force": {"F": 0.8 + 1j * H},
+                 "friction[0].regularization": {"r": 1e-5 + 1j * H}, "friction[0].viscous": {"cv": 0.05 + 1j * H},
+                 "friction[0].belt_velocity": {"belt": 0.2 + 1j * H}, "mass.m2.m": {"m2": 0.5 + 1j * H}}
+    s = smdcli.sensitivity(sc, list(arguments))
+    assert "compiled Radau IIA" in s.method
+    for i, (path, given) in enumerate(arguments.items()):
+        want = regularized_reference(grid, **{"r": 1e-5, **given}, landed=True).imag / H
+        for got, reference, quantity in ((s.d_displacement[i], want[:2].T, "displacement"),
+                                         (s.d_velocity[i], want[2:].T, "velocity")):
+            error = np.abs(got - reference).max() / np.abs(reference).max()
+            assert error <= 1e-7, (path, quantity, error)
+            assert error <= s.accuracy[f"d_{quantity}"][i], (path, quantity, error)
 
 
 def test_a_forcing_frequency_over_a_long_run_matches_the_complex_step():
@@ -606,19 +654,22 @@ def test_a_nonlinear_scene_at_rest_has_zero_sensitivities_at_once():
     assert any("does not move" in note for note in moved.notes)
 
 
-def test_the_compiled_sensitivities_match_the_complex_step_and_the_python_integration(monkeypatch):
-    """Every parameter goes to the compiled kernel (state and sensitivities by compiled DOP853, every kink of the
-    quadratic damper landed on; a mass's stencil model through M^-1 M_j): each against the complex step of DOP853 to
-    1e-7 of its largest sensitivity, and against the same equations integrated in Python (kinks restarted), to
-    1e-7."""
+@pytest.mark.parametrize("kernel", ["explicit", "implicit"])
+def test_the_compiled_sensitivities_match_the_complex_step_and_the_python_integration(monkeypatch, kernel):
+    """Every parameter goes to the compiled kernel (state and sensitivities by compiled DOP853, or Radau IIA as a
+    stiff scene takes it, every kink of the quadratic damper landed on; a mass's stencil model through M^-1 M_j):
+    each against the complex step of DOP853 to 1e-7 of its largest sensitivity, and against the same equations
+    integrated in Python (kinks restarted), to 1e-7."""
     import smdcli.analysis.smooth_sensitivity as smooth
+    from smdcli.solvers import sensitivity_run
 
+    monkeypatch.setattr(sensitivity_run, "KERNEL", kernel)
     sc, _, grid = model_of(DUFFING, "duffing.toml")
     arguments = {"spring[0].k": {"k": 40 + 1j * H}, "spring[1].k3": {"k3": 300 + 1j * H},
                  "damper[1].c": {"cq": 0.3 + 1j * H}, "force[0].omega": {"w": 4 + 1j * H},
                  "mass.m.m": {"m": 1.5 + 1j * H}}
     s = smdcli.sensitivity(sc, list(arguments))
-    assert "compiled DOP853" in s.method
+    assert ("compiled Radau IIA" if kernel == "implicit" else "compiled DOP853") in s.method
     for i, given in enumerate(arguments.values()):
         want = duffing_reference(grid, **given).imag / H
         assert np.abs(s.d_displacement[i, :, 0] - want[0]).max() <= 1e-7 * np.abs(want[0]).max()
@@ -786,11 +837,16 @@ def bouc_wen_complex_step(grid, n, k=1.0e5, beta=800.0, c=10.0, gamma=-1100.0):
         y[1 + crossed] = 1j * y[1 + crossed].imag  # on its level
 
 
+@pytest.mark.parametrize("kernel", ["explicit", "implicit"])
 @pytest.mark.parametrize("n", [1.0, 2.0])
-def test_a_bouc_wen_law_matches_the_complex_step_of_dop853_restarted_at_its_kinks(n):
+def test_a_bouc_wen_law_matches_the_complex_step_of_dop853_restarted_at_its_kinks(monkeypatch, n, kernel):
     """The benchmark's law (beta + gamma < 0), and its square, under a sine over 0.2 s: k, beta, gamma and the
     damper's c against the complex step of DOP853 written here (bouc_wen_complex_step), to 1e-7 of each largest
-    (measured 5.9e-10 to 1.1e-9 for n = 1, 2.5e-9 to 1.2e-8 for n = 2)."""
+    (measured 5.9e-10 to 1.1e-9 for n = 1, 2.5e-9 to 1.2e-8 for n = 2), by either compiled kernel (each step that
+    would cross a kink ends just past it)."""
+    from smdcli.solvers import sensitivity_run
+
+    monkeypatch.setattr(sensitivity_run, "KERNEL", kernel)
     sc, _, _ = model_of(BOUC_WEN.replace("n = 1.0", f"n = {n!r}").replace("end = 0.1", "end = 0.2"), "bw.toml")
     params = {"spring[0].k": "k", "spring[0].beta": "beta", "spring[0].gamma": "gamma", "damper[0].c": "c"}
     s = smdcli.sensitivity(sc, list(params))

@@ -62,6 +62,7 @@ class MixedRun(MixedEdges):
         self.events: list = []
         self.peak_points: list[tuple] = []  # (t, x, scale_i dx/dp_i along the moved event) at each event: peaks there
         self._kept: dict = {}  # the kernels' arrays of each scene and mode
+        self.implicit = False  # whether a piece was stiff: Radau's kernel took it
         # each element's internal numbers that its events set (not integrated: a plastic deformation) -> their (P,)
         # scaled sensitivities, as they stand; and as they stood over each piece of the run
         self.dq: list[dict] = [{} for _ in self.scene.elements]
@@ -181,8 +182,9 @@ class MixedRun(MixedEdges):
                    for i, (scenes, offsets, weights) in enumerate(self.stencils)
                    for w, scene, o in zip(weights, scenes, offsets) if scene is not self.scene]
         state0 = np.concatenate([start[:m], np.zeros(base.ns_acc)])
-        y, S, rate, d_S = grouped_runs(base, stencil, state0, start[m:].reshape(m, P), times,
+        y, S, rate, d_S, implicit = grouped_runs(base, stencil, state0, start[m:].reshape(m, P), times,
                                        np.array([times[0], times[-1]]), self.rtol, self.atol, self.model.source)
+        self.implicit = self.implicit or implicit
         return np.hstack([y, S.reshape(N, m * P)]), np.hstack([rate, d_S.reshape(N, m * P)])
 
     def _arrays(self, scene: SmoothScene, states):
@@ -378,5 +380,7 @@ def mixed_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gri
     y, S, rates, d_rates, rates_at = run.run(Tolerances(rtol=rtol, atol=min(atol, 1e-3 * rtol * size)), advance)
     from smdcli.analysis.smooth_sensitivity import COMPILED
 
-    how = "compiled DOP853 (J analytic)" if COMPILED else "DOP853 in Python (J s a central difference along s)"
+    how = "DOP853 in Python (J s a central difference along s)" if not COMPILED else \
+        "compiled Radau IIA 5 where a piece is stiff, DOP853 elsewhere (J analytic)" if run.implicit else \
+        "compiled DOP853 (J analytic)"
     return y, S, rates, d_rates, rates_at, METHOD.format(how=how), run

@@ -149,7 +149,8 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
                          "sweep are not differentiated; for zeta give the damper's c)")
     value = parameter_value(doc, path, sc)
     element, key = law_key(base, path)  # a law's key may move its force on a finer scale than its own size
-    scale = min(relative_size(value), (element and element.law.key_scale(key)) or math.inf)
+    turns = (element and element.law.key_scale(key)) or math.inf
+    scale = min(relative_size(value), turns)
     structure = _structure(base, grid) if structure is None else structure
     t_end = float(grid[-1])
     # the model held: its id stays its own
@@ -166,7 +167,9 @@ def derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str
         found = _modal_derivative(sc, doc, base, grid, path, value, scale, structure, arrays_of)
         if found is not None:
             return found
-    scale, _ = _step_scale(sc, doc, base, grid, path, value, scale, structure, arrays_of)
+    # never wider than the law's own scale: a belt of 0.2 m/s under r = 1e-5 m/s, widened to 0.2 for the belt's
+    # digits, stepped across the whole tanh (dx/d belt 15 times the complex step's, stated 1e-7)
+    scale, _ = _step_scale(sc, doc, base, grid, path, value, scale, structure, arrays_of, turns)
     best = refused = None
     for relative in STEPS:
         delta = 2.0 ** round(math.log2(relative * scale))
@@ -286,15 +289,15 @@ def _affine_derivative(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, p
 
 
 def _step_scale(sc: Scenario, doc: dict, base: Model, grid: np.ndarray, path: str, value: float, scale: float,
-                structure: tuple, arrays_of) -> tuple[float, tuple | None]:
+                structure: tuple, arrays_of, ceiling: float = math.inf) -> tuple[float, tuple | None]:
     """The scale a parameter's steps are taken in, and (the scene a step of AFFINE_STEP of it away, the step): |p|,
-    or step_scale.wider_scale's where such a step moves the model by too little and one that wide is a scene;
-    (|p|, None) where no scene is a step away (the stencil finds its own side)."""
+    or step_scale.wider_scale's (at most ceiling) where such a step moves the model by too little and one that wide
+    is a scene; (|p|, None) where no scene is a step away (the stencil finds its own side)."""
     try:
         moved = _moved_once(sc, doc, base, grid, path, value, scale, structure)
     except ScenarioError:
         return scale, None
-    wider = wider_scale(arrays_of(base), arrays_of(moved[0]), moved[1])
+    wider = min(wider_scale(arrays_of(base), arrays_of(moved[0]), moved[1]), ceiling)
     try:
         return (wider, _moved_once(sc, doc, base, grid, path, value, wider, structure)) if wider > scale else \
             (scale, moved)

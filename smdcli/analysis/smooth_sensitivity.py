@@ -3,7 +3,8 @@ friction): the forward sensitivity equations s' = J(t, y) s + df/dp integrated b
 laws' internal variables), the error controlled on state and sensitivities together.
 
 By the compiled kernel (smdcli.kernels.sensitivity: DOP853, restarted at the forces' discontinuities, every kink of
-a law landed on: a step ends just past it, on the branch of J it started on); a stencil model that moves M enters
+a law landed on: a step ends just past it, on the branch of J it started on; where Hairer's test finds the scene
+stiff, kernels.implicit_sensitivity's Radau IIA from the start); a stencil model that moves M enters
 through M^-1 M_j, so that its forces are combined, not its accelerations. In Python by scipy's DOP853, restarted at
 the forces' discontinuities and wherever a law's right-hand side has a kink (a Bouc-Wen rate or z changing sign):
 the tests' second way.
@@ -32,9 +33,10 @@ ANSWERED = ("linear scenes; elastoplastic, bilinear, Clough and Iwan springs, Co
             "springs, friction or stops beside those smooth terms")
 RTOL = 1e-9  # smd sensitivity's default for smooth nonlinear scenes (a scenario's tighter rtol applies)
 COMPILED = True  # the compiled kernel where it takes the scene; the Python integration (the tests' second way) else
-COMPILED_METHOD = ("forward sensitivity equations s' = J s + df/dp integrated beside the state by compiled DOP853 "
+COMPILED_METHOD = ("forward sensitivity equations s' = J s + df/dp integrated beside the state by compiled {} "
                    "(error controlled on both, restarted at force discontinuities, every output time landed on), J "
                    "analytic, df/dp from the model at the parameter's stencil points")
+KERNELS = ("DOP853", "Radau IIA 5 (the scene stiff by DOP853's test; S by its collocation formula differentiated)")
 PYTHON_METHOD = ("forward sensitivity equations s' = J s + df/dp integrated beside the state by DOP853 (error "
                  "controlled on both, restarted at force discontinuities and at the laws' kinks), J analytic, df/dp "
                  "from the model at the parameter's stencil points, in Python")
@@ -236,10 +238,11 @@ def smooth_sensitivities(model: Model, derivatives: list, scales: np.ndarray, gr
 
     cuts = np.concatenate([[grid[0]], model.breakpoints(float(grid[0]), float(grid[-1])), [grid[-1]]])
     if COMPILED:
-        y, S, rates, d_rates = compiled_sensitivities(flow, points, weights, y0, s0, grid, cuts, rtol)
+        y, S, rates, d_rates, implicit = compiled_sensitivities(flow, points, weights, y0, s0, grid, cuts, rtol)
         if advance is not None:
             advance(len(grid))
-        return y, S, rates, d_rates, _resumed(grid, y, S, rhs, rtol, flow, parameter_rates, cuts), COMPILED_METHOD
+        return (y, S, rates, d_rates, _resumed(grid, y, S, rhs, rtol, flow, parameter_rates, cuts),
+                COMPILED_METHOD.format(KERNELS[implicit]))
     # a first pass of the state alone sets the absolute tolerances: rtol of each block's peak, a thousandth of it
     peak = np.abs(solve_ivp(flow.f, (grid[0], grid[-1]), y0, method="DOP853", rtol=1e-6, atol=1e-12,
                             t_eval=grid).y).max(axis=1)
@@ -301,8 +304,9 @@ def absolute_tolerances(peak: np.ndarray, P: int, rtol: float) -> np.ndarray:
 
 def compiled_sensitivities(flow: _Flow, points: list, weights: list, y0: np.ndarray, s0: np.ndarray,
                            grid: np.ndarray, cuts: np.ndarray, rtol: float):
-    """(y, S, y', S') on the grid by the compiled kernel (smdcli.kernels.sensitivity), the models at each parameter's
-    stencil points handed to it as arrays; a first run of the state alone at rtol 1e-6 sets the tolerances."""
+    """(y, S, y', S', implicit) on the grid by a compiled kernel (sensitivity_run's), the models at each parameter's
+    stencil points handed to it as arrays; a first run of the state alone at rtol 1e-6 sets the tolerances, and
+    whether the scene is stiff (implicit: Radau's kernel)."""
     from smdcli.solvers.sensitivity_run import run_sensitivities
 
     base = _arrays(flow)
@@ -312,25 +316,24 @@ def compiled_sensitivities(flow: _Flow, points: list, weights: list, y0: np.ndar
                for p, (ws, fs) in enumerate(zip(weights, points)) for w, f in zip(ws, fs)
                if f is not flow]  # the scene's own point adds f - f: nothing
     state0 = np.concatenate([y0, np.zeros(extra)])
-    peak = np.abs(run_sensitivities(base, [], state0, grid, cuts, 1e-6,
-                                    np.concatenate([np.full(s, 1e-12), np.full(extra, np.inf)]),
-                                    flow.model.source)[0][:, :s])
-    return grouped_runs(base, stencil, state0, s0, grid, cuts, rtol, absolute_tolerances(peak.max(axis=0), P, rtol),
-                        flow.model.source)
+    alone, _, implicit = run_sensitivities(base, [], state0, grid, cuts, 1e-6,
+                                           np.concatenate([np.full(s, 1e-12), np.full(extra, np.inf)]),
+                                           flow.model.source)
+    return grouped_runs(base, stencil, state0, s0, grid, cuts, rtol,
+                        absolute_tolerances(np.abs(alone[:, :s]).max(axis=0), P, rtol), flow.model.source, implicit)
 
 
 def mass_ratio(model: Model, other: Model) -> np.ndarray | None:
-    """M^-1 M_j of a stencil point's model (its forces differenced, not its accelerations), None where M is the
-    same."""
+    """M^-1 M_j of a stencil point's model (its forces differenced, not its accelerations), None where M is one."""
     return None if np.array_equal(other.M, model.M) else model.Minv @ other.M
 
 
 def grouped_runs(base, stencil: list, state0: np.ndarray, s0: np.ndarray, grid: np.ndarray, cuts: np.ndarray,
-                 rtol: float, atol: np.ndarray, source: str):
-    """(y, S, y', S') on the grid by the compiled kernel from state0 (the state, then its energy terms, which ride
-    along out of the error's control) and s0 (s, P): stencil (parameter, weight, arrays, mass_ratio) of each model a
-    parameter's derivative takes, run in groups of consecutive parameters as many as the kernel takes at a time;
-    atol (s + s P) of [y; S]."""
+                 rtol: float, atol: np.ndarray, source: str, implicit: bool = False):
+    """(y, S, y', S', implicit) on the grid by a compiled kernel (implicit: Radau's from the start) from state0 (the
+    state, then its energy terms, riding along out of the error's control) and s0 (s, P): stencil (parameter, weight,
+    arrays, mass_ratio) of each model a parameter's derivative takes, run in groups of consecutive parameters as many
+    as the kernel takes at a time; atol (s + s P) of [y; S]."""
     from smdcli.solvers.sensitivity_run import run_sensitivities
 
     (s, P), N = s0.shape, len(grid)
@@ -340,13 +343,13 @@ def grouped_runs(base, stencil: list, state0: np.ndarray, s0: np.ndarray, grid: 
         local = {p: i for i, p in enumerate(group)}
         models = [(local[p], w, arrays, ratio) for p, w, arrays, ratio in stencil if p in local]
         tolerance = np.concatenate([atol[:s], np.full(extra, np.inf), atol[s:].reshape(s, P)[:, group].ravel()])
-        out, rates = run_sensitivities(base, models, np.concatenate([state0, s0[:, group].ravel()]), grid, cuts,
-                                       rtol, tolerance, source)
+        out, rates, implicit = run_sensitivities(base, models, np.concatenate([state0, s0[:, group].ravel()]), grid,
+                                                 cuts, rtol, tolerance, source, implicit)
         if group[0] == 0:  # the state of the first run (the others' differ by their tolerance, not more)
             y, rate = out[:, :s], rates[:, :s]
         S[:, :, group] = out[:, s + extra:].reshape(N, s, len(group))
         d_S[:, :, group] = rates[:, s + extra:].reshape(N, s, len(group))
-    return y, S, rate, d_S
+    return y, S, rate, d_S, implicit
 
 
 def _groups(owners: list[int], P: int) -> list[list[int]]:

@@ -26,8 +26,8 @@ from smdcli.kernels import tableaus
 from smdcli.kernels.arrays import CUBIC_SPRING
 from smdcli.kernels.compiler import inlined, kernel, no_alloc
 from smdcli.kernels.erk import (DOP853, ERROR_ORDER, MAX_FACTOR, MIN_FACTOR, NOT_FINITE, OK, SAFETY, STEP_BUDGET,
-                                TOO_SMALL_STEP, _error_norm, axpy, assign, hermite_crossing, probe_step, probed_step,
-                                reversal, scaled_rms)
+                                STIFF, TOO_SMALL_STEP, _error_norm, axpy, assign, hermite_crossing, probe_step,
+                                probed_step, reversal, scaled_rms)
 from smdcli.kernels.rhs import state_rhs, state_rhs_inlined
 
 STAGES = tableaus.DOP853_STAGES
@@ -35,6 +35,14 @@ KINK_MARGIN = 1e-8  # how far past a kink (a fraction of the step) a step ends: 
 LANDINGS = 12  # tries a step may take to end just past a kink (each found on the last try's interpolant)
 CROSSING_SAMPLES = 8  # points of a step's interpolant a kink's quantity is looked at (its end among them)
 A, B, C = tableaus.DOP853_A, tableaus.DOP853_B, tableaus.DOP853_C
+LAST_STAGE = 11  # DOP853's stage at the step's end (c = 1), beside whose rate the end's measures h |lambda|
+# Hairer's stiffness test of DOP853 (dop853.f): h |lambda| past STIFF_RHO (6.1, its stability boundary's) in
+# STIFF_STEPS accepted steps with fewer than NONSTIFF_STEPS others between them says the steps are stability's, not
+# accuracy's: a run stops (STIFF) where they are also below OUTPUT_SHARE of the output step, so that Radau, whose
+# steps cost ten of these and land on every output time, takes fewer than a tenth as many (REGULARIZED's friction
+# over 3 s at rtol 1e-9: at r = 1e-3 and 1e-4 m/s, stability-limited to an eighth and a thirteenth of the output
+# step, DOP853 took 57 and 84 ms, Radau 152 and 157; at 1e-5, a 130th, 228 ms and 157)
+STIFF_RHO, STIFF_STEPS, NONSTIFF_STEPS, OUTPUT_SHARE = 6.1, 15, 6, 1e-2
 
 
 @no_alloc
@@ -148,6 +156,32 @@ def kink(m, y, y_new, f, f_new, h):
 
 
 @no_alloc
+def stability_limited(y, y_new, K, h, scratch, stiff_rho):
+    """Hairer's test after a step of h from y to y_new: h |lambda| ~ h |f(y_new) - f(y_12)| / |y_new - y_12|, y_12
+    the last stage's point (the same time), past stiff_rho."""
+    assign(scratch, y)
+    for j in range(LAST_STAGE):
+        if A[LAST_STAGE, j] != 0.0:
+            axpy(h * A[LAST_STAGE, j], K[j], scratch)
+    rates, points = 0.0, 0.0
+    for i in range(len(y)):
+        rates += (K[STAGES, i] - K[LAST_STAGE, i]) ** 2
+        points += (y_new[i] - scratch[i]) ** 2
+    return points > 0.0 and abs(h) * math.sqrt(rates / points) > stiff_rho
+
+
+@no_alloc
+def kink_landing(m, y, y_new, f, f_new, h, landed, min_step):
+    """The step to take again where a law's kink lies inside this one (J jumps there: the step ends just past it, on
+    the branch it started on, each try's crossing, found on its own shorter interpolant, nearer the end, until it is
+    at the end), or 0.0 where none does or the step has been landed LANDINGS times."""
+    at = kink(m, y, y_new, f, f_new, h)
+    if at < 1.0 - 2 * KINK_MARGIN and landed < LANDINGS:
+        return max(abs(h) * (at + KINK_MARGIN), 2 * min_step)
+    return 0.0
+
+
+@no_alloc
 def first_crossing(r0, r1, d0, d1, first):
     """Where in [0, first] the cubic Hermite interpolant of a quantity (values r0, r1 at the step's ends, slopes d0,
     d1 over the step) first changes sign, just past it, or first for none: looked at in CROSSING_SAMPLES points, so
@@ -213,11 +247,12 @@ def augmented_rates(m, models, weights, owner, ratios, moves, g, t, y, left, dy,
 
 @kernel
 def integrate(m, models, weights, owner, ratios, moves, y0, grid, cuts, rtol, atol, max_steps, out, rates, work,
-              counts, reached):
+              counts, reached, stiff_rho):
     """From y0 at grid[0] over the grid, restarting at each cut (a force's discontinuity) as the compiled pairs do,
     each output time landed on: out and rates (N, len(y0)) get the state and its rate there (right limits); counts:
     right-hand sides, accepted and rejected steps; reached[0]: the time a failure met. Returns OK, TOO_SMALL_STEP,
-    STEP_BUDGET or NOT_FINITE."""
+    STEP_BUDGET, NOT_FINITE or STIFF (Hairer's test, h |lambda| past stiff_rho (inf: never): the scene is for
+    kernels.implicit_sensitivity)."""
     size_all = len(y0)
     n = m.n
     s = 2 * n + m.ns_q
@@ -227,12 +262,12 @@ def integrate(m, models, weights, owner, ratios, moves, y0, grid, cuts, rtol, at
     J, dwork, f, g = np.zeros((s, s)), np.zeros((n, s)), np.zeros(2 * n + m.ns_q + m.ns_acc), np.zeros(n)
     signs, now = np.ones((len(m.ns_belt), 2)), np.ones((len(m.ns_belt), 2))
     return _march(m, models, weights, owner, ratios, moves, y0.copy(), grid, cuts, rtol, atol, max_steps, out, rates,
-                  work, counts, reached, K, arg, y_new, scale, err, err3, J, dwork, f, g, signs, now)
+                  work, counts, reached, K, arg, y_new, scale, err, err3, J, dwork, f, g, signs, now, stiff_rho)
 
 
 @no_alloc
 def _march(m, models, weights, owner, ratios, moves, y, grid, cuts, rtol, atol, max_steps, out, rates, work, counts,
-           reached, K, arg, y_new, scale, err, err3, J, dwork, f, g, signs, now):
+           reached, K, arg, y_new, scale, err, err3, J, dwork, f, g, signs, now, stiff_rho):
     """integrate's steps, on the scratch it made: compiled without reference counting, which the stages' inlined
     right-hand sides would otherwise pay on every read of a model's arrays. The stages have one call site, inlined
     (a call handed over the stencil's models, array by array, and took a third of the time): a step's first stage is
@@ -250,6 +285,7 @@ def _march(m, models, weights, owner, ratios, moves, y, grid, cuts, rtol, atol, 
     h_abs = 0.0
     probing = False
     d1 = 0.0
+    stiff_steps, other_steps = 0, 0
     for seg in range(len(cuts)):
         ta = cuts[seg]
         t_end = cuts[seg + 1] if seg + 1 < len(cuts) else ta
@@ -260,7 +296,7 @@ def _march(m, models, weights, owner, ratios, moves, y, grid, cuts, rtol, atol, 
             target = grid[k] if k < len(grid) and grid[k] < t_end else t_end
             min_step = 10 * abs(np.nextafter(t, np.inf) - t)
             rejected = False
-            landed = 0
+            landed = np.int64(0)  # not a literal: kink_landing compiles once
             while True:
                 if not fresh and not probing and h_abs < min_step:
                     reached[0] = t
@@ -312,12 +348,10 @@ def _march(m, models, weights, owner, ratios, moves, y, grid, cuts, rtol, atol, 
                     continue
                 assign(y_new, arg)
                 counts[0] += STAGES
-                at = kink(m, y, y_new, K[0], K[STAGES], h)
-                if at < 1.0 - 2 * KINK_MARGIN and landed < LANDINGS:
-                    # J jumps there: the step is taken again to end just past it, on the branch it started on, each
-                    # try's crossing (found on its own, shorter interpolant) nearer the end, until it is at the end
+                again = kink_landing(m, y, y_new, K[0], K[STAGES], h, landed, min_step)
+                if again > 0.0:
                     landed += 1
-                    h_abs = max(abs(h) * (at + KINK_MARGIN), 2 * min_step)
+                    h_abs = again
                     counts[2] += 1
                     continue
                 for i in range(size_all):
@@ -342,6 +376,16 @@ def _march(m, models, weights, owner, ratios, moves, y, grid, cuts, rtol, atol, 
             for i in range(size_all):
                 if not math.isfinite(y_new[i]):
                     return NOT_FINITE
+            last = min(k, len(grid) - 1)
+            if abs(h) < OUTPUT_SHARE * (grid[last] - grid[last - 1]) and stability_limited(y, y_new, K, h, err,
+                                                                                          stiff_rho):
+                stiff_steps, other_steps = stiff_steps + 1, 0
+                if stiff_steps == STIFF_STEPS:
+                    return STIFF
+            else:
+                other_steps += 1
+                if other_steps == NONSTIFF_STEPS:
+                    stiff_steps = 0
             t = t_new
             assign(y, y_new)
             assign(K[0], K[STAGES])

@@ -112,7 +112,7 @@ def _tiny_run(family: str) -> None:
               pair, one, np.arange(2, dtype=np.int64), np.array([0, 1], dtype=np.int64), np.ones(2), np.zeros(2),
               np.zeros((2, 2)), np.zeros((2, 2)), np.zeros(3, dtype=np.int64), np.zeros(1))
         return
-    if family == "sensitivity":  # the state alone (no parameter's stencil), two output times
+    if family in ("sensitivity", "implicit_sensitivity"):  # the state alone (no parameter's stencil), two outputs
         from smdcli.kernels.rhs import work_size
         from smdcli.kernels.compiler import model_tuple
 
@@ -120,7 +120,7 @@ def _tiny_run(family: str) -> None:
         entry(arrays, model_tuple([], arrays), np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros((0, 1, 1)),
               np.zeros(0, dtype=np.bool_), y0.copy(), grid, grid, 1e-3,
               np.full(2, 1e-6), 10, np.zeros((2, 2)), np.zeros((2, 2)), np.zeros(work_size(arrays)),
-              np.zeros(3, dtype=np.int64), np.zeros(1))
+              np.zeros(3, dtype=np.int64), np.zeros(1), *((6.1,) if family == "sensitivity" else ()))
         return
     if family.startswith("modes:"):
         from smdcli.kernels.rhs import work_size
@@ -150,19 +150,23 @@ def _entry(family: str):
                     "radau": ("radau", "integrate"), "bdf": ("bdf", "integrate"), "rhs": ("rhs", "state_rhs"),
                     "return_mapping": ("return_mapping", "march"), "banded": ("banded", "march"),
                     "taylor": ("taylor", "integrate"), "yielding": ("yielding", "run"),
-                    "sensitivity": ("sensitivity", "integrate")}.get(family, (family.removeprefix("modes:"), "integrate_mode"))  # modes:MODULE: its mode kernel
+                    "sensitivity": ("sensitivity", "integrate"),
+                    "implicit_sensitivity": ("implicit_sensitivity", "integrate")
+                    }.get(family, (family.removeprefix("modes:"), "integrate_mode"))  # modes:MODULE: its mode kernel
     return getattr(importlib.import_module(f"smdcli.kernels.{module}"), name)
 
 
 KERNEL_FAMILIES = ("erk", "fixed", "stiff", "radau", "bdf", "rhs", "modes:events", "modes:radau", "modes:bdf",
-                   "modes:stiff", "return_mapping", "banded", "taylor", "yielding", "sensitivity")
+                   "modes:stiff", "return_mapping", "banded", "taylor", "yielding", "sensitivity",
+                   "implicit_sensitivity")
 _warmed: set[str] = set()
 # two chains of kernel families that share compiled parts, each compiled in a child process of its own, about equal
 # (on a 2-core Intel Xeon under numba's generic target, 2026-12-03, the modes' families free after their integrators:
 # stiff 58 s, erk 16, modes:events 9, fixed 8, banded 6, yielding 57; radau 55, bdf 13, taylor 29, sensitivity 54,
 # return_mapping 10: 155 s and 161 s, where they were 305 s and 301 s before kernels stopped passing literals)
 COMPILE_CHAINS = (("stiff", "modes:stiff", "erk", "rhs", "modes:events", "fixed", "banded", "yielding"),
-                  ("radau", "modes:radau", "bdf", "modes:bdf", "taylor", "sensitivity", "return_mapping"))
+                  ("radau", "modes:radau", "bdf", "modes:bdf", "taylor", "sensitivity", "implicit_sensitivity",
+                   "return_mapping"))
 
 
 def compile_side_by_side(families=KERNEL_FAMILIES) -> None:
