@@ -421,6 +421,10 @@ def test_a_stiff_piece_between_events_is_taken_by_radau_and_agrees_with_dop853(m
     paths = ["spring[0].k", "spring[0].fy", "friction[0].force"]
     chosen = smdcli.sensitivity(sc, paths)
     assert "Radau IIA 5 where a piece is stiff" in chosen.method
+    from smdcli.commands.sensitivity import format_sensitivity, sensitivity_summary
+
+    assert "from event to event, compiled Radau IIA where a piece is stiff, DOP853 elsewhere)" in \
+        format_sensitivity(sensitivity_summary(chosen)).splitlines()[0]
     monkeypatch.setattr(sensitivity_run, "KERNEL", "explicit")
     alone = smdcli.sensitivity(sc, paths)
     assert "compiled DOP853 (J analytic)" in alone.method

@@ -549,6 +549,11 @@ def test_a_stiff_regularized_friction_is_handed_to_radau_and_matches_the_complex
                  "friction[0].belt_velocity": {"belt": 0.2 + 1j * H}, "mass.m2.m": {"m2": 0.5 + 1j * H}}
     s = smdcli.sensitivity(sc, list(arguments))
     assert "compiled Radau IIA" in s.method
+    from smdcli.commands.sensitivity import format_sensitivity, sensitivity_summary
+
+    # the terminal's first line says so (it said "DOP853 in Python" of anything not compiled DOP853)
+    assert "forward sensitivity equations, compiled Radau IIA (stiff))" in \
+        format_sensitivity(sensitivity_summary(s)).splitlines()[0]
     for i, (path, given) in enumerate(arguments.items()):
         want = regularized_reference(grid, **{"r": 1e-5, **given}, landed=True).imag / H
         for got, reference, quantity in ((s.d_displacement[i], want[:2].T, "displacement"),

@@ -142,5 +142,5 @@ class MixedEdges:
             tension[k] = whole(self.scene, 0.0)
             for i in range(self.P):
                 if np.isfinite(S[k, :, i]).all():
-                    derived[k, i] = self.total(i, lambda scene, c, i=i: whole(scene, c, i))
+                    derived[k, i] = self.shifted_total(i, lambda scene, c, i=i: whole(scene, c, i))
         return tension, derived

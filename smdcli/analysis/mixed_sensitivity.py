@@ -27,7 +27,7 @@ import numpy as np
 
 from smdcli.analysis.event_edges import breakaway_margins, continuous, on_breakaway, shifted_states
 from smdcli.analysis.mixed_edges import MixedEdges
-from smdcli.analysis.signal_derivative import stencil_total
+from smdcli.analysis.signal_derivative import shifted_stencil_total, stencil_total
 from smdcli.elements.base import KINK
 from smdcli.errors import SolverFailed
 from smdcli.model import Model
@@ -71,6 +71,10 @@ class MixedRun(MixedEdges):
     def total(self, i: int, read) -> np.ndarray:
         """scale_i times the total derivative along parameter i of read(scene, c) (stencil_total)."""
         return stencil_total(self.stencils[i], self.scales[i], read)
+
+    def shifted_total(self, i: int, read) -> np.ndarray:
+        """total of a read at the state moved with the parameter at every point (shifted_stencil_total)."""
+        return shifted_stencil_total(self.stencils[i], self.scales[i], read)
 
     def no_derivative(self, t: float, why: str) -> None:
         """From t on the response has no derivative: nan from here, the reason kept."""
@@ -302,7 +306,7 @@ class MixedRun(MixedEdges):
             self.peak_points.append((t, y_before[:self.n].copy(), np.full((P, self.n), np.nan)))
             return S
         for i in range(P):
-            dt[i] = -float(self.total(i, lambda sc, c: self._guard_value(
+            dt[i] = -float(self.shifted_total(i, lambda sc, c: self._guard_value(
                 sc, shifted_states(before, self.dq, i, c), t, y_before + c * S[:, i], element, guard))) / crossing
         self.moves = getattr(self, "moves", {})
         self.moves.setdefault(t, dt)
@@ -318,7 +322,7 @@ class MixedRun(MixedEdges):
                                     sc.elements[element].law.rebound)
                     return np.concatenate([project(sc, shifted_states(after, self.dq, i, c), struck, self.v_scale),
                                            z[2 * n:]])
-                out[:, i] = self.total(i, jumped)
+                out[:, i] = self.shifted_total(i, jumped)
             moved = out
         self._carry_internal(t, element, kind, before, after, y_before, moved)
         f_after = self._rate(scene, after, t, y_after)

@@ -26,6 +26,20 @@ def stencil_total(stencil: tuple, scale: float, read) -> np.ndarray:
     return combined(weights, [np.asarray(read(scene, o / scale), dtype=float) for scene, o in zip(scenes, offsets)])
 
 
+def shifted_stencil_total(stencil: tuple, scale: float, read) -> np.ndarray:
+    """stencil_total of a read at the state moved with the parameter (y + c s, read(scene, c) honouring c at every
+    point): an affine parameter's one difference (p, p + d) is read at both shifts, [(r(p + d, c) + r(p + d, -c)) / 2
+    - r(p, -c)] / d, exact where the read is affine in p and holds p times the state (a damper's c in a held
+    contact's force, c v: the one-sided difference kept half its second derivative, dt*/dc of a breakaway 1.4 %
+    off); a stencil of more points as stencil_total."""
+    scenes, offsets, weights = stencil
+    if len(scenes) != 2 or offsets[0] != 0:
+        return stencil_total(stencil, scale, read)
+    c = offsets[1] / scale
+    ahead, behind = (np.asarray(read(scenes[1], side * c), dtype=float) for side in (1.0, -1.0))
+    return weights[1] * ((ahead + behind) / 2 - np.asarray(read(scenes[0], -c), dtype=float))
+
+
 class ParameterDerivative(Signal):
     """du/dp of a force as a signal: the stencil's combination of the force at its points; its generator the
     force's with the derivative's beside it, [[S, 0], [dS, S]] on [w; dw], read as dg w + g dw. Where S moves with p

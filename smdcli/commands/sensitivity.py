@@ -65,11 +65,16 @@ def sensitivity_summary(s) -> dict:
         "notes": list(s.notes), "outputs": [str(p) for p in s.outputs]}
 
 
+# how the method's text says the sensitivity equations were integrated, and the terminal's words for it
+INTEGRATED = (("compiled Radau IIA 5 where", "compiled Radau IIA where a piece is stiff, DOP853 elsewhere"),
+              ("compiled Radau IIA", "compiled Radau IIA (stiff)"), ("compiled DOP853", "compiled DOP853"))
+
+
 def format_sensitivity(d: dict) -> str:
     """Terminal text: each DOF's peak and its derivatives, per unit and per 100 % of each parameter."""
     from smdcli.text import plural
 
-    integrated = "compiled DOP853" if "compiled DOP853" in d["method"] else "DOP853 in Python"
+    integrated = next((short for long, short in INTEGRATED if long in d["method"]), "DOP853 in Python")
     between = " from event to event" if "from event to event" in d["method"] else ""
     how = "exact" if d["method"].startswith("exact") else f"forward sensitivity equations{between}, {integrated}"
     lines = [f"{d['scenario']}: sensitivities of the peak displacement ({plural(len(d['parameters']), 'parameter')}, "

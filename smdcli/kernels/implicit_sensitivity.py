@@ -216,7 +216,7 @@ def _march(m, models, weights, owner, ratios, moves, y, grid, cuts, rtol, atol, 
                     counts[0] += state_jacobian(m, t, state, mid, rtol, newton_atol, newton_J, work, Jscratch, dy,
                                                 pad, f1)
                     current_jac, factored = True, False
-                if converged:
+                if converged and P > 0:  # the state alone (the first pass) has none to solve
                     _evaluate(stage, stage + 3, m, models, weights, owner, ratios, moves, t, h, mid, y, y_new, Z, arg,
                               R, K0, K_end, Js, work, J, dwork, f, g, signs)
                     counts[0] += 3
