@@ -23,7 +23,7 @@ import numpy as np
 from smdcli.kernels.compiler import kernel, no_alloc
 from smdcli.kernels.erk import NOT_FINITE, OK, STEP_BUDGET, TOO_SMALL_STEP, assign, initial_step, scaled_rms
 from smdcli.kernels.linalg import factor_shifted, lu_factor, lu_solve
-from smdcli.kernels.radau import (C, E, MAX_FACTOR, MIN_FACTOR, MU_COMPLEX, MU_REAL, NEWTON_MAXITER, P as DENSE,
+from smdcli.kernels.radau import (C, E, EPS, MAX_FACTOR, MIN_FACTOR, MU_COMPLEX, MU_REAL, NEWTON_MAXITER, P as DENSE,
                                   _collocation, _predict_factor, newton_tolerance)
 from smdcli.kernels.rhs import state_jacobian
 from smdcli.kernels.sensitivity import augmented_rates, branches, kink_landing
@@ -128,7 +128,7 @@ def integrate(m, models, weights, owner, ratios, moves, y0, grid, cuts, rtol, at
     for i in range(size):
         if not math.isfinite(newton_atol[i]):
             newton_atol[i] = 1.0
-    return _march(m, models, weights, owner, ratios, moves, y0.copy(), grid, cuts, max(rtol, 100 * 2.0**-52), atol,
+    return _march(m, models, weights, owner, ratios, moves, y0.copy(), grid, cuts, max(rtol, 100 * EPS), atol,
                   max_steps, out, rates, work, counts, reached, J, dwork, f, g, signs, now, newton_J, LU_real,
                   LU_complex, piv_real, piv_complex, Z0, Z, W, dW, F, Q, R, K0, K_end, Js, DS, big, piv,
                   column, y_new, y_old, arg, scale, error, b_real, b_complex, dy, f1, pad, np.zeros(2),

@@ -120,7 +120,7 @@ def _tiny_run(family: str) -> None:
         entry(arrays, model_tuple([], arrays), np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros((0, 1, 1)),
               np.zeros(0, dtype=np.bool_), y0.copy(), grid, grid, 1e-3,
               np.full(2, 1e-6), 10, np.zeros((2, 2)), np.zeros((2, 2)), np.zeros(work_size(arrays)),
-              np.zeros(3, dtype=np.int64), np.zeros(1), *((6.1,) if family == "sensitivity" else ()))
+              np.zeros(3, dtype=np.int64), np.zeros(1), *((np.inf,) if family == "sensitivity" else ()))
         return
     if family.startswith("modes:"):
         from smdcli.kernels.rhs import work_size
