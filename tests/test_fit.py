@@ -279,9 +279,11 @@ def test_the_cli_writes_the_contract_and_a_scene_that_runs(cli, tmp_path):
 def test_a_fit_steps_back_from_points_that_are_no_scene_and_says_when_it_explains_nothing():
     """The stick-slip belt from a kinetic friction force 30 % off (2.6 N for 2 N): the trust region's first step
     puts it above the 3 N breakaway force, which is no scene: that point is stepped back from (it used to end the
-    fit, exit 2). From there the fit settles in a local minimum (pure slip, 2.94 N), which leaves 99 % of the data
-    unexplained: the result, the terminal and the plot say so, beside the intervals that assume the model. From
-    20 % off it finds the truth to rounding, with no warning."""
+    fit, exit 2). Over the whole 10 s at once the fit settles in a local minimum (pure slip, 2.94 N, 99 % of the
+    data unexplained); taken again over growing spans of the data it finds the truth to rounding. From 20 % off
+    it finds it at once. A scene that cannot make the data (its breakaway force 2.3 N for 3 N, only k fitted)
+    leaves them largely unexplained: the result, the terminal and the plot say so, beside the intervals that
+    assume the model."""
     text = (SCENARIOS / "stick_slip_belt.toml").read_text()
     truth_sc, _, _ = model_of(text, "truth.toml")
     truth = smdcli.simulate(truth_sc, method="exact")
@@ -289,11 +291,108 @@ def test_a_fit_steps_back_from_points_that_are_no_scene_and_says_when_it_explain
     far = fit([make_test(scenario_with(truth_sc, {"friction[0].force": 2.6}), data, None, None)],
               ["friction[0].force", "spring[0].k"])
     assert "stepped back from" in far.message and "friction[0].static" in far.message
-    assert far.unexplained > 0.5 and "unexplained" in far.warning and "local minimum" in far.warning
+    assert "growing spans" in far.message and far.converged
+    assert abs(far.estimate[0] / 2.0 - 1) <= 1e-6 and abs(far.estimate[1] / 100.0 - 1) <= 1e-6
+    assert far.unexplained < 1e-6 and not far.warning
     near = fit([make_test(scenario_with(truth_sc, {"friction[0].force": 2.4}), data, None, None)],
                ["friction[0].force", "spring[0].k"])
     assert near.converged and abs(near.estimate[0] / 2.0 - 1) <= 1e-6 and abs(near.estimate[1] / 100.0 - 1) <= 1e-6
-    assert near.unexplained < 1e-6 and not near.warning
+    assert near.unexplained < 1e-6 and not near.warning and "growing spans" not in near.message
+    wrong = fit([make_test(scenario_with(truth_sc, {"friction[0].static": 2.3}), data, None, None)], ["spring[0].k"])
+    assert wrong.unexplained > 0.2 and "unexplained" in wrong.warning and "local minimum" in wrong.warning
+
+
+@pytest.mark.parametrize("noise", [0.0, 1e-5])
+def test_a_free_decay_of_twenty_cycles_is_fitted_from_forty_percent_off(noise, cli, tmp_path):
+    """A free decay, the commonest identification test: 1 kg on k = 100 N/m and c = 0.2 N s/m from x0 = 10 mm,
+    20 s (32 cycles) sampled at 5 ms. Started at k = 140 N/m and c = 0.3 N s/m (40 % and 50 % off), its period
+    15 % short, the phase drifts by cycles over the record: the whole at once stalls in the valley where added
+    damping hides the drift (it stopped with c at 6 and 9 times the truth). Taken over growing spans of the data from the
+    start (the first a cycle and a half, each next twice as long), each from the last one's estimate, the truth:
+    noise-free to 1e-6 (measured 6e-14), under Gaussian noise of 10 um (0.1 % of x0) each estimate within 3 of its
+    standard errors, which are below 1e-3 of it."""
+    text = one_dof(0.2, k=100.0, x0=0.01, end=20.0, step=0.005)
+    truth_sc, _, _ = model_of(text, "decay.toml")
+    truth = smdcli.simulate(truth_sc, method="exact")
+    data = measured_from(truth, {"m.displacement": ("displacement", 0)})
+    data.channels["m.displacement"] = data.channels["m.displacement"] + noise * np.random.default_rng(
+        5).standard_normal(len(data.time))
+    params, true = ["spring[0].k", "damper[0].c"], np.array([100.0, 0.2])
+    start = scenario_with(truth_sc, {"spring[0].k": 140.0, "damper[0].c": 0.3})
+    run = fit([make_test(start, data, None, None)], params)
+    assert run.converged and "growing spans" in run.retried and run.retried in run.message and not run.warning
+    if noise:
+        assert np.all(np.abs(run.estimate - true) <= 3 * run.standard_error)
+        assert np.all(run.standard_error <= 1e-3 * true)
+    else:
+        assert np.abs(run.estimate / true - 1).max() <= 1e-6
+    import smdcli.analysis.fit as fitting
+
+    whole = fitting.growing_spans
+    try:  # the whole at once, the spans taken away: it does not find the truth (the test's own check can fail)
+        fitting.growing_spans = lambda tests, count: []
+        alone = fit([make_test(start, data, None, None)], params)
+    finally:
+        fitting.growing_spans = whole
+    assert not alone.converged or np.abs(alone.estimate / true - 1).max() > 0.1
+    if noise:
+        return
+    import h5py  # the CLI: the terminal's line, --json's and the file's attribute say it was taken again
+
+    rows = "".join(f"{t!r},{x!r}\n" for t, x in zip(data.time.tolist(), data.channels["m.displacement"].tolist()))
+    (tmp_path / "decay.csv").write_text("time,m.displacement\n" + rows)
+    scene = tmp_path / "decay.toml"
+    scene.write_text(start.text)
+    ran = cli("fit", scene, "--data", tmp_path / "decay.csv", "--param", "spring[0].k", "--param", "damper[0].c",
+              "-o", tmp_path / "out", "--no-plots")
+    assert ran.exit_code == 0 and "taken again over growing spans" in ran.stdout, ran.output
+    ran = cli("fit", scene, "--data", tmp_path / "decay.csv", "--param", "spring[0].k", "--param", "damper[0].c",
+              "-o", tmp_path / "out", "--no-plots", "--json")
+    assert "growing spans" in json.loads(ran.stdout)["retried"]
+    with h5py.File(tmp_path / "out" / "decay_fit.h5") as f:
+        assert "growing spans" in f.attrs["retried"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("start", [0.3, 0.35])
+def test_a_vibro_impact_restitution_is_fitted_past_grazes_and_impacts_at_rest(start):
+    """The vibro-impact absorber's restitution (0.5) from its two displacements, noise-free. From 0.3 the impactor's
+    impacts accumulate to rest at 0.45 s: the response has no derivative from there (it was a traceback), so the
+    fit starts on the data before it, then grows the span from each estimate. From 0.35 the whole at once meets a
+    graze at 0.3500627 (an impact appearing at 7.16 s: trial points with no Jacobian, stepped back from, which
+    shrank the trust region against it, 8.8 % of the data unexplained; it used to stop at 0.35 leaving 22 %); over
+    growing spans, the truth. Against the event-driven run that made the data: to 1e-6 (measured 3e-14)."""
+    text = (SCENARIOS / "vibro_impact_gap.toml").read_text()
+    truth_sc, _, _ = model_of(text, "truth.toml")
+    truth = smdcli.simulate(truth_sc)
+    data = measured_from(truth, {f"{d}.displacement": ("displacement", j) for j, d in enumerate(truth_sc.dof_names)})
+    run = fit([make_test(scenario_with(truth_sc, {"stop[0].restitution": start}), data, None, None)],
+              ["stop[0].restitution"])
+    assert run.converged and "growing spans" in run.message and not run.warning
+    assert abs(run.estimate[0] / 0.5 - 1) <= 1e-6
+    assert ("no derivative at its start" if start == 0.3 else "where the response has no derivative") in run.message
+
+
+def test_data_past_where_the_response_has_a_derivative_are_one_line_exit_2(cli, tmp_path):
+    """The bouncing ball (restitution 0.75 in the data) fitted from 0.8 over 6 s: its impacts accumulate to rest
+    at 3.16 s at the start, and at every estimate the response has no derivative from its rest on; the fit says
+    which samples to leave out, exit 2, nothing written. Without them, the truth (the event-driven run's)."""
+    truth = smdcli.simulate(scenario_with(smdcli.load(SCENARIOS / "bouncing_ball.toml"),
+                                          {"stop[0].restitution": 0.75}))
+    rows = "".join(f"{t!r},{x!r}\n" for t, x in zip(truth.time[1:].tolist(), truth.displacement[1:, 0].tolist()))
+    whole = _csv(tmp_path / "ball.csv", "time,ball.displacement\n" + rows)
+    ran = cli("fit", SCENARIOS / "bouncing_ball.toml", "--data", whole, "--param", "stop[0].restitution", "-o",
+              tmp_path / "out")
+    assert ran.exit_code == 2 and len(ran.output.strip().splitlines()) == 1, ran.output
+    assert "accumulate to rest" in ran.output and f"leave {whole}'s samples from t = 3.16" in ran.output
+    assert not (tmp_path / "out").exists()
+    before = truth.time[1:] < 2.9
+    short = _csv(tmp_path / "short.csv", "time,ball.displacement\n" + "".join(
+        f"{t!r},{x!r}\n" for t, x in zip(truth.time[1:][before].tolist(), truth.displacement[1:, 0][before].tolist())))
+    ran = cli("fit", SCENARIOS / "bouncing_ball.toml", "--data", short, "--param", "stop[0].restitution", "-o",
+              tmp_path / "out", "--json", "--no-plots")
+    assert ran.exit_code == 0, ran.output
+    assert abs(json.loads(ran.stdout)["parameters"][0]["estimate"] / 0.75 - 1) <= 1e-6
 
 
 def test_data_at_unequal_times_starting_after_the_scene_s_start_fit_the_truth():

@@ -14,6 +14,7 @@ Must not import: io, plots, commands, cli.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time as clock
 import tomllib
@@ -82,6 +83,7 @@ class FitResult:
     outputs: list[Path] = field(default_factory=list)
     unexplained: float = math.nan  # |weighted residual| / |weighted data|: what the fitted scene leaves unexplained
     warning: str = ""  # where it leaves more than UNEXPLAINED of the data: why the intervals may not be trusted
+    retried: str = ""  # where the whole at once stalled: that it was taken again over growing spans, and why
 
 
 def make_test(sc: Scenario, measured: Measured, channels: tuple[str, ...] | None = None,
@@ -144,9 +146,10 @@ def default_weights(measured: Measured, channels: tuple[str, ...]) -> dict[str, 
     return {c: 1.0 / max(rms[c], WEIGHT_FLOOR * largest[quantity_of(c)]) for c in channels}
 
 
-def _model_channels(test: Test, sc: Scenario, params: list[str], built: tuple | None = None) -> tuple[dict, dict]:
+def _model_channels(test: Test, sc: Scenario, params: list[str],
+                    built: tuple | None = None) -> tuple[dict, dict, tuple[str, ...]]:
     """Each channel of a test at the scene sc (built: its TOML document and model, where the caller has them): its
-    values (N,) and derivatives (P, N) at the data's times."""
+    values (N,) and derivatives (P, N) at the data's times, and the sensitivities' notes (where they have none)."""
     s = sensitivity(sc, params, grid=test.grid, peaks=False, built=built)
     dofs = {name: j for j, name in enumerate(s.dof)}
     ground = s.ground_acceleration()
@@ -161,7 +164,7 @@ def _model_channels(test: Test, sc: Scenario, params: list[str], built: tuple | 
             if quantity == "acceleration" and ground is not None:  # an accelerometer's: absolute
                 value, derivative = value + ground[0], derivative + ground[1]
         values[channel], derivatives[channel] = value[test.rows], derivative[:, test.rows]
-    return values, derivatives
+    return values, derivatives, s.notes
 
 
 def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, float]] | None = None,
@@ -194,57 +197,127 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
     if samples <= len(params):
         raise UsageError(f"{tests[0].measured.file}: {samples} samples cannot determine {len(params)} parameters")
     scale = np.where(initial != 0, np.abs(initial), 1.0)
-    cache: dict[bytes, tuple] = {}
-    history: list[tuple[float, np.ndarray]] = []
     refused: list[str] = []  # trial points that are no scene (a kinetic friction force above its breakaway one)
+    underived: list[str] = []  # trial points where the response has no derivative
     solves = 0
+    size = max(2 * (len(params) + 1) * len(t.scenario.dof_names) for t in tests)
 
-    def evaluate(theta: np.ndarray) -> tuple:
-        nonlocal solves
-        key = theta.tobytes()
-        if key not in cache:
-            solves += 1
-            p = theta * scale
-            residuals, columns, fitted = [], [], []
-            for test in tests:
-                try:
-                    sc, doc, model = member_with(test.scenario, dict(zip(params, p)))
-                except ScenarioError as exc:
-                    if solves == 1:
-                        raise  # the start itself
-                    # a step past what the scene allows: an infinite cost, from which least_squares' trust region
-                    # steps back (it shrinks the step where the residuals are not finite)
-                    refused.append(f"{exc.field}: {exc.message}")
-                    cache.clear()
-                    cache[key] = (np.full(samples, np.inf), None, None)
-                    return cache[key]
-                values, derivatives = _model_channels(test, sc, params, (doc, model))
-                fitted.append(values)
-                for w, channel in zip(test.weights, test.channels):
-                    residuals.append(w * (values[channel] - test.measured.channels[channel]))
-                    columns.append(w * derivatives[channel])
-            r = np.concatenate(residuals)
-            J = np.concatenate(columns, axis=1).T  # (m, P) per unit of each parameter
-            cache.clear()  # the last point only: least_squares asks for fun and jac at the same theta
-            cache[key] = (r, J, fitted)
-            if advance is not None:
-                advance(1, f"cost {0.5 * float(r @ r):.4g}")
-        return cache[key]
+    def attempt(staged: list[Test], theta_start: np.ndarray, budget: int, tolerance: float) -> tuple:
+        """least_squares on these tests' data from theta_start: its answer, the residuals' evaluation (the last
+        point's cached), the history of its iterations, and whether it stepped back from points in its last two
+        iterations (its trust region shrunk against them to its end: a graze's wall, not a minimum). Its start
+        being no scene raises the ScenarioError, its start having no derivative _NoDerivative."""
+        cache: dict[bytes, tuple] = {}
+        history: list[tuple[float, np.ndarray]] = []
+        stepped_back, backs = [False], []  # since the last accepted point; each iteration's
+        staged_samples = sum(len(t.rows) * len(t.channels) for t in staged)
 
-    def residual(theta):
-        return evaluate(theta)[0]
+        def step_back(key: bytes) -> tuple:
+            """A point with an infinite cost, from which least_squares' trust region steps back (it shrinks the step
+            where the residuals are not finite)."""
+            stepped_back[0] = True
+            cache.clear()
+            cache[key] = (np.full(staged_samples, np.inf), None, None)
+            return cache[key]
 
-    def jacobian(theta):
-        r, J, _ = evaluate(theta)
-        history.append((0.5 * float(r @ r), theta * scale))
-        return J * scale
+        def evaluate(theta: np.ndarray) -> tuple:
+            nonlocal solves
+            key = theta.tobytes()
+            if key not in cache:
+                solves += 1
+                first = not history and not cache
+                p = theta * scale
+                residuals, columns, fitted = [], [], []
+                for test in staged:
+                    try:
+                        sc, doc, model = member_with(test.scenario, dict(zip(params, p)))
+                    except ScenarioError as exc:
+                        if first:
+                            raise
+                        refused.append(f"{exc.field}: {exc.message}")  # a step past what the scene allows
+                        return step_back(key)
+                    values, derivatives, notes = _model_channels(test, sc, params, (doc, model))
+                    finite = np.logical_and.reduce([np.isfinite(d).all(axis=0) for d in derivatives.values()])
+                    if not finite.all():
+                        why = f"{test.scenario.path}: {'; '.join(notes) or 'a derivative is nan'}"
+                        if first:  # its first sample without one, and the span of the data before it
+                            at = int(np.argmin(finite))
+                            raise _NoDerivative(why, float(test.measured.time[at - 1] - test.grid[0]) if at else 0.0,
+                                                f"{test.measured.file}'s samples from t = {test.measured.time[at]:.6g} s")
+                        # a graze, an impact appearing: the Jacobian there is no number
+                        underived.append(", ".join(f"{n} = {v:.6g}" for n, v in zip(params, p)) + f": {why}")
+                        return step_back(key)
+                    fitted.append(values)
+                    for w, channel in zip(test.weights, test.channels):
+                        residuals.append(w * (values[channel] - test.measured.channels[channel]))
+                        columns.append(w * derivatives[channel])
+                r = np.concatenate(residuals)
+                J = np.concatenate(columns, axis=1).T  # (m, P) per unit of each parameter
+                cache.clear()  # the last point only: least_squares asks for fun and jac at the same theta
+                cache[key] = (r, J, fitted)
+                if advance is not None:
+                    advance(1, f"cost {0.5 * float(r @ r):.4g}")
+            return cache[key]
+
+        def residual(theta):
+            return evaluate(theta)[0]
+
+        def jacobian(theta):
+            r, J, _ = evaluate(theta)
+            history.append((0.5 * float(r @ r), theta * scale))
+            backs.append(stepped_back[0])  # whether this iteration stepped back from a point
+            stepped_back[0] = False
+            return J * scale
+
+        with np.errstate(all="ignore"), small_blas(size):
+            found = least_squares(residual, theta_start, jac=jacobian, bounds=(lower / scale, upper / scale),
+                                  method="trf", ftol=tolerance, xtol=tolerance, gtol=tolerance, max_nfev=budget,
+                                  x_scale=1.0)
+        return found, evaluate, history, stepped_back[0] or any(backs[-2:])
 
     theta0 = initial / scale
-    size = max(2 * (len(params) + 1) * len(t.scenario.dof_names) for t in tests)
-    with np.errstate(all="ignore"), small_blas(size):
-        found = least_squares(residual, theta0, jac=jacobian, bounds=(lower / scale, upper / scale), method="trf",
-                              ftol=TOLERANCE, xtol=TOLERANCE, gtol=TOLERANCE, max_nfev=max_iterations,
-                              x_scale=1.0)
+    spans = growing_spans(tests, len(params))
+    # where shorter spans may help, the whole is tried with half the evaluations, and the spans take the rest
+    try:
+        whole = attempt(tests, theta0, max(1, max_iterations // 2) if spans else max_iterations, TOLERANCE)
+        found, evaluate, history, stepped = whole
+        iterations = int(found.njev or 0)
+        stalled = ("" if not spans or max_iterations - solves <= len(spans) else
+                   f"stopped after {solves} evaluations" if found.status <= 0 else
+                   "ended stepping back from points past the scene or without a derivative" if stepped else
+                   f"left {100 * unexplained:.0f} % of the data unexplained"
+                   if (unexplained := _unexplained(tests, evaluate(found.x)[0])) > UNEXPLAINED else "")
+    except _NoDerivative as exc:
+        if max_iterations < 2:
+            raise _refusal(exc) from None
+        whole, iterations, stalled = None, 0, f"had no derivative at its start ({exc.args[0]})"
+        spans = spans or [None]
+    if stalled:
+        theta, done = theta0, 0
+        while done < len(spans):
+            span = spans[done]
+            staged = [w for test in tests if (w := _within(test, span)) is not None]
+            # a fair share of what is left; the whole, the rest
+            budget = max(1, (max_iterations - solves) // (len(spans) - done))
+            try:
+                spanned = attempt(staged, theta, budget, TOLERANCE if span is None else SPAN_TOLERANCE)
+            except _NoDerivative as exc:  # a span that ends before the derivative does, first
+                when = exc.args[1]
+                if when in spans or sum(len(w.rows) * len(w.channels) for test in tests
+                                        if (w := _within(test, when)) is not None) <= 2 * len(params):
+                    raise _refusal(exc) from None
+                spans.insert(done, when)
+                continue
+            iterations += int(spanned[0].njev or 0)
+            theta, done = spanned[0].x, done + 1
+        if whole is None or spanned[0].cost < whole[0].cost:
+            found, evaluate, history, stepped = spanned
+        spans = [s for s in spans if s is not None]
+        stalled = (f"over the whole data at once the fit {stalled}, so it was taken again over growing spans of "
+                   f"the data from their start (" + (f"the first {spans[0]:.4g} s, each next about twice as long, "
+                                                      if spans else "") + "then the whole), each from the last one's "
+                   "estimate" + ("" if found is spanned[0] else
+                                 ", which ended no lower: the first attempt's best point is written"))
     estimate = found.x * scale
     r, J, fitted = evaluate(found.x)
     m, P = len(r), len(params)
@@ -271,18 +344,20 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
     t_value = float(stdtrit(m - P, 0.975))
     confidence = np.stack([estimate - t_value * standard_error, estimate + t_value * standard_error], axis=1)
     converged = bool(found.status > 0)
-    message = found.message if converged else (f"stopped after {max_iterations} evaluations (--max-iterations) "
+    message = found.message.rstrip(".") if converged else (f"stopped after {max_iterations} evaluations (--max-iterations) "
                                                 f"without meeting the tolerance {TOLERANCE:g}; the best point is "
                                                 "written")
+    message += f"; {stalled}" if stalled else ""
     if refused:
         message += (f"; {len(refused)} trial point{'s' if len(refused) > 1 else ''} outside what the scene allows "
                     f"stepped back from (the first: {refused[0]})")
+    if underived:
+        message += (f"; {len(underived)} trial point{'s' if len(underived) > 1 else ''} where the response has no "
+                    f"derivative stepped back from (the first: {underived[0]})")
     if not history or not np.array_equal(history[-1][1], estimate):
         history.append((0.5 * float(r @ r), estimate))
     units = tuple(parameter_units(p, tests[0].scenario) or "1" for p in params)
-    data = np.concatenate([w * test.measured.channels[c] for test in tests
-                           for w, c in zip(test.weights, test.channels)])
-    unexplained = float(np.linalg.norm(r) / max(float(np.linalg.norm(data)), 1e-300))
+    unexplained = _unexplained(tests, r)
     warning = "" if unexplained <= UNEXPLAINED else (
         f"the fitted scene leaves {100 * unexplained:.0f} % of the data's weighted RMS unexplained: a local minimum "
         "(start nearer the answer, or bound the parameters) or a model that cannot make these data; the standard "
@@ -290,8 +365,76 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
     return FitResult(
         parameter=tuple(params), units=units, initial=initial, estimate=estimate, lower=lower, upper=upper,
         standard_error=standard_error, covariance=covariance, correlation=correlation, confidence_95=confidence,
-        cost=0.5 * float(r @ r), rms_residual=float(np.sqrt(np.mean(r ** 2))), iterations=int(found.njev or 0),
+        cost=0.5 * float(r @ r), rms_residual=float(np.sqrt(np.mean(r ** 2))), iterations=iterations,
         solves=solves, converged=converged, message=message, identifiable=identifiable, condition=condition,
         null_direction=null_direction, history_cost=np.array([c for c, _ in history]),
         history_estimate=np.array([e for _, e in history]), tests=tests, fitted=fitted,
-        wall_time_s=clock.perf_counter() - start, unexplained=unexplained, warning=warning)
+        wall_time_s=clock.perf_counter() - start, unexplained=unexplained, warning=warning, retried=stalled)
+
+
+class _NoDerivative(Exception):
+    """A fit's start where the response has no derivative: why (the sensitivities' notes), the span of the data
+    before the first sample without one (from its test's start), and which samples those are."""
+
+
+def _refusal(exc: _NoDerivative) -> UsageError:
+    """A fit that cannot go on without the derivative at its start: what to change."""
+    why, _, samples = exc.args
+    return UsageError(f"{why}; a fit needs the derivatives at its start: start elsewhere, or leave {samples} out")
+
+
+ALTERNATIONS = 3  # swings of the busiest channel across its mean that the first of growing_spans holds
+SPAN_TOLERANCE = 1e-6  # a span short of the whole data is a start for the next: no need to meet TOLERANCE on it
+
+
+def growing_spans(tests: list[Test], count: int) -> list[float | None]:
+    """The spans of the data (seconds from each test's start) over which a fit that stalls on the whole is taken
+    again, each from the last one's estimate, the last the whole (None): the first holds ALTERNATIONS swings of the
+    channel that swings soonest (across a band of a tenth of its RMS about its mean), and more samples than twice the
+    parameters; each next twice the last. Empty where the data hold too few swings for a shorter span to help.
+
+    A free oscillation's phase drifts with a frequency's error over the whole record (a free decay's 20 cycles with
+    the stiffness 5 % off: a valley of the cost where added damping hides the drift, and the fit crawls along it);
+    over a cycle and a half the drift is less than half a cycle, and each doubling starts within its own cycle."""
+    first, longest = math.inf, 0.0
+    for test in tests:
+        t, begin = test.measured.time, float(test.grid[0])
+        longest = max(longest, float(t[-1]) - begin)
+        for channel in test.channels:
+            y = test.measured.channels[channel] - test.measured.channels[channel].mean()
+            band = 0.1 * float(np.sqrt(np.mean(y ** 2)))
+            side = np.sign(y) * (np.abs(y) > band)
+            outside = np.flatnonzero(side)
+            swings = outside[1:][side[outside[1:]] != side[outside[:-1]]]
+            if len(swings) >= ALTERNATIONS:
+                first = min(first, float(t[swings[ALTERNATIONS - 1]]) - begin)
+    while first < longest and sum(int(np.count_nonzero(test.measured.time <= test.grid[0] + first)) *
+                                  len(test.channels) for test in tests) <= 2 * count:
+        first *= 2
+    if not first < longest / 2:
+        return []
+    spans: list[float | None] = []
+    while first < longest:
+        spans.append(first)
+        first *= 2
+    return spans + [None]
+
+
+def _within(test: Test, span: float | None) -> Test | None:
+    """The test's data no later than span after its start (None: all of them); None where that holds no sample."""
+    if span is None:
+        return test
+    kept = int(np.searchsorted(test.measured.time, test.grid[0] + span, side="right"))
+    if kept == 0:
+        return None
+    measured = dataclasses.replace(test.measured, time=test.measured.time[:kept],
+                                   channels={c: v[:kept] for c, v in test.measured.channels.items()})
+    return dataclasses.replace(test, measured=measured, grid=test.grid[:test.rows[kept - 1] + 1],
+                               rows=test.rows[:kept])
+
+
+def _unexplained(tests: list[Test], r: np.ndarray) -> float:
+    """|weighted residual| / |weighted data|: what the scene leaves of the data unexplained."""
+    data = np.concatenate([w * test.measured.channels[c] for test in tests
+                           for w, c in zip(test.weights, test.channels)])
+    return float(np.linalg.norm(r) / max(float(np.linalg.norm(data)), 1e-300))

@@ -151,19 +151,19 @@ def _sensitivity(sc: Scenario, params: list[str], grid: np.ndarray | None, peaks
     for q, row in zip(QUANTITIES, relative):
         accuracy[f"d_{q}"] = row
         accuracy[q] = np.full(1, stated)
-    if not peaks:
-        nan = np.full(n, np.nan)
-        found = _result(sc, params, derivatives, grid, base, nominal, derived, nan, nan, np.full((P, n), np.nan),
-                        accuracy, (), method)
-        found.law_tensions = _law_tensions(base, tensions, scales)
-        return found
-    notes = []
+    notes = []  # the histories' too: a fit's trial point where they have no derivative says why
     evented = run if run is not None else mixed  # the events' run, where the scene has events
     if evented is not None and evented.undefined_from is not None:
         when, why = evented.undefined_from
         notes.append(f"from t = {when:.9g} s the response has no derivative ({why}): written as nan")
     for i, why in (evented.edges.items() if evented is not None else ()):
         notes.append(f"the response has no derivative in {params[i]} ({why}): written as nan")
+    if not peaks:
+        nan = np.full(n, np.nan)
+        found = _result(sc, params, derivatives, grid, base, nominal, derived, nan, nan, np.full((P, n), np.nan),
+                        accuracy, tuple(notes), method)
+        found.law_tensions = _law_tensions(base, tensions, scales)
+        return found
     # where the state or the acceleration jumps (the forces' and the ground's jumps, the events) the interpolant does
     # not hold: those intervals keep their samples (result_peaks' rule)
     events = np.unique(np.concatenate([jump_times(base, grid), [e[0] for e in getattr(evented, "events", ())]]))

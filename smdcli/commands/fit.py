@@ -100,7 +100,7 @@ def fit_summary(run) -> dict:
         "status": "ok" if run.converged else "not converged", "exit_code": 0 if run.converged else 1,
         "converged": run.converged, "message": run.message, "iterations": run.iterations, "solves": run.solves,
         "cost": run.cost, "rms_residual": run.rms_residual, "unexplained": _number(run.unexplained),
-        "warning": run.warning or None, "jacobian": run.jacobian,
+        "warning": run.warning or None, "retried": run.retried or None, "jacobian": run.jacobian,
         "identifiable": run.identifiable, "condition": run.condition if math.isfinite(run.condition) else None,
         "null_direction": run.null_direction or None,
         "parameters": [{"path": p, "units": u, "initial": float(a), "estimate": float(e),
@@ -133,6 +133,8 @@ def format_fit(d: dict) -> str:
                      f"{d['condition'] if d['condition'] is not None else 'inf'})")
     if not d["converged"]:
         lines.append(f"  {d['message']}")
+    elif d["retried"]:
+        lines.append(f"  {d['retried']}")
     if d["warning"]:
         lines.append(f"  warning: {d['warning']}")
     if d["outputs"]:

@@ -22,7 +22,7 @@ def write_fit(path: Path, run) -> None:
     """The fit file: /parameter, /initial, /estimate, /standard_error, /covariance, /correlation, /confidence_95,
     /lower, /upper, /time and /measured, /fitted, /residual (a data set per channel; a group per scenario stem
     when several), /history/cost and /history/estimate; root attributes cost, rms_residual, unexplained, warning,
-    iterations, solves, converged, message, jacobian."""
+    retried, iterations, solves, converged, message, jacobian."""
     import h5py
 
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
@@ -30,8 +30,8 @@ def write_fit(path: Path, run) -> None:
         f.attrs["title"] = f"Fit of {', '.join(Path(t.scenario.path).name for t in run.tests)}"
         f.attrs["scenario_paths"] = np.array([str(t.scenario.path) for t in run.tests], dtype=h5py.string_dtype())
         f.attrs["data_files"] = np.array([t.measured.file for t in run.tests], dtype=h5py.string_dtype())
-        for key in ("cost", "rms_residual", "unexplained", "warning", "iterations", "solves", "converged", "message",
-                    "jacobian", "condition", "identifiable", "null_direction", "wall_time_s"):
+        for key in ("cost", "rms_residual", "unexplained", "warning", "retried", "iterations", "solves", "converged",
+                    "message", "jacobian", "condition", "identifiable", "null_direction", "wall_time_s"):
             value = getattr(run, key)
             f.attrs[key] = value if not isinstance(value, bool) else int(value)
         parameter = axis(f, "parameter", list(run.parameter))
