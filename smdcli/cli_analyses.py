@@ -190,7 +190,8 @@ def fit(
     bound: Optional[List[str]] = typer.Option(None, "--bound", help="PATH=LOWER:UPPER (repeat). Default: \\[fit] "
                                               "bounds; a positive parameter is kept positive."),
     max_iterations: int = typer.Option(100, "--max-iterations", help="Evaluations allowed before the fit stops "
-                                       "unconverged (exit 1, the best point written)."),
+                                       "unconverged (exit 1, the best point written): half for the whole data at "
+                                       "once, the rest for growing spans of it where that stalls."),
     out: Path = typer.Option(Path("results"), "-o", "--out", help="Output folder."),
     no_plots: bool = typer.Option(False, "--no-plots", help="Write the HDF5 and TOML files only."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print errors only."),
