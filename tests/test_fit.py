@@ -302,6 +302,18 @@ def test_a_fit_steps_back_from_points_that_are_no_scene_and_says_when_it_explain
     assert wrong.unexplained > 0.2 and "unexplained" in wrong.warning and "local minimum" in wrong.warning
 
 
+def _whole_at_once(start, data, params):
+    """The fit over the whole data at once alone, its growing spans taken away (what it was)."""
+    import smdcli.analysis.fit as fitting
+
+    spans = fitting.growing_spans
+    try:
+        fitting.growing_spans = lambda tests, count: []
+        return fit([make_test(start, data, None, None)], params)
+    finally:
+        fitting.growing_spans = spans
+
+
 @pytest.mark.parametrize("noise", [0.0, 1e-5])
 def test_a_free_decay_of_twenty_cycles_is_fitted_from_forty_percent_off(noise, cli, tmp_path):
     """A free decay, the commonest identification test: 1 kg on k = 100 N/m and c = 0.2 N s/m from x0 = 10 mm,
@@ -326,14 +338,7 @@ def test_a_free_decay_of_twenty_cycles_is_fitted_from_forty_percent_off(noise, c
         assert np.all(run.standard_error <= 1e-3 * true)
     else:
         assert np.abs(run.estimate / true - 1).max() <= 1e-6
-    import smdcli.analysis.fit as fitting
-
-    whole = fitting.growing_spans
-    try:  # the whole at once, the spans taken away: it does not find the truth (the test's own check can fail)
-        fitting.growing_spans = lambda tests, count: []
-        alone = fit([make_test(start, data, None, None)], params)
-    finally:
-        fitting.growing_spans = whole
+    alone = _whole_at_once(start, data, params)  # the spans taken away: the test's own check can fail
     assert not alone.converged or np.abs(alone.estimate / true - 1).max() > 0.1
     if noise:
         return
@@ -351,6 +356,32 @@ def test_a_free_decay_of_twenty_cycles_is_fitted_from_forty_percent_off(noise, c
     assert "growing spans" in json.loads(ran.stdout)["retried"]
     with h5py.File(tmp_path / "out" / "decay_fit.h5") as f:
         assert "growing spans" in f.attrs["retried"]
+
+
+@pytest.mark.parametrize("noise", [0.0, 0.02])
+def test_a_local_minimum_that_leaves_a_smooth_residual_is_not_called_a_fit(noise):
+    """A Coulomb and viscous free decay (k = 203.365 N/m, F = 0.452 N, c = 0.652 N s/m, 5 s) started with F 10 %
+    high: over the whole record at once it converges one stick-slip event short, at F = 0.597 N and c = 0.170, and
+    leaves 5.4 % unexplained (5.7 % under 2 % noise), below the 10 % that calls a fit a misfit: it was reported
+    converged, with intervals and no warning. What it leaves is no noise (its lag-one correlation about 1, noise's
+    about 0), so the fit is taken again over growing spans: the truth, noise-free to 1e-6 (measured 1e-14), under
+    noise each estimate within 3 standard errors (measured 1.7). The whole at once alone now warns."""
+    text = one_dof(0.652, k=203.365, m=1.39, x0=0.0445, end=5.0, step=0.005,
+                   extra='[[friction]]\nconnects = ["ground", "m"]\nforce = 0.452\n')
+    truth_sc, _, _ = model_of(text, "coulomb.toml")
+    truth = smdcli.simulate(truth_sc)
+    data = measured_from(truth, {"m.displacement": ("displacement", 0)}, noise=noise, seed=3)
+    params, true = ["spring[0].k", "friction[0].force", "damper[0].c"], np.array([203.365, 0.452, 0.652])
+    start = scenario_with(truth_sc, {"friction[0].force": 0.452 * 1.1})
+    run = fit([make_test(start, data, None, None)], params)
+    assert run.converged and "no noise" in run.retried and not run.warning
+    if noise:
+        assert np.all(np.abs(run.estimate - true) <= 3 * run.standard_error)
+    else:
+        assert np.abs(run.estimate / true - 1).max() <= 1e-6
+    alone = _whole_at_once(start, data, params)  # the spans taken away: the test's own check can fail
+    assert alone.converged and 0.03 < alone.unexplained < 0.1 and abs(alone.estimate[2] / 0.652 - 1) > 0.5
+    assert "no noise" in alone.warning and "local minimum" in alone.warning
 
 
 TWO_DOF_FREE = """[time]
@@ -388,14 +419,7 @@ def test_a_mode_too_small_to_swing_a_channel_is_fitted_over_growing_spans(factor
     start = scenario_with(truth_sc, dict(zip(params, true * factors)))
     run = fit([make_test(start, data, None, None)], params)
     assert run.converged and "growing spans" in run.retried and np.abs(run.estimate / true - 1).max() <= 1e-6
-    import smdcli.analysis.fit as fitting
-
-    spans = fitting.growing_spans
-    try:  # the whole at once alone: a local minimum (the test's own check can fail)
-        fitting.growing_spans = lambda tests, count: []
-        alone = fit([make_test(start, data, None, None)], params)
-    finally:
-        fitting.growing_spans = spans
+    alone = _whole_at_once(start, data, params)  # the spans taken away: the test's own check can fail
     assert alone.unexplained > 0.3 and np.abs(alone.estimate / true - 1).max() > 0.1
 
 

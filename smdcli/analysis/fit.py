@@ -14,7 +14,6 @@ Must not import: io, plots, commands, cli.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time as clock
 import tomllib
@@ -23,7 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from smdcli.analysis.fit_data import Measured, quantity_of
+from smdcli.analysis.fit_data import Measured, Test, quantity_of
+from smdcli.analysis.fit_spans import (MISFIT, RESOLVED, SPAN_TOLERANCE, UNEXPLAINED, NoDerivative, growing_spans,
+                                      misfit, refusal, unexplained_share, within)
 from smdcli.analysis.sensitivity import sensitivity
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.resources import small_blas
@@ -32,23 +33,7 @@ from smdcli.sweep.family import member_with
 
 TOLERANCE = 1e-12  # relative reduction of the cost and relative step below which the fit has converged
 IDENTIFIABLE = 1e7  # condition number of the column-normalized Jacobian above which a direction is undetermined
-# the fraction of the data's weighted RMS a fitted scene may leave unexplained before the fit says it does not explain
-# them (a local minimum, or a model that cannot make the data): measurement noise leaves a few percent (a
-# vibro-impact absorber's restitution started 30 % off stopped where it began, leaving 22 %)
-UNEXPLAINED = 0.1
 JACOBIAN = "exact sensitivities: the scene and its sensitivity equations solved together (smd sensitivity)"
-
-
-@dataclass
-class Test:
-    """One scenario, the data measured on it, the channels fitted and their weights."""
-
-    scenario: Scenario
-    measured: Measured
-    channels: tuple[str, ...]
-    weights: np.ndarray
-    grid: np.ndarray  # the scenario's start, then the data's times
-    rows: np.ndarray  # where the data's times are in the grid
 
 
 @dataclass
@@ -82,7 +67,7 @@ class FitResult:
     wall_time_s: float = 0.0
     outputs: list[Path] = field(default_factory=list)
     unexplained: float = math.nan  # |weighted residual| / |weighted data|: what the fitted scene leaves unexplained
-    warning: str = ""  # where it leaves more than UNEXPLAINED of the data: why the intervals may not be trusted
+    warning: str = ""  # where it leaves a misfit (fit_spans.misfit): why the intervals may not be trusted
     retried: str = ""  # where the whole at once stalled: that it was taken again over growing spans, and why
 
 
@@ -206,7 +191,7 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
         """least_squares on these tests' data from theta_start: its answer, the residuals' evaluation (the last
         point's cached), the history of its iterations, and whether it stepped back from points in its last two
         iterations (its trust region shrunk against them to its end: a graze's wall, not a minimum). Its start
-        being no scene raises the ScenarioError, its start having no derivative _NoDerivative."""
+        being no scene raises the ScenarioError, its start having no derivative NoDerivative."""
         cache: dict[bytes, tuple] = {}
         history: list[tuple[float, np.ndarray]] = []
         stepped_back, backs = [False], []  # since the last accepted point; each iteration's
@@ -242,7 +227,7 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
                         why = f"{test.scenario.path}: {'; '.join(notes) or 'a derivative is nan'}"
                         if first:  # its first sample without one, and the span of the data before it
                             at = int(np.argmin(finite))
-                            raise _NoDerivative(why, float(test.measured.time[at - 1] - test.grid[0]) if at else 0.0,
+                            raise NoDerivative(why, float(test.measured.time[at - 1] - test.grid[0]) if at else 0.0,
                                                 f"{test.measured.file}'s samples from t = {test.measured.time[at]:.6g} s")
                         # a graze, an impact appearing: the Jacobian there is no number
                         underived.append(", ".join(f"{n} = {v:.6g}" for n, v in zip(params, p)) + f": {why}")
@@ -280,32 +265,37 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
     # where shorter spans may help, the whole is tried with half the evaluations, and the spans take the rest
     try:
         whole = attempt(tests, theta0, max(1, max_iterations // 2) if spans else max_iterations, TOLERANCE)
+        iterations = int(whole[0].njev or 0)
+        if spans and whole[0].status <= 0 and max_iterations > solves and \
+                unexplained_share(tests, whole[1](whole[0].x)[0]) <= UNEXPLAINED:
+            # out of its half while it explains the data all but a little: still descending (a Bouc-Wen scene's
+            # five parameters took 58 evaluations), it takes the rest from its best point
+            whole = attempt(tests, whole[0].x, max_iterations - solves, TOLERANCE)
+            iterations += int(whole[0].njev or 0)
         found, evaluate, history, stepped = whole
-        iterations = int(found.njev or 0)
         stalled = ("" if not spans or max_iterations - solves <= len(spans) else
                    f"stopped after {solves} evaluations" if found.status <= 0 else
                    "ended stepping back from points past the scene or without a derivative" if stepped else
-                   f"left {100 * unexplained:.0f} % of the data unexplained"
-                   if (unexplained := _unexplained(tests, evaluate(found.x)[0])) > UNEXPLAINED else "")
-    except _NoDerivative as exc:
+                   misfit(tests, evaluate(found.x)[0], RESOLVED))
+    except NoDerivative as exc:
         if max_iterations < 2:
-            raise _refusal(exc) from None
+            raise refusal(exc) from None
         whole, iterations, stalled = None, 0, f"had no derivative at its start ({exc.args[0]})"
         spans = spans or [None]
     if stalled:
         theta, done = theta0, 0
         while done < len(spans):
             span = spans[done]
-            staged = [w for test in tests if (w := _within(test, span)) is not None]
+            staged = [w for test in tests if (w := within(test, span)) is not None]
             # a fair share of what is left; the whole, the rest
             budget = max(1, (max_iterations - solves) // (len(spans) - done))
             try:
                 spanned = attempt(staged, theta, budget, TOLERANCE if span is None else SPAN_TOLERANCE)
-            except _NoDerivative as exc:  # a span that ends before the derivative does, first
+            except NoDerivative as exc:  # a span that ends before the derivative does, first
                 when = exc.args[1]
                 if when in spans or sum(len(w.rows) * len(w.channels) for test in tests
-                                        if (w := _within(test, when)) is not None) <= 2 * len(params):
-                    raise _refusal(exc) from None
+                                        if (w := within(test, when)) is not None) <= 2 * len(params):
+                    raise refusal(exc) from None
                 spans.insert(done, when)
                 continue
             iterations += int(spanned[0].njev or 0)
@@ -357,11 +347,12 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
     if not history or not np.array_equal(history[-1][1], estimate):
         history.append((0.5 * float(r @ r), estimate))
     units = tuple(parameter_units(p, tests[0].scenario) or "1" for p in params)
-    unexplained = _unexplained(tests, r)
-    warning = "" if unexplained <= UNEXPLAINED else (
-        f"the fitted scene leaves {100 * unexplained:.0f} % of the data's weighted RMS unexplained: a local minimum "
-        "(start nearer the answer, or bound the parameters) or a model that cannot make these data; the standard "
-        "errors and intervals assume the model is right")
+    unexplained = unexplained_share(tests, r)
+    left = misfit(tests, r, MISFIT)
+    warning = "" if not left else (
+        f"the fitted scene {left.replace('left', 'leaves', 1)}: a local minimum (start nearer the answer, or bound "
+        "the parameters) or a model that cannot make these data; the standard errors and intervals assume the model "
+        "is right")
     return FitResult(
         parameter=tuple(params), units=units, initial=initial, estimate=estimate, lower=lower, upper=upper,
         standard_error=standard_error, covariance=covariance, correlation=correlation, confidence_95=confidence,
@@ -370,76 +361,3 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
         null_direction=null_direction, history_cost=np.array([c for c, _ in history]),
         history_estimate=np.array([e for _, e in history]), tests=tests, fitted=fitted,
         wall_time_s=clock.perf_counter() - start, unexplained=unexplained, warning=warning, retried=stalled)
-
-
-class _NoDerivative(Exception):
-    """A fit's start where the response has no derivative: why (the sensitivities' notes), the span of the data
-    before the first sample without one (from its test's start), and which samples those are."""
-
-
-def _refusal(exc: _NoDerivative) -> UsageError:
-    """A fit that cannot go on without the derivative at its start: what to change."""
-    why, _, samples = exc.args
-    return UsageError(f"{why}; a fit needs the derivatives at its start: start elsewhere, or leave {samples} out")
-
-
-ALTERNATIONS = 3  # swings of the busiest channel across its mean that the first of growing_spans holds
-SPAN_TOLERANCE = 1e-6  # a span short of the whole data is a start for the next: no need to meet TOLERANCE on it
-
-
-def growing_spans(tests: list[Test], count: int) -> list[float | None]:
-    """The spans of the data (seconds from each test's start) over which a fit that stalls on the whole is taken
-    again, each from the last one's estimate, the last the whole (None): the first holds ALTERNATIONS swings of the
-    channel that swings soonest (across a band of a tenth of its RMS about its mean), at most an eighth of the
-    longest test, and more samples than twice the parameters; each next twice the last. Empty where the data hold
-    too few samples for a shorter span.
-
-    A free oscillation's phase drifts with a frequency's error over the whole record (a free decay's 20 cycles with
-    the stiffness 5 % off: a valley of the cost where added damping hides the drift, and the fit crawls along it);
-    over a cycle and a half the drift is less than half a cycle, and each doubling starts within its own cycle. A
-    mode too small to swing a channel drifts all the same (a 2-DOF's free vibration over 2 s, its slow mode's swings
-    a second apart: of 12 starts up to 50 % off, 8 stopped with over a third of the data unexplained; from an eighth
-    of the record, all 12 found the truth)."""
-    first, longest = math.inf, 0.0
-    for test in tests:
-        t, begin = test.measured.time, float(test.grid[0])
-        longest = max(longest, float(t[-1]) - begin)
-        for channel in test.channels:
-            y = test.measured.channels[channel] - test.measured.channels[channel].mean()
-            band = 0.1 * float(np.sqrt(np.mean(y ** 2)))
-            side = np.sign(y) * (np.abs(y) > band)
-            outside = np.flatnonzero(side)
-            swings = outside[1:][side[outside[1:]] != side[outside[:-1]]]
-            if len(swings) >= ALTERNATIONS:
-                first = min(first, float(t[swings[ALTERNATIONS - 1]]) - begin)
-    first = min(first, longest / 8)
-    while first < longest and sum(int(np.count_nonzero(test.measured.time <= test.grid[0] + first)) *
-                                  len(test.channels) for test in tests) <= 2 * count:
-        first *= 2
-    if not first < longest / 2:
-        return []
-    spans: list[float | None] = []
-    while first < longest:
-        spans.append(first)
-        first *= 2
-    return spans + [None]
-
-
-def _within(test: Test, span: float | None) -> Test | None:
-    """The test's data no later than span after its start (None: all of them); None where that holds no sample."""
-    if span is None:
-        return test
-    kept = int(np.searchsorted(test.measured.time, test.grid[0] + span, side="right"))
-    if kept == 0:
-        return None
-    measured = dataclasses.replace(test.measured, time=test.measured.time[:kept],
-                                   channels={c: v[:kept] for c, v in test.measured.channels.items()})
-    return dataclasses.replace(test, measured=measured, grid=test.grid[:test.rows[kept - 1] + 1],
-                               rows=test.rows[:kept])
-
-
-def _unexplained(tests: list[Test], r: np.ndarray) -> float:
-    """|weighted residual| / |weighted data|: what the scene leaves of the data unexplained."""
-    data = np.concatenate([w * test.measured.channels[c] for test in tests
-                           for w, c in zip(test.weights, test.channels)])
-    return float(np.linalg.norm(r) / max(float(np.linalg.norm(data)), 1e-300))

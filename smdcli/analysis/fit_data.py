@@ -1,7 +1,7 @@
 """Measured response for `smd fit`: a CSV whose first column is time and whose others are named
 `<mass>.<displacement|velocity|acceleration>` or `<element>.force` (units optional, `m1.acceleration [g]`), or an
 smd HDF5 result. Everything is converted to SI on reading; every malformed cell is refused naming the file, the
-row and the column.
+row and the column. A Test pairs such data with the scenario they were measured on.
 
 Must not import: io, plots, commands, cli.
 """
@@ -17,6 +17,7 @@ import numpy as np
 
 from smdcli.analysis.sensitivity import QUANTITIES as RESPONSE_UNITS
 from smdcli.errors import UsageError
+from smdcli.scenario import Scenario
 from smdcli.scenario.spec import STANDARD_GRAVITY
 
 QUANTITIES = ("displacement", "velocity", "acceleration", "force")
@@ -41,6 +42,18 @@ class Measured:
     time: np.ndarray
     channels: dict[str, np.ndarray]  # "m1.acceleration" -> (N,)
     units: dict[str, str]  # the units the file gave each channel in
+
+
+@dataclass
+class Test:
+    """One scenario, the data measured on it, the channels fitted and their weights."""
+
+    scenario: Scenario
+    measured: Measured
+    channels: tuple[str, ...]
+    weights: np.ndarray
+    grid: np.ndarray  # the scenario's start, then the data's times
+    rows: np.ndarray  # where the data's times are in the grid
 
 
 def quantity_of(channel: str) -> str:
