@@ -19,12 +19,14 @@ import time as clock
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
 from smdcli.analysis.fit_data import Measured, Test, quantity_of
-from smdcli.analysis.fit_spans import (MISFIT, RESOLVED, SPAN_TOLERANCE, UNEXPLAINED, NoDerivative, growing_spans,
-                                      misfit, refusal, unexplained_share, within)
+from smdcli.analysis.fit_spans import (MISFIT, RESOLVED, SPAN_TOLERANCE, UNEXPLAINED, NoDerivative, Stalled,
+                                      STALL_DROP, STALL_ITERATIONS, growing_spans, misfit, refusal, stalled_descent,
+                                      unexplained_share, within)
 from smdcli.analysis.sensitivity import sensitivity
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.resources import small_blas
@@ -187,10 +189,12 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
     solves = 0
     size = max(2 * (len(params) + 1) * len(t.scenario.dof_names) for t in tests)
 
-    def attempt(staged: list[Test], theta_start: np.ndarray, budget: int, tolerance: float) -> tuple:
+    def attempt(staged: list[Test], theta_start: np.ndarray, budget: int, tolerance: float,
+                watch: bool = False) -> tuple:
         """least_squares on these tests' data from theta_start: its answer, the residuals' evaluation (the last
         point's cached), the history of its iterations, and whether it stepped back from points in its last two
-        iterations (its trust region shrunk against them to its end: a graze's wall, not a minimum). Its start
+        iterations (its trust region shrunk against them to its end: a graze's wall, not a minimum). watch: stop
+        where it stalls (fit_spans.stalled), its best point the answer, status 0. Its start
         being no scene raises the ScenarioError, its start having no derivative NoDerivative."""
         cache: dict[bytes, tuple] = {}
         history: list[tuple[float, np.ndarray]] = []
@@ -252,19 +256,28 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
             history.append((0.5 * float(r @ r), theta * scale))
             backs.append(stepped_back[0])  # whether this iteration stepped back from a point
             stepped_back[0] = False
+            if watch and stalled_descent([c for c, _ in history], unexplained_share(staged, r)):
+                raise Stalled
             return J * scale
 
         with np.errstate(all="ignore"), small_blas(size):
-            found = least_squares(residual, theta_start, jac=jacobian, bounds=(lower / scale, upper / scale),
-                                  method="trf", ftol=tolerance, xtol=tolerance, gtol=tolerance, max_nfev=budget,
-                                  x_scale=1.0)
+            try:
+                found = least_squares(residual, theta_start, jac=jacobian, bounds=(lower / scale, upper / scale),
+                                      method="trf", ftol=tolerance, xtol=tolerance, gtol=tolerance, max_nfev=budget,
+                                      x_scale=1.0)
+            except Stalled:
+                cost, best = min(history, key=lambda entry: entry[0])
+                found = SimpleNamespace(x=best / scale, cost=cost, status=0, njev=len(history),
+                                        message=f"stalled after {solves} evaluations (its cost fell less than "
+                                        f"{100 * STALL_DROP:.0f} % over its last {STALL_ITERATIONS} iterations)")
         return found, evaluate, history, stepped_back[0] or any(backs[-2:])
 
     theta0 = initial / scale
     spans = growing_spans(tests, len(params))
     # where shorter spans may help, the whole is tried with half the evaluations, and the spans take the rest
     try:
-        whole = attempt(tests, theta0, max(1, max_iterations // 2) if spans else max_iterations, TOLERANCE)
+        whole = attempt(tests, theta0, max(1, max_iterations // 2) if spans else max_iterations, TOLERANCE,
+                        watch=bool(spans))
         iterations = int(whole[0].njev or 0)
         if spans and whole[0].status <= 0 and max_iterations > solves and \
                 unexplained_share(tests, whole[1](whole[0].x)[0]) <= UNEXPLAINED:
@@ -274,7 +287,8 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
             iterations += int(whole[0].njev or 0)
         found, evaluate, history, stepped = whole
         stalled = ("" if not spans or max_iterations - solves <= len(spans) else
-                   f"stopped after {solves} evaluations" if found.status <= 0 else
+                   (found.message if isinstance(found, SimpleNamespace) else f"stopped after {solves} evaluations")
+                   if found.status <= 0 else
                    "ended stepping back from points past the scene or without a derivative" if stepped else
                    misfit(tests, evaluate(found.x)[0], RESOLVED))
     except NoDerivative as exc:
@@ -334,9 +348,9 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
     t_value = float(stdtrit(m - P, 0.975))
     confidence = np.stack([estimate - t_value * standard_error, estimate + t_value * standard_error], axis=1)
     converged = bool(found.status > 0)
-    message = found.message.rstrip(".") if converged else (f"stopped after {max_iterations} evaluations (--max-iterations) "
-                                                f"without meeting the tolerance {TOLERANCE:g}; the best point is "
-                                                "written")
+    message = found.message.rstrip(".") if converged else (
+        f"stopped after {solves} evaluations{' (--max-iterations)' if solves >= max_iterations else ''} without "
+        f"meeting the tolerance {TOLERANCE:g}; the best point is written")
     message += f"; {stalled}" if stalled else ""
     if refused:
         message += (f"; {len(refused)} trial point{'s' if len(refused) > 1 else ''} outside what the scene allows "

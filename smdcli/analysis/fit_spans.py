@@ -28,6 +28,25 @@ UNEXPLAINED = 0.1
 SYSTEMATIC, RESOLVED, MISFIT = 0.5, 1e-6, 0.01
 
 
+# A fit over the whole record at once has stalled where its last STALL_ITERATIONS iterations took less than STALL_DROP
+# off its cost while it leaves more than UNEXPLAINED of the data: the free decay's valley (its cost from 1.7e3 to
+# 1.2e3 over 80 iterations, 80 % of the data unexplained), where its half of the evaluations was spent before the
+# growing spans began (65 solves; 28 where it stops as it stalls). A fit stopped so that was in fact descending is
+# taken over the growing spans from the start, and the lower cost of the two is written
+STALL_ITERATIONS, STALL_DROP = 5, 0.2
+
+
+class Stalled(Exception):
+    """A fit over the whole record at once that has stalled (stalled_descent)."""
+
+
+def stalled_descent(costs: list[float], unexplained: float) -> bool:
+    """Whether a fit whose costs at its accepted points are these, leaving this share of the data unexplained, has
+    stalled: the last STALL_ITERATIONS took less than STALL_DROP off its cost, and it leaves more than UNEXPLAINED."""
+    return len(costs) > STALL_ITERATIONS and unexplained > UNEXPLAINED and \
+        costs[-1] > (1 - STALL_DROP) * costs[-1 - STALL_ITERATIONS]
+
+
 class NoDerivative(Exception):
     """A fit's start where the response has no derivative: why (the sensitivities' notes), the span of the data
     before the first sample without one (from its test's start), and which samples those are."""
