@@ -194,8 +194,8 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
         """least_squares on these tests' data from theta_start: its answer, the residuals' evaluation (the last
         point's cached), the history of its iterations, and whether it stepped back from points in its last two
         iterations (its trust region shrunk against them to its end: a graze's wall, not a minimum). watch: stop
-        where it stalls (fit_spans.stalled), its best point the answer, status 0. Its start
-        being no scene raises the ScenarioError, its start having no derivative NoDerivative."""
+        where it stalls (fit_spans.stalled_descent), its best point the answer, status 0. Its start being no scene
+        raises the ScenarioError, its start having no derivative NoDerivative."""
         cache: dict[bytes, tuple] = {}
         history: list[tuple[float, np.ndarray]] = []
         stepped_back, backs = [False], []  # since the last accepted point; each iteration's
@@ -281,8 +281,8 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
         iterations = int(whole[0].njev or 0)
         if spans and whole[0].status <= 0 and max_iterations > solves and \
                 unexplained_share(tests, whole[1](whole[0].x)[0]) <= UNEXPLAINED:
-            # out of its half while it explains the data all but a little: still descending (a Bouc-Wen scene's
-            # five parameters took 58 evaluations), it takes the rest from its best point
+            # out of its half while it explains the data all but a little: still descending (a Bouc-Wen spring's k,
+            # alpha, beta and c under a sine took 58 evaluations), it takes the rest from its best point
             whole = attempt(tests, whole[0].x, max_iterations - solves, TOLERANCE)
             iterations += int(whole[0].njev or 0)
         found, evaluate, history, stepped = whole
