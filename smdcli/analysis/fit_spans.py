@@ -69,11 +69,11 @@ def growing_spans(tests: list[Test], count: int) -> list[float | None]:
     longest test, and more samples than twice the parameters; each next twice the last. Empty where the data hold
     too few samples for a shorter span.
 
-    A free oscillation's phase drifts with a frequency's error over the whole record (a free decay's 20 cycles with
+    A free oscillation's phase drifts with a frequency's error over the whole record (a free decay's 32 cycles with
     the stiffness 5 % off: a valley of the cost where added damping hides the drift, and the fit crawls along it);
     over a cycle and a half the drift is less than half a cycle, and each doubling starts within its own cycle. A
-    mode too small to swing a channel drifts all the same (a 2-DOF's free vibration over 2 s, its slow mode's swings
-    a second apart: of 12 starts up to 50 % off, 8 stopped with over a third of the data unexplained; from an eighth
+    mode too small to swing a channel drifts all the same (a 2-DOF's free vibration over 2 s, its slow mode swinging
+    every 0.69 s: of 12 starts up to 50 % off, 8 stopped with over a third of the data unexplained; from an eighth
     of the record, all 12 found the truth)."""
     first, longest = math.inf, 0.0
     for test in tests:
