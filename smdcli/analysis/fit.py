@@ -19,14 +19,13 @@ import time as clock
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 
 from smdcli.analysis.fit_data import Measured, Test, quantity_of
-from smdcli.analysis.fit_spans import (MISFIT, RESOLVED, SPAN_TOLERANCE, UNEXPLAINED, NoDerivative, Stalled,
-                                      STALL_DROP, STALL_ITERATIONS, growing_spans, misfit, refusal, stalled_descent,
-                                      unexplained_share, within)
+from smdcli.analysis.fit_spans import (MISFIT, RESOLVED, SPAN_TOLERANCE, STALL_DROP, STALL_ITERATIONS, UNEXPLAINED,
+                                      NoDerivative, growing_spans, misfit, refusal, stalled_descent, unexplained_share,
+                                      within)
 from smdcli.analysis.sensitivity import sensitivity
 from smdcli.errors import ScenarioError, UsageError
 from smdcli.resources import small_blas
@@ -194,8 +193,9 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
         """least_squares on these tests' data from theta_start: its answer, the residuals' evaluation (the last
         point's cached), the history of its iterations, and whether it stepped back from points in its last two
         iterations (its trust region shrunk against them to its end: a graze's wall, not a minimum). watch: stop
-        where it stalls (fit_spans.stalled_descent), its best point the answer, status 0. Its start being no scene
-        raises the ScenarioError, its start having no derivative NoDerivative."""
+        where it stalls (fit_spans.stalled_descent: status -2). An answer short of convergence says after how many
+        evaluations it stopped. Its start being no scene raises the ScenarioError, its start having no derivative
+        NoDerivative."""
         cache: dict[bytes, tuple] = {}
         history: list[tuple[float, np.ndarray]] = []
         stepped_back, backs = [False], []  # since the last accepted point; each iteration's
@@ -256,20 +256,21 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
             history.append((0.5 * float(r @ r), theta * scale))
             backs.append(stepped_back[0])  # whether this iteration stepped back from a point
             stepped_back[0] = False
-            if watch and stalled_descent([c for c, _ in history], unexplained_share(staged, r)):
-                raise Stalled
             return J * scale
 
+        def watched(intermediate_result):  # least_squares' callback after each iteration (its name tells it so)
+            if stalled_descent([c for c, _ in history], unexplained_share(staged, intermediate_result.fun)):
+                raise StopIteration
+
         with np.errstate(all="ignore"), small_blas(size):
-            try:
-                found = least_squares(residual, theta_start, jac=jacobian, bounds=(lower / scale, upper / scale),
-                                      method="trf", ftol=tolerance, xtol=tolerance, gtol=tolerance, max_nfev=budget,
-                                      x_scale=1.0)
-            except Stalled:
-                cost, best = min(history, key=lambda entry: entry[0])
-                found = SimpleNamespace(x=best / scale, cost=cost, status=0, njev=len(history),
-                                        message=f"stalled after {solves} evaluations (its cost fell less than "
-                                        f"{100 * STALL_DROP:.0f} % over its last {STALL_ITERATIONS} iterations)")
+            found = least_squares(residual, theta_start, jac=jacobian, bounds=(lower / scale, upper / scale),
+                                  method="trf", ftol=tolerance, xtol=tolerance, gtol=tolerance, max_nfev=budget,
+                                  x_scale=1.0, callback=watched if watch else None)
+        if found.status == -2:
+            found.message = (f"stalled after {solves} evaluations (its cost fell less than {100 * STALL_DROP:.0f} % "
+                             f"over its last {STALL_ITERATIONS} iterations)")
+        elif found.status <= 0:
+            found.message = f"stopped after {solves} evaluations"
         return found, evaluate, history, stepped_back[0] or any(backs[-2:])
 
     theta0 = initial / scale
@@ -286,17 +287,17 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
             whole = attempt(tests, whole[0].x, max_iterations - solves, TOLERANCE)
             iterations += int(whole[0].njev or 0)
         found, evaluate, history, stepped = whole
-        stalled = ("" if not spans or max_iterations - solves <= len(spans) else
-                   (found.message if isinstance(found, SimpleNamespace) else f"stopped after {solves} evaluations")
-                   if found.status <= 0 else
-                   "ended stepping back from points past the scene or without a derivative" if stepped else
-                   misfit(tests, evaluate(found.x)[0], RESOLVED))
+        reason = ("" if not spans or max_iterations - solves <= len(spans) else
+                  found.message if found.status <= 0 else
+                  "ended stepping back from points past the scene or without a derivative" if stepped else
+                  f"left {left}" if (left := misfit(tests, evaluate(found.x)[0], RESOLVED)) else "")
     except NoDerivative as exc:
         if max_iterations < 2:
             raise refusal(exc) from None
-        whole, iterations, stalled = None, 0, f"had no derivative at its start ({exc.args[0]})"
+        whole, iterations, reason = None, 0, f"had no derivative at its start ({exc.why})"
         spans = spans or [None]
-    if stalled:
+    retried = ""
+    if reason:
         theta, done = theta0, 0
         while done < len(spans):
             span = spans[done]
@@ -306,7 +307,7 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
             try:
                 spanned = attempt(staged, theta, budget, TOLERANCE if span is None else SPAN_TOLERANCE)
             except NoDerivative as exc:  # a span that ends before the derivative does, first
-                when = exc.args[1]
+                when = exc.span
                 if when in spans or sum(len(w.rows) * len(w.channels) for test in tests
                                         if (w := within(test, when)) is not None) <= 2 * len(params):
                     raise refusal(exc) from None
@@ -317,7 +318,7 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
         if whole is None or spanned[0].cost < whole[0].cost:
             found, evaluate, history, stepped = spanned
         spans = [s for s in spans if s is not None]
-        stalled = (f"over the whole data at once the fit {stalled}, so it was taken again over growing spans of "
+        retried = (f"over the whole data at once the fit {reason}, so it was taken again over growing spans of "
                    f"the data from their start (" + (f"the first {spans[0]:.4g} s, each next about twice as long, "
                                                       if spans else "") + "then the whole), each from the last one's "
                    "estimate" + ("" if found is spanned[0] else
@@ -351,7 +352,7 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
     message = found.message.rstrip(".") if converged else (
         f"stopped after {solves} evaluations{' (--max-iterations)' if solves >= max_iterations else ''} without "
         f"meeting the tolerance {TOLERANCE:g}; the best point is written")
-    message += f"; {stalled}" if stalled else ""
+    message += f"; {retried}" if retried else ""
     if refused:
         message += (f"; {len(refused)} trial point{'s' if len(refused) > 1 else ''} outside what the scene allows "
                     f"stepped back from (the first: {refused[0]})")
@@ -364,7 +365,7 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
     unexplained = unexplained_share(tests, r)
     left = misfit(tests, r, MISFIT)
     warning = "" if not left else (
-        f"the fitted scene {left.replace('left', 'leaves', 1)}: a local minimum (start nearer the answer, or bound "
+        f"the fitted scene leaves {left}: a local minimum (start nearer the answer, or bound "
         "the parameters) or a model that cannot make these data; the standard errors and intervals assume the model "
         "is right")
     return FitResult(
@@ -374,4 +375,4 @@ def fit(tests: list[Test], params: list[str], bounds: dict[str, tuple[float, flo
         solves=solves, converged=converged, message=message, identifiable=identifiable, condition=condition,
         null_direction=null_direction, history_cost=np.array([c for c, _ in history]),
         history_estimate=np.array([e for _, e in history]), tests=tests, fitted=fitted,
-        wall_time_s=clock.perf_counter() - start, unexplained=unexplained, warning=warning, retried=stalled)
+        wall_time_s=clock.perf_counter() - start, unexplained=unexplained, warning=warning, retried=retried)

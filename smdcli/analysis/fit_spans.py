@@ -36,10 +36,6 @@ SYSTEMATIC, RESOLVED, MISFIT = 0.5, 1e-6, 0.01
 STALL_ITERATIONS, STALL_DROP = 5, 0.2
 
 
-class Stalled(Exception):
-    """A fit over the whole record at once that has stalled (stalled_descent)."""
-
-
 def stalled_descent(costs: list[float], unexplained: float) -> bool:
     """Whether a fit whose costs at its accepted points are these, leaving this share of the data unexplained, has
     stalled: the last STALL_ITERATIONS took less than STALL_DROP off its cost, and it leaves more than UNEXPLAINED."""
@@ -51,11 +47,15 @@ class NoDerivative(Exception):
     """A fit's start where the response has no derivative: why (the sensitivities' notes), the span of the data
     before the first sample without one (from its test's start), and which samples those are."""
 
+    def __init__(self, why: str, span: float, samples: str):
+        super().__init__(why)
+        self.why, self.span, self.samples = why, span, samples
+
 
 def refusal(exc: NoDerivative) -> UsageError:
     """A fit that cannot go on without the derivative at its start: what to change."""
-    why, _, samples = exc.args
-    return UsageError(f"{why}; a fit needs the derivatives at its start: start elsewhere, or leave {samples} out")
+    return UsageError(f"{exc.why}; a fit needs the derivatives at its start: start elsewhere, or leave {exc.samples} "
+                      "out")
 
 
 ALTERNATIONS = 3  # swings of the busiest channel across its mean that the first of growing_spans holds
@@ -114,13 +114,13 @@ def within(test: Test, span: float | None) -> Test | None:
 
 
 def misfit(tests: list[Test], r: np.ndarray, floor: float) -> str:
-    """What a fit at residuals r leaves of the data, where it leaves more than UNEXPLAINED, or more than floor and
-    smooth in time (not noise: SYSTEMATIC); else empty."""
+    """What a fit at residuals r leaves of the data ("30 % of the data's weighted RMS unexplained"), where it leaves
+    more than UNEXPLAINED, or more than floor and smooth in time (not noise: SYSTEMATIC); else empty."""
     unexplained = unexplained_share(tests, r)
     if unexplained > UNEXPLAINED:
-        return f"left {100 * unexplained:.0f} % of the data's weighted RMS unexplained"
+        return f"{100 * unexplained:.0f} % of the data's weighted RMS unexplained"
     if unexplained > floor and (correlation := lag_one(tests, r)) > SYSTEMATIC:
-        return (f"left {100 * unexplained:.2g} % of the data's weighted RMS unexplained, and no noise: smooth in "
+        return (f"{100 * unexplained:.2g} % of the data's weighted RMS unexplained, and no noise: smooth in "
                 f"time (its lag-one correlation {correlation:.2f})")
     return ""
 
