@@ -11,6 +11,7 @@ import numpy as np
 
 from smdcli.elements import State
 from smdcli.solvers.events.scene import Scene
+from smdcli.analysis.signal_derivative import stencil_total
 from smdcli.solvers.ground import jump_at
 
 GRAZE = 1e-9  # a guard's top within this share of its terms below its level: a near miss, no derivative from it
@@ -35,6 +36,41 @@ def on_breakaway(margins: dict, nominal: np.ndarray, scene: Scene) -> list[str]:
     for m in margins.values():
         moved |= on & (np.abs(m - nominal) > GRAZE * sizes)
     return [el.path for el, edge in zip(scene.elements, moved) if edge]
+
+
+def start_derivative(scene: Scene, stencil: tuple, scale: float, t: float, states, nominal: np.ndarray,
+                     held_margins: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """The start's scaled derivative along a stencil ([z0; the elements' internal values], from each point's
+    own start), and the elements whose start the stencil's step moves across an edge between two branches
+    (none where it does not)."""
+    n = scene.model.n
+    branches, internals = set(), {}  # the elements' starting modes and internal values at the stencil's points
+    margins = {}  # the held contacts' forces less their breakaway at the stencil's points
+    ragged = []  # the points whose internal variables are another branch's
+
+    def initial(point, c):
+        model = point.model
+        z0 = np.zeros(point.size)
+        z0[:n], z0[n:2 * n] = model.x0, model.v0
+        point.reseed(z0, t)
+        d0, rate0 = point.R @ model.x0, point.R @ model.v0 + point.belts
+        starts = [el.law.start(float(d0[e]), float(rate0[e])) for e, el in enumerate(point.elements)]
+        branches.add(tuple(s.mode for s in starts))
+        margins[c] = breakaway_margins(point, starts, z0)
+        internals[c] = np.array([value for s in starts for value in internal_values(s)])
+        if len(internals[c]) != len(nominal):
+            # another branch, whose internal variables differ in number (a Clough spring deformed to its
+            # yield point exactly, the stiffness moved: elastic on one side, on its backbone on the other)
+            ragged.append(c)
+            internals[c] = np.full(len(nominal), np.nan)
+        return np.concatenate([z0, internals[c]])
+    flat = stencil_total(stencil, scale, initial)
+    held_at_breakaway = on_breakaway(margins, held_margins, scene)
+    if not (len(branches) > 1 or ragged or kinked(internals, nominal) or held_at_breakaway):
+        return flat, []
+    return flat, (held_at_breakaway or
+                  [el.path for k, el in enumerate(scene.elements) if len({b[k] for b in branches}) > 1] or
+                  [el.path for el, state in zip(scene.elements, states) if state.internal])
 
 
 def kinked(internals: dict, nominal: np.ndarray) -> bool:

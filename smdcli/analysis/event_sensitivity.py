@@ -26,7 +26,8 @@ from smdcli.elements.base import KINK, RATE
 from smdcli.elements import State
 from smdcli.analysis.event_carry import CarriedSensitivities
 from smdcli.analysis.event_edges import (GRAZE, breakaway_margins, carry_numbers, continuous, internal_values,
-                                           kinked, on_breakaway, shifted_states)
+                                           shifted_states, start_derivative)
+from smdcli.analysis.finer_stencil import FINER, finer
 from smdcli.analysis.signal_derivative import stencil_total
 from smdcli.analysis.smooth_sensitivity import ANSWERED
 from smdcli.model import Model
@@ -66,9 +67,8 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
         self.P = len(derivatives)
         # each parameter's stencil: the scenes at its points, their offsets (in the parameter's units) and weights
         # (times its scale: the sensitivities carried are scale_i d/dp_i, every block the size of the state)
-        self.stencils = [([Scene(first_order_hold(m, grid)[0]) for m in d.models],
-                          np.asarray(d.offsets, dtype=float) * d.delta, d.weights * scale)
-                         for d, scale in zip(derivatives, scales)]
+        self.stencils = [self._stencil(d, scale, grid) for d, scale in zip(derivatives, scales)]
+        self.derivatives = derivatives
         self.scales = scales
         self.dq = [{} for _ in self.scene.elements]  # internal variable -> its (P,) scaled sensitivities
         self.h_out = float(grid[1] - grid[0]) if len(grid) > 1 else 0.0
@@ -85,6 +85,14 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
         self._seeds: dict[float, tuple] = {}  # (sensitivities', state's) generators reseeded at a break, by its time
 
     # ----------------------------------------------------------------------------- stencils
+    @staticmethod
+    def _stencil(d, scale: float, grid: np.ndarray) -> tuple:
+        """A derivative's stencil as the run reads it: the scenes at its points, their offsets (in the parameter's
+        units) and weights (times its scale: the sensitivities carried are scale_i d/dp_i, every block the size of
+        the state)."""
+        return ([Scene(first_order_hold(m, grid)[0]) for m in d.models], np.asarray(d.offsets, dtype=float) * d.delta,
+                d.weights * scale)
+
     def total(self, i: int, read) -> np.ndarray:
         """scale_i times the total derivative along parameter i of read(scene, c) (stencil_total)."""
         return stencil_total(self.stencils[i], self.scales[i], read)
@@ -208,42 +216,32 @@ class EventSensitivityRun(PiecewiseRun, CarriedSensitivities):
         states, z = super().start(states, z, t)
         if any(kind == "impact" for _, _, kind in self.events[before:]):
             self.no_derivative(t, "a stop is met moving into it at the start")
-        n, E = self.n, self.scene.E
+        E = self.scene.E
         S = np.zeros((self.P, self.scene.size))
         nominal = np.array([v for s in states for v in internal_values(s)])
         for i in range(self.P):
-            branches, internals = set(), {}  # the elements' starting modes and internal values at the stencil's points
-            margins = {}  # the held contacts' forces less their breakaway at the stencil's points
-            ragged = []  # the points whose internal variables are another branch's
-
-            def initial(scene, c):
-                model = scene.model
-                z0 = np.zeros(scene.size)
-                z0[:n], z0[n:2 * n] = model.x0, model.v0
-                scene.reseed(z0, t)
-                d0, rate0 = scene.R @ model.x0, scene.R @ model.v0 + scene.belts
-                starts = [el.law.start(float(d0[e]), float(rate0[e])) for e, el in enumerate(scene.elements)]
-                branches.add(tuple(s.mode for s in starts))
-                margins[c] = breakaway_margins(scene, starts, z0)
-                internals[c] = np.array([value for s in starts for value in internal_values(s)])
-                if len(internals[c]) != len(nominal):
-                    # another branch, whose internal variables differ in number (a Clough spring deformed to its
-                    # yield point exactly, the stiffness moved: elastic on one side, on its backbone on the other)
-                    ragged.append(c)
-                    internals[c] = np.full(len(nominal), np.nan)
-                return np.concatenate([z0, internals[c]])
-            flat = self.total(i, initial)
-            held_at_breakaway = on_breakaway(margins, held_margins, self.scene)
-            if len(branches) > 1 or ragged or kinked(internals, nominal) or \
-                    held_at_breakaway:
+            flat, edge = start_derivative(self.scene, self.stencils[i], self.scales[i], t, states, nominal,
+                                          held_margins)
+            # its stencil's step crosses an edge: the start is on it only if a step near the parameter's rounding
+            # still does (the step's, 1e-3 of a speed wide, kept a fit 2.4e-3 off a truth on the edge)
+            for share in FINER if edge else ():
+                found = finer(self.derivatives[i], share)
+                if found is None:
+                    break
+                flat, edge = start_derivative(self.scene, self._stencil(found, self.scales[i], self.grid),
+                                              self.scales[i], t, states, nominal, held_margins)
+                if not edge:
+                    self.derivatives[i].error = found.error  # its rounding, in the accuracy the result states
+                    break
+            if edge:
                 # a start on the edge of two branches (deformed to its yield point exactly, held at its breakaway):
                 # carried as zeros, read as nan (outputs, state_at, rates_at)
-                edge = held_at_breakaway or \
-                    [el.path for k, el in enumerate(self.scene.elements) if len({b[k] for b in branches}) > 1] or \
-                    [el.path for el, state in zip(self.scene.elements, states) if state.internal]
-                self.edges[i] = (f"{', '.join(edge)} starts on the edge between two of its branches (within the "
-                                 "parameter's step: a spring deformed to its yield point, a contact held at its "
-                                 "breakaway force), where the response's derivatives on either side differ")
+                d = self.derivatives[i]
+                reach = abs(d.delta) * max(map(abs, d.offsets)) * min(FINER, default=1.0) / self.scales[i]
+                self.edges[i] = (f"{', '.join(edge)} starts on the edge between two of its branches (within "
+                                 f"{reach:.1g} of the parameter, relative: a spring deformed to its yield point, a "
+                                 "contact held at its breakaway force), where the response's derivatives on either "
+                                 "side differ")
                 flat = np.zeros_like(flat)
             S[i] = flat[:self.scene.size]
             at = self.scene.size

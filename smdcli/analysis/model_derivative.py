@@ -82,6 +82,7 @@ class Derivative:
     error: float
     offsets: tuple[float, ...] = ()  # each model's offset from the value, in units of delta
     scale: float = 0.0  # what its steps were scaled by (a sensitivity block holds scale dx/dp): |p| where 0
+    built_from: tuple = ()  # (scenario, document, base, grid, structure, flowed): finer_stencil.finer's
 
     def of(self, read) -> np.ndarray:
         """d/dp of a model's array read(model), combined over the stencil (as differences from its first point: the
@@ -441,4 +442,5 @@ def model_derivatives(sc: Scenario, base: Model, grid: np.ndarray, paths: list[s
     check_once(paths)
     doc = decoded(sc.text) if doc is None else doc  # decoded once per text; _scene_at copies before it edits
     base_arrays, structure = _model_arrays(base, float(grid[-1]), flowed), _structure(base, grid)
-    return [derivative(sc, doc, base, grid, path, base_arrays, structure, flowed) for path in paths]
+    return [dataclasses.replace(derivative(sc, doc, base, grid, path, base_arrays, structure, flowed),
+                                built_from=(sc, doc, base, grid, structure, flowed)) for path in paths]
