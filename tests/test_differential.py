@@ -435,8 +435,8 @@ def check_fit(text: str, tmp_path) -> None:
         return
     if not run.converged or run.warning or not run.identifiable:
         return  # said
-    # the runs' own error e (their stated accuracy of the displacement's peak) moves an estimate by J+ e, where the
-    # standard error is J+ r / |r| |r|: up to e / r times it (each in the data's weights, 1 / each channel's RMS)
+    # the runs' own error e (their stated accuracy of the displacement's peak) moves an estimate by up to |J+ row| e,
+    # where its standard error is |J+ row| r (r the residual's RMS): e / r times it, both in the data's weights
     rms = np.sqrt(np.mean(truth.displacement ** 2, axis=0))
     peaks = np.abs(truth.displacement).max(axis=0) / np.where(rms > 0, rms, np.inf)
     moved = float(truth.accuracy["displacement"][0]) * float(peaks.max()) / max(run.rms_residual, 1e-300)
@@ -1023,9 +1023,11 @@ quantity = "acceleration"
 type = "sine"
 amplitude = 6.8294200688372015
 omega = 2.0
-""",  # two masses at one starting speed, a friction contact between them held: its k and the first mass's v0 fitted
-#   from 10 % above ended 2.4e-3 off the truth (on the contact's edge) with intervals of 1.7e-4, converged, no word:
-#   the stencil's step, 1e-3 of the speed, crossed the edge, and every trial point within it had no derivative
+""",  # two masses at one starting speed, a friction contact between them held: its
+#   k and the first mass's v0 fitted from 10 % above ended 2.4e-3 off the truth (on the contact's edge) with intervals
+#   of 1.7e-4, converged, no word: the stencil's step, 1e-3 of the speed, crossed the edge, and every trial point
+#   within it had no derivative (this text's own one more number is v0; test_event_sensitivity's MOVING_TOGETHER,
+#   rounded, draws damper[0].c)
 ]
 
 

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from smdcli.analysis.signal_derivative import stencil_total
 from smdcli.elements import State
 from smdcli.solvers.events.scene import Scene
-from smdcli.analysis.signal_derivative import stencil_total
 from smdcli.solvers.ground import jump_at
 
 GRAZE = 1e-9  # a guard's top within this share of its terms below its level: a near miss, no derivative from it
